@@ -1,0 +1,28 @@
+# All set-up lives here: `make demo` and `make test` work from a clean clone.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.setup-stamp
+DEMO_OUT ?= demo_out
+
+.PHONY: setup demo test clean
+
+setup: $(STAMP)
+
+# Idempotent: re-runs only when the pins or the package metadata change.
+$(STAMP): requirements.txt pyproject.toml scripts/ensure_llvm.sh
+	bash scripts/ensure_llvm.sh
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip setuptools
+	$(PY) -m pip install --quiet -r requirements.txt
+	$(PY) -m pip install --quiet --no-deps --no-build-isolation -e .
+	touch $(STAMP)
+
+demo: setup
+	$(VENV)/bin/denoisebench demo --out $(DEMO_OUT)
+
+test: setup
+	$(PY) -m pytest -q tests
+
+clean:
+	rm -rf $(VENV) $(DEMO_OUT) build *.egg-info
