@@ -1,0 +1,97 @@
+"""Command line: ``denoisebench <command>``, plus the ``generate-dataset`` and ``run-benchmark`` aliases.
+
+Each command lives in ``denoisebench/commands/<name>.py`` with two functions:
+``add_arguments(parser)`` and ``run(args) -> int``. This file only wires them up and maps errors
+to exit codes (DESIGN.md): 0 success, 2 bad input with a one-line message and no traceback,
+1 internal failure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+import textwrap
+
+from denoisebench.errors import UserInputError
+
+#: command name -> (module under denoisebench.commands, one-line help). Order is the --help order.
+COMMANDS: dict[str, tuple[str, str]] = {
+    "scenes": ("scenes", "list scene families, author a scene as USD, preview a stage"),
+    "demo": ("demo", "author and preview one scene of every family (what `make demo` runs)"),
+}
+
+EPILOG = textwrap.dedent(
+    """\
+    examples:
+      denoisebench scenes list
+      denoisebench scenes make cornell --seed 3 --out scenes/cornell_3
+      denoisebench scenes preview scenes/cornell_3/scene.usda --out cornell.png --frame 2
+    """
+)
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse exits 2 on bad arguments already; keep its message to one line plus usage."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(
+        prog="denoisebench",
+        description="Dataset generation and benchmarking for Monte Carlo denoisers.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    from denoisebench import __version__
+
+    parser.add_argument("--version", action="version", version=f"denoisebench {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name, (module_name, help_text) in COMMANDS.items():
+        module = importlib.import_module(f"denoisebench.commands.{module_name}")
+        command_parser = sub.add_parser(
+            name,
+            help=help_text,
+            description=(module.__doc__ or help_text).strip(),
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+            epilog=getattr(module, "EPILOG", None),
+        )
+        module.add_arguments(command_parser)
+        command_parser.set_defaults(_run=module.run)
+    return parser
+
+
+def run_parsed(args: argparse.Namespace) -> int:
+    """Run a parsed command with the exit-code contract."""
+    try:
+        return int(args._run(args) or 0)
+    except UserInputError as error:
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    return run_parsed(args)
+
+
+def _alias_main(command: str, argv: list[str] | None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    return main([command, *argv])
+
+
+def generate_dataset_main(argv: list[str] | None = None) -> int:
+    """``generate-dataset ...`` is ``denoisebench generate ...``."""
+    return _alias_main("generate", argv)
+
+
+def run_benchmark_main(argv: list[str] | None = None) -> int:
+    """``run-benchmark ...`` is ``denoisebench benchmark ...``."""
+    return _alias_main("benchmark", argv)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
