@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from denoisebench.generator.camera_track import CameraTrack
+from denoisebench.scenes.effects import DECLARED_ONLY, validate_effects
 
 
 @dataclass
@@ -12,9 +13,13 @@ class TranslatedScene:
     """A stage made ready for Mitsuba.
 
     Attributes:
-        scene_dict: a ``mi.load_dict`` dictionary of shapes, BSDFs, emitters (Mitsuba world space:
-            Y-up, meters), *without* sensor and integrator: the renderer adds those per frame,
-            because the camera moves and its film, filter and sampler depend on the render plan.
+        scene_dict: plain, picklable data in Mitsuba world space (Y-up, meters):
+            ``{"bsdfs": {id: Mitsuba BSDF dict}, "shapes": [record], "emitters": [Mitsuba emitter dict]}``
+            where a shape record is a triangle mesh (``kind="mesh"``, numpy positions/faces/normals/uvs)
+            or an analytic sphere, with a ``bsdf`` id and an optional area ``emitter``. No sensor and
+            no integrator: the renderer adds those per frame, because the camera moves and its film,
+            filter and sampler depend on the render plan. ``build_mitsuba_scene`` turns it into a
+            ``mi.Scene``.
         camera: the camera's poses over the sequence and its lens.
         effects_declared: effects the stage's metadata declares (empty for a user's own USD).
         effects_inferred: effects read off the stage itself.
@@ -35,16 +40,17 @@ class TranslatedScene:
     @property
     def effects(self) -> tuple[str, ...]:
         """The effects the render plan must honour: union of declared and inferred."""
-        from denoisebench.scenes.effects import validate_effects
-
         return validate_effects(set(self.effects_declared) | set(self.effects_inferred))
 
     @property
     def effects_mismatch(self) -> dict[str, list[str]]:
-        """Declared-but-absent and present-but-undeclared effects (empty when they agree)."""
+        """Declared-but-absent and present-but-undeclared effects (empty when they agree).
+
+        Declared-only effects (``indirect``) are never reported missing."""
         if not self.effects_declared:
             return {}
-        declared, inferred = set(self.effects_declared), set(self.effects_inferred)
+        declared = set(self.effects_declared) - set(DECLARED_ONLY)
+        inferred = set(self.effects_inferred)
         out = {}
         if declared - inferred:
             out["declared_not_found"] = sorted(declared - inferred)

@@ -20,6 +20,9 @@ EFFECTS: tuple[str, ...] = (
     "indirect",  # multi-bounce light transport matters
 )
 
+#: Effects no stage can show by itself (multi-bounce transport matters): only ever declared.
+DECLARED_ONLY: tuple[str, ...] = ("indirect",)
+
 #: Key under the root layer's customLayerData holding denoisebench metadata:
 #: ``{"family": str, "seed": int, "effects": [str, ...], "frames": int}``.
 METADATA_KEY = "denoisebench"

@@ -1,0 +1,118 @@
+"""Build Mitsuba objects from a :class:`TranslatedScene`'s plain data.
+
+Triangle meshes are made with ``mi.Mesh`` and filled through ``mi.traverse`` (no temporary PLY
+files); BSDFs are loaded once each and shared by every shape that uses them. Sensors come from
+:func:`sensor_dict`, built from the camera track at a given frame (Mitsuba's own cameras: used by
+previews and by the tests that compare our renderer with Mitsuba's ``path`` integrator).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from denoisebench.generator.camera_track import CameraTrack
+from denoisebench.generator.translated_scene import TranslatedScene
+from denoisebench.mitsuba_runtime import load_mitsuba
+
+
+def _transform(mi, matrix) -> object:
+    return mi.ScalarTransform4f(np.asarray(matrix, dtype=np.float64).tolist())
+
+
+def _emitter_object(mi, record: dict):
+    return mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": list(record["radiance"])}})
+
+
+def _build_mesh(mi, record: dict, bsdf, emitter):
+    props = mi.Properties()
+    if bsdf is not None:
+        props["bsdf"] = bsdf
+    if emitter is not None:
+        props["emitter"] = emitter
+    positions, faces = record["positions"], record["faces"]
+    mesh = mi.Mesh(
+        record["name"], len(positions), len(faces), props,
+        has_vertex_normals="normals" in record, has_vertex_texcoords="uvs" in record,
+    )
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(positions.reshape(-1))
+    params["faces"] = mi.UInt32(faces.reshape(-1))
+    if "normals" in record:
+        params["vertex_normals"] = mi.Float(record["normals"].reshape(-1))
+    if "uvs" in record:
+        params["vertex_texcoords"] = mi.Float(record["uvs"].reshape(-1))
+    params.update()
+    return mesh
+
+
+def _emitter_dict(mi, record: dict) -> dict:
+    kind = record["type"]
+    if kind == "point":
+        return {"type": "point", "position": record["position"], "intensity": {"type": "rgb", "value": record["intensity"]}}
+    if kind == "directional":
+        return {"type": "directional", "direction": record["direction"], "irradiance": {"type": "rgb", "value": record["irradiance"]}}
+    if kind == "envmap":
+        rotation = np.eye(4)
+        rotation[:3, :3] = np.asarray(record["rotation"])
+        return {"type": "envmap", "filename": record["filename"], "scale": record["scale"], "to_world": _transform(mi, rotation)}
+    if kind == "constant":
+        return {"type": "constant", "radiance": {"type": "rgb", "value": record["radiance"]}}
+    raise ValueError(f"unknown emitter record type {kind!r}")
+
+
+def scene_objects(translated: TranslatedScene) -> dict:
+    """The ``mi.load_dict`` dictionary of a translated scene with Mitsuba objects (no sensor/integrator)."""
+    mi = load_mitsuba()
+    data = translated.scene_dict
+    bsdfs = {key: mi.load_dict(value) for key, value in data["bsdfs"].items()}
+    black = None
+    out: dict = {"type": "scene"}
+    for index, record in enumerate(data["shapes"]):
+        emitter = _emitter_object(mi, record["emitter"]) if "emitter" in record else None
+        bsdf = bsdfs.get(record.get("bsdf")) if record.get("bsdf") else None
+        if bsdf is None:
+            # Lights' own geometry: black, so it only emits (and blocks light, as a real fixture does).
+            black = black or mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}})
+            bsdf = black
+        key = f"shape_{index:04d}"
+        if record["kind"] == "sphere":
+            shape = {"type": "sphere", "center": record["center"], "radius": record["radius"], "bsdf": bsdf}
+            if emitter is not None:
+                shape["emitter"] = emitter
+            out[key] = shape
+        else:
+            out[key] = _build_mesh(mi, record, bsdf, emitter)
+    for index, record in enumerate(data["emitters"]):
+        out[f"emitter_{index:03d}"] = _emitter_dict(mi, record)
+    return out
+
+
+def sensor_dict(camera: CameraTrack, frame: int, width: int, height: int, spp: int, seed: int = 0,
+                aperture_scale: float = 1.0) -> dict:
+    """A Mitsuba perspective/thin-lens sensor matching ``camera`` at ``frame`` (box filter, independent sampler)."""
+    mi = load_mitsuba()
+    sensor = {
+        "type": "thinlens" if camera.has_depth_of_field and aperture_scale > 0 else "perspective",
+        "fov": camera.fov_x_deg,
+        "fov_axis": "x",
+        "near_clip": camera.near_clip,
+        "far_clip": camera.far_clip,
+        "to_world": _transform(mi, camera.mitsuba_to_world(frame)),
+        "film": {"type": "hdrfilm", "width": width, "height": height, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+        "sampler": {"type": "independent", "sample_count": spp, "seed": seed},
+    }
+    if sensor["type"] == "thinlens":
+        sensor["aperture_radius"] = camera.aperture_radius * aperture_scale
+        sensor["focus_distance"] = camera.focus_distance
+    return sensor
+
+
+def build_mitsuba_scene(translated: TranslatedScene, sensor: dict | None = None, integrator: dict | None = None):
+    """``mi.Scene`` of a translated stage, optionally with a sensor and an integrator."""
+    mi = load_mitsuba()
+    objects = scene_objects(translated)
+    if sensor is not None:
+        objects["sensor"] = sensor
+    if integrator is not None:
+        objects["integrator"] = integrator
+    return mi.load_dict(objects)

@@ -1,0 +1,68 @@
+"""A quick look at a stage: Mitsuba's ``path`` integrator at one frame, tone-mapped to a PNG.
+
+The preview renders with Mitsuba's own camera and integrator (not the feature renderer) at the
+depth the scene's render plan calls for, so it shows what the dataset will contain, fast.
+Tone map: exposure set so the 99th-percentile luminance maps to 1, then x/(1+x) and the sRGB
+curve (a preview is for eyes, not for metrics).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from denoisebench.errors import UserInputError
+from denoisebench.generator.mitsuba_scene import build_mitsuba_scene, sensor_dict
+from denoisebench.generator.render_plan import make_render_plan
+from denoisebench.generator.translate import translate_usd
+
+
+def tone_map_preview(image: np.ndarray) -> np.ndarray:
+    """Linear HDR → 8-bit sRGB with auto exposure (finite input assumed; NaN/Inf become 0)."""
+    image = np.nan_to_num(np.asarray(image, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0).clip(0, None)
+    luminance = image @ np.array([0.2126, 0.7152, 0.0722])
+    white = np.percentile(luminance, 99) if luminance.size else 0.0
+    scaled = image / white if white > 0 else image
+    mapped = scaled / (1.0 + scaled) * 1.6  # brightens mid-tones; 1.0 input ≈ 0.8 after the curve
+    mapped = np.clip(mapped, 0, 1)
+    srgb = np.where(mapped <= 0.0031308, 12.92 * mapped, 1.055 * np.power(mapped, 1 / 2.4) - 0.055)
+    return (np.clip(srgb, 0, 1) * 255 + 0.5).astype(np.uint8)
+
+
+def render_preview(usd_path: str | Path, frame: int = 0, width: int = 256, height: int = 256, spp: int = 64,
+                   seed: int = 0) -> tuple[np.ndarray, "object"]:
+    """(linear HDR image H×W×3, translated scene) of ``usd_path`` at ``frame``."""
+    from denoisebench.mitsuba_runtime import load_mitsuba
+
+    translated = translate_usd(usd_path)
+    if not 0 <= frame < translated.camera.frames:
+        raise UserInputError(f"--frame {frame} is out of range: the stage has {translated.camera.frames} frame(s)")
+    plan = make_render_plan(translated.effects)
+    mi = load_mitsuba()
+    scene = build_mitsuba_scene(
+        translated,
+        sensor=sensor_dict(translated.camera, frame, width, height, spp, seed),
+        integrator={"type": "path", "max_depth": plan.max_depth},
+    )
+    image = np.array(mi.render(scene, spp=spp, seed=seed), dtype=np.float32)
+    return image, translated
+
+
+def write_png(image_8bit: np.ndarray, out: str | Path) -> Path:
+    """Write atomically (temporary name in the same folder, then rename)."""
+    from PIL import Image
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    handle, temporary = tempfile.mkstemp(prefix=".", suffix=".png", dir=out.parent)
+    os.close(handle)
+    try:
+        Image.fromarray(image_8bit).save(temporary, format="PNG")
+        os.replace(temporary, out)
+    finally:
+        if os.path.exists(temporary):
+            os.unlink(temporary)
+    return out
