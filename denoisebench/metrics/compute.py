@@ -1,0 +1,153 @@
+"""Compute a chosen set of registered metrics on one frame or on a sequence.
+
+``compute_metrics(pred, ref)`` with H×W×3 arrays evaluates spatial and gradient metrics; with
+T×H×W×3 arrays (or lists of frames) it evaluates them per frame (value = mean over frames,
+``per_frame`` the list) and the temporal metrics. Each result says how many prediction values
+were non-finite; when any were, ``value`` is the metric's defined worst value (never a mean
+that skipped them).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Iterable
+
+import numpy as np
+
+from .registry import Metric, get_metric, metric_names
+from .validation import check_pair, check_sequences
+
+__all__ = ["MetricResult", "compute_metrics"]
+
+
+@dataclass(frozen=True)
+class MetricResult:
+    """One metric's value on a frame or a sequence.
+
+    ``nonfinite_count``: NaN/Inf values in the prediction (all frames). When > 0, ``value`` is the
+    metric's worst value (``worst_value_used`` is True). ``per_frame``: spatial/gradient values of
+    each frame of a sequence. ``map``: H×W (frame), T×H×W (per-frame maps of a sequence) or
+    (T−1)×H×W (temporal) when maps were asked for and the metric has one. ``seconds``: wall time.
+    """
+
+    name: str
+    value: float
+    higher_is_better: bool
+    domain: str
+    kind: str
+    nonfinite_count: int = 0
+    per_frame: tuple[float, ...] | None = None
+    map: np.ndarray | None = field(default=None, repr=False, compare=False)
+    seconds: float = 0.0
+
+    @property
+    def worst_value_used(self) -> bool:
+        return self.nonfinite_count > 0
+
+    def as_dict(self) -> dict:
+        """JSON-friendly fields (no map)."""
+        return {
+            "name": self.name,
+            "value": self.value,
+            "higher_is_better": self.higher_is_better,
+            "domain": self.domain,
+            "kind": self.kind,
+            "nonfinite_count": self.nonfinite_count,
+            "worst_value_used": self.worst_value_used,
+            "per_frame": list(self.per_frame) if self.per_frame is not None else None,
+            "seconds": self.seconds,
+        }
+
+
+def _is_sequence(pred) -> bool:
+    if isinstance(pred, (list, tuple)):
+        return True
+    ndim = np.ndim(pred)
+    if ndim in (3, 4):
+        return ndim == 4
+    raise ValueError(f"prediction must be H×W×3 or T×H×W×3 (or a list of frames), got shape {np.shape(pred)}")
+
+
+def _select(names: Iterable[str] | str | None, sequence: bool, context: dict) -> list[Metric]:
+    if isinstance(names, str):
+        names = [names]
+    if names is None:
+        chosen = [get_metric(n) for n in metric_names()]
+        chosen = [
+            m for m in chosen
+            if not m.temporal or (sequence and all(context.get(k) is not None for k in m.requires))
+        ]
+    else:
+        chosen = []
+        for n in names:
+            m = get_metric(n)
+            if m not in chosen:
+                chosen.append(m)
+    for m in chosen:
+        if m.temporal and not sequence:
+            raise ValueError(f"metric {m.name!r} is temporal: it needs sequences (T×H×W×3), not one frame")
+        missing = [k for k in m.requires if context.get(k) is None]
+        if missing:
+            raise ValueError(f"metric {m.name!r} needs {', '.join(missing)}")
+    return chosen
+
+
+def compute_metrics(
+    pred,
+    ref,
+    metrics: Iterable[str] | str | None = None,
+    *,
+    motion=None,
+    depth=None,
+    masks=None,
+    maps: bool = False,
+) -> dict[str, MetricResult]:
+    """Evaluate ``metrics`` (names; default: every registered one that applies) on pred vs ref.
+
+    ``motion``, ``depth``, ``masks``: per-frame buffers for temporal metrics (see
+    ``temporal``); each metric receives those it accepts. ``maps=True`` also returns per-pixel
+    maps. Returns ``{name: MetricResult}`` in the order asked. Bad input (shapes, a non-finite
+    reference, a temporal metric on one frame, a missing motion buffer) is a ``ValueError``.
+    """
+    sequence = _is_sequence(pred)
+    context = {"motion": motion, "depth": depth, "masks": masks}
+    chosen = _select(metrics, sequence, context)
+    checked = check_sequences(pred, ref) if sequence else check_pair(pred, ref)
+    pred_arr, ref_arr, total_bad = checked.pred, checked.ref, checked.nonfinite_count
+
+    results: dict[str, MetricResult] = {}
+    for m in chosen:
+        t0 = time.perf_counter()
+        per_frame = None
+        the_map = None
+        if m.temporal:
+            kwargs = {k: context[k] for k in m.accepts if context.get(k) is not None}
+            value = float(m.fn(pred_arr, ref_arr, **kwargs))
+            if maps and m.map_fn is not None:
+                the_map = m.map_fn(pred_arr, ref_arr, **kwargs)
+        elif sequence:
+            values = [float(m.fn(p, r)) for p, r in zip(pred_arr, ref_arr)]
+            per_frame = tuple(values)
+            value = m.worst if total_bad else float(np.mean(values))
+            if maps and m.map_fn is not None:
+                the_map = np.stack([m.map_fn(p, r) for p, r in zip(pred_arr, ref_arr)])
+        else:
+            value = float(m.fn(pred_arr, ref_arr))
+            if maps and m.map_fn is not None:
+                the_map = m.map_fn(pred_arr, ref_arr)
+        if total_bad:
+            value = m.worst
+        results[m.name] = MetricResult(
+            name=m.name,
+            value=value,
+            higher_is_better=m.higher_is_better,
+            domain=m.domain,
+            kind=m.kind,
+            nonfinite_count=total_bad,
+            per_frame=per_frame,
+            map=the_map,
+            seconds=time.perf_counter() - t0,
+        )
+    return results
+

@@ -1,0 +1,148 @@
+"""Metrics by name, so reports and plugins can ask for ``"relmse"``, ``"flip"``, ...
+
+A :class:`Metric` pairs the pure function with what a report needs to know about it.
+Spatial and gradient metrics take ``(pred, ref)`` H×W×3; temporal ones take
+``(pred_seq, ref_seq, **context)`` with the keywords listed in ``accepts`` (``motion``,
+``depth``, ``masks``), of which ``requires`` must be given.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Literal
+
+from . import gradient, spatial, temporal
+
+__all__ = ["Metric", "get_metric", "metric_names", "register_metric", "unregister_metric", "ALIASES"]
+
+Domain = Literal["linear", "tonemapped", "reinhard"]
+Kind = Literal["spatial", "gradient", "temporal"]
+
+
+@dataclass(frozen=True)
+class Metric:
+    """A named metric.
+
+    ``domain``: ``"linear"`` (HDR radiance as given), ``"tonemapped"`` (the documented tone map,
+    [0, 1)), or ``"reinhard"`` (its linear Reinhard stage, for ΔE2000). ``worst`` is the value a
+    non-finite prediction gets; ``perfect`` the value of prediction == reference.
+    """
+
+    name: str
+    fn: Callable[..., float]
+    higher_is_better: bool
+    domain: Domain
+    kind: Kind
+    worst: float
+    perfect: float
+    map_fn: Callable | None = None
+    description: str = ""
+    unit: str = ""
+    accepts: tuple[str, ...] = ()
+    requires: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.name or self.name != self.name.lower():
+            raise ValueError(f"metric names are non-empty lower case, got {self.name!r}")
+        if self.kind not in ("spatial", "gradient", "temporal"):
+            raise ValueError(f"unknown metric kind {self.kind!r}")
+        if not callable(self.fn):
+            raise ValueError(f"metric {self.name!r}: fn is not callable")
+
+    @property
+    def temporal(self) -> bool:
+        return self.kind == "temporal"
+
+    def better(self, a: float, b: float) -> bool:
+        """True when value ``a`` is strictly better than ``b``."""
+        return a > b if self.higher_is_better else a < b
+
+
+_REGISTRY: dict[str, Metric] = {}
+
+ALIASES = {
+    "rel_mse": "relmse",
+    "mae": "l1",
+    "hdr_flip": "flip",
+    "hdrflip": "flip",
+    "deltae": "deltae2000",
+    "delta_e": "deltae2000",
+    "de2000": "deltae2000",
+    "ciede2000": "deltae2000",
+    "gradient_l1": "grad_l1",
+    "flicker": "temporal_l1",
+    "temporal_l1_warp": "temporal_l1_warped",
+    "t_psnr": "tpsnr",
+}
+
+
+def register_metric(metric: Metric, *, replace: bool = False) -> Metric:
+    """Add ``metric`` to the registry (``replace=True`` to override an existing name)."""
+    if not isinstance(metric, Metric):
+        raise ValueError(f"register_metric takes a Metric, got {type(metric).__name__}")
+    if metric.name in ALIASES:
+        raise ValueError(f"{metric.name!r} is an alias of {ALIASES[metric.name]!r}")
+    if metric.name in _REGISTRY and not replace:
+        raise ValueError(f"metric {metric.name!r} is already registered (pass replace=True)")
+    _REGISTRY[metric.name] = metric
+    return metric
+
+
+def unregister_metric(name: str) -> None:
+    """Remove a metric (plugins and tests undoing their registration)."""
+    _REGISTRY.pop(name, None)
+
+
+def get_metric(name: str) -> Metric:
+    """The metric called ``name`` (case-insensitive; aliases such as ``"delta_e"`` accepted)."""
+    key = str(name).strip().lower()
+    key = ALIASES.get(key, key)
+    try:
+        return _REGISTRY[key]
+    except KeyError:
+        raise ValueError(f"unknown metric {name!r}; known: {', '.join(metric_names())}") from None
+
+
+def metric_names(kind: str | None = None) -> list[str]:
+    """Registered names in registration order, optionally only those of one ``kind``."""
+    return [m.name for m in _REGISTRY.values() if kind is None or m.kind == kind]
+
+
+def _builtin() -> None:
+    inf = math.inf
+    s, g, t = spatial, gradient, temporal
+    for m in (
+        Metric("mse", s.mse, False, "linear", "spatial", s.WORST["mse"], 0.0, s.mse_map,
+               "mean squared error"),
+        Metric("relmse", s.relmse, False, "linear", "spatial", s.WORST["relmse"], 0.0, s.relmse_map,
+               "mean((p-r)^2 / (r^2 + 0.01))"),
+        Metric("smape", s.smape, False, "linear", "spatial", s.WORST["smape"], 0.0, s.smape_map,
+               "mean(|p-r| / (|p| + |r| + 0.01))"),
+        Metric("l1", s.l1, False, "linear", "spatial", s.WORST["l1"], 0.0, s.l1_map,
+               "mean absolute error"),
+        Metric("psnr", s.psnr, True, "tonemapped", "spatial", s.WORST["psnr"], inf, None,
+               "PSNR of tone-mapped images, peak 1", "dB"),
+        Metric("ssim", s.ssim, True, "tonemapped", "spatial", s.WORST["ssim"], 1.0, s.ssim_map,
+               "SSIM (scikit-image, Gaussian sigma 1.5, data_range 1)"),
+        Metric("flip", s.flip, False, "linear", "spatial", s.WORST["flip"], 0.0, s.flip_map,
+               "HDR-FLIP (flip-evaluator)"),
+        Metric("deltae2000", s.deltae2000, False, "reinhard", "spatial", s.WORST["deltae2000"], 0.0,
+               s.deltae2000_map, "CIEDE2000 (colour-science) of Reinhard-mapped linear sRGB"),
+        Metric("grad_l1", g.grad_l1, False, "linear", "gradient", g.WORST["grad_l1"], 0.0, g.grad_l1_map,
+               "mean |grad p - grad r| (forward differences)"),
+        Metric("hfen", g.hfen, False, "linear", "gradient", g.WORST["hfen"], 0.0, g.hfen_map,
+               "rms(LoG(p) - LoG(r)) / (rms(LoG(r)) + 0.01), LoG sigma 1.5"),
+        Metric("temporal_l1", t.temporal_l1, False, "linear", "temporal", t.WORST["temporal_l1"], 0.0,
+               t.temporal_l1_map, "mean |(p_t - p_t-1) - (r_t - r_t-1)|", accepts=("masks",)),
+        Metric("temporal_l1_warped", t.temporal_l1_warped, False, "linear", "temporal",
+               t.WORST["temporal_l1_warped"], 0.0, t.temporal_l1_warped_map,
+               "temporal_l1 with frame t-1 warped by the motion buffer, disocclusions masked",
+               accepts=("motion", "depth", "masks"), requires=("motion",)),
+        Metric("tpsnr", t.tpsnr, True, "tonemapped", "temporal", t.WORST["tpsnr"], inf, None,
+               "PSNR of tone-mapped frame differences, peak 1", "dB", accepts=("masks",)),
+    ):
+        register_metric(m)
+
+
+_builtin()

@@ -1,0 +1,292 @@
+"""Temporal (flicker) metrics of a sequence: T×H×W×3 arrays or lists of H×W×3 frames, T ≥ 2.
+
+=======================  ==========  ===============  =============================
+metric                   domain      higher is better worst (non-finite prediction)
+=======================  ==========  ===============  =============================
+temporal_l1              linear      no               +inf
+temporal_l1_warped       linear      no               +inf
+tpsnr                    tone-mapped yes              20·log10(1/2) ≈ −6.02 dB
+=======================  ==========  ===============  =============================
+
+Notes
+-----
+* ``temporal_l1`` = mean over pairs t = 1..T−1, pixels and channels of
+  ``|(p_t − p_{t−1}) − (r_t − r_{t−1})|``, pooled (every valid pixel of every pair weighs the
+  same). It is 0 when p = r and when p = r + c for a constant c.
+* ``temporal_l1_warped``: the same with frame t−1 warped to frame t by frame t's motion buffer.
+  Motion convention (DESIGN.md): ``motion[t]`` is H×W×2, (x, y) in pixels from a pixel of frame t
+  to where its surface point was in frame t−1. Pixel (row i, col j) has its centre at
+  (x = j + 0.5, y = i + 0.5); its previous position is (j + 0.5 + mx, i + 0.5 + my) and the
+  warped frame samples frame t−1 there **bilinearly** (edge-clamped within the outer half pixel).
+  ``motion[0]`` is unused but must be given (one buffer per frame, like ``Frame.buffers``).
+  Since warping is linear and its weights sum to 1, p = r + c still gives 0.
+* Disocclusion (pixels left out of the mean):
+  1. the previous position falls outside the image rectangle [0, W] × [0, H];
+  2. with ``depth`` (one H×W or H×W×1 camera-space depth per frame): the depth test. A pixel
+     is kept only if every bilinear tap it reads from frame t−1 (every tap with non-zero weight)
+     has ``|depth[t−1][tap] − depth[t][pixel]| ≤ depth_tolerance · |depth[t][pixel]|``
+     (default 0.1, relative). The test compares camera-space depths of two frames, so it
+     assumes the camera moves little along its axis between frames (a pan or small dolly);
+     that is the usual TAA heuristic, not an exact reprojection;
+  3. with ``masks`` (bool, True = counts; one H×W for all frames or one per frame): pair t uses
+     ``masks[t]``.
+  A sequence where no pixel survives is a ``ValueError`` (there is nothing to measure).
+  Maps are (T−1)×H×W with 0 at masked pixels; :func:`warped_valid_masks` gives the masks.
+* ``tpsnr``: PSNR (peak 1) of the tone-mapped frame differences,
+  ``10·log10(1 / mean(((T(p_t) − T(p_{t−1})) − (T(r_t) − T(r_{t−1})))²))`` pooled over pairs,
+  T the documented tone map. Identical sequences give +inf. Because the tone map is non-linear,
+  p = r + c gives +inf only for a static reference; frame differences lie in (−1, 1), so
+  tPSNR ≥ 20·log10(1/2).
+* Motion and depth must be finite (``ValueError`` otherwise); a prediction with NaN/Inf in any
+  frame gives the worst value (maps: worst everywhere).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .tonemap import tonemap
+from .validation import Checked, as_depth, as_mask, as_motion, check_sequences
+
+__all__ = [
+    "DEPTH_TOLERANCE",
+    "WORST",
+    "warp_previous",
+    "disocclusion_mask",
+    "warped_valid_masks",
+    "temporal_l1",
+    "temporal_l1_map",
+    "temporal_l1_warped",
+    "temporal_l1_warped_map",
+    "tpsnr",
+]
+
+DEPTH_TOLERANCE = 0.1
+
+WORST: dict[str, float] = {
+    "temporal_l1": math.inf,
+    "temporal_l1_warped": math.inf,
+    "tpsnr": 20.0 * math.log10(0.5),
+}
+
+
+# --------------------------------------------------------------------------- warping
+
+def _taps(motion: np.ndarray):
+    """Bilinear taps of the previous positions: (i0, i1, j0, j1, fy, fx, inside)."""
+    h, w = motion.shape[:2]
+    x = np.arange(w, dtype=np.float64)[None, :] + 0.5 + motion[..., 0]
+    y = np.arange(h, dtype=np.float64)[:, None] + 0.5 + motion[..., 1]
+    inside = (x >= 0.0) & (x <= w) & (y >= 0.0) & (y <= h)
+    u = np.clip(x - 0.5, 0.0, w - 1)  # continuous column index of the sample
+    v = np.clip(y - 0.5, 0.0, h - 1)
+    j0 = np.floor(u).astype(np.intp)
+    i0 = np.floor(v).astype(np.intp)
+    fx = u - j0
+    fy = v - i0
+    j1 = np.minimum(j0 + 1, w - 1)
+    i1 = np.minimum(i0 + 1, h - 1)
+    return i0, i1, j0, j1, fy, fx, inside
+
+
+def _bilinear(img: np.ndarray, taps) -> np.ndarray:
+    i0, i1, j0, j1, fy, fx, _ = taps
+    if img.ndim == 3:
+        fx = fx[..., None]
+        fy = fy[..., None]
+    top = img[i0, j0] * (1.0 - fx) + img[i0, j1] * fx
+    bottom = img[i1, j0] * (1.0 - fx) + img[i1, j1] * fx
+    return top * (1.0 - fy) + bottom * fy
+
+
+def warp_previous(prev: np.ndarray, motion: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Warp frame t−1 (H×W×C or H×W) to frame t with frame t's motion (H×W×2), bilinearly.
+
+    Returns the warped frame (float64) and the H×W mask of pixels whose previous position lies
+    inside the image (the rest are disoccluded; their warped value is edge-clamped).
+    """
+    prev = np.asarray(prev, dtype=np.float64)
+    motion = np.asarray(motion, dtype=np.float64)
+    if motion.ndim != 3 or motion.shape[2] != 2 or motion.shape[:2] != prev.shape[:2]:
+        raise ValueError(f"motion must be H×W×2 matching the frame {prev.shape[:2]}, got {motion.shape}")
+    if not np.isfinite(motion).all():
+        raise ValueError("motion has non-finite values (NaN/Inf)")
+    taps = _taps(motion)
+    return _bilinear(prev, taps), taps[6]
+
+
+def _depth_ok(taps, depth_now: np.ndarray, depth_prev: np.ndarray, tol: float) -> np.ndarray:
+    i0, i1, j0, j1, fy, fx, _ = taps
+    limit = tol * np.abs(depth_now)
+    ok = np.ones(depth_now.shape, dtype=bool)
+    for ii, jj, weight in (
+        (i0, j0, (1 - fy) * (1 - fx)),
+        (i0, j1, (1 - fy) * fx),
+        (i1, j0, fy * (1 - fx)),
+        (i1, j1, fy * fx),
+    ):
+        ok &= (weight == 0) | (np.abs(depth_prev[ii, jj] - depth_now) <= limit)
+    return ok
+
+
+def disocclusion_mask(
+    motion: np.ndarray,
+    depth: np.ndarray | None = None,
+    prev_depth: np.ndarray | None = None,
+    depth_tolerance: float = DEPTH_TOLERANCE,
+) -> np.ndarray:
+    """H×W bool, True where frame t's pixel is visible in frame t−1 (see module Notes).
+
+    ``depth``/``prev_depth``: H×W depth of frames t and t−1 for the depth test (both or neither).
+    """
+    motion = np.asarray(motion, dtype=np.float64)
+    if motion.ndim != 3 or motion.shape[2] != 2:
+        raise ValueError(f"motion must be H×W×2, got {motion.shape}")
+    if not np.isfinite(motion).all():
+        raise ValueError("motion has non-finite values (NaN/Inf)")
+    taps = _taps(motion)
+    valid = taps[6].copy()
+    if (depth is None) != (prev_depth is None):
+        raise ValueError("the depth test needs both depth and prev_depth")
+    if depth is not None:
+        d = np.asarray(depth, dtype=np.float64).reshape(motion.shape[:2])
+        dp = np.asarray(prev_depth, dtype=np.float64).reshape(motion.shape[:2])
+        valid &= _depth_ok(taps, d, dp, depth_tolerance)
+    return valid
+
+
+# --------------------------------------------------------------------------- helpers
+
+def _context(c: Checked, motion, depth, masks, tol):
+    n, h, w = c.pred.shape[:3]
+    mask = None if masks is None else as_mask(masks, n, (h, w))
+    mot = None if motion is None else as_motion(motion, n, (h, w))
+    dep = None if depth is None else as_depth(depth, n, (h, w))
+    if dep is not None and mot is None:
+        raise ValueError("depth is only used with motion (the warped temporal error)")
+    if not (math.isfinite(tol) and tol >= 0):
+        raise ValueError(f"depth_tolerance must be finite and ≥ 0, got {tol}")
+    return mask, mot, dep
+
+
+def _pair_maps(c: Checked, mask, mot, dep, tol) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pair |Δp − Δr| maps (T−1)×H×W (channel mean) and validity masks."""
+    e = c.pred.astype(np.float64) - c.ref  # Δp − Δr = e_t − e_{t−1} (warping is linear)
+    n, h, w = e.shape[:3]
+    maps = np.empty((n - 1, h, w))
+    valid = np.ones((n - 1, h, w), dtype=bool)
+    for t in range(1, n):
+        if mot is None:
+            prev = e[t - 1]
+        else:
+            taps = _taps(mot[t].astype(np.float64))
+            prev = _bilinear(e[t - 1], taps)
+            valid[t - 1] = taps[6]
+            if dep is not None:
+                valid[t - 1] &= _depth_ok(taps, dep[t].astype(np.float64), dep[t - 1].astype(np.float64), tol)
+        maps[t - 1] = np.abs(e[t] - prev).mean(axis=-1)
+        if mask is not None:
+            valid[t - 1] &= mask[t]
+    return maps, valid
+
+
+def _pooled(maps: np.ndarray, valid: np.ndarray) -> float:
+    count = int(np.count_nonzero(valid))
+    if count == 0:
+        raise ValueError("no pixel is left after masking and disocclusion: nothing to measure")
+    return float(maps[valid].mean()) if count < valid.size else float(maps.mean())
+
+
+def warped_valid_masks(
+    motion, depth=None, masks=None, depth_tolerance: float = DEPTH_TOLERANCE
+) -> np.ndarray:
+    """(T−1)×H×W masks of the pixels ``temporal_l1_warped`` counts, from T motion buffers."""
+    mot = np.asarray(motion, dtype=np.float64)
+    if mot.ndim != 4 or mot.shape[3] != 2 or mot.shape[0] < 2:
+        raise ValueError(f"motion must be T×H×W×2 with T ≥ 2, got {mot.shape}")
+    n, h, w = mot.shape[:3]
+    mot = as_motion(mot, n, (h, w))
+    dep = None if depth is None else as_depth(depth, n, (h, w))
+    mask = None if masks is None else as_mask(masks, n, (h, w))
+    out = np.empty((n - 1, h, w), dtype=bool)
+    for t in range(1, n):
+        out[t - 1] = disocclusion_mask(
+            mot[t], None if dep is None else dep[t], None if dep is None else dep[t - 1], depth_tolerance
+        )
+        if mask is not None:
+            out[t - 1] &= mask[t]
+    return out
+
+
+# --------------------------------------------------------------------------- metrics
+
+def temporal_l1(pred_seq, ref_seq, *, masks=None) -> float:
+    """Mean |(p_t − p_{t−1}) − (r_t − r_{t−1})| over pairs, pixels, channels (linear). Lower is better."""
+    c = check_sequences(pred_seq, ref_seq, min_frames=2)
+    mask, _, _ = _context(c, None, None, masks, DEPTH_TOLERANCE)
+    if c.nonfinite_count:
+        return WORST["temporal_l1"]
+    return _pooled(*_pair_maps(c, mask, None, None, DEPTH_TOLERANCE))
+
+
+def temporal_l1_map(pred_seq, ref_seq, *, masks=None) -> np.ndarray:
+    """(T−1)×H×W maps of |Δp − Δr| (channel mean); 0 where ``masks`` excludes a pixel."""
+    c = check_sequences(pred_seq, ref_seq, min_frames=2)
+    mask, _, _ = _context(c, None, None, masks, DEPTH_TOLERANCE)
+    n, h, w = c.pred.shape[:3]
+    if c.nonfinite_count:
+        return np.full((n - 1, h, w), WORST["temporal_l1"])
+    maps, valid = _pair_maps(c, mask, None, None, DEPTH_TOLERANCE)
+    return np.where(valid, maps, 0.0)
+
+
+def temporal_l1_warped(
+    pred_seq, ref_seq, motion, *, depth=None, masks=None, depth_tolerance: float = DEPTH_TOLERANCE
+) -> float:
+    """``temporal_l1`` after warping frame t−1 by frame t's motion, disoccluded pixels masked."""
+    c = check_sequences(pred_seq, ref_seq, min_frames=2)
+    if motion is None:
+        raise ValueError("temporal_l1_warped needs the motion buffers (one H×W×2 per frame)")
+    mask, mot, dep = _context(c, motion, depth, masks, depth_tolerance)
+    if c.nonfinite_count:
+        return WORST["temporal_l1_warped"]
+    return _pooled(*_pair_maps(c, mask, mot, dep, depth_tolerance))
+
+
+def temporal_l1_warped_map(
+    pred_seq, ref_seq, motion, *, depth=None, masks=None, depth_tolerance: float = DEPTH_TOLERANCE
+) -> np.ndarray:
+    """(T−1)×H×W warped |Δp − Δr| maps; 0 at disoccluded or masked pixels."""
+    c = check_sequences(pred_seq, ref_seq, min_frames=2)
+    if motion is None:
+        raise ValueError("temporal_l1_warped needs the motion buffers (one H×W×2 per frame)")
+    mask, mot, dep = _context(c, motion, depth, masks, depth_tolerance)
+    n, h, w = c.pred.shape[:3]
+    if c.nonfinite_count:
+        return np.full((n - 1, h, w), WORST["temporal_l1_warped"])
+    maps, valid = _pair_maps(c, mask, mot, dep, depth_tolerance)
+    return np.where(valid, maps, 0.0)
+
+
+def tpsnr(pred_seq, ref_seq, *, masks=None) -> float:
+    """PSNR (dB, peak 1) of tone-mapped frame differences, pooled over pairs. Higher is better."""
+    c = check_sequences(pred_seq, ref_seq, min_frames=2)
+    mask, _, _ = _context(c, None, None, masks, DEPTH_TOLERANCE)
+    if c.nonfinite_count:
+        return WORST["tpsnr"]
+    tp = tonemap(c.pred)
+    tr = tonemap(c.ref)
+    d = np.diff(tp, axis=0) - np.diff(tr, axis=0)
+    sq = np.mean(np.square(d), axis=-1)
+    if mask is not None:
+        valid = np.asarray(mask[1:])
+        if not valid.any():
+            raise ValueError("no pixel is left after masking: nothing to measure")
+        err = float(sq[valid].mean())
+    else:
+        err = float(sq.mean())
+    if err == 0.0:
+        return math.inf
+    return 10.0 * math.log10(1.0 / err)
