@@ -7,6 +7,7 @@ column-vector numpy matrices (``M @ p``), so every matrix read goes through :fun
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +25,10 @@ def open_stage(path: str | Path):
     try:
         stage = Usd.Stage.Open(str(path), Usd.Stage.LoadAll)
     except Tf.ErrorException as error:
-        first = str(error).strip().splitlines()
-        detail = next((line.strip() for line in first if line.strip() and "Error in" not in line), "parse error")
+        # Tf errors read "Error in 'Function' at line N in file F : 'message'"; keep the first message.
+        messages = re.findall(r" : '(.*?)'\s*(?:\n|$)", str(error), flags=re.S)
+        detail = messages[0] if messages else "parse error"
+        detail = detail.replace(str(path.resolve()) + ":", "line ")
         raise UserInputError(f"{path}: cannot open USD stage ({_one_line(detail)})") from None
     if stage is None:
         raise UserInputError(f"{path}: cannot open USD stage")
