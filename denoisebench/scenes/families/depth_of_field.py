@@ -1,0 +1,56 @@
+"""depth_of_field: rows of objects receding from a wide-open lens, bright bokeh balls behind."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from denoisebench.scenes import camera_paths, geometry, textures
+from denoisebench.scenes.authoring import SceneBuilder
+
+#: The family's lens is at least this wide open (f-number at most this).
+MAX_FSTOP = 2.0
+
+
+def build(b: SceneBuilder, rng: np.random.Generator) -> None:
+    # Textured ground: blur of fine detail is what depth of field is about.
+    tex = b.texture("ground_tiles", textures.checker(1024, 64, rng.uniform(0.6, 0.8, 3), rng.uniform(0.15, 0.3, 3)))
+    ground = b.material("Ground", roughness=0.9, diffuse_texture=tex)
+    b.mesh("Ground", geometry.grid(8.0, 24.0, 1, 1, axis="y"), ground, translate=(0.0, 0.0, -8.0))
+
+    # Rows of objects from 2 m to 11 m in front of the camera (camera at z = 3).
+    rows = 6
+    for k in range(rows):
+        z = 1.0 - 1.8 * k
+        for j in range(int(rng.integers(3, 6))):
+            color = rng.uniform(0.1, 0.9, 3)
+            mat = b.material(f"Row{k}_{j}", diffuse=color, roughness=0.8)
+            x = rng.uniform(-1.6, 1.6)
+            kind = int(rng.integers(3))
+            if kind == 0:
+                r = rng.uniform(0.12, 0.25)
+                b.sphere(f"Sphere{k}_{j}", r, mat, translate=(x, r, z + rng.uniform(-0.3, 0.3)))
+            elif kind == 1:
+                s = rng.uniform(0.2, 0.4)
+                b.cube(f"Cube{k}_{j}", s, mat, translate=(x, s / 2, z + rng.uniform(-0.3, 0.3)), rotate=(0.0, rng.uniform(0.0, 90.0), 0.0))
+            else:
+                hgt = rng.uniform(0.4, 0.9)
+                b.cylinder(f"Cylinder{k}_{j}", rng.uniform(0.05, 0.12), hgt, "Y", mat, translate=(x, hgt / 2, z + rng.uniform(-0.3, 0.3)))
+
+    # Small emissive balls far behind: bokeh discs when out of focus.
+    for i in range(int(rng.integers(10, 17))):
+        glow = b.material(f"Glow{i}", diffuse=(0.0, 0.0, 0.0), roughness=1.0,
+                          emissive=rng.uniform(4.0, 12.0) * np.array([1.0, rng.uniform(0.5, 0.9), rng.uniform(0.2, 0.6)]))
+        b.sphere(f"Bokeh{i}", rng.uniform(0.03, 0.06), glow, translate=(rng.uniform(-3.0, 3.0), rng.uniform(0.4, 2.5), rng.uniform(-16.0, -12.0)))
+
+    # Key light overhead and a fill from behind the camera.
+    b.disk_light("Key", 1.0, intensity=rng.uniform(6.0, 10.0), matrix=b.aim((0.0, 5.0, -3.0), (0.0, 0.0, -3.0)))
+    b.rect_light("Fill", 3.0, 1.5, intensity=rng.uniform(0.8, 1.5), matrix=b.aim((0.0, 2.5, 6.0), (0.0, 0.5, -3.0)))
+
+    # Slow sideways truck; focus on the third row with a wide-open 50 mm lens.
+    eye_y = rng.uniform(0.5, 0.8)
+    focus_row = 2
+    focus = 3.0 - (1.0 - 1.8 * focus_row)  # distance along the view axis (z) to that row
+    poses = camera_paths.truck((-0.3, eye_y, 3.0), (0.3, eye_y, 3.0), (0.0, -0.08, -1.0), b.frames, b.up)
+    # The view axis tilts down slightly, so focus distance along it is the z distance / cos(tilt).
+    tilt = np.arctan2(0.08, 1.0)
+    b.camera(poses, focal_length_mm=50.0, fstop=rng.uniform(1.2, MAX_FSTOP), focus_distance=focus / np.cos(tilt), clipping=(0.05, 100.0))
