@@ -359,17 +359,21 @@ class SceneBuilder:
     ) -> UsdGeom.Camera:
         """``/World/Camera`` with one ``xformOp:transform`` time-sampled at frames 0..F-1.
 
+        Lens and filmback are given in millimeters and written in UsdGeomCamera's units, tenths
+        of a scene unit (so 50 mm is 0.5 on a meter stage and 50 on a centimeter stage): the
+        thin-lens aperture ``focalLength / (2 fStop)`` then comes out in physical size.
         ``aspect`` is width / height of the image; distances (clipping, focus) are in stage units.
         """
+        tenths = 100.0 * self.meters_per_unit  # millimeters per tenth of a scene unit
         aspect = self.aspect if aspect is None else aspect
         poses = np.asarray(poses, dtype=np.float64)
         if poses.shape != (self.frames, 4, 4):
             raise ValueError(f"camera poses must be {self.frames}×4×4, got {poses.shape}")
         cam = UsdGeom.Camera.Define(self.stage, self._path("/World", name))
         cam.CreateProjectionAttr(UsdGeom.Tokens.perspective)
-        cam.CreateFocalLengthAttr(_r(focal_length_mm))
-        cam.CreateHorizontalApertureAttr(_r(horizontal_aperture_mm))
-        cam.CreateVerticalApertureAttr(_r(horizontal_aperture_mm / aspect))
+        cam.CreateFocalLengthAttr(_r(focal_length_mm / tenths))
+        cam.CreateHorizontalApertureAttr(_r(horizontal_aperture_mm / tenths))
+        cam.CreateVerticalApertureAttr(_r(horizontal_aperture_mm / aspect / tenths))
         cam.CreateClippingRangeAttr(Gf.Vec2f(_r(clipping[0]), _r(clipping[1])))
         cam.CreateFStopAttr(_r(fstop))
         cam.CreateFocusDistanceAttr(_r(focus_distance))

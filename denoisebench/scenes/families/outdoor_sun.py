@@ -48,7 +48,7 @@ def build(b: SceneBuilder, rng: np.random.Generator) -> None:
                     direction=-np.array([np.cos(el) * np.cos(az), np.sin(el), np.cos(el) * np.sin(az)]))
 
     # Handheld orbit: a slow arc with a walking wobble.
-    base = camera_paths.orbit((0.0, 0.5, 0.0), rng.uniform(7.0, 9.0), rng.uniform(1.2, 2.0), rng.uniform(0.0, 360.0),
+    base = camera_paths.orbit((0.0, 0.5, 0.0), rng.uniform(5.5, 7.0), rng.uniform(1.2, 2.0), rng.uniform(0.0, 360.0),
                               rng.choice([-1.0, 1.0]) * rng.uniform(10.0, 20.0), b.frames, b.up)
     poses = camera_paths.handheld_shake(base, rng, translate_amp=0.03, rotate_amp_deg=0.4)
     b.camera(poses, focal_length_mm=35.0, clipping=(0.05, 200.0))

@@ -27,12 +27,12 @@ def build(b: SceneBuilder, rng: np.random.Generator) -> None:
 
     # Welded-mesh fence behind: one mesh of thin strips on a 5-7 cm grid.
     spacing = rng.uniform(0.05, 0.07)
-    width = rng.uniform(0.003, 0.005)
+    width = rng.uniform(0.005, 0.009)
     z = -1.6
     x0, x1, y0, y1 = -3.5, 3.5, 0.0, 2.0
     strips = [geometry.strip((x, y0, z), (x, y1, z), width, (1, 0, 0)) for x in np.arange(x0, x1 + 1e-9, spacing)]
     strips += [geometry.strip((x0, y, z + 0.005), (x1, y, z + 0.005), width, (0, 1, 0)) for y in np.arange(y0 + spacing, y1 + 1e-9, spacing)]
-    mesh_mat = b.material("MeshFence", diffuse=(0.45, 0.5, 0.45), roughness=0.7)
+    mesh_mat = b.material("MeshFence", diffuse=(0.12, 0.13, 0.12), roughness=0.7)
     b.mesh("MeshFence", geometry.merge(strips), mesh_mat, double_sided=True)
 
     # Grass in front of the fence.
