@@ -1,0 +1,249 @@
+"""Ray generation for the feature renderer: pinhole / thin lens, camera motion blur, reprojection.
+
+Mitsuba 3.9 samples a time per ray but moves nothing with it, so the renderer builds its own camera
+rays (DESIGN.md, "Effects and the render plan"). Conventions, shared with Mitsuba's ``perspective``
+and ``thinlens`` sensors so that both render the same image:
+
+* Pixel ``(i, j)`` (row ``i`` from the top, column ``j`` from the left) takes samples at film
+  position ``(j + u, i + v)`` with ``u, v`` uniform in [0, 1): a one-pixel box filter.
+* Camera frame: Mitsuba's (``CameraTrack.mitsuba_to_world``): local +Z forward, +Y up, +X to the
+  *left* of the image. Horizontal field of view ``camera.fov_x_deg``; the vertical one follows from
+  the image aspect.
+* Thin lens: aperture radius ``camera.aperture_radius * plan.aperture_scale``, focus distance
+  ``camera.focus_distance``, lens point ``square_to_uniform_disk_concentric(lens_uv)``; rays aim at
+  the point of the focal plane that the pinhole ray through the film position would hit.
+* Rays start on the near clipping plane and end on the far one, like Mitsuba's sensors.
+* Time (motion blur only): a ray's time is ``frame + m + (s - 1/2) * (close - open) * shutter_scale``
+  with ``s`` uniform in [0, 1) and ``m = (open + close) / 2``: the shutter interval scaled about its
+  midpoint. The camera pose at that time interpolates the two bracketing frame poses exactly as
+  :meth:`CameraTrack.pose_at` does (translation and scale lerped, rotation slerped), per ray, in
+  Dr.Jit. Without time sampling every ray uses the pose at ``t = frame``.
+
+All numbers that vary between frames (pose, lens, time) enter the kernels as *opaque* Dr.Jit values,
+so a new frame reuses the compiled kernel instead of baking new literals into a new one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from denoisebench.generator.camera_track import CameraTrack
+from denoisebench.generator.render_plan import RenderPlan
+
+
+@dataclass(frozen=True)
+class CameraSetup:
+    """Host-side description of the camera for one frame (plain numbers and small tables)."""
+
+    width: int
+    height: int
+    tan_half_x: float
+    tan_half_y: float
+    thin_lens: bool
+    aperture_radius: float
+    focus_distance: float
+    near_clip: float
+    far_clip: float
+    time_sampling: bool
+    frame: int
+    time_center: float  # frame + shutter midpoint (frames); used only with time sampling
+    time_span: float  # (close - open) * shutter_scale (frames); used only with time sampling
+    static_pose: np.ndarray | None  # 4×4 Mitsuba to_world used by every ray, or None: per-ray poses
+    prev_pose: np.ndarray | None  # 4×4 Mitsuba to_world of the previous frame (static case), or None
+    has_previous: bool  # frame > 0: motion vectors are computed (else they are zero)
+    # Per-ray pose tables (time sampling with an animated camera), one entry per frame interval k:
+    # quaternion (x, y, z, w) at frame k and k+1 (same hemisphere), translation, column scales.
+    quat_a: np.ndarray | None = None
+    quat_b: np.ndarray | None = None
+    trans: np.ndarray | None = None
+    scale: np.ndarray | None = None
+    frames: int = 1
+
+
+def camera_setup(camera: CameraTrack, frame: int, plan: RenderPlan, width: int, height: int) -> CameraSetup:
+    """Collect everything ray generation needs for ``frame`` (no Dr.Jit involved)."""
+    if width < 1 or height < 1:
+        raise ValueError(f"image size must be positive (got {width}×{height})")
+    if not 0 <= frame < camera.frames:
+        raise ValueError(f"frame {frame} outside the camera track (0..{camera.frames - 1})")
+    tan_half_x = math.tan(math.radians(camera.fov_x_deg) / 2.0)
+    thin_lens = plan.camera_model == "thin_lens"
+    if plan.camera_model not in ("pinhole", "thin_lens"):
+        raise ValueError(f"unknown camera model {plan.camera_model!r}")
+    span = (camera.shutter_close - camera.shutter_open) * plan.shutter_scale if plan.time_sampling else 0.0
+    center = frame + 0.5 * (camera.shutter_open + camera.shutter_close) if plan.time_sampling else float(frame)
+    per_ray = plan.time_sampling and camera.is_animated and span > 0.0
+    common = dict(
+        width=width,
+        height=height,
+        tan_half_x=tan_half_x,
+        tan_half_y=tan_half_x * height / width,
+        thin_lens=thin_lens,
+        aperture_radius=float(camera.aperture_radius * plan.aperture_scale) if thin_lens else 0.0,
+        focus_distance=float(camera.focus_distance),
+        near_clip=float(camera.near_clip),
+        far_clip=float(camera.far_clip),
+        time_sampling=bool(plan.time_sampling),
+        frame=int(frame),
+        time_center=float(center),
+        time_span=float(span),
+        has_previous=frame > 0,
+        frames=camera.frames,
+    )
+    if not per_ray:
+        # One pose for every ray: the pose at the (center) time; the previous frame's one second earlier.
+        time = center if plan.time_sampling else float(frame)
+        return CameraSetup(
+            static_pose=camera.mitsuba_to_world(time),
+            prev_pose=camera.mitsuba_to_world(time - 1.0) if frame > 0 else None,
+            **common,
+        )
+    quat_a, quat_b, trans, scale = _pose_tables(camera)
+    return CameraSetup(static_pose=None, prev_pose=None, quat_a=quat_a, quat_b=quat_b, trans=trans, scale=scale, **common)
+
+
+def _pose_tables(camera: CameraTrack):
+    """Quaternions, translations and scales of every frame's Mitsuba pose, for per-ray slerp."""
+    from scipy.spatial.transform import Rotation
+
+    mats = np.stack([camera.mitsuba_to_world(float(k)) for k in range(camera.frames)])
+    scale = np.linalg.norm(mats[:, :3, :3], axis=1)  # column norms, F×3
+    rot = mats[:, :3, :3] / scale[:, None, :]
+    quats = Rotation.from_matrix(rot).as_quat()  # (x, y, z, w)
+    quat_a = quats[:-1].copy()
+    quat_b = quats[1:].copy()
+    flip = np.sum(quat_a * quat_b, axis=1) < 0  # shortest arc, as scipy's Slerp
+    quat_b[flip] *= -1.0
+    return quat_a, quat_b, mats[:, :3, 3].copy(), scale
+
+
+class DrCamera:
+    """The camera of one frame as opaque Dr.Jit values; builds rays and reprojects points."""
+
+    def __init__(self, mi, setup: CameraSetup):
+        import drjit as dr
+
+        self.mi = mi
+        self.dr = dr
+        self.setup = setup
+        F = mi.Float
+
+        def opaque(value):
+            return dr.opaque(F, float(value))
+
+        self.tan_x = opaque(setup.tan_half_x)
+        self.tan_y = opaque(setup.tan_half_y)
+        self.inv_w = opaque(1.0 / setup.width)
+        self.inv_h = opaque(1.0 / setup.height)
+        self.width = opaque(setup.width)
+        self.height = opaque(setup.height)
+        self.aperture = opaque(setup.aperture_radius)
+        self.focus = opaque(setup.focus_distance)
+        self.near = opaque(setup.near_clip)
+        self.far = opaque(setup.far_clip)
+        self.time_center = opaque(setup.time_center)
+        self.time_span = opaque(setup.time_span)
+        self.frame_time = opaque(float(setup.frame))
+        if setup.static_pose is not None:
+            self.static = self._opaque_pose(setup.static_pose)
+            self.prev_static = self._opaque_pose(setup.prev_pose) if setup.prev_pose is not None else None
+        else:
+            self.static = self.prev_static = None
+            self.qa = mi.Vector4f(*[mi.Float(setup.quat_a[:, c]) for c in range(4)])
+            self.qb = mi.Vector4f(*[mi.Float(setup.quat_b[:, c]) for c in range(4)])
+            self.tr = mi.Vector3f(*[mi.Float(setup.trans[:, c]) for c in range(3)])
+            self.sc = mi.Vector3f(*[mi.Float(setup.scale[:, c]) for c in range(3)])
+            self.last_frame = opaque(setup.frames - 1)
+
+    def _opaque_pose(self, m: np.ndarray):
+        """(column0, column1, column2, translation) of a 4×4 matrix as opaque vectors."""
+        dr, mi = self.dr, self.mi
+        cols = [mi.Vector3f(*[dr.opaque(mi.Float, float(m[r, c])) for r in range(3)]) for c in range(4)]
+        return tuple(cols)
+
+    # ------------------------------------------------------------------ poses
+    def pose_at(self, time):
+        """Per-ray pose (three scaled rotation columns and translation) at fractional frame ``time``."""
+        dr, mi = self.dr, self.mi
+        t = dr.clip(time, 0.0, self.last_frame)
+        k = mi.UInt32(dr.minimum(dr.floor(t), dr.maximum(self.last_frame - 1.0, 0.0)))
+        w = t - mi.Float(k)
+        qa = dr.gather(mi.Vector4f, self.qa, k)
+        qb = dr.gather(mi.Vector4f, self.qb, k)
+        k1 = k + 1
+        ta = dr.gather(mi.Vector3f, self.tr, k)
+        tb = dr.gather(mi.Vector3f, self.tr, k1)
+        sa = dr.gather(mi.Vector3f, self.sc, k)
+        sb = dr.gather(mi.Vector3f, self.sc, k1)
+        cos_theta = dr.minimum(dr.dot(qa, qb), 1.0)
+        theta = dr.acos(cos_theta)
+        sin_theta = dr.sin(theta)
+        small = sin_theta < 1e-5
+        inv_sin = dr.rcp(dr.select(small, 1.0, sin_theta))
+        wa = dr.select(small, 1.0 - w, dr.sin((1.0 - w) * theta) * inv_sin)
+        wb = dr.select(small, w, dr.sin(w * theta) * inv_sin)
+        q = dr.normalize(qa * wa + qb * wb)
+        x, y, z, s = q.x, q.y, q.z, q.w
+        c0 = mi.Vector3f(1 - 2 * (y * y + z * z), 2 * (x * y + z * s), 2 * (x * z - y * s))
+        c1 = mi.Vector3f(2 * (x * y - z * s), 1 - 2 * (x * x + z * z), 2 * (y * z + x * s))
+        c2 = mi.Vector3f(2 * (x * z + y * s), 2 * (y * z - x * s), 1 - 2 * (x * x + y * y))
+        scale = dr.lerp(sa, sb, w)
+        return (c0 * scale.x, c1 * scale.y, c2 * scale.z, dr.lerp(ta, tb, w))
+
+    def sample_time(self, s):
+        return self.time_center + (s - 0.5) * self.time_span
+
+    def current_pose(self, time):
+        return self.static if self.static is not None else self.pose_at(time)
+
+    def previous_pose(self, time):
+        """Pose one frame before the ray's time (``None`` at frame 0: no previous frame)."""
+        if not self.setup.has_previous:
+            return None
+        return self.prev_static if self.static is not None else self.pose_at(time - 1.0)
+
+    # ------------------------------------------------------------------- rays
+    def generate_ray(self, film_xy, lens_uv, time):
+        """World-space ray through film position ``film_xy`` (pixels); returns (ray, pose)."""
+        dr, mi = self.dr, self.mi
+        ndc_x = film_xy.x * self.inv_w * 2.0 - 1.0
+        ndc_y = film_xy.y * self.inv_h * 2.0 - 1.0
+        near_p = mi.Vector3f(-ndc_x * self.tan_x, -ndc_y * self.tan_y, 1.0)  # +X left, +Y up in camera space
+        pose = self.current_pose(time)
+        c0, c1, c2, origin = pose
+        if self.setup.thin_lens:
+            lens = mi.warp.square_to_uniform_disk_concentric(lens_uv) * self.aperture
+            d_local = dr.normalize(near_p * self.focus - mi.Vector3f(lens.x, lens.y, 0.0))
+            o = origin + c0 * lens.x + c1 * lens.y
+        else:
+            d_local = dr.normalize(near_p)
+            o = origin
+        d = dr.normalize(c0 * d_local.x + c1 * d_local.y + c2 * d_local.z)
+        inv_z = dr.rcp(d_local.z)
+        near_t = self.near * inv_z
+        ray = mi.Ray3f(o + d * near_t, d, self.far * inv_z - near_t, time, mi.Color0f())
+        return ray, pose
+
+    @staticmethod
+    def forward(pose):
+        return pose[2]
+
+    def to_local(self, pose, p, w):
+        """Camera-space coordinates of world point ``p`` (``w = 1``) or direction (``w = 0``)."""
+        dr = self.dr
+        c0, c1, c2, origin = pose
+        q = p - origin * w
+        return (dr.dot(c0, q) / dr.squared_norm(c0), dr.dot(c1, q) / dr.squared_norm(c1), dr.dot(c2, q) / dr.squared_norm(c2))
+
+    def project(self, pose, p, w):
+        """Film position (pixels, x right, y down) of a point/direction, and whether it is in front."""
+        dr, mi = self.dr, self.mi
+        x, y, z = self.to_local(pose, p, w)
+        front = z > 1e-6
+        inv_z = dr.rcp(dr.select(front, z, 1.0))
+        px = (1.0 - x * inv_z / self.tan_x) * 0.5 * self.width
+        py = (1.0 - y * inv_z / self.tan_y) * 0.5 * self.height
+        return mi.Point2f(px, py), front
