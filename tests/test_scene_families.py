@@ -256,6 +256,20 @@ def test_same_seed_gives_identical_bytes_and_another_seed_differs(authored, name
     assert other.read_bytes() != first.read_bytes()
 
 
+def test_reauthoring_into_the_same_folder_leaves_no_stale_textures(tmp_path):
+    fam = get_family("texture_checker")
+    fam.author(tmp_path, seed=0, frames=2)
+    (tmp_path / "textures" / "stale.png").write_bytes(b"not a texture")
+    stage = _open(fam.author(tmp_path, seed=1, frames=2))
+    stage_assets = {
+        attr.Get().path
+        for prim in stage.Traverse()
+        for attr in prim.GetAttributes()
+        if attr.GetTypeName() == Sdf.ValueTypeNames.Asset and attr.Get() is not None
+    }
+    assert {f"textures/{p.name}" for p in (tmp_path / "textures").iterdir()} == stage_assets
+
+
 def test_exported_layer_has_no_doc_string_or_absolute_path(authored):
     text = authored["cornell"].read_text()
     assert text.startswith("#usda 1.0\n")

@@ -397,7 +397,11 @@ class SceneBuilder:
             raise RuntimeError(f"{self.family}: no /World/Camera")
 
     def save(self) -> Path:
-        """Write the textures and ``scene.usda`` into ``out_dir``; return the stage path."""
+        """Write the textures and ``scene.usda`` into ``out_dir``; return the stage path.
+
+        Files are written under temporary names and renamed. PNGs in ``out_dir/textures`` that
+        this stage does not reference are removed, so the folder always matches the stage.
+        """
         self._check()
         self.stage.GetRootLayer().customLayerData = {
             METADATA_KEY: {
@@ -408,8 +412,14 @@ class SceneBuilder:
             }
         }
         self.out_dir.mkdir(parents=True, exist_ok=True)
+        tex_dir = self.out_dir / TEXTURE_DIR
+        # textures/ belongs to the stage: PNGs of an earlier authoring (another seed) go away.
+        if tex_dir.is_dir():
+            for stale in sorted(tex_dir.glob("*.png")):
+                if stale.stem not in self._textures:
+                    stale.unlink()
         for name in sorted(self._textures):
-            write_png(self.out_dir / TEXTURE_DIR / f"{name}.png", self._textures[name])
+            write_png(tex_dir / f"{name}.png", self._textures[name])
         path = self.out_dir / STAGE_FILENAME
         text = self.stage.GetRootLayer().ExportToString()
         tmp = path.with_name(path.name + ".tmp")

@@ -24,7 +24,9 @@ def write_png(path: Path, rgb: np.ndarray) -> Path:
         raise ValueError(f"expected an H×W×3 image, got shape {arr.shape}")
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(np.ascontiguousarray(arr), mode="RGB").save(path, format="PNG", compress_level=6)
+    tmp = path.with_name(f".{path.name}.tmp")
+    Image.fromarray(np.ascontiguousarray(arr)).save(tmp, format="PNG", compress_level=6)
+    tmp.replace(path)
     return path
 
 
