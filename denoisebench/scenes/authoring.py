@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, Vt
 
+from denoisebench.scenes.camera_paths import look_at
 from denoisebench.scenes.effects import METADATA_KEY, validate_effects
 from denoisebench.scenes.geometry import MeshData
 from denoisebench.scenes.textures import write_png
@@ -300,8 +301,6 @@ class SceneBuilder:
 
     def aim(self, eye, target) -> np.ndarray:
         """Matrix placing a light (or anything facing −Z) at ``eye`` facing ``target``."""
-        from denoisebench.scenes.camera_paths import look_at
-
         return look_at(eye, target, self.up)
 
     def rect_light(self, name, width, height, intensity, color=(1, 1, 1), exposure=0.0, translate=None, rotate=None, matrix=None):

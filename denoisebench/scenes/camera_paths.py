@@ -12,9 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 
-Vec = "tuple[float, float, float] | np.ndarray"
-
-
 def _unit(v) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
     n = float(np.linalg.norm(v))
