@@ -1,0 +1,305 @@
+"""Cross (joint) bilateral filter over screen position, color and feature buffers, vectorised in numpy.
+
+Weight of neighbour q for pixel p (the lecture slides' cross-bilateral form, with the colour and
+feature distances normalised by their noise)::
+
+    w(p, q) = exp(-|p - q|² / 2σ_s²)
+            · exp(-Σ_ch (c̃_p,ch - c̃_q,ch)² / 2)            c̃ = c / (σ_c · sqrt(2·V̄ + ε))
+            · Π_k exp(-|f_k,p - f_k,q|² / 2σ_k,eff²)         σ_k,eff² = (σ_k·s_k)² + 2·median(Var f_k)
+
+* ``V̄`` is the per-pixel variance of the mean colour (``color_var``, averaged over channels; when
+  the frame has none, or it is all zero as at 1 spp, the colour's 3×3 spatial variance), median
+  filtered 3×3 (so that a firefly's own variance does not open the filter to it) and box filtered
+  5×5. Dividing the colour by the local noise standard deviation makes σ_c a count of noise
+  standard deviations (a variance-stabilised colour distance; exact where V̄ is locally constant).
+  ε = (0.01·mean colour)² + 1e-12 keeps noise-free regions finite.
+* ``s_k`` is a feature's scale: 1 for albedo, normal and roughness (their values are already in
+  [0, 1] or unit length), and the median of the frame's depth (depth) or of the spread of the
+  world positions (position), so the same σ_k works at any scene scale. Per-feature variance
+  buffers (``<feature>_var``, e.g. from depth of field) widen σ_k by the frame's median variance.
+* Each pair (p, q) is evaluated once and used for both pixels (the weight is symmetric); pixels
+  outside the image take no part (no edge padding). The output is Σ w c / Σ w, a convex
+  combination of the (sanitised, non-negative) input, so it is finite and non-negative.
+
+Defaults (``σ_c`` is in noise standard deviations):
+
+==========  ======  =====  =========  =====  =========================================  ==========
+preset      radius  σ_s    window     σ_c    features (σ_k)                             guide dims
+==========  ======  =====  =========  =====  =========================================  ==========
+fast        5       2.5    separable  1.4    albedo 0.1, normal 0.3                     PCA → 3
+balanced    7       3.5    separable  1.4    albedo 0.1, normal 0.3, depth 0.03         all
+high        7       3.5    full 2-D   1.4    + position 0.03, roughness 0.15            all
+==========  ======  =====  =========  =====  =========================================  ==========
+
+"separable" runs a horizontal then a vertical 1-D pass over the same (2r+1)² window: 4r
+pair evaluations per pixel instead of 2r(r+1), the classic separable bilateral approximation
+(Pham & van Vliet 2005). "PCA → 3" projects the scaled feature guide onto its three principal
+directions (distances within that subspace are kept, the rest is dropped).
+Features the frame lacks are skipped, so the filter also runs on color alone.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable, Mapping
+
+import numpy as np
+from scipy import ndimage
+
+from denoisebench.dataset.frame import Frame
+from denoisebench.denoisers.protocol import DenoiserBase
+
+DEFAULT_FEATURE_SIGMAS: dict[str, float] = {
+    "albedo": 0.1,
+    "normal": 0.3,
+    "depth": 0.03,  # relative to the frame's median depth
+    "position": 4.0,  # in one-pixel steps of the world position (the frame's median step)
+    "roughness": 0.15,
+}
+
+PRESETS: dict[str, dict] = {
+    "fast": dict(radius=5, sigma_spatial=2.5, separable=True, sigma_color=5.0, features=("albedo", "normal"), guide_dims=3),
+    "balanced": dict(
+        radius=7, sigma_spatial=3.5, separable=True, sigma_color=5.0, features=("albedo", "normal", "depth"), guide_dims=None
+    ),
+    "high": dict(
+        radius=8,
+        sigma_spatial=4.0,
+        separable=False,
+        sigma_color=5.0,
+        features=("albedo", "normal", "depth", "roughness"),
+        guide_dims=None,
+    ),
+}
+
+_STRIP_PIXELS = 32768  # pixels per row strip: keeps a strip's working set in cache
+
+
+def window_offsets(radius: int, sigma_spatial: float, separable: bool) -> list[list[tuple[int, int, float]]]:
+    """Half-window offsets (dy, dx, spatial exponent) per pass: one pass (full) or two (separable)."""
+    two_s2 = 2.0 * float(sigma_spatial) ** 2
+    if separable:
+        horizontal = [(0, d, d * d / two_s2) for d in range(1, radius + 1)]
+        vertical = [(d, 0, d * d / two_s2) for d in range(1, radius + 1)]
+        return [horizontal, vertical]
+    half = [
+        (dy, dx, (dy * dy + dx * dx) / two_s2)
+        for dy in range(0, radius + 1)
+        for dx in range(-radius, radius + 1)
+        if dy > 0 or dx > 0
+    ]
+    return [half]
+
+
+def joint_bilateral_pass(color: np.ndarray, guide: np.ndarray, offsets: Iterable[tuple[int, int, float]]) -> np.ndarray:
+    """One filtering pass. ``color`` C×H×W, ``guide`` D×H×W (float32, already scaled so that the
+    range weight is exp(-Σ_d (g_p,d - g_q,d)²)); ``offsets`` the half window. Returns C×H×W."""
+    channels, height, width = color.shape
+    depth = guide.shape[0]
+    num = np.array(color, dtype=np.float32, copy=True)
+    den = np.ones((height, width), np.float32)
+    offsets = list(offsets)
+    rows = max(1, _STRIP_PIXELS // max(width, 1))
+    diff_buf = np.empty((max(depth, 1), rows, width), np.float32)
+    weight_buf = np.empty((rows, width), np.float32)
+    tmp_buf = np.empty((channels, rows, width), np.float32)
+    for y0 in range(0, height, rows):
+        for dy, dx, spatial in offsets:
+            y1 = min(y0 + rows, height - dy)
+            x0, x1 = max(0, -dx), width - max(0, dx)
+            if y1 <= y0 or x1 <= x0:
+                continue
+            n, m = y1 - y0, x1 - x0
+            p = (slice(None), slice(y0, y1), slice(x0, x1))
+            q = (slice(None), slice(y0 + dy, y1 + dy), slice(x0 + dx, x1 + dx))
+            w = weight_buf[:n, :m]
+            if depth:
+                d = diff_buf[:, :n, :m]
+                np.subtract(guide[p], guide[q], out=d)
+                np.square(d, out=d)
+                np.add.reduce(d, axis=0, out=w)
+                w += spatial
+            else:
+                w.fill(spatial)
+            np.negative(w, out=w)
+            np.exp(w, out=w)
+            t = tmp_buf[:, :n, :m]
+            np.multiply(color[q], w, out=t)
+            num[p] += t
+            np.multiply(color[p], w, out=t)
+            num[q] += t
+            den[p[1:]] += w
+            den[q[1:]] += w
+    num /= den
+    return num
+
+
+def _noise_variance(color: np.ndarray, variance: np.ndarray | None) -> np.ndarray:
+    """Smoothed per-pixel variance of the mean colour (H×W), see the module docstring."""
+    var = None
+    if variance is not None:
+        var = np.mean(np.asarray(variance, np.float32), axis=-1)
+        if not np.any(var > 0):
+            var = None
+    if var is None:  # no usable variance buffer: the colour's local spatial variance
+        mean = ndimage.uniform_filter(color, size=(3, 3, 1), mode="nearest")
+        mean_sq = ndimage.uniform_filter(color * color, size=(3, 3, 1), mode="nearest")
+        var = np.mean(np.maximum(mean_sq - mean * mean, 0.0), axis=-1)
+    var = ndimage.median_filter(np.maximum(var, 0.0), size=3, mode="nearest")
+    return ndimage.uniform_filter(var, size=5, mode="nearest")
+
+
+def _feature_scale(name: str, feature: np.ndarray) -> float:
+    if name == "depth":
+        finite = feature[np.isfinite(feature)]
+        return float(np.median(np.abs(finite))) if finite.size else 1.0
+    if name == "position":
+        # the typical one-pixel step of the world position on a surface
+        steps = []
+        if feature.shape[1] > 1:
+            steps.append(np.linalg.norm(np.diff(feature, axis=1), axis=-1).ravel())
+        if feature.shape[0] > 1:
+            steps.append(np.linalg.norm(np.diff(feature, axis=0), axis=-1).ravel())
+        steps = np.concatenate(steps) if steps else np.zeros(0)
+        steps = steps[np.isfinite(steps) & (steps > 0)]
+        return float(np.median(steps)) if steps.size else 1.0
+    return 1.0
+
+
+def build_guide(
+    color: np.ndarray,
+    features: Mapping[str, np.ndarray],
+    *,
+    sigma_color: float,
+    feature_sigmas: Mapping[str, float],
+    color_variance: np.ndarray | None = None,
+    feature_variances: Mapping[str, np.ndarray] | None = None,
+    guide_dims: int | None = None,
+) -> np.ndarray:
+    """The scaled guide D×H×W: normalised colour (3) then the features (PCA-projected if asked)."""
+    color = np.asarray(color, np.float32)
+    noise = _noise_variance(color, color_variance)
+    eps = (0.01 * float(np.mean(color))) ** 2 + 1e-12
+    # range weight exp(-(Δc̃)²/2) with c̃ = c / (σ_c sqrt(2 V̄ + ε)); the guide carries 1/sqrt(2)
+    scale = 1.0 / (np.sqrt(2.0) * sigma_color * np.sqrt(2.0 * noise + eps))
+    parts = [np.moveaxis(color * scale[..., None], -1, 0)]
+    feature_parts = []
+    for name, sigma in feature_sigmas.items():
+        if name not in features or sigma is None or sigma <= 0:
+            continue
+        feature = np.asarray(features[name], np.float32)
+        sigma_eff2 = (sigma * max(_feature_scale(name, feature), 1e-12)) ** 2
+        if feature_variances is not None and name in feature_variances:
+            sigma_eff2 += 2.0 * float(np.median(feature_variances[name]))
+        feature_parts.append(np.moveaxis(feature, -1, 0) / np.float32(np.sqrt(2.0 * sigma_eff2)))
+    if feature_parts:
+        feats = np.concatenate(feature_parts, axis=0)
+        if guide_dims is not None and 0 < guide_dims < feats.shape[0]:
+            flat = feats.reshape(feats.shape[0], -1)
+            sample = flat[:, :: max(1, flat.shape[1] // 65536)].astype(np.float64)
+            sample = sample - sample.mean(axis=1, keepdims=True)
+            cov = sample @ sample.T / max(sample.shape[1], 1)
+            _, vectors = np.linalg.eigh(cov)
+            basis = vectors[:, ::-1][:, :guide_dims].T.astype(np.float32)  # k×D, orthonormal rows
+            feats = (basis @ flat).reshape(guide_dims, *feats.shape[1:])
+        parts.append(feats)
+    guide = np.concatenate(parts, axis=0)
+    # |Δg|² must stay finite in float32 even for absurd inputs (squares of ≤ 2e15, ≤ 20 channels)
+    np.clip(guide, -1e15, 1e15, out=guide)
+    return np.ascontiguousarray(guide, dtype=np.float32)
+
+
+def cross_bilateral_filter(
+    color: np.ndarray,
+    features: Mapping[str, np.ndarray] | None = None,
+    *,
+    color_variance: np.ndarray | None = None,
+    feature_variances: Mapping[str, np.ndarray] | None = None,
+    radius: int = 7,
+    sigma_spatial: float = 3.5,
+    sigma_color: float = 5.0,
+    feature_sigmas: Mapping[str, float] | None = None,
+    separable: bool = True,
+    guide_dims: int | None = None,
+) -> np.ndarray:
+    """Filter H×W×3 ``color`` guided by ``features`` (name → H×W×C); returns H×W×3 float32."""
+    color = np.maximum(np.asarray(color, np.float32), 0.0)
+    features = dict(features or {})
+    sigmas = DEFAULT_FEATURE_SIGMAS if feature_sigmas is None else dict(feature_sigmas)
+    guide = build_guide(
+        color,
+        features,
+        sigma_color=sigma_color,
+        feature_sigmas=sigmas,
+        color_variance=color_variance,
+        feature_variances=feature_variances,
+        guide_dims=guide_dims,
+    )
+    out = np.ascontiguousarray(np.moveaxis(color, -1, 0))
+    for offsets in window_offsets(int(radius), sigma_spatial, separable):
+        out = joint_bilateral_pass(out, guide, offsets)
+    return np.ascontiguousarray(np.moveaxis(out, 0, -1), dtype=np.float32)
+
+
+class CrossBilateral(DenoiserBase):
+    """The cross-bilateral baseline. ``preset`` is fast, balanced or high; keywords override it."""
+
+    needs = frozenset({"color"})  # features are used when the frame has them
+    temporal = False
+
+    def __init__(
+        self,
+        preset: str = "balanced",
+        *,
+        radius: int | None = None,
+        sigma_spatial: float | None = None,
+        sigma_color: float | None = None,
+        separable: bool | None = None,
+        features: Iterable[str] | None = None,
+        feature_sigmas: Mapping[str, float] | None = None,
+        guide_dims: int | None | str = "preset",
+    ) -> None:
+        if preset not in PRESETS:
+            raise ValueError(f"unknown cross_bilateral preset {preset!r}; known: {', '.join(PRESETS)}")
+        config = dict(PRESETS[preset])
+        for key, value in (
+            ("radius", radius),
+            ("sigma_spatial", sigma_spatial),
+            ("sigma_color", sigma_color),
+            ("separable", separable),
+        ):
+            if value is not None:
+                config[key] = value
+        if guide_dims != "preset":
+            config["guide_dims"] = guide_dims
+        names = tuple(features) if features is not None else config["features"]
+        sigmas = {name: DEFAULT_FEATURE_SIGMAS[name] for name in names if name in DEFAULT_FEATURE_SIGMAS}
+        sigmas.update(feature_sigmas or {})
+        unknown = sorted(set(sigmas) - set(DEFAULT_FEATURE_SIGMAS))
+        if unknown:
+            raise ValueError(f"unknown feature(s) {', '.join(unknown)}; known: {', '.join(DEFAULT_FEATURE_SIGMAS)}")
+        if int(config["radius"]) < 0 or float(config["sigma_spatial"]) <= 0 or float(config["sigma_color"]) <= 0:
+            raise ValueError("radius must be >= 0 and sigma_spatial, sigma_color > 0")
+        self.preset = preset
+        self.radius = int(config["radius"])
+        self.sigma_spatial = float(config["sigma_spatial"])
+        self.sigma_color = float(config["sigma_color"])
+        self.separable = bool(config["separable"])
+        self.guide_dims = config["guide_dims"]
+        self.feature_sigmas = sigmas
+        self.name = "cross_bilateral" if preset == "balanced" else f"cross_bilateral_{preset}"
+
+    def denoise(self, frame: Frame) -> np.ndarray:
+        features = {name: frame.buffers[name] for name in self.feature_sigmas if name in frame.buffers}
+        variances = {name: frame.buffers[f"{name}_var"] for name in features if f"{name}_var" in frame.buffers}
+        return cross_bilateral_filter(
+            frame.color,
+            features,
+            color_variance=frame.buffers.get("color_var"),
+            feature_variances=variances,
+            radius=self.radius,
+            sigma_spatial=self.sigma_spatial,
+            sigma_color=self.sigma_color,
+            feature_sigmas=self.feature_sigmas,
+            separable=self.separable,
+            guide_dims=self.guide_dims,
+        )

@@ -1,0 +1,224 @@
+"""Run denoisers under the harness contract: sanitise inputs, time ``denoise()`` only, check outputs,
+contain failures.
+
+Everything that calls a denoiser (the benchmark, ``check-plugin``, tests) goes through here:
+
+* **Inputs.** NaN and ±Inf in every buffer and per-sample array are replaced before the denoiser
+  sees them, by the median of the finite values among the element's 3×3 spatial neighbours in the
+  same channel (0 when none is finite), and counted per buffer (:attr:`DenoiseResult.sanitized`).
+  The reference image is withheld, and every array is passed as a read-only view, so a denoiser
+  can neither peek at the answer nor corrupt the input of the next one.
+* **Needs.** A frame that lacks a buffer the denoiser ``needs`` is a failure without a call.
+* **Timing.** :func:`time.perf_counter` around ``denoise(frame)`` only: sanitising, checking and
+  any I/O are outside it.
+* **Outputs.** Must be a numpy array of shape H×W×3, dtype float32, every value finite. Anything
+  else (an exception, NaN output, wrong shape or dtype) is recorded as ``status="failed"`` with a
+  one-line reason; the run goes on. ``KeyboardInterrupt`` and ``SystemExit`` still propagate.
+* **Sequences.** ``reset()`` is called before each sequence, then the frames go in order.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass, field
+from typing import Iterable, Mapping
+
+import numpy as np
+
+from denoisebench.dataset.frame import Frame, Sequence
+
+from .protocol import describe
+
+STATUS_OK = "ok"
+STATUS_FAILED = "failed"
+
+
+@dataclass
+class DenoiseResult:
+    """One call of one denoiser on one frame."""
+
+    denoiser: str
+    scene: str
+    frame: int
+    status: str
+    error: str | None = None
+    seconds: float | None = None  # time inside denoise(); None when it was not called
+    output: np.ndarray | None = None  # H×W×3 float32 when status is "ok"
+    sanitized: dict[str, int] = field(default_factory=dict)  # buffer -> NaN/Inf values replaced
+
+    @property
+    def ok(self) -> bool:
+        return self.status == STATUS_OK
+
+    @property
+    def sanitized_total(self) -> int:
+        return sum(self.sanitized.values())
+
+
+def _one_line(error: BaseException) -> str:
+    lines = str(error).strip().splitlines()
+    return f"{type(error).__name__}: {lines[0]}" if lines else type(error).__name__
+
+
+# --------------------------------------------------------------------------------------------------
+# input sanitising
+
+
+def sanitize_array(array: np.ndarray) -> tuple[np.ndarray, int]:
+    """``array`` (…×H×W×C) with NaN/±Inf replaced by the 3×3 neighbour median; and how many were.
+
+    Returns the input itself (no copy) when everything is finite or the dtype is not floating.
+    """
+    array = np.asarray(array)
+    if not np.issubdtype(array.dtype, np.floating):
+        return array, 0
+    bad = ~np.isfinite(array)
+    count = int(np.count_nonzero(bad))
+    if count == 0:
+        return array, 0
+    out = np.array(array, copy=True)
+    out[bad] = np.nan
+    if out.ndim < 3:
+        flat = out.reshape(-1)
+        finite = flat[np.isfinite(flat)]
+        out[np.isnan(out)] = np.median(finite) if finite.size else 0.0
+        return out, count
+    # pad H and W (axes -3, -2) with NaN and gather the 3×3 neighbours of each bad element
+    pad = [(0, 0)] * (out.ndim - 3) + [(1, 1), (1, 1), (0, 0)]
+    padded = np.pad(out, pad, constant_values=np.nan)
+    index = list(np.nonzero(bad))
+    neighbours = []
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            shifted = list(index)
+            shifted[-3] = index[-3] + 1 + dy
+            shifted[-2] = index[-2] + 1 + dx
+            neighbours.append(padded[tuple(shifted)])
+    stack = np.stack(neighbours, axis=-1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN neighbourhoods
+        median = np.nanmedian(stack, axis=-1)
+    out[tuple(index)] = np.where(np.isfinite(median), median, 0.0)
+    return out, count
+
+
+def _read_only(array: np.ndarray) -> np.ndarray:
+    view = np.asarray(array).view()
+    view.flags.writeable = False
+    return view
+
+
+def sanitize_frame(frame: Frame) -> tuple[Frame, dict[str, int]]:
+    """A copy of ``frame`` for a denoiser: finite, read-only, without the reference; and the counts.
+
+    Per-sample arrays are counted as ``samples.<name>``.
+    """
+    counts: dict[str, int] = {}
+    buffers = {}
+    for name, array in frame.buffers.items():
+        clean, count = sanitize_array(array)
+        if count:
+            counts[name] = count
+        buffers[name] = _read_only(clean)
+    samples = None
+    if frame.samples is not None:
+        samples = {}
+        for name, array in frame.samples.items():
+            clean, count = sanitize_array(array)
+            if count:
+                counts[f"samples.{name}"] = count
+            samples[name] = _read_only(clean)
+    safe = Frame(
+        buffers=buffers,
+        spp=frame.spp,
+        scene=frame.scene,
+        index=frame.index,
+        reference=None,
+        samples=samples,
+        meta=dict(frame.meta),
+    )
+    return safe, counts
+
+
+# --------------------------------------------------------------------------------------------------
+# output checks
+
+
+def check_output(output: object, height: int, width: int) -> str | None:
+    """Why ``output`` breaks the contract (one line), or None when it is a finite H×W×3 float32 array."""
+    if not isinstance(output, np.ndarray):
+        return f"returned {type(output).__name__}, not a numpy array"
+    if output.shape != (height, width, 3):
+        return f"returned shape {output.shape}, expected {(height, width, 3)}"
+    if output.dtype != np.float32:
+        return f"returned dtype {output.dtype}, expected float32"
+    bad = int(np.count_nonzero(~np.isfinite(output)))
+    if bad:
+        nans = int(np.count_nonzero(np.isnan(output)))
+        return f"returned {bad} non-finite values ({nans} NaN, {bad - nans} Inf) of {output.size}"
+    return None
+
+
+# --------------------------------------------------------------------------------------------------
+# running
+
+
+def run_frame(denoiser: object, frame: Frame, *, name: str | None = None, keep_output: bool = True) -> DenoiseResult:
+    """Denoise one frame under the contract; never raises for a failing denoiser."""
+    try:
+        info = describe(denoiser, fallback_name=name or type(denoiser).__name__)
+        label = name or info.name
+    except Exception as error:  # noqa: BLE001
+        return DenoiseResult(name or repr(denoiser), frame.scene, frame.index, STATUS_FAILED, _one_line(error))
+    safe, counts = sanitize_frame(frame)
+    result = DenoiseResult(label, frame.scene, frame.index, STATUS_FAILED, sanitized=counts)
+    missing = sorted(need for need in info.needs if not frame.has(need))
+    if missing:
+        result.error = f"frame lacks buffer(s) {', '.join(missing)} that the denoiser needs"
+        return result
+    started = time.perf_counter()
+    try:
+        output = denoiser.denoise(safe)
+    except Exception as error:  # noqa: BLE001 - contained and recorded
+        result.seconds = time.perf_counter() - started
+        result.error = f"raised {_one_line(error)}"
+        return result
+    result.seconds = time.perf_counter() - started
+    reason = check_output(output, frame.height, frame.width)
+    if reason is not None:
+        result.error = reason
+        return result
+    result.status = STATUS_OK
+    result.output = output if keep_output else None
+    return result
+
+
+def run_sequence(
+    denoiser: object, sequence: Sequence | Iterable[Frame], *, name: str | None = None, keep_output: bool = True
+) -> list[DenoiseResult]:
+    """``reset()``, then every frame in order. A failing ``reset()`` fails every frame of the sequence."""
+    frames = list(sequence)
+    label = name or getattr(denoiser, "name", None) or type(denoiser).__name__
+    reset = getattr(denoiser, "reset", None)
+    if callable(reset):
+        try:
+            reset()
+        except Exception as error:  # noqa: BLE001
+            reason = f"reset() raised {_one_line(error)}"
+            return [DenoiseResult(label, f.scene, f.index, STATUS_FAILED, reason) for f in frames]
+    return [run_frame(denoiser, frame, name=label, keep_output=keep_output) for frame in frames]
+
+
+def run_denoisers(
+    denoisers: Mapping[str, object], sequences: Iterable[Sequence], *, keep_output: bool = True
+) -> dict[str, list[DenoiseResult]]:
+    """Every denoiser on every sequence; one denoiser's failures never touch another's results."""
+    sequences = list(sequences)
+    results: dict[str, list[DenoiseResult]] = {}
+    for label, denoiser in denoisers.items():
+        records: list[DenoiseResult] = []
+        for sequence in sequences:
+            records.extend(run_sequence(denoiser, sequence, name=label, keep_output=keep_output))
+        results[label] = records
+    return results
