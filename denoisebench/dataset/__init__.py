@@ -1,1 +1,40 @@
+"""Dataset I/O: Frame/Sequence types, EXR + manifest read/write, torch datasets (loaded lazily).
 
+Torch-free on import: ``CropDataset`` and ``SequenceCropDataset`` import torch only when asked for.
+"""
+
+from __future__ import annotations
+
+from .errors import DatasetError
+from .exr_io import read_exr, read_samples_exr, write_exr
+from .frame import Frame, Sequence
+from .manifest import assign_splits, config_hash, manifest_without_timings, reference_quality
+from .reader import Dataset, SceneInfo, open_dataset
+from .writer import DatasetWriter
+
+__all__ = [
+    "CropDataset",
+    "Dataset",
+    "DatasetError",
+    "DatasetWriter",
+    "Frame",
+    "SceneInfo",
+    "Sequence",
+    "SequenceCropDataset",
+    "assign_splits",
+    "config_hash",
+    "manifest_without_timings",
+    "open_dataset",
+    "read_exr",
+    "read_samples_exr",
+    "reference_quality",
+    "write_exr",
+]
+
+
+def __getattr__(name: str):
+    if name in ("CropDataset", "SequenceCropDataset"):
+        from . import torch_dataset
+
+        return getattr(torch_dataset, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,266 @@
+"""The ``dataset.json`` model (DESIGN.md, "Dataset on disk"): schema, config hash, splits, quality.
+
+Layout of the manifest (all keys sorted when saved; paths relative to the dataset folder)::
+
+    {
+      "schema": "denoisebench-dataset", "schema_version": 1,
+      "config": {...}, "config_hash": "<sha256 of the canonical JSON of config>",
+      "versions": {"python": ..., "numpy": ..., "openexr": ..., <caller's: mitsuba, drjit, usd ...>},
+      "complete": true,                      # set by finalize when every expected file is done
+      "splits": {"train": [...], "val": [...], "test": [...]},   # scene names, set by finalize
+      "scenes": {
+        "<scene>": {
+          "family": str, "seed": int, "frames": int, "width": int, "height": int,
+          "spp": [int, ...], "ref_spp": int | null,
+          "usd": "<scene>/scene.usda", "effects": {"declared": [...], "inferred": [...]},
+          "plan": {...render plan...}, "camera": {...},  # and anything else the generator adds
+          "renders": {
+            "spp0004": {"0000": {"file", "sha256", "spp", "seconds", "seconds_per_spp",
+                                  "rel_se", "samples": {"file", "sha256", "count"} | null, ...}},
+            "reference": {"0000": {"file", "sha256", "spp", "seconds", "seconds_per_spp",
+                                    "rel_se", "noisy_rel_se_max", "reference_too_noisy", ...}}
+          }
+        }
+      }
+    }
+
+Identical bytes: the EXR files are byte-identical for the same seed and config; the manifest is
+identical **except for timings** (render seconds are there by design). A timing is any key whose
+name contains ``seconds`` (:func:`is_timing_key`); :func:`manifest_without_timings` drops them, and
+that is what must match between an interrupted-and-resumed run and an uninterrupted one. The
+manifest holds no wall-clock time stamps.
+
+Reference quality: the relative standard error of an image is
+``rel_se = sqrt(mean(color_var)) / max(mean(color), 1e-8)`` over all pixels and channels: the RMS
+standard error of the pixel means divided by the mean radiance. It is one robust number per image
+(a per-pixel ratio explodes on black pixels) and falls as 1/sqrt(spp). The reference of a frame is
+flagged ``reference_too_noisy`` when its rel_se is not at least :data:`REFERENCE_FACTOR` (4) times
+lower than that of the noisiest noisy input of the same frame (:func:`reference_quality`): a
+reference with a quarter of the input's noise still adds 1/16 of the input's MSE to any score.
+
+Splits (:func:`assign_splits`) are by scene and deterministic: scenes are ordered by
+``sha256(f"{seed}:{name}")``, so the result depends only on the seed and the set of names (not on
+their order, nor on any library's random generator), and adding a scene never moves the others
+relative to each other.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import math
+import os
+import platform
+from pathlib import Path
+from typing import Iterable, Mapping
+
+import numpy as np
+
+from .atomic import atomic_write_bytes
+from .errors import DatasetError
+from .exr_io import canonical_json
+
+SCHEMA = "denoisebench-dataset"
+SCHEMA_VERSION = 1
+SPLITS = ("train", "val", "test")
+DEFAULT_FRACTIONS = (0.7, 0.15, 0.15)
+
+#: The reference must be this many times less noisy (rel_se) than the noisiest input.
+REFERENCE_FACTOR = 4.0
+#: Floor of the mean radiance in rel_se (a black image with zero variance has rel_se 0).
+REL_SE_EPS = 1e-8
+
+__all__ = [
+    "SCHEMA",
+    "SCHEMA_VERSION",
+    "SPLITS",
+    "REFERENCE_FACTOR",
+    "config_hash",
+    "assign_splits",
+    "relative_standard_error",
+    "reference_quality",
+    "software_versions",
+    "new_manifest",
+    "load_manifest",
+    "save_manifest",
+    "manifest_bytes",
+    "is_timing_key",
+    "manifest_without_timings",
+    "DatasetWriter",
+]
+
+
+# --------------------------------------------------------------------------- config, versions
+
+
+def config_hash(config: Mapping) -> str:
+    """sha256 (hex) of the canonical JSON of ``config`` (sorted keys, no spaces; tuples = lists)."""
+    try:
+        text = canonical_json(config)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"the dataset config must be plain JSON (no NaN): {exc}") from None
+    return hashlib.sha256(text.encode("ascii")).hexdigest()
+
+
+def software_versions(extra: Mapping[str, str] | None = None) -> dict[str, str]:
+    """Python, numpy and OpenEXR versions, plus the caller's (mitsuba, drjit, usd...: passed in)."""
+    import OpenEXR
+
+    versions = {
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "openexr": getattr(OpenEXR, "__version__", "unknown"),
+    }
+    for key, value in (extra or {}).items():
+        versions[str(key)] = str(value)
+    return versions
+
+
+# --------------------------------------------------------------------------- splits
+
+
+def _round_half_up(x: float) -> int:
+    return int(math.floor(x + 0.5))
+
+
+def assign_splits(
+    scene_names: Iterable[str], seed: int, fractions: tuple[float, float, float] = DEFAULT_FRACTIONS
+) -> dict[str, list[str]]:
+    """Split scenes into train/val/test, deterministically from ``seed``.
+
+    Counts for n scenes: test = max(1, round(n·f_test)), val = round(n·f_val), train = the rest,
+    with at least one train scene (val shrinks first, then test, down to 1). So there is always at
+    least one test scene and one train scene when n ≥ 2. A single scene goes to **test** (the
+    harness's first use is benchmarking; training needs several scenes anyway). Rounding is half
+    up. Each list is sorted by name.
+    """
+    names = sorted(set(scene_names))
+    if len(fractions) != 3 or any(f < 0 for f in fractions) or not math.isclose(sum(fractions), 1.0, abs_tol=1e-9):
+        raise ValueError(f"fractions must be three non-negative numbers summing to 1 (got {fractions})")
+    n = len(names)
+    if n == 0:
+        return {split: [] for split in SPLITS}
+    order = sorted(names, key=lambda name: hashlib.sha256(f"{int(seed)}:{name}".encode()).hexdigest())
+    if n == 1:
+        return {"train": [], "val": [], "test": order}
+    n_test = min(max(1, _round_half_up(n * fractions[2])), n - 1)
+    n_val = min(_round_half_up(n * fractions[1]), n - 1 - n_test)
+    test = order[:n_test]
+    val = order[n_test : n_test + n_val]
+    train = order[n_test + n_val :]
+    return {"train": sorted(train), "val": sorted(val), "test": sorted(test)}
+
+
+# --------------------------------------------------------------------------- quality
+
+
+def relative_standard_error(color: np.ndarray, color_var: np.ndarray | None) -> float | None:
+    """``sqrt(mean(color_var)) / max(mean(color), 1e-8)``; None without a variance buffer."""
+    if color_var is None:
+        return None
+    var = np.asarray(color_var, dtype=np.float64)
+    mean = float(np.mean(np.asarray(color, dtype=np.float64)))
+    value = math.sqrt(max(float(np.mean(var)), 0.0)) / max(abs(mean), REL_SE_EPS)
+    if not math.isfinite(value):
+        raise ValueError("relative standard error is not finite (NaN/Inf in color or color_var)")
+    return value
+
+
+def reference_quality(noisy_rel_se, ref_rel_se: float | None, factor: float = REFERENCE_FACTOR) -> bool:
+    """True (**too noisy**) when ``ref_rel_se`` is not at least ``factor``× below the noisiest input.
+
+    ``noisy_rel_se`` is one number or several (the frame's inputs at each spp; None entries are
+    ignored). Without a measurable input or reference there is nothing to flag: False.
+    """
+    if isinstance(noisy_rel_se, (int, float)) or noisy_rel_se is None:
+        values = [noisy_rel_se]
+    else:
+        values = list(noisy_rel_se)
+    values = [float(v) for v in values if v is not None]
+    if not values or ref_rel_se is None:
+        return False
+    return bool(float(ref_rel_se) * factor > max(values))
+
+
+# --------------------------------------------------------------------------- load / save
+
+
+def new_manifest(config: Mapping, versions: Mapping[str, str]) -> dict:
+    config = json.loads(canonical_json(config))  # a plain-JSON copy (tuples → lists)
+    return {
+        "schema": SCHEMA,
+        "schema_version": SCHEMA_VERSION,
+        "config": config,
+        "config_hash": config_hash(config),
+        "versions": dict(versions),
+        "complete": False,
+        "splits": {split: [] for split in SPLITS},
+        "scenes": {},
+    }
+
+
+def manifest_bytes(manifest: Mapping) -> bytes:
+    """Indented JSON with sorted keys (deterministic), UTF-8, final newline."""
+    return (json.dumps(manifest, indent=2, sort_keys=True, allow_nan=False) + "\n").encode("utf-8")
+
+
+def save_manifest(path: str | os.PathLike, manifest: Mapping) -> None:
+    atomic_write_bytes(path, manifest_bytes(manifest))
+
+
+def load_manifest(path: str | os.PathLike) -> dict:
+    """Read and check a manifest; DatasetError (one line, naming the file) when it is not one."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DatasetError(f"{path} is missing: not a denoisebench dataset (no manifest)") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"cannot read {path}: {exc}") from None
+    try:
+        manifest = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise DatasetError(f"{path} is not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    if not isinstance(manifest, dict) or manifest.get("schema") != SCHEMA:
+        raise DatasetError(f"{path} is not a denoisebench dataset manifest")
+    version = manifest.get("schema_version")
+    if version != SCHEMA_VERSION:
+        raise DatasetError(
+            f"{path} has schema version {version}; this denoisebench reads version {SCHEMA_VERSION}"
+        )
+    for key, kind in (("config", dict), ("config_hash", str), ("versions", dict), ("splits", dict), ("scenes", dict)):
+        if not isinstance(manifest.get(key), kind):
+            raise DatasetError(f"{path}: manifest field {key!r} is missing or not a {kind.__name__}")
+    for name, scene in manifest["scenes"].items():
+        if not isinstance(scene, dict) or not isinstance(scene.get("renders", {}), dict):
+            raise DatasetError(f"{path}: scene {name!r} has a malformed record")
+    return manifest
+
+
+def is_timing_key(key: str) -> bool:
+    """Keys holding measured time (they differ between runs): any name containing ``seconds``."""
+    return "seconds" in key
+
+
+def _strip(value):
+    if isinstance(value, dict):
+        return {k: _strip(v) for k, v in value.items() if not is_timing_key(k)}
+    if isinstance(value, list):
+        return [_strip(v) for v in value]
+    return value
+
+
+def manifest_without_timings(manifest: Mapping | str | os.PathLike) -> dict:
+    """A copy of the manifest (or of the manifest file at a path) without any timing key."""
+    if not isinstance(manifest, Mapping):
+        manifest = load_manifest(manifest)
+    return _strip(copy.deepcopy(dict(manifest)))
+
+
+def __getattr__(name: str):  # DatasetWriter lives in .writer (it needs this module)
+    if name == "DatasetWriter":
+        from .writer import DatasetWriter
+
+        return DatasetWriter
+    raise AttributeError(name)

@@ -1,0 +1,264 @@
+"""Open a dataset folder and yield :class:`~denoisebench.dataset.frame.Frame` / ``Sequence`` (torch-free).
+
+>>> ds = open_dataset("out")                       # doctest: +SKIP
+>>> ds.split("test")                               # scene names
+>>> ds.scene("cornell_0").plan                     # the render plan dict
+>>> for frame in ds.frames("cornell_0", 4): ...    # Frames at 4 spp, reference attached
+>>> seq = ds.sequence("cornell_0", 4)              # all frames, in order
+
+A Frame carries the noisy buffers (``color``, features, ``*_var``), ``reference`` (the reference
+color, H×W×3) when the scene has one, ``samples`` (S×H×W×C per buffer) when per-sample data was
+written, and ``meta``: the frame record's ``file``, ``seconds``, ``seconds_per_spp``, ``rel_se``,
+and ``reference_file``, ``reference_spp``, ``reference_seconds``, ``reference_rel_se``,
+``reference_too_noisy`` and ``reference_buffers`` (every layer of the reference file: ``color``,
+``color_var`` and, when written, ``diffuse``/``specular`` and their variances).
+
+Every problem is a one-line :class:`~denoisebench.dataset.errors.DatasetError` naming the scene,
+frame and file: an unknown scene or spp, a frame with no record (incomplete dataset), a missing or
+corrupt file, NaN/Inf in it, and with ``verify=True`` a sha256 that differs from the manifest.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import numpy as np
+
+from . import layout
+from .errors import DatasetError
+from .exr_io import load_exr, load_samples_exr
+from .frame import Frame, Sequence
+from .manifest import SPLITS, load_manifest
+
+
+@dataclass(frozen=True)
+class SceneInfo:
+    """One scene's manifest record (without its frame records, which stay in ``renders``)."""
+
+    name: str
+    record: dict
+
+    @property
+    def plan(self) -> dict:
+        return self.record.get("plan", {})
+
+    @property
+    def family(self) -> str:
+        return self.record.get("family", "")
+
+    @property
+    def seed(self) -> int:
+        return self.record.get("seed", 0)
+
+    @property
+    def frame_count(self) -> int:
+        return int(self.record["frames"])
+
+    @property
+    def spp(self) -> list[int]:
+        return list(self.record["spp"])
+
+    @property
+    def ref_spp(self) -> int | None:
+        return self.record.get("ref_spp")
+
+    @property
+    def width(self) -> int:
+        return int(self.record["width"])
+
+    @property
+    def height(self) -> int:
+        return int(self.record["height"])
+
+    @property
+    def effects(self):
+        return self.record.get("effects", {})
+
+    @property
+    def camera(self) -> dict:
+        return self.record.get("camera", {})
+
+    @property
+    def usd(self) -> str:
+        return self.record.get("usd", layout.usd_path(self.name))
+
+    @property
+    def has_reference(self) -> bool:
+        return bool(self.record.get("ref_spp"))
+
+    @property
+    def meta(self) -> dict:
+        return {k: v for k, v in self.record.items() if k != "renders"}
+
+
+class Dataset:
+    """A dataset folder opened by :func:`open_dataset`."""
+
+    def __init__(self, root: Path, manifest: dict, verify: bool = False):
+        self.root = root
+        self.manifest = manifest
+        self.verify = verify
+
+    # ------------------------------------------------------------------ catalogue
+
+    @property
+    def config(self) -> dict:
+        return self.manifest["config"]
+
+    @property
+    def config_hash(self) -> str:
+        return self.manifest["config_hash"]
+
+    @property
+    def versions(self) -> dict:
+        return self.manifest["versions"]
+
+    @property
+    def complete(self) -> bool:
+        return bool(self.manifest.get("complete", False))
+
+    @property
+    def scenes(self) -> list[str]:
+        return sorted(self.manifest["scenes"])
+
+    @property
+    def splits(self) -> dict[str, list[str]]:
+        return {split: list(self.manifest["splits"].get(split, [])) for split in SPLITS}
+
+    def split(self, name: str) -> list[str]:
+        """Scene names of split ``name`` (train, val or test)."""
+        if name not in SPLITS:
+            raise DatasetError(f"unknown split {name!r}; splits are {', '.join(SPLITS)}")
+        return self.splits[name]
+
+    def scene(self, name: str) -> SceneInfo:
+        try:
+            return SceneInfo(name, self.manifest["scenes"][name])
+        except KeyError:
+            known = ", ".join(self.scenes[:8]) + (", ..." if len(self.scenes) > 8 else "")
+            raise DatasetError(f"{self.root}: no scene {name!r} (scenes: {known or 'none'})") from None
+
+    def _frame_record(self, scene: str, key: str, index: int, what: str, expected: str) -> dict:
+        info = self.scene(scene)
+        if not 0 <= index < info.frame_count:
+            raise DatasetError(f"scene {scene!r} has frames 0..{info.frame_count - 1}, not {index}")
+        record = info.record.get("renders", {}).get(key, {}).get(layout.frame_key(index))
+        if record is None:
+            raise DatasetError(
+                f"{self.root}: scene {scene!r} frame {index} has no {what} in the manifest "
+                f"(expected {self.root / expected}; incomplete dataset?)"
+            )
+        return record
+
+    # ------------------------------------------------------------------ loading
+
+    def reference(self, scene: str, index: int) -> tuple[dict[str, np.ndarray], dict]:
+        """The reference file's layers and its manifest record."""
+        record = self._frame_record(
+            scene, layout.REFERENCE, index, "reference", layout.reference_path(scene, index)
+        )
+        contents = load_exr(
+            self.root / record["file"],
+            record["sha256"] if self.verify else None,
+            what=f"scene {scene!r} frame {index} reference file",
+        )
+        if "color" not in contents.buffers:
+            raise DatasetError(f"scene {scene!r} frame {index} reference file {self.root / record['file']} has no color layer")
+        return contents.buffers, record
+
+    def frame(
+        self,
+        scene: str,
+        spp: int,
+        index: int,
+        *,
+        reference: bool = True,
+        samples: bool = True,
+        buffers: Iterable[str] | None = None,
+    ) -> Frame:
+        """Frame ``index`` of ``scene`` at ``spp``.
+
+        ``reference``: attach the reference when the scene has one; ``samples``: load per-sample
+        data when present; ``buffers``: keep only these noisy buffers (``color`` always kept).
+        """
+        info = self.scene(scene)
+        spp = int(spp)
+        if spp not in info.spp:
+            raise DatasetError(f"scene {scene!r} was rendered at spp {info.spp}, not {spp}")
+        record = self._frame_record(
+            scene, layout.spp_key(spp), index, f"{spp}-spp frame", layout.noisy_path(scene, spp, index)
+        )
+        what = f"scene {scene!r} frame {index} ({spp} spp) file"
+        contents = load_exr(self.root / record["file"], record["sha256"] if self.verify else None, what=what)
+        layers = contents.buffers
+        if "color" not in layers:
+            raise DatasetError(f"{what} {self.root / record['file']} has no color layer")
+        if buffers is not None:
+            wanted = ["color"] + [b for b in buffers if b != "color"]
+            absent = [b for b in wanted if b not in layers]
+            if absent:
+                raise DatasetError(
+                    f"{what} {self.root / record['file']} has no buffer(s) {', '.join(absent)} "
+                    f"(has {', '.join(sorted(layers))})"
+                )
+            layers = {b: layers[b] for b in wanted}
+        meta = {k: record[k] for k in ("file", "seconds", "seconds_per_spp", "rel_se") if k in record}
+        ref_color = None
+        if reference and info.has_reference:
+            ref_layers, ref_record = self.reference(scene, index)
+            ref_color = ref_layers["color"]
+            if ref_color.shape != layers["color"].shape:
+                raise DatasetError(
+                    f"scene {scene!r} frame {index} reference is {ref_color.shape[:2]}, the frame is {layers['color'].shape[:2]}"
+                )
+            meta.update(
+                reference_file=ref_record["file"],
+                reference_spp=ref_record.get("spp"),
+                reference_seconds=ref_record.get("seconds"),
+                reference_rel_se=ref_record.get("rel_se"),
+                reference_too_noisy=ref_record.get("reference_too_noisy", False),
+                reference_buffers=ref_layers,
+            )
+        sample_data = None
+        if samples and record.get("samples"):
+            entry = record["samples"]
+            sample_data = load_samples_exr(
+                self.root / entry["file"],
+                entry["sha256"] if self.verify else None,
+                what=f"scene {scene!r} frame {index} ({spp} spp) samples file",
+            ).samples
+            meta["samples_file"] = entry["file"]
+        try:
+            return Frame(
+                buffers=layers, spp=spp, scene=scene, index=index, reference=ref_color, samples=sample_data, meta=meta
+            )
+        except ValueError as exc:
+            raise DatasetError(f"{what} {self.root / record['file']}: {exc}") from None
+
+    def frames(self, scene: str, spp: int, **options) -> Iterator[Frame]:
+        """Frames 0..N−1 of ``scene`` at ``spp``, loaded one at a time (options as :meth:`frame`)."""
+        for index in range(self.scene(scene).frame_count):
+            yield self.frame(scene, spp, index, **options)
+
+    def sequence(self, scene: str, spp: int, **options) -> Sequence:
+        """All frames of ``scene`` at ``spp`` in order; ``meta`` is the scene record (plan, camera...)."""
+        info = self.scene(scene)
+        return Sequence(scene=scene, spp=int(spp), frames=list(self.frames(scene, spp, **options)), meta=info.meta)
+
+
+def open_dataset(path: str | os.PathLike, verify: bool = False) -> Dataset:
+    """Open the dataset at ``path`` (the folder, or its ``dataset.json``).
+
+    ``verify``: check every file's sha256 against the manifest as it is read.
+    """
+    path = Path(path)
+    if path.name == layout.MANIFEST_NAME and path.is_file():
+        root, manifest_path = path.parent, path
+    else:
+        root, manifest_path = path, path / layout.MANIFEST_NAME
+    if not root.exists():
+        raise DatasetError(f"dataset folder {root} does not exist")
+    return Dataset(root, load_manifest(manifest_path), verify=verify)
