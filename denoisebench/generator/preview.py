@@ -1,7 +1,8 @@
-"""A quick look at a stage: Mitsuba's ``path`` integrator at one frame, tone-mapped to a PNG.
+"""A quick look at a stage: one frame's reference color from the feature renderer, tone-mapped to a PNG.
 
-The preview renders with Mitsuba's own camera and integrator (not the feature renderer) at the
-depth the scene's render plan calls for, so it shows what the dataset will contain, fast.
+The preview renders with the same renderer, camera model and render plan as the dataset (camera
+motion blur and thin-lens depth of field included, which Mitsuba's own sensors would not show for
+an animated camera), at the spp asked for, so it shows what the dataset will contain.
 Tone map: exposure set so the 99th-percentile luminance maps to 1, then x/(1+x) and the sRGB
 curve (a preview is for eyes, not for metrics).
 """
@@ -15,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from denoisebench.errors import UserInputError
-from denoisebench.generator.mitsuba_scene import build_mitsuba_scene, sensor_dict
+from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
 from denoisebench.generator.render_plan import make_render_plan
 from denoisebench.generator.translate import translate_usd
 
@@ -35,20 +36,16 @@ def tone_map_preview(image: np.ndarray) -> np.ndarray:
 def render_preview(usd_path: str | Path, frame: int = 0, width: int = 256, height: int = 256, spp: int = 64,
                    seed: int = 0) -> tuple[np.ndarray, "object"]:
     """(linear HDR image H×W×3, translated scene) of ``usd_path`` at ``frame``."""
-    from denoisebench.mitsuba_runtime import load_mitsuba
-
     translated = translate_usd(usd_path)
     if not 0 <= frame < translated.camera.frames:
         raise UserInputError(f"--frame {frame} is out of range: the stage has {translated.camera.frames} frame(s)")
+    from denoisebench.generator.feature_renderer import render_frame
+
     plan = make_render_plan(translated.effects)
-    mi = load_mitsuba()
-    scene = build_mitsuba_scene(
-        translated,
-        sensor=sensor_dict(translated.camera, frame, width, height, spp, seed),
-        integrator={"type": "path", "max_depth": plan.max_depth},
-    )
-    image = np.array(mi.render(scene, spp=spp, seed=seed), dtype=np.float32)
-    return image, translated
+    scene = build_mitsuba_scene(translated)
+    rendered = render_frame(scene, translated.camera, frame, plan, width=width, height=height, spp=spp,
+                            seed=seed, reference=True)
+    return rendered.buffers["color"], translated
 
 
 def write_png(image_8bit: np.ndarray, out: str | Path) -> Path:
