@@ -19,6 +19,8 @@ from denoisebench.errors import UserInputError
 COMMANDS: dict[str, tuple[str, str]] = {
     "scenes": ("scenes", "list scene families, author a scene as USD, preview a stage"),
     "demo": ("demo", "author and preview one scene of every family (what `make demo` runs)"),
+    "benchmark": ("benchmark", "run denoisers over a dataset split into SQLite and write a report (run-benchmark)"),
+    "leaderboard": ("leaderboard", "rank denoisers across the runs on one dataset in a results database"),
 }
 
 EPILOG = textwrap.dedent(

@@ -1,0 +1,111 @@
+"""Benchmark denoisers on a dataset split and write a report (also installed as ``run-benchmark``).
+
+Every denoiser runs over every sequence of the split at every input spp (temporal ones frame by
+frame, reset() between sequences); every metric is computed per frame and every call timed. Results
+go to a SQLite database (--db) with the dataset's hash, the config and software versions; a failing
+denoiser is recorded with its error and the run goes on. Rerunning the same command after a kill
+completes what is missing. The report folder (--out) gets index.html (self-contained, works
+offline), report.md, results.json, results.csv and figures/.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+
+from denoisebench.errors import UserInputError
+
+EPILOG = """examples:
+  run-benchmark --data out/dataset --out report/
+  run-benchmark --data out/dataset --denoisers identity,oidn --spp 1,4 --db results.sqlite
+  run-benchmark --data out/dataset --denoiser my_pkg.filters:MyDenoiser --option my_pkg.filters:MyDenoiser:radius=5
+"""
+
+
+def _int_list(text: str) -> list[int]:
+    try:
+        values = [int(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise UserInputError(f"--spp wants comma-separated integers, got {text!r}") from None
+    if not values or any(v < 1 for v in values):
+        raise UserInputError(f"--spp wants positive integers, got {text!r}")
+    return values
+
+
+def _options(items: list[str]) -> dict[str, dict]:
+    """``SPEC:KEY=VALUE`` (SPEC may itself contain ':') → {spec: {key: value}}; values parsed as JSON when they can be."""
+    import json
+
+    options: dict[str, dict] = {}
+    for item in items:
+        head, eq, value = item.rpartition("=")
+        spec, colon, key = head.rpartition(":")
+        if not eq or not colon or not spec or not key:
+            raise UserInputError(f"--option wants SPEC:KEY=VALUE, got {item!r}")
+        try:
+            parsed = json.loads(value)
+        except json.JSONDecodeError:
+            parsed = value
+        options.setdefault(spec, {})[key] = parsed
+    return options
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--data", required=True, help="dataset folder (with dataset.json)")
+    parser.add_argument(
+        "--denoisers", default=None,
+        help="comma-separated built-in/entry-point names, or 'all' (default all, or none when --denoiser is given)"
+    )
+    parser.add_argument(
+        "--denoiser", action="append", default=[], metavar="MODULE:ATTR",
+        help="a plugin denoiser as module:attr or path/to/file.py:attr (repeatable; added to --denoisers)",
+    )
+    parser.add_argument("--option", action="append", default=[], metavar="SPEC:KEY=VALUE", help="constructor option of a denoiser")
+    parser.add_argument("--spp", default=None, help="input spp to benchmark, e.g. 1,4,16 (default: every spp of the split)")
+    parser.add_argument("--split", default="test", choices=("train", "val", "test"), help="dataset split (default test)")
+    parser.add_argument("--metrics", default="", help="comma-separated metrics (default every registered; relmse and flip always)")
+    parser.add_argument("--out", default="report", help="report folder (default report)")
+    parser.add_argument("--db", default="benchmark.sqlite", help="results database (default benchmark.sqlite)")
+    parser.add_argument("--executor", default="local", choices=("local", "ray"), help="where units run (default local)")
+    parser.add_argument("--new-run", action="store_true", help="measure everything again as a new run instead of resuming")
+    parser.add_argument("--no-report", action="store_true", help="only measure; write no report")
+
+
+def run(args) -> int:
+    from denoisebench.dataset import open_dataset
+    from denoisebench.leaderboard.runner import BenchmarkConfig, run_benchmark
+    from denoisebench.leaderboard.store import ResultsStore, utc_now
+
+    # --denoiser alone benchmarks just those plugins; --denoisers defaults to all otherwise
+    given = args.denoisers if args.denoisers is not None else ("" if args.denoiser else "all")
+    specs = [s.strip() for s in given.split(",") if s.strip()] + list(args.denoiser)
+    config = BenchmarkConfig(
+        denoisers=specs,
+        spp=_int_list(args.spp) if args.spp else [],
+        split=args.split,
+        metrics=[m.strip() for m in args.metrics.split(",") if m.strip()],
+        options=_options(args.option),
+        nonce=utc_now() if args.new_run else None,
+    )
+    dataset = open_dataset(args.data)
+    started = time.perf_counter()
+    with ResultsStore(args.db) as store:
+        plan = run_benchmark(dataset, config, store, executor=args.executor)
+        units = store.units(plan.run_id)
+        failed = [u for u in units if u["status"] != "ok"]
+        print(
+            f"run {plan.run_id} ({'resumed' if plan.resumed else 'new'}): {len(units)} units in {args.db}, "
+            f"{len(failed)} failed, {time.perf_counter() - started:.1f} s"
+        )
+        for d in plan.denoisers:
+            if d.load_error:
+                print(f"  {d.spec}: not run: {d.load_error}")
+        if args.no_report:
+            return 0
+        from denoisebench.leaderboard.report import write_report
+
+        index = write_report(store, plan.run_id, dataset, Path(args.out))
+    print(f"report: {index.resolve()}")
+    sys.stdout.flush()
+    return 0

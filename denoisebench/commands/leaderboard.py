@@ -1,0 +1,31 @@
+"""Rank denoisers by one metric at one input spp across every run on one dataset of a results database.
+
+Each denoiser is shown from the newest run that measured it (its run id and date in the table);
+``noisy`` is the input itself, the line every denoiser has to beat. Failed denoisers rank last.
+"""
+
+from __future__ import annotations
+
+EPILOG = """examples:
+  denoisebench leaderboard --db benchmark.sqlite
+  denoisebench leaderboard --db benchmark.sqlite --metric flip --spp 4
+  denoisebench leaderboard --metric temporal_l1 --dataset 3fa9c1
+"""
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--db", default="benchmark.sqlite", help="results database (default benchmark.sqlite)")
+    parser.add_argument("--metric", default="relmse", help="metric to rank by (default relmse)")
+    parser.add_argument("--spp", type=int, default=None, help="input spp (default the lowest measured)")
+    parser.add_argument(
+        "--dataset", default=None, help="dataset hash prefix or folder (default the dataset of the newest run)"
+    )
+
+
+def run(args) -> int:
+    from denoisebench.leaderboard.store import ResultsStore
+    from denoisebench.leaderboard.table import format_leaderboard, leaderboard
+
+    with ResultsStore(args.db, readonly=True) as store:
+        print(format_leaderboard(*leaderboard(store, args.metric, args.spp, args.dataset)))
+    return 0

@@ -1,0 +1,67 @@
+"""``--executor ray``: measure the sequences of a run as Ray tasks, one task per (scene, spp).
+
+Each task opens the dataset itself, constructs its denoisers from their specs (instances do not
+travel between processes) and returns its units; the driver writes them to the store, one
+transaction per unit, as they arrive (:func:`ray.wait`), so a kill keeps everything finished.
+
+Notes
+-----
+* Ray is imported inside :func:`run_ray` only: it takes seconds to import and to start.
+* Without a running cluster ``ray.init()`` starts a local one with one worker per core. Denoise
+  times are then measured while other tasks share the machine: on a small machine prefer the
+  local executor for timings that will be compared.
+* Only ``noisy`` and denoisers that loaded in the driver are sent; a denoiser that fails to load
+  in a worker fails its units with that error.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from denoisebench.dataset import Dataset
+
+from .runner import NOISY, BenchmarkConfig, RunPlan, measure_group, pending_groups
+from .store import ResultsStore, UnitRecord
+
+
+def _measure_remote(root: str, plan: RunPlan, options: dict, scene: str, spp: int, labels: list[str]) -> list[UnitRecord]:
+    from denoisebench.dataset import open_dataset
+    from denoisebench.denoisers.registry import load_denoiser
+
+    instances: dict[str, object] = {}
+    errors: dict[str, str] = {}
+    for d in plan.denoisers:
+        if d.label in labels and d.label != NOISY:
+            try:
+                instances[d.label] = load_denoiser(d.spec, **options.get(d.spec, {}))
+            except Exception as exc:  # noqa: BLE001 - recorded as the units' failure
+                errors[d.label] = f"load in worker: {exc}"
+    units = list(measure_group(open_dataset(root), plan, scene, spp, [l for l in labels if l not in errors], instances))
+    for label, error in errors.items():
+        units.append(UnitRecord(label, scene, spp, "failed", error, []))
+    return units
+
+
+def run_ray(
+    dataset: Dataset, plan: RunPlan, store: ResultsStore, config: BenchmarkConfig, on_unit: Callable[[UnitRecord, bool], None]
+) -> None:
+    import ray
+
+    if not ray.is_initialized():
+        ray.init(include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    # instances stay in the driver; the plan travels without them
+    light = RunPlan(
+        plan.run_id, plan.scenes, plan.spp,
+        [type(d)(d.label, d.spec, None, d.needs, d.temporal, d.load_error) for d in plan.denoisers],
+        plan.spatial, plan.temporal, plan.resumed,
+    )
+    task = ray.remote(_measure_remote)
+    root = str(dataset.root.resolve())
+    pending = [
+        task.remote(root, light, config.options, scene, spp, labels)
+        for scene, spp, labels in pending_groups(plan, store.done_units(plan.run_id))
+    ]
+    while pending:
+        ready, pending = ray.wait(pending, num_returns=1)
+        for unit in ray.get(ready[0]):
+            on_unit(unit, store.write_unit(plan.run_id, unit))

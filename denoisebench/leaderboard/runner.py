@@ -1,0 +1,383 @@
+"""The benchmark runner: every denoiser over every sequence of a split at every input spp.
+
+A **unit** is one denoiser on one scene's sequence at one spp. The runner loads a sequence once,
+runs the noisy input itself (the "just render more samples" point, label :data:`NOISY`) and every
+denoiser on it through :func:`denoisebench.denoisers.runner.run_sequence` (``reset()`` first, then
+the frames in order, every call timed, every output checked, failures contained), computes every
+metric per frame and the temporal ones per sequence, and writes the unit to the
+:class:`~denoisebench.leaderboard.store.ResultsStore` in one transaction.
+
+Notes
+-----
+* **Resuming.** A run is identified by the hash of the dataset and the benchmark config
+  (:func:`run_identity`). Rerunning the same command finds the run and computes only the units that
+  have no row; a unit is atomic in the store, so a kill loses at most the unit in flight.
+* **Time.** ``render_seconds`` of a frame is the generator's measured render time at that spp
+  (manifest); ``total_seconds`` = render + denoise (:func:`denoisebench.metrics.cost.total_seconds`).
+  Denoise time is measured around ``denoise()`` only. Two runs on a busy machine measure different
+  times: the leaderboard shows the run it comes from.
+* **The noisy input** is the color buffer after the harness's NaN/Inf sanitising (what denoisers
+  see); its denoise time is 0.
+* A denoiser that cannot be loaded (missing optional dependency, broken plugin) is recorded with
+  its error in ``run_denoisers`` and gets no units; the run goes on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.metadata
+import platform
+import sys
+from dataclasses import dataclass, field
+from typing import Callable, Iterable
+
+import numpy as np
+
+from denoisebench.dataset import Dataset, DatasetError, layout, manifest_without_timings
+from denoisebench.dataset.exr_io import canonical_json
+from denoisebench.errors import UserInputError
+
+from .store import FrameRecord, ResultsStore, UnitRecord
+
+NOISY = "noisy"
+#: Metrics the report leads with; always computed.
+REQUIRED_METRICS = ("relmse", "flip")
+#: Per-frame flicker: temporal_l1 of frames (t−1, t), stored as a frame metric of frame t.
+FLICKER_METRIC = "temporal_l1"
+#: Distributions whose versions a run records (those installed).
+VERSIONED = (
+    "denoisebench", "numpy", "scipy", "scikit-image", "colour-science", "flip-evaluator", "OpenEXR",
+    "torch", "pyoidn", "mitsuba", "usd-core", "ray",
+)
+
+
+@dataclass
+class BenchmarkConfig:
+    """What a run measures; its canonical JSON (with the dataset hash) identifies the run."""
+
+    denoisers: list[str]
+    spp: list[int]
+    split: str = "test"
+    metrics: list[str] = field(default_factory=list)
+    options: dict[str, dict] = field(default_factory=dict)
+    nonce: str | None = None  # set to force a new run instead of resuming
+
+    def as_dict(self) -> dict:
+        data = {
+            "denoisers": list(self.denoisers),
+            "spp": sorted(int(s) for s in self.spp),
+            "split": self.split,
+            "metrics": list(self.metrics),
+            "options": self.options,
+        }
+        if self.nonce:
+            data["nonce"] = self.nonce
+        return data
+
+
+@dataclass
+class LoadedDenoiser:
+    label: str
+    spec: str
+    instance: object | None
+    needs: frozenset[str]
+    temporal: bool
+    load_error: str | None = None
+
+
+# --------------------------------------------------------------------------------------------------
+# identity of a run
+
+
+def dataset_hash(dataset: Dataset) -> str:
+    """sha256 of the manifest without timings: the dataset's content (files' sha256 included)."""
+    return hashlib.sha256(canonical_json(manifest_without_timings(dataset.manifest)).encode()).hexdigest()
+
+
+def run_identity(data_hash: str, config: BenchmarkConfig) -> str:
+    text = canonical_json({"dataset": data_hash, "config": config.as_dict()})
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def software_versions() -> dict[str, str]:
+    versions = {"python": platform.python_version()}
+    for dist in VERSIONED:
+        try:
+            versions[dist] = importlib.metadata.version(dist)
+        except importlib.metadata.PackageNotFoundError:
+            continue
+    return versions
+
+
+# --------------------------------------------------------------------------------------------------
+# inputs
+
+
+def resolve_denoiser_specs(specs: Iterable[str]) -> list[str]:
+    """Expand ``all`` to every available name (built-ins, then entry points); keep order, no repeats."""
+    from denoisebench.denoisers.registry import available_denoisers
+
+    out: list[str] = []
+    for spec in specs:
+        names = list(available_denoisers()) if spec.strip() == "all" else [spec.strip()]
+        out.extend(n for n in names if n and n not in out)
+    if not out:
+        raise UserInputError("no denoisers given")
+    return out
+
+
+def load_denoisers(specs: list[str], options: dict[str, dict]) -> list[LoadedDenoiser]:
+    """Construct each denoiser. An unknown name is bad input; a load failure is recorded, not raised."""
+    from denoisebench.denoisers.protocol import describe
+    from denoisebench.denoisers.registry import DenoiserLoadError, load_denoiser
+
+    loaded: list[LoadedDenoiser] = []
+    taken = {NOISY}
+    for spec in specs:
+        try:
+            instance = load_denoiser(spec, **options.get(spec, {}))
+            info = describe(instance, fallback_name=spec)
+            label, needs, temporal, error = info.name, info.needs, info.temporal, None
+        except DenoiserLoadError as exc:
+            instance, label, needs, temporal, error = None, spec, frozenset(), False, str(exc)
+        base, n = label, 2
+        while label in taken:  # two specs with one name (or a plugin called "noisy") stay apart
+            label, n = f"{base}#{n}", n + 1
+        taken.add(label)
+        loaded.append(LoadedDenoiser(label, spec, instance, needs, temporal, error))
+    return loaded
+
+
+def check_dataset(dataset: Dataset, scenes: list[str], spp: list[int]) -> None:
+    """Every frame the run needs has a manifest record and a file, and a reference: else one line."""
+    for scene in scenes:
+        info = dataset.scene(scene)
+        renders = info.record.get("renders", {})
+        missing_spp = [s for s in spp if s not in info.spp]
+        if missing_spp:
+            raise DatasetError(f"scene {scene!r} was rendered at spp {info.spp}, not {missing_spp}")
+        for index in range(info.frame_count):
+            key = layout.frame_key(index)
+            ref = renders.get(layout.REFERENCE, {}).get(key)
+            ref_path = dataset.root / (ref["file"] if ref else layout.reference_path(scene, index))
+            if not info.has_reference or ref is None or not ref_path.is_file():
+                raise DatasetError(
+                    f"scene {scene!r} frame {index} has no reference ({ref_path} is "
+                    f"{'not in the manifest' if ref is None else 'missing'}): the benchmark needs one for every frame"
+                )
+            for s in spp:
+                record = renders.get(layout.spp_key(s), {}).get(key)
+                path = dataset.root / (record["file"] if record else layout.noisy_path(scene, s, index))
+                if record is None or not path.is_file():
+                    raise DatasetError(f"scene {scene!r} frame {index} at {s} spp: {path} is missing")
+
+
+# --------------------------------------------------------------------------------------------------
+# one unit
+
+
+def _frame_metrics(pred: np.ndarray, ref: np.ndarray, names: list[str]) -> dict[str, float]:
+    from denoisebench.metrics import compute_metrics
+
+    return {name: result.value for name, result in compute_metrics(pred, ref, names).items()}
+
+
+def _sequence_metrics(outputs, refs, motion, names: list[str]) -> dict[str, float]:
+    from denoisebench.metrics import compute_metrics, get_metric
+
+    usable = [n for n in names if "motion" not in get_metric(n).requires or motion is not None]
+    if len(outputs) < 2 or not usable:
+        return {}
+    results = compute_metrics(np.stack(outputs), np.stack(refs), usable, motion=motion)
+    return {name: result.value for name, result in results.items()}
+
+
+def _flicker(outputs, refs) -> list[float]:
+    """temporal_l1 of each consecutive pair: the flicker of frame t against frame t−1."""
+    from denoisebench.metrics import compute_metrics
+
+    return [
+        compute_metrics(np.stack(outputs[t - 1 : t + 1]), np.stack(refs[t - 1 : t + 1]), [FLICKER_METRIC])[FLICKER_METRIC].value
+        for t in range(1, len(outputs))
+    ]
+
+
+def measure_unit(label: str, denoiser: object | None, sequence, spatial: list[str], temporal: list[str]) -> UnitRecord:
+    """Run one denoiser (None: the noisy input) on ``sequence`` and measure every frame."""
+    from denoisebench.denoisers.runner import run_sequence, sanitize_array
+    from denoisebench.metrics.cost import total_seconds
+
+    frames = list(sequence)
+    if denoiser is None:
+        results = [(True, None, 0.0, sanitize_array(f.color)[0].astype(np.float32), 0) for f in frames]
+    else:
+        results = [
+            (r.ok, r.error, r.seconds, r.output, r.sanitized_total)
+            for r in run_sequence(denoiser, frames, name=label, keep_output=True)
+        ]
+    records: list[FrameRecord] = []
+    outputs: list[np.ndarray] = []
+    for frame, (ok, error, seconds, output, sanitized) in zip(frames, results):
+        render = frame.meta.get("seconds")
+        total = None
+        if render is not None and seconds is not None:
+            total = total_seconds(float(render) / frame.spp, frame.spp, float(seconds))
+        record = FrameRecord(frame.index, "ok" if ok else "failed", error, render, seconds, total, sanitized)
+        if ok:
+            try:
+                record.metrics = _frame_metrics(output, frame.reference, spatial)
+            except ValueError as exc:  # a metric refusing this output is the denoiser's failure
+                record.status, record.error, ok = "failed", f"metrics: {exc}", False
+        if ok:
+            outputs.append(output)
+        records.append(record)
+    all_ok = all(r.status == "ok" for r in records)
+    unit = UnitRecord(label, sequence.scene, sequence.spp, "ok" if all_ok else "failed", None, records)
+    if not all_ok:
+        unit.error = next(r.error for r in records if r.status != "ok")
+        return unit
+    refs = [f.reference for f in frames]
+    motion = np.stack([f.buffers["motion"] for f in frames]) if all(f.has("motion") for f in frames) else None
+    unit.sequence_metrics = _sequence_metrics(outputs, refs, motion, temporal)
+    if len(outputs) > 1:
+        for record, value in zip(records[1:], _flicker(outputs, refs)):
+            record.metrics["flicker"] = value
+    unit.image_frame, unit.image = frames[-1].index, outputs[-1]
+    return unit
+
+
+# --------------------------------------------------------------------------------------------------
+# the run
+
+
+def split_metrics(names: list[str]) -> tuple[list[str], list[str]]:
+    """(per-frame metric names, temporal metric names) of a metrics option ([] = every registered)."""
+    from denoisebench.metrics import get_metric, metric_names
+
+    try:
+        chosen = [get_metric(n).name for n in names] if names else metric_names()
+    except ValueError as exc:
+        raise UserInputError(str(exc)) from None
+    for name in REQUIRED_METRICS:
+        if name not in chosen:
+            chosen.append(name)
+    spatial = [n for n in dict.fromkeys(chosen) if not get_metric(n).temporal]
+    temporal = [n for n in dict.fromkeys(chosen) if get_metric(n).temporal]
+    return spatial, temporal
+
+
+@dataclass
+class RunPlan:
+    run_id: str
+    scenes: list[str]
+    spp: list[int]
+    denoisers: list[LoadedDenoiser]
+    spatial: list[str]
+    temporal: list[str]
+    resumed: bool
+
+    @property
+    def labels(self) -> list[str]:
+        return [NOISY] + [d.label for d in self.denoisers if d.instance is not None]
+
+    @property
+    def total_units(self) -> int:
+        return len(self.labels) * len(self.scenes) * len(self.spp)
+
+
+def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore) -> RunPlan:
+    """Check the inputs, load the denoisers, create (or find) the run in the store."""
+    scenes = dataset.split(config.split)
+    if not scenes:
+        raise UserInputError(f"{dataset.root}: split {config.split!r} has no scenes")
+    spp = sorted({int(s) for s in config.spp}) if config.spp else sorted(set.intersection(*(set(dataset.scene(s).spp) for s in scenes)))
+    if not spp:
+        raise UserInputError(f"{dataset.root}: the scenes of split {config.split!r} share no input spp")
+    config.spp = spp
+    check_dataset(dataset, scenes, spp)
+    spatial, temporal = split_metrics(config.metrics)
+    specs = resolve_denoiser_specs(config.denoisers)
+    config.denoisers = specs
+    data_hash = dataset_hash(dataset)
+    run_id = run_identity(data_hash, config)
+    denoisers = load_denoisers(specs, config.options)
+    created = store.ensure_run(run_id, data_hash, str(dataset.root.resolve()), config.as_dict(), software_versions())
+    store.add_denoiser(run_id, NOISY, NOISY, "input", {"color"}, False, None)
+    for d in denoisers:
+        store.add_denoiser(run_id, d.label, d.spec, "denoiser", d.needs, d.temporal, d.load_error)
+    return RunPlan(run_id, scenes, spp, denoisers, spatial, temporal, resumed=not created)
+
+
+def pending_groups(plan: RunPlan, done: set[tuple[str, str, int]]) -> list[tuple[str, int, list[str]]]:
+    """(scene, spp, labels still to measure) for every sequence with work left."""
+    groups = []
+    for scene in plan.scenes:
+        for spp in plan.spp:
+            labels = [label for label in plan.labels if (label, scene, spp) not in done]
+            if labels:
+                groups.append((scene, spp, labels))
+    return groups
+
+
+def measure_group(dataset: Dataset, plan: RunPlan, scene: str, spp: int, labels: list[str], instances: dict) -> Iterable[UnitRecord]:
+    """Load the sequence once and yield the unit of each label on it."""
+    wants_samples = any("samples" in d.needs for d in plan.denoisers if d.label in labels)
+    sequence = dataset.sequence(scene, spp, samples=wants_samples)
+    for label in labels:
+        if label != NOISY and label not in instances:
+            raise KeyError(f"no denoiser instance for {label!r}")  # never measure a denoiser as the input
+        yield measure_unit(label, instances.get(label), sequence, plan.spatial, plan.temporal)
+
+
+def run_local(dataset: Dataset, plan: RunPlan, store: ResultsStore, on_unit: Callable[[UnitRecord, bool], None]) -> None:
+    instances = {d.label: d.instance for d in plan.denoisers if d.instance is not None}
+    for scene, spp, _ in pending_groups(plan, store.done_units(plan.run_id)):
+        # re-read what is done: another process may be working on the same run
+        done = store.done_units(plan.run_id)
+        labels = [label for label in plan.labels if (label, scene, spp) not in done]
+        for unit in measure_group(dataset, plan, scene, spp, labels, instances):
+            on_unit(unit, store.write_unit(plan.run_id, unit))
+
+
+def run_benchmark(
+    dataset: Dataset,
+    config: BenchmarkConfig,
+    store: ResultsStore,
+    *,
+    executor: str = "local",
+    progress: bool = True,
+) -> RunPlan:
+    """Measure every missing unit of the run ``config`` describes; return its plan (with run_id)."""
+    from tqdm import tqdm
+
+    plan = prepare_run(dataset, config, store)
+    done = len(store.done_units(plan.run_id))
+    bar = tqdm(
+        total=plan.total_units, initial=min(done, plan.total_units), desc="benchmark: denoisers × sequences",
+        unit="seq", file=sys.stderr, disable=not progress,
+    )
+
+    def on_unit(unit: UnitRecord, written: bool) -> None:
+        bar.update(1)
+        if unit.status != "ok" and written:
+            bar.write(f"warning: {unit.denoiser} failed on {unit.scene} at {unit.spp} spp: {unit.error}", file=sys.stderr)
+
+    try:
+        if executor == "local":
+            run_local(dataset, plan, store, on_unit)
+        elif executor == "ray":
+            from .ray_executor import run_ray
+
+            run_ray(dataset, plan, store, config, on_unit)
+        else:
+            raise UserInputError(f"unknown executor {executor!r}; use local or ray")
+    finally:
+        bar.close()
+    missing = plan.total_units - len(store.done_units(plan.run_id) & _expected(plan))
+    if missing == 0:
+        store.finish_run(plan.run_id)
+    return plan
+
+
+def _expected(plan: RunPlan) -> set[tuple[str, str, int]]:
+    return {(label, scene, spp) for label in plan.labels for scene in plan.scenes for spp in plan.spp}

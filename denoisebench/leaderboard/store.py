@@ -1,0 +1,415 @@
+"""The results store: one SQLite file (stdlib ``sqlite3``) that every benchmark run writes to.
+
+Tables (schema version :data:`SCHEMA_VERSION`, kept in ``schema_version``):
+
+``runs``            one row per benchmark run: dataset hash, config (JSON), software versions (JSON)
+``run_denoisers``   the denoisers of a run: label, spec, needs, temporal, load error (if any)
+``units``           one denoiser on one sequence (scene) at one input spp: status, error, seconds
+``frames``          one row per frame of a unit: status, error, render/denoise/total seconds
+``frame_metrics``   metric values per frame (spatial, gradient, and per-frame flicker)
+``sequence_metrics``  temporal metric values per unit
+``images``          the denoised last frame of each unit (zlib-compressed float32), for reports
+
+Notes
+-----
+* **A unit is written in one transaction** (``BEGIN IMMEDIATE``), its ``units`` row last inside it:
+  a unit row exists if and only if all its frames and metrics do. A process killed mid-way leaves
+  either the whole unit or nothing, and a rerun computes only the units without a row.
+* **Concurrent writers.** WAL mode lets readers work while one process writes; ``BEGIN IMMEDIATE``
+  takes the write lock at the start of a transaction, so two writers never deadlock on a lock
+  upgrade, and the busy timeout makes the second wait instead of failing. Two processes running the
+  same run compute the same unit at worst twice: the second finds the row inside its transaction
+  and writes nothing (:meth:`ResultsStore.write_unit` returns False).
+* The WAL journal mode is a property of the database file; network file systems do not support it
+  (SQLite's documentation): keep the database on a local disk.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sqlite3
+import zlib
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from denoisebench.errors import UserInputError
+
+SCHEMA_VERSION = 1
+#: Seconds a writer waits for another's transaction before giving up.
+BUSY_TIMEOUT_S = 120.0
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL);
+CREATE TABLE IF NOT EXISTS runs (
+    run_id TEXT PRIMARY KEY,
+    dataset_hash TEXT NOT NULL,
+    dataset_path TEXT NOT NULL,
+    config TEXT NOT NULL,
+    versions TEXT NOT NULL,
+    created_at TEXT NOT NULL,
+    finished_at TEXT
+);
+CREATE TABLE IF NOT EXISTS run_denoisers (
+    run_id TEXT NOT NULL REFERENCES runs(run_id),
+    label TEXT NOT NULL,
+    spec TEXT NOT NULL,
+    kind TEXT NOT NULL,
+    needs TEXT NOT NULL,
+    temporal INTEGER NOT NULL,
+    load_error TEXT,
+    PRIMARY KEY (run_id, label)
+);
+CREATE TABLE IF NOT EXISTS units (
+    run_id TEXT NOT NULL REFERENCES runs(run_id),
+    denoiser TEXT NOT NULL,
+    scene TEXT NOT NULL,
+    spp INTEGER NOT NULL,
+    status TEXT NOT NULL,
+    error TEXT,
+    frames INTEGER NOT NULL,
+    frames_ok INTEGER NOT NULL,
+    denoise_seconds REAL,
+    render_seconds REAL,
+    finished_at TEXT NOT NULL,
+    PRIMARY KEY (run_id, denoiser, scene, spp)
+);
+CREATE TABLE IF NOT EXISTS frames (
+    run_id TEXT NOT NULL,
+    denoiser TEXT NOT NULL,
+    scene TEXT NOT NULL,
+    spp INTEGER NOT NULL,
+    frame INTEGER NOT NULL,
+    status TEXT NOT NULL,
+    error TEXT,
+    render_seconds REAL,
+    denoise_seconds REAL,
+    total_seconds REAL,
+    sanitized INTEGER NOT NULL DEFAULT 0,
+    PRIMARY KEY (run_id, denoiser, scene, spp, frame)
+);
+CREATE TABLE IF NOT EXISTS frame_metrics (
+    run_id TEXT NOT NULL,
+    denoiser TEXT NOT NULL,
+    scene TEXT NOT NULL,
+    spp INTEGER NOT NULL,
+    frame INTEGER NOT NULL,
+    metric TEXT NOT NULL,
+    value REAL,
+    PRIMARY KEY (run_id, denoiser, scene, spp, frame, metric)
+);
+CREATE TABLE IF NOT EXISTS sequence_metrics (
+    run_id TEXT NOT NULL,
+    denoiser TEXT NOT NULL,
+    scene TEXT NOT NULL,
+    spp INTEGER NOT NULL,
+    metric TEXT NOT NULL,
+    value REAL,
+    PRIMARY KEY (run_id, denoiser, scene, spp, metric)
+);
+CREATE TABLE IF NOT EXISTS images (
+    run_id TEXT NOT NULL,
+    denoiser TEXT NOT NULL,
+    scene TEXT NOT NULL,
+    spp INTEGER NOT NULL,
+    frame INTEGER NOT NULL,
+    height INTEGER NOT NULL,
+    width INTEGER NOT NULL,
+    data BLOB NOT NULL,
+    PRIMARY KEY (run_id, denoiser, scene, spp)
+);
+"""
+
+_UNIT_TABLES = ("frames", "frame_metrics", "sequence_metrics", "images")
+
+
+def utc_now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+@dataclass
+class FrameRecord:
+    """One frame of a unit: what the runner measured."""
+
+    frame: int
+    status: str
+    error: str | None
+    render_seconds: float | None
+    denoise_seconds: float | None
+    total_seconds: float | None
+    sanitized: int = 0
+    metrics: dict[str, float] = field(default_factory=dict)
+
+
+@dataclass
+class UnitRecord:
+    """One denoiser on one scene's sequence at one spp, ready to be written in one transaction."""
+
+    denoiser: str
+    scene: str
+    spp: int
+    status: str
+    error: str | None
+    frames: list[FrameRecord]
+    sequence_metrics: dict[str, float] = field(default_factory=dict)
+    image_frame: int | None = None
+    image: np.ndarray | None = None  # H×W×3 float32: the denoised frame ``image_frame``
+
+    @property
+    def denoise_seconds(self) -> float | None:
+        values = [f.denoise_seconds for f in self.frames if f.denoise_seconds is not None]
+        return float(sum(values)) if values else None
+
+    @property
+    def render_seconds(self) -> float | None:
+        values = [f.render_seconds for f in self.frames if f.render_seconds is not None]
+        return float(sum(values)) if values else None
+
+
+def _finite_or_none(value) -> float | None:
+    if value is None:
+        return None
+    value = float(value)
+    return value if np.isfinite(value) else None
+
+
+def encode_image(image: np.ndarray) -> bytes:
+    return zlib.compress(np.ascontiguousarray(image, dtype="<f4").tobytes(), 6)
+
+
+def decode_image(blob: bytes, height: int, width: int) -> np.ndarray:
+    return np.frombuffer(zlib.decompress(blob), dtype="<f4").reshape(height, width, 3).astype(np.float32)
+
+
+class ResultsStore:
+    """A connection to the results database at ``path`` (created with its schema when new)."""
+
+    def __init__(self, path: str | os.PathLike, *, readonly: bool = False):
+        self.path = Path(path)
+        if readonly and not self.path.is_file():
+            raise UserInputError(f"no results database at {self.path}")
+        if not readonly:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            # isolation_level=None: we issue BEGIN IMMEDIATE / COMMIT ourselves
+            self.conn = sqlite3.connect(str(self.path), timeout=BUSY_TIMEOUT_S, isolation_level=None)
+            self.conn.execute(f"PRAGMA busy_timeout = {int(BUSY_TIMEOUT_S * 1000)}")
+            if not readonly:
+                self.conn.execute("PRAGMA journal_mode = WAL")
+                self.conn.execute("PRAGMA synchronous = NORMAL")  # durable at checkpoints; safe in WAL
+                self._ensure_schema()
+            self._check_version()
+        except sqlite3.DatabaseError as error:
+            raise UserInputError(f"{self.path} is not a usable SQLite results database ({error})") from None
+
+    # ------------------------------------------------------------------ schema
+
+    def _ensure_schema(self) -> None:
+        with self.transaction():
+            # one statement at a time: executescript() would COMMIT our transaction for us
+            for statement in filter(str.strip, _SCHEMA.split(";")):
+                self.conn.execute(statement)
+            if self.conn.execute("SELECT COUNT(*) FROM schema_version").fetchone()[0] == 0:
+                self.conn.execute("INSERT INTO schema_version (version) VALUES (?)", (SCHEMA_VERSION,))
+
+    def _check_version(self) -> None:
+        try:
+            row = self.conn.execute("SELECT MAX(version) FROM schema_version").fetchone()
+        except sqlite3.OperationalError:
+            raise UserInputError(f"{self.path} is not a denoisebench results database (no schema_version table)") from None
+        if row is None or row[0] != SCHEMA_VERSION:
+            raise UserInputError(
+                f"{self.path} has results schema version {row[0] if row else None}; "
+                f"this denoisebench reads version {SCHEMA_VERSION}"
+            )
+
+    @contextmanager
+    def transaction(self) -> Iterator[sqlite3.Connection]:
+        """``BEGIN IMMEDIATE`` … ``COMMIT`` (``ROLLBACK`` on any exception, which propagates)."""
+        self.conn.execute("BEGIN IMMEDIATE")
+        try:
+            yield self.conn
+        except BaseException:
+            self.conn.execute("ROLLBACK")
+            raise
+        self.conn.execute("COMMIT")
+
+    def close(self) -> None:
+        self.conn.close()
+
+    def __enter__(self) -> "ResultsStore":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------------ runs
+
+    def ensure_run(self, run_id: str, dataset_hash: str, dataset_path: str, config: dict, versions: dict) -> bool:
+        """Create the run row unless it exists; True when it was created (False: resuming)."""
+        with self.transaction() as conn:
+            exists = conn.execute("SELECT 1 FROM runs WHERE run_id = ?", (run_id,)).fetchone()
+            if exists:
+                return False
+            conn.execute(
+                "INSERT INTO runs (run_id, dataset_hash, dataset_path, config, versions, created_at) VALUES (?, ?, ?, ?, ?, ?)",
+                (run_id, dataset_hash, dataset_path, json.dumps(config, sort_keys=True), json.dumps(versions, sort_keys=True), utc_now()),
+            )
+            return True
+
+    def add_denoiser(self, run_id: str, label: str, spec: str, kind: str, needs, temporal: bool, load_error: str | None) -> None:
+        with self.transaction() as conn:
+            conn.execute(
+                "INSERT OR REPLACE INTO run_denoisers (run_id, label, spec, kind, needs, temporal, load_error) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (run_id, label, spec, kind, json.dumps(sorted(needs)), int(bool(temporal)), load_error),
+            )
+
+    def finish_run(self, run_id: str) -> None:
+        with self.transaction() as conn:
+            conn.execute("UPDATE runs SET finished_at = ? WHERE run_id = ?", (utc_now(), run_id))
+
+    def run(self, run_id: str) -> dict:
+        row = self.conn.execute(
+            "SELECT run_id, dataset_hash, dataset_path, config, versions, created_at, finished_at FROM runs WHERE run_id = ?",
+            (run_id,),
+        ).fetchone()
+        if row is None:
+            raise UserInputError(f"{self.path}: no run {run_id!r}")
+        keys = ("run_id", "dataset_hash", "dataset_path", "config", "versions", "created_at", "finished_at")
+        record = dict(zip(keys, row))
+        record["config"] = json.loads(record["config"])
+        record["versions"] = json.loads(record["versions"])
+        return record
+
+    def runs(self, dataset_hash: str | None = None) -> list[dict]:
+        """Every run (newest first), optionally only those on one dataset."""
+        query = "SELECT run_id FROM runs" + (" WHERE dataset_hash = ?" if dataset_hash else "") + " ORDER BY created_at DESC, run_id"
+        return [self.run(r[0]) for r in self.conn.execute(query, (dataset_hash,) if dataset_hash else ())]
+
+    def denoisers(self, run_id: str) -> list[dict]:
+        rows = self.conn.execute(
+            "SELECT label, spec, kind, needs, temporal, load_error FROM run_denoisers WHERE run_id = ? ORDER BY rowid", (run_id,)
+        )
+        return [
+            {"label": r[0], "spec": r[1], "kind": r[2], "needs": json.loads(r[3]), "temporal": bool(r[4]), "load_error": r[5]}
+            for r in rows
+        ]
+
+    # ------------------------------------------------------------------ units
+
+    def done_units(self, run_id: str) -> set[tuple[str, str, int]]:
+        """(denoiser, scene, spp) of every unit of ``run_id`` already written."""
+        rows = self.conn.execute("SELECT denoiser, scene, spp FROM units WHERE run_id = ?", (run_id,))
+        return {(r[0], r[1], int(r[2])) for r in rows}
+
+    def write_unit(self, run_id: str, unit: UnitRecord) -> bool:
+        """Write ``unit`` with all its frames, metrics and image in one transaction.
+
+        Returns False (and writes nothing) when another process already wrote this unit.
+        """
+        key = (run_id, unit.denoiser, unit.scene, int(unit.spp))
+        with self.transaction() as conn:
+            if conn.execute(
+                "SELECT 1 FROM units WHERE run_id = ? AND denoiser = ? AND scene = ? AND spp = ?", key
+            ).fetchone():
+                return False
+            # leftovers of a unit whose transaction never committed cannot exist (atomicity), but a
+            # unit row deleted by hand may have left its children: replace them
+            for table in _UNIT_TABLES:
+                conn.execute(f"DELETE FROM {table} WHERE run_id = ? AND denoiser = ? AND scene = ? AND spp = ?", key)
+            for f in unit.frames:
+                conn.execute(
+                    "INSERT INTO frames (run_id, denoiser, scene, spp, frame, status, error, render_seconds, "
+                    "denoise_seconds, total_seconds, sanitized) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (*key, f.frame, f.status, f.error, _finite_or_none(f.render_seconds),
+                     _finite_or_none(f.denoise_seconds), _finite_or_none(f.total_seconds), int(f.sanitized)),
+                )
+                conn.executemany(
+                    "INSERT INTO frame_metrics (run_id, denoiser, scene, spp, frame, metric, value) VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    [(*key, f.frame, name, _finite_or_none(value)) for name, value in f.metrics.items()],
+                )
+            conn.executemany(
+                "INSERT INTO sequence_metrics (run_id, denoiser, scene, spp, metric, value) VALUES (?, ?, ?, ?, ?, ?)",
+                [(*key, name, _finite_or_none(value)) for name, value in unit.sequence_metrics.items()],
+            )
+            if unit.image is not None and unit.image_frame is not None:
+                height, width = unit.image.shape[:2]
+                conn.execute(
+                    "INSERT INTO images (run_id, denoiser, scene, spp, frame, height, width, data) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                    (*key, int(unit.image_frame), height, width, encode_image(unit.image)),
+                )
+            conn.execute(
+                "INSERT INTO units (run_id, denoiser, scene, spp, status, error, frames, frames_ok, denoise_seconds, "
+                "render_seconds, finished_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (*key, unit.status, unit.error, len(unit.frames), sum(f.status == "ok" for f in unit.frames),
+                 _finite_or_none(unit.denoise_seconds), _finite_or_none(unit.render_seconds), utc_now()),
+            )
+        return True
+
+    # ------------------------------------------------------------------ reading
+
+    def units(self, run_id: str) -> list[dict]:
+        rows = self.conn.execute(
+            "SELECT denoiser, scene, spp, status, error, frames, frames_ok, denoise_seconds, render_seconds "
+            "FROM units WHERE run_id = ? ORDER BY denoiser, scene, spp",
+            (run_id,),
+        )
+        keys = ("denoiser", "scene", "spp", "status", "error", "frames", "frames_ok", "denoise_seconds", "render_seconds")
+        return [dict(zip(keys, r)) for r in rows]
+
+    def frames(self, run_id: str) -> list[dict]:
+        """Every frame row of ``run_id`` with its metrics as ``metrics: {name: value}``."""
+        keys = ("denoiser", "scene", "spp", "frame", "status", "error", "render_seconds", "denoise_seconds", "total_seconds", "sanitized")
+        rows = {
+            tuple(r[:4]): dict(zip(keys, r), metrics={})
+            for r in self.conn.execute(
+                f"SELECT {', '.join(keys)} FROM frames WHERE run_id = ? ORDER BY denoiser, scene, spp, frame", (run_id,)
+            )
+        }
+        for denoiser, scene, spp, frame, metric, value in self.conn.execute(
+            "SELECT denoiser, scene, spp, frame, metric, value FROM frame_metrics WHERE run_id = ?", (run_id,)
+        ):
+            row = rows.get((denoiser, scene, spp, frame))
+            if row is not None:
+                row["metrics"][metric] = value
+        return list(rows.values())
+
+    def sequence_metrics(self, run_id: str) -> list[dict]:
+        rows = self.conn.execute(
+            "SELECT denoiser, scene, spp, metric, value FROM sequence_metrics WHERE run_id = ? ORDER BY denoiser, scene, spp, metric",
+            (run_id,),
+        )
+        return [dict(zip(("denoiser", "scene", "spp", "metric", "value"), r)) for r in rows]
+
+    def image(self, run_id: str, denoiser: str, scene: str, spp: int) -> tuple[int, np.ndarray] | None:
+        """(frame index, H×W×3 float32) of the stored output of a unit, or None."""
+        row = self.conn.execute(
+            "SELECT frame, height, width, data FROM images WHERE run_id = ? AND denoiser = ? AND scene = ? AND spp = ?",
+            (run_id, denoiser, scene, int(spp)),
+        ).fetchone()
+        if row is None:
+            return None
+        return int(row[0]), decode_image(row[3], row[1], row[2])
+
+    def integrity_problems(self) -> list[str]:
+        """SQLite's integrity check plus ours: every frame row belongs to a unit row and vice versa."""
+        problems = [r[0] for r in self.conn.execute("PRAGMA integrity_check") if r[0] != "ok"]
+        for table in _UNIT_TABLES:
+            orphans = self.conn.execute(
+                f"SELECT COUNT(*) FROM {table} t WHERE NOT EXISTS (SELECT 1 FROM units u WHERE u.run_id = t.run_id "
+                "AND u.denoiser = t.denoiser AND u.scene = t.scene AND u.spp = t.spp)"
+            ).fetchone()[0]
+            if orphans:
+                problems.append(f"{orphans} row(s) of {table} without a unit")
+        short = self.conn.execute(
+            "SELECT COUNT(*) FROM units u WHERE u.frames != (SELECT COUNT(*) FROM frames f WHERE f.run_id = u.run_id "
+            "AND f.denoiser = u.denoiser AND f.scene = u.scene AND f.spp = u.spp)"
+        ).fetchone()[0]
+        if short:
+            problems.append(f"{short} unit(s) whose frame rows are missing")
+        return problems

@@ -1,0 +1,132 @@
+"""The leaderboard: denoisers ranked by one metric at one input spp, across the runs on one dataset.
+
+Each denoiser's entry comes from the newest run that measured it at that spp (a rerun with newer
+code replaces the older number); the run id and its date are shown, so numbers from different runs
+are never silently mixed. The value is the mean over every frame of every scene (temporal metrics:
+over sequences); failed units count as failed, not as missing, and rank last.
+
+Notes
+-----
+* Runs are grouped by **dataset hash** (the manifest's content without timings), not by path: a
+  dataset moved to another folder is the same dataset; one regenerated with another seed is not.
+* Seconds are those of the run the entry comes from; runs made on different machines or under
+  different load are not comparable in time, only in accuracy.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from denoisebench.errors import UserInputError
+
+from .store import ResultsStore
+
+
+@dataclass
+class Entry:
+    denoiser: str
+    value: float | None
+    frames: int
+    failed_units: int
+    denoise_seconds: float | None  # per frame
+    total_seconds: float | None  # per frame: render at the spp + denoise
+    run_id: str
+    created_at: str
+
+
+def _mean(values):
+    values = [v for v in values if v is not None and math.isfinite(v)]
+    return sum(values) / len(values) if values else None
+
+
+def pick_dataset(store: ResultsStore, dataset: str | None) -> str:
+    """The dataset hash to rank: the one given (hash prefix or dataset path), else the newest run's."""
+    runs = store.runs()
+    if not runs:
+        raise UserInputError(f"{store.path} holds no runs")
+    if dataset is None:
+        return runs[0]["dataset_hash"]
+    matches = {r["dataset_hash"] for r in runs if r["dataset_hash"].startswith(dataset) or r["dataset_path"].rstrip("/") == dataset.rstrip("/")}
+    if len(matches) != 1:
+        known = ", ".join(sorted({f"{r['dataset_hash'][:12]} ({r['dataset_path']})" for r in runs}))
+        raise UserInputError(f"dataset {dataset!r} matches {len(matches)} datasets in {store.path}; known: {known}")
+    return matches.pop()
+
+
+def leaderboard(store: ResultsStore, metric: str = "relmse", spp: int | None = None, dataset: str | None = None):
+    """(metric object, spp, dataset hash, entries ranked best first)."""
+    from denoisebench.metrics import get_metric
+
+    try:
+        m = get_metric(metric) if metric != "flicker" else get_metric("temporal_l1")
+    except ValueError as exc:
+        raise UserInputError(str(exc)) from None
+    data_hash = pick_dataset(store, dataset)
+    runs = store.runs(data_hash)  # newest first
+    available = sorted({u["spp"] for r in runs for u in store.units(r["run_id"])})
+    if not available:
+        raise UserInputError(f"{store.path}: no results for dataset {data_hash[:12]}")
+    if spp is None:
+        spp = available[0]
+    elif spp not in available:
+        raise UserInputError(f"no results at {spp} spp; measured: {', '.join(map(str, available))}")
+    entries: dict[str, Entry] = {}
+    unmeasured: dict[str, Entry] = {}
+    for run in runs:
+        run_id = run["run_id"]
+        units = [u for u in store.units(run_id) if u["spp"] == spp]
+        labels = {u["denoiser"] for u in units} - set(entries)
+        if not labels:
+            continue
+        frames = [f for f in store.frames(run_id) if f["spp"] == spp and f["denoiser"] in labels]
+        sequences = [s for s in store.sequence_metrics(run_id) if s["spp"] == spp and s["denoiser"] in labels]
+        for label in sorted(labels):
+            mine = [f for f in frames if f["denoiser"] == label]
+            ok = [f for f in mine if f["status"] == "ok"]
+            if m.temporal:
+                value = _mean(s["value"] for s in sequences if s["denoiser"] == label and s["metric"] == m.name)
+            else:
+                value = _mean(f["metrics"].get(m.name) for f in ok)
+            failed = sum(1 for u in units if u["denoiser"] == label and u["status"] != "ok")
+            if value is None and not failed:  # this run did not compute the metric: look further back
+                unmeasured.setdefault(label, Entry(label, None, len(ok), 0, None, None, run_id, run["created_at"]))
+                continue
+            entries[label] = Entry(
+                label, value if not failed else None, len(ok), failed,
+                _mean(f["denoise_seconds"] for f in ok), _mean(f["total_seconds"] for f in ok),
+                run_id, run["created_at"],
+            )
+    for label, entry in unmeasured.items():
+        entries.setdefault(label, entry)
+    sign = -1.0 if m.higher_is_better else 1.0
+    ranked = sorted(entries.values(), key=lambda e: (e.value is None, sign * e.value if e.value is not None else 0.0, e.denoiser))
+    return m, spp, data_hash, ranked
+
+
+def _fmt(value: float | None, digits: int = 4) -> str:
+    if value is None:
+        return "—"
+    return f"{value:.{digits}g}"
+
+
+def format_leaderboard(metric, spp: int, data_hash: str, entries: list[Entry]) -> str:
+    """A plain-text table for the terminal."""
+    arrow = "higher is better" if metric.higher_is_better else "lower is better"
+    header = ["#", "denoiser", metric.name, "s/frame denoise", "s/frame total", "frames", "run", "date"]
+    rows = []
+    for rank, e in enumerate(entries, 1):
+        value = _fmt(e.value) if e.value is not None else ("failed" if e.failed_units else "—")
+        rows.append([
+            str(rank) if e.value is not None else "-", e.denoiser, value, _fmt(e.denoise_seconds, 3),
+            _fmt(e.total_seconds, 3), str(e.frames), e.run_id[:8], e.created_at[:16].replace("T", " "),
+        ])
+    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)]
+    right = {0, 2, 3, 4, 5}
+
+    def line(cells):
+        return "  ".join(c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths))).rstrip()
+
+    out = [f"leaderboard: {metric.name} ({arrow}) at {spp} spp, dataset {data_hash[:12]}", line(header), line(["-" * w for w in widths])]
+    out += [line(r) for r in rows]
+    return "\n".join(out)
