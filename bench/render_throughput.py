@@ -1,14 +1,17 @@
 """Feature renderer throughput against Mitsuba's own ``path`` integrator, in one run.
 
 Both render the same scene at the same resolution, spp and max depth (Mitsuba with an ``hdrfilm``
-and a box filter, the pixel filter of our noisy buffers); ours also produces the diffuse/specular
-split, every feature buffer and all per-pixel variances. Each renderer is warmed up once (JIT
-compilation), then timed ``--repeats`` times, interleaved, and the medians are compared.
+and a box filter, the pixel filter of our noisy buffers). Ours is timed twice: as a noisy frame
+(the diffuse/specular split, every feature buffer and all per-pixel variances, returned as host
+arrays) and as a reference frame (color, diffuse, specular and their variances: no features).
+Each renderer is warmed up once (JIT compilation), then timed ``--repeats`` times, interleaved, and
+the medians are compared; the minimum is printed too, since other processes on a shared machine
+only ever add time.
 
     .venv/bin/python bench/render_throughput.py [--scene cornell|glossy] [--size 128] [--spp 16]
-        [--max-depth 8] [--repeats 5]
+        [--max-depth 8] [--repeats 7] [--target-lanes N]
 
-Prints samples per second of both and their ratio (ours / path; the target is >= 0.9).
+Prints samples per second of each and the ratios ours / path (the target is >= 0.9).
 """
 
 from __future__ import annotations
@@ -45,7 +48,8 @@ def main(argv=None) -> int:
     parser.add_argument("--size", type=int, default=128)
     parser.add_argument("--spp", type=int, default=16)
     parser.add_argument("--max-depth", type=int, default=8)
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=7)
+    parser.add_argument("--target-lanes", type=int, default=None, help="render_frame's target_lanes")
     args = parser.parse_args(argv)
 
     mi = load_mitsuba()
@@ -68,30 +72,50 @@ def main(argv=None) -> int:
     })
     integrator = mi.load_dict({"type": "path", "max_depth": args.max_depth, "rr_depth": plan.rr_depth})
 
+    cpu = {}  # process CPU seconds (all threads) per run: robust to other processes on a shared machine
+
     def run_path(seed: int) -> float:
         start = time.perf_counter()
+        cpu0 = time.process_time()
         image = mi.render(scene, sensor=sensor, integrator=integrator, seed=seed, spp=spp)
         dr.eval(image)
         np.asarray(image)  # both renderers end with host arrays
+        cpu.setdefault("path", []).append(time.process_time() - cpu0)
         return time.perf_counter() - start
 
-    def run_ours(seed: int) -> float:
+    extra = {} if args.target_lanes is None else {"target_lanes": args.target_lanes}
+
+    def run_ours(seed: int, reference: bool = False) -> float:
         start = time.perf_counter()
-        render_frame(scene, camera, 1, plan, width=size, height=size, spp=spp, seed=seed)
+        cpu0 = time.process_time()
+        render_frame(scene, camera, 1, plan, width=size, height=size, spp=spp, seed=seed, reference=reference, **extra)
+        cpu.setdefault("ours_ref" if reference else "ours", []).append(time.process_time() - cpu0)
         return time.perf_counter() - start
 
-    run_path(1000)  # warm-up: JIT compilation
-    run_ours(1000)
-    ours, path = [], []
+    runs = {"path": run_path, "ours": run_ours, "ours_ref": lambda seed: run_ours(seed, reference=True)}
+    labels = {
+        "path": "mitsuba path",
+        "ours": "ours, noisy (features + variances)",
+        "ours_ref": "ours, reference (color only)",
+    }
+    for run in runs.values():
+        run(1000)  # warm-up: JIT compilation
+    cpu.clear()
+    times = {name: [] for name in runs}
     for k in range(args.repeats):
-        path.append(run_path(k))
-        ours.append(run_ours(k))
+        for name, run in runs.items():
+            times[name].append(run(k))
     samples = size * size * spp
-    t_ours, t_path = statistics.median(ours), statistics.median(path)
-    print(f"scene={args.scene} {size}x{size} spp={spp} max_depth={args.max_depth} repeats={args.repeats}")
-    print(f"mitsuba path     : {samples / t_path / 1e6:8.3f} Msamples/s  (median {t_path * 1e3:8.1f} ms)")
-    print(f"feature renderer : {samples / t_ours / 1e6:8.3f} Msamples/s  (median {t_ours * 1e3:8.1f} ms)")
-    print(f"throughput ratio (ours / path): {t_path / t_ours:.3f}")
+    print(f"scene={args.scene} {size}x{size} spp={spp} max_depth={args.max_depth} repeats={args.repeats} "
+          f"threads={dr.thread_count()} target_lanes={extra.get('target_lanes', 'default')}")
+    medians = {name: statistics.median(t) for name, t in times.items()}
+    for name, t in times.items():
+        print(f"{labels[name]:36s}: {samples / medians[name] / 1e6:7.3f} Msamples/s  "
+              f"(median {medians[name] * 1e3:7.1f} ms, min {min(t) * 1e3:7.1f} ms)")
+    for name in ("ours", "ours_ref"):
+        print(f"throughput ratio {name:8s} / path: median {medians['path'] / medians[name]:.3f}  "
+              f"min {min(times['path']) / min(times[name]):.3f}  "
+              f"CPU-time median {statistics.median(cpu['path']) / statistics.median(cpu[name]):.3f}")
     return 0
 
 

@@ -4,8 +4,10 @@
 (:mod:`~denoisebench.generator.render_camera`: box pixel filter, pinhole or thin lens, camera motion
 blur) and traces them with :mod:`~denoisebench.generator.render_integrator`, an unbiased estimator
 of the image Mitsuba's ``path`` integrator renders at the same ``max_depth``, which also yields the
-diffuse/specular split and every feature. One kernel per pass computes all of it; per-pixel means
-and variances are reduced on the host from the per-sample values.
+diffuse/specular split and every feature. One kernel per pass computes all of it: each lane loops over
+samples of its pixel keeping running (Welford) moments, and when a small image gives a pixel several
+lanes their moments are merged on the device, so only per-pixel values (and per-sample data, when
+asked) reach the host.
 
 Conventions:
 
@@ -25,6 +27,8 @@ Conventions:
   bit-identical buffers.
 * Passes hold at most :data:`MAX_PATHS_PER_PASS` paths: a frame is split into bands of rows and
   chunks of samples, whose statistics are merged exactly (Chan et al.'s pairwise update).
+* Random numbers depend on the pass layout (:data:`MAX_PATHS_PER_PASS`, ``target_lanes``), which
+  is fixed, never derived from the core count (vector width may still change float rounding).
 """
 
 from __future__ import annotations
@@ -38,12 +42,19 @@ import numpy as np
 
 from denoisebench.generator.camera_track import CameraTrack
 from denoisebench.generator.render_camera import DrCamera, camera_setup
-from denoisebench.generator.render_integrator import KernelOptions, scene_has_delta_only_bsdf, trace
+from denoisebench.generator.render_integrator import KernelOptions, merge_lane_moments, render_moments, scene_has_delta_only_bsdf
 from denoisebench.generator.render_plan import RenderPlan
 from denoisebench.mitsuba_runtime import load_mitsuba
 
-#: Most paths traced by one kernel launch (bounds memory: ~100 bytes of output per path).
+#: Most paths traced by one kernel launch (bounds per-sample memory and the length of one launch).
 MAX_PATHS_PER_PASS = 1 << 22
+#: Lanes per launch to aim for: each lane loops over several samples of its pixel, keeping running
+#: moments, and a pixel gets several lanes only when the image is small (so that every core has
+#: work). Fewer, longer lanes mean less output and merging: on 2 cores, 64×64 at 16 spp took ~15%
+#: less CPU time with 16K lanes than with 64K (bench/render_throughput.py). A constant, not a
+#: function of the core count: lanes decide which random numbers a sample gets, and a frame must
+#: be the same bytes on every machine.
+TARGET_LANES = 1 << 14
 
 #: Channels of each per-sample buffer, in output order.
 SAMPLE_BUFFERS = {
@@ -86,12 +97,6 @@ def derive_seed(seed: int, frame: int, spp: int, stream: int, pass_index: int = 
     return int.from_bytes(hashlib.blake2b(data, digest_size=4).digest(), "little")
 
 
-def _channels(value, count: int, n: int) -> list[np.ndarray]:
-    """Per-channel 1-D numpy arrays (length ``n``) of a Dr.Jit value with ``count`` channels."""
-    parts = [value] if count == 1 else [value[c] for c in range(count)]
-    return [np.broadcast_to(np.asarray(p, dtype=np.float32).reshape(-1), (n,)) for p in parts]
-
-
 class _Moments:
     """Per-pixel mean and sum of squared deviations of one buffer (float64), merged pass by pass."""
 
@@ -99,28 +104,30 @@ class _Moments:
         self.mean = np.zeros((height, width, channels))
         self.m2 = np.zeros((height, width, channels))
 
-    def add(self, rows: slice, chans: list[np.ndarray], before: int, count: int, band: int, width: int) -> None:
-        """Merge ``count`` new samples per pixel of ``rows`` into the ``before`` already there."""
-        for c, values in enumerate(chans):
-            x = values.reshape(count, band, width)
-            mean_b = x.mean(axis=0, dtype=np.float64)
-            m2_b = np.square(x - mean_b.astype(np.float32), dtype=np.float64).sum(axis=0) if count > 1 else 0.0
-            if before == 0:
-                self.mean[rows, :, c] = mean_b
-                self.m2[rows, :, c] = m2_b
-            else:
-                total = before + count
-                delta = mean_b - self.mean[rows, :, c]
-                self.mean[rows, :, c] += delta * (count / total)
-                self.m2[rows, :, c] += m2_b + np.square(delta) * (before * count / total)
+    def add(self, rows: slice, before: int, count: int, mean_b: np.ndarray, m2_b: np.ndarray) -> None:
+        """Merge ``count`` new samples per pixel of ``rows`` (their mean and M2) into ``before`` ones."""
+        if before == 0:
+            self.mean[rows] = mean_b
+            self.m2[rows] = m2_b
+        else:
+            total = before + count
+            delta = mean_b - self.mean[rows]
+            self.mean[rows] += delta * (count / total)
+            self.m2[rows] += m2_b + np.square(delta) * (before * count / total)
 
     def finish(self, spp: int):
         mean = self.mean.astype(np.float32)
         if spp > 1:
-            var = (self.m2 / ((spp - 1) * spp)).astype(np.float32)
+            var = (np.maximum(self.m2, 0.0) / ((spp - 1) * spp)).astype(np.float32)
         else:
             var = np.zeros_like(mean)
         return mean, var
+
+
+def _to_numpy(value, channels: int, lanes: int) -> np.ndarray:
+    """lanes×channels float32 array of a Dr.Jit value."""
+    parts = [value] if channels == 1 else [value[c] for c in range(channels)]
+    return np.stack([np.broadcast_to(np.asarray(p, dtype=np.float32).reshape(-1), (lanes,)) for p in parts], -1)
 
 
 def _plan_passes(height: int, width: int, spp: int, max_paths: int):
@@ -147,9 +154,13 @@ def render_frame(
     seed: int,
     reference: bool = False,
     max_paths_per_pass: int = MAX_PATHS_PER_PASS,
+    target_lanes: int = TARGET_LANES,
     _jitter: bool = True,
 ) -> RenderedFrame:
     """Render ``frame`` of ``camera`` with ``spp`` samples per pixel; see the module docstring.
+
+    ``target_lanes`` overrides how many lanes one launch aims for (:data:`TARGET_LANES`); it
+    changes which random numbers each sample gets, not the estimator.
 
     ``_jitter=False`` puts every sample at its pixel center (tests compare features with Mitsuba's
     ``aov`` integrator that way); it is not meant for datasets.
@@ -192,24 +203,40 @@ def render_frame(
     sampler = mi.load_dict({"type": "independent", "sample_count": 1})
     passes = _plan_passes(height, width, spp, max_paths_per_pass)
     for index, (row0, band, s0, count) in enumerate(passes):
-        n = band * width * count
-        sampler.seed(derive_seed(seed, frame, spp, stream, index), n)
-        lane = dr.arange(mi.UInt32, n)
-        per_sample = band * width
-        pixel = lane % per_sample
+        pixels = band * width
+        groups = max(1, min(count, -(-target_lanes // pixels)))  # lanes per pixel (each loops over samples)
+        base, rem = divmod(count, groups)
+        lanes = pixels * groups
+        sampler.seed(derive_seed(seed, frame, spp, stream, index), lanes)
+        # Pixel-major lanes (lane = pixel * groups + group): a pixel's lanes are one contiguous block,
+        # so the per-lane moments merge with block reductions on the device.
+        lane = dr.arange(mi.UInt32, lanes)
+        pixel = lane // groups
+        group = lane - pixel * groups
         px = pixel % width
         py = pixel // width + dr.opaque(mi.UInt32, row0)
-        out = trace(mi, scene, sampler, cam, opts, px, py)
-        wanted = {k: out[k] for k in dict.fromkeys([*stat_channels, *sample_channels])}
-        dr.eval(wanted)
+        lane_count = dr.opaque(mi.UInt32, base) + dr.select(group < dr.opaque(mi.UInt32, rem), mi.UInt32(1), mi.UInt32(0))
+        targets = None
+        if samples is not None:
+            targets = {k: (dr.zeros(mi.Float, count * pixels * c), c) for k, c in sample_channels.items()}
+        moments_dr = render_moments(
+            mi, scene, sampler, cam, opts, px, py, lane_count, stat_channels, targets,
+            lambda s: (group + s * groups) * pixels + pixel,  # sample index within the pass, then pixel
+        )
+        dr.eval(moments_dr, targets)  # one kernel traces everything; the merge below reads its results
+        if groups > 1:
+            moments_dr = merge_lane_moments(mi, moments_dr, lane_count, groups, count)
+            dr.eval(moments_dr)
         rows = slice(row0, row0 + band)
         for name, chans in stat_channels.items():
-            moments[name].add(rows, _channels(wanted[name], chans, n), s0, count, band, width)
+            mean_dr, m2_dr = moments_dr[name]
+            mean_b = _to_numpy(mean_dr, chans, pixels).reshape(band, width, chans)
+            m2_b = _to_numpy(m2_dr, chans, pixels).reshape(band, width, chans)
+            moments[name].add(rows, s0, count, mean_b, m2_b)
         if samples is not None:
-            for name, chans in sample_channels.items():
-                values = _channels(wanted[name], chans, n)
-                samples[name][s0 : s0 + count, rows] = np.stack(values, axis=-1).reshape(count, band, width, chans)
-        del out, wanted
+            for name, (target, chans) in targets.items():
+                samples[name][s0 : s0 + count, rows] = np.asarray(target).reshape(count, band, width, chans)
+        del moments_dr, targets
 
     buffers = {}
     for name, m in moments.items():

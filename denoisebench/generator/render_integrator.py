@@ -29,7 +29,8 @@ Features (the first vertex is the camera ray's first intersection):
 * ``roughness``: first-hit roughness: the BSDF's ``roughness`` attribute when it has one (principled),
   else ``sqrt(alpha)`` of microfacet BSDFs (so that it matches principled's perceptual roughness),
   else 1 for purely diffuse BSDFs and 0 for anything else (smooth conductors, dielectrics);
-* ``albedo``: ``bsdf.eval_diffuse_reflectance`` at the first non-delta hit; when the camera ray first
+* ``albedo``: ``bsdf.eval_diffuse_reflectance`` at the first non-delta hit (for BSDFs without a
+  diffuse lobe, the BSDF sample weight: a one-sample estimate of the directional albedo); when the camera ray first
   meets delta surfaces (mirror, glass) the path is followed through them and the albedo is the
   throughput of that delta chain times the diffuse reflectance where it ends (0 if it escapes);
 * ``motion``: the first-hit point projected through the pinhole (lens center) of the camera one frame
@@ -89,8 +90,14 @@ def _first_vertex_bsdf(split, want_features, bsdf, ctx, ctx_diffuse, si, wo, sam
     val, pdf, bs, weight = bsdf.eval_pdf_sample(ctx, si, wo, sample1, sample2, active)
     val_diffuse = bsdf.eval(ctx_diffuse, si, wo, active_em) if split else mi.Color3f(0.0)
     if want_features:
-        albedo = bsdf.eval_diffuse_reflectance(si, active)
         flags = bsdf.flags()
+        if mi.has_flag(flags, mi.BSDFFlags.Diffuse):
+            albedo = bsdf.eval_diffuse_reflectance(si, active)
+        else:
+            # No diffuse lobe (rough conductor, rough dielectric): Mitsuba's default
+            # eval_diffuse_reflectance is pi * f(wi, n), which a narrow lobe makes >> 1. The sampled
+            # weight f cos / pdf is an unbiased one-sample estimate of the directional albedo instead.
+            albedo = mi.Color3f(weight)
         if bsdf.has_attribute("roughness"):
             rough = bsdf.eval_attribute_1("roughness", si, active)
         elif bsdf.has_attribute("alpha"):
@@ -298,3 +305,87 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     out["specular"] = specular
     out["color"] = diffuse + specular
     return out
+
+
+
+def _channel_type(mi, channels: int):
+    return {1: mi.Float, 2: mi.Vector2f, 3: mi.Color3f}[channels]
+
+
+def render_moments(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pixel_y, count,
+                   names: dict, sample_targets: dict | None = None, sample_slot=None):
+    """Each lane traces ``count`` samples of pixel ``(pixel_x, pixel_y)`` in a loop, keeping running
+    per-lane moments (Welford: mean and sum of squared deviations) of the buffers in ``names``
+    (name → channels): one kernel yields per-pixel statistics without storing samples.
+
+    ``sample_targets`` (name → (flat Float array, channels)) also receives per-sample values: sample
+    ``s`` of a lane is written to row ``sample_slot(s)`` (row-major, channels innermost).
+    Returns ``{name: (mean, m2)}`` as Dr.Jit arrays (one entry per lane).
+    """
+    import drjit as dr
+
+    lanes = dr.width(pixel_x)
+    mean = {k: dr.zeros(_channel_type(mi, c), lanes) for k, c in names.items()}
+    m2 = {k: dr.zeros(_channel_type(mi, c), lanes) for k, c in names.items()}
+    s = dr.zeros(mi.UInt32, lanes)
+    count = mi.UInt32(count)
+
+    def cond(sampler, s, mean, m2):
+        return s < count
+
+    def body(sampler, s, mean, m2):
+        out = trace(mi, scene, sampler, camera, opts, pixel_x, pixel_y)
+        inv_n = dr.rcp(mi.Float(s + 1))
+        new_mean, new_m2 = {}, {}
+        for k, c in names.items():
+            value = _channel_type(mi, c)(out[k])
+            delta = value - mean[k]
+            new_mean[k] = dr.fma(delta, inv_n, mean[k])
+            new_m2[k] = dr.fma(delta, value - new_mean[k], m2[k])
+        if sample_targets:
+            slot = sample_slot(s)
+            for k, (target, channels) in sample_targets.items():
+                value = out[k]
+                for c in range(channels):
+                    dr.scatter(target, value if channels == 1 else value[c], slot * channels + c)
+        return sampler, s + 1, new_mean, new_m2
+
+    sampler, s, mean, m2 = dr.while_loop(
+        state=(sampler, s, mean, m2), cond=cond, body=body, label="denoisebench samples per pixel"
+    )
+    return {k: (mean[k], m2[k]) for k in names}
+
+
+def merge_lane_moments(mi, moments: dict, lane_count, groups: int, total: int) -> dict:
+    """Merge the moments of ``groups`` consecutive lanes (one pixel's) into per-pixel moments.
+
+    ``moments`` is :func:`render_moments`' result, ``lane_count`` the samples each lane took (they
+    add up to ``total`` per pixel). Chan et al.'s pairwise rule generalised to K groups:
+    ``mean = Σ n_k mean_k / n`` and ``M2 = Σ (M2_k + n_k (mean_k - mean)²)``.
+
+    Notes:
+        Block reductions need a pixel's lanes to be contiguous (lane = pixel * groups + group).
+        Merging on the device keeps the host transfer at one value per pixel, which matters for
+        small images, where every pixel gets many lanes.
+    """
+    import drjit as dr
+
+    weight = mi.Float(lane_count)
+    lanes = dr.width(lane_count)
+    owner = dr.arange(mi.UInt32, lanes) // groups
+
+    def block_sums(values: dict) -> dict:
+        # Scatter-adds into targets made beforehand fuse into one kernel (block_sum would allocate,
+        # and so launch, once per buffer).
+        sums = {k: dr.zeros(type(v), lanes // groups) for k, v in values.items()}
+        dr.eval(sums)
+        for k, v in values.items():
+            dr.scatter_add(sums[k], v, owner)
+        dr.eval(sums)
+        return sums
+
+    means = block_sums({k: mean * (weight * (1.0 / total)) for k, (mean, _) in moments.items()})
+    m2s = block_sums({
+        k: m2 + weight * dr.square(mean - dr.gather(type(mean), means[k], owner)) for k, (mean, m2) in moments.items()
+    })
+    return {k: (means[k], m2s[k]) for k in moments}
