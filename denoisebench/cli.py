@@ -18,6 +18,7 @@ from denoisebench.errors import UserInputError
 #: command name -> (module under denoisebench.commands, one-line help). Order is the --help order.
 COMMANDS: dict[str, tuple[str, str]] = {
     "scenes": ("scenes", "list scene families, author a scene as USD, preview a stage"),
+    "generate": ("generate", "render a dataset of noisy/reference EXR sequences (alias: generate-dataset)"),
     "demo": ("demo", "author and preview one scene of every family (what `make demo` runs)"),
     "benchmark": ("benchmark", "run denoisers over a dataset split into SQLite and write a report (run-benchmark)"),
     "leaderboard": ("leaderboard", "rank denoisers across the runs on one dataset in a results database"),

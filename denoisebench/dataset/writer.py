@@ -26,6 +26,7 @@ from typing import Mapping
 import numpy as np
 
 from . import layout
+from .atomic import is_temporary
 from .errors import DatasetError
 from .exr_io import canonical_json, sha256_file, write_exr
 from .manifest import (
@@ -89,6 +90,7 @@ class DatasetWriter:
             manifest = new_manifest(config, current_versions)
         self.manifest = manifest
         self.root.mkdir(parents=True, exist_ok=True)
+        self._remove_temporaries()
         self._save()
 
     # ------------------------------------------------------------------ housekeeping
@@ -96,15 +98,25 @@ class DatasetWriter:
     def _clear(self, old: dict | None) -> None:
         self.manifest_path.unlink(missing_ok=True)
         for name in sorted((old or {}).get("scenes", {})):
-            try:
-                layout.check_scene_name(name)
-            except ValueError:
+            if not _is_plain_name(name):
                 continue  # never delete a path a malformed manifest makes up
             target = self.root / name
             if target.is_symlink():
                 target.unlink()
             elif target.is_dir():
                 shutil.rmtree(target)
+
+    def _remove_temporaries(self) -> None:
+        """Delete the hidden ``*.tmp`` files a killed run left behind (their names hold the dead pid,
+        so no later write would replace them). Only OUT and the scene folders are searched."""
+        folders = [self.root] + [self.root / name for name in sorted(self.manifest["scenes"]) if _is_plain_name(name)]
+        for folder in folders:
+            if not folder.is_dir() or folder.is_symlink():
+                continue
+            pattern = "*" if folder == self.root else "**/*"
+            for path in sorted(folder.glob(pattern)):
+                if is_temporary(path) and path.is_file() and not path.is_symlink():
+                    path.unlink(missing_ok=True)
 
     def _save(self) -> None:
         save_manifest(self.manifest_path, self.manifest)
@@ -349,6 +361,14 @@ class DatasetWriter:
         self.manifest["splits"] = {split: sorted(splits.get(split, [])) for split in SPLITS}
         self.manifest["complete"] = not missing
         self._save()
+
+
+def _is_plain_name(name: str) -> bool:
+    try:
+        layout.check_scene_name(name)
+    except ValueError:
+        return False
+    return True
 
 
 def _timing(seconds: float, spp: int) -> dict:

@@ -1,0 +1,129 @@
+"""Generate a dataset: procedural scenes (and your own USD stages) rendered into noisy/reference EXR sequences.
+
+For every scene: OUT/<scene>/scene.usda (+ textures), OUT/<scene>/sppNNNN/frame_NNNN.exr (noisy
+buffers, features and variances at each --spp), OUT/<scene>/reference/frame_NNNN.exr (reference
+color at --ref-spp), and OUT/dataset.json (config, render plans, splits, per-frame sha256, render
+seconds, reference quality). Frame i is rendered at the camera's i-th time sample.
+
+Running the same command again resumes where it stopped and gives the same bytes as an
+uninterrupted run; a different config in the same OUT is refused unless --force. The executor is
+not part of the config: --executor ray gives the same bytes as the local executor.
+
+--usd FILE copies the stage and the files it depends on (which must lie in its folder) into
+OUT/usd_<stem>/ and renders it along its own camera time samples (--frames does not apply to it).
+Every --usd file is checked before anything is written: a missing or malformed stage, or one
+without a camera, refuses the command (one line, exit 2).
+
+Exit codes: 0 done, 2 bad input (one line, nothing written), 1 some frames failed to render
+(reported; the dataset is left resumable and marked incomplete).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from denoisebench.errors import UserInputError
+
+EPILOG = """examples:
+  generate-dataset --out data/small --families cornell,glossy_fireflies --scenes 2 --frames 4 \\
+      --width 128 --height 128 --spp 1,4,16 --ref-spp 1024
+  denoisebench generate --out data/mine --usd shots/my_shot.usda --spp 4 --ref-spp 512
+  generate-dataset --out data/big --scenes 20 --executor ray --ray-address auto
+"""
+
+
+def _int_list(text: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(part) for part in text.split(",") if part.strip())
+    except ValueError:
+        raise UserInputError(f"--spp expects comma-separated integers like 1,4,16 (got {text!r})") from None
+    if not values:
+        raise UserInputError(f"--spp expects comma-separated integers like 1,4,16 (got {text!r})")
+    return values
+
+
+def _families(text: str | None, have_usd: bool) -> tuple[str, ...]:
+    from denoisebench.scenes import list_families
+
+    if text is None:
+        return () if have_usd else tuple(f.name for f in list_families())
+    if text.strip() == "all":
+        return tuple(f.name for f in list_families())
+    names = tuple(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
+    return names
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--out", required=True, help="dataset folder (created; resumed when it exists)")
+    parser.add_argument("--families", default=None,
+                        help="comma-separated scene families, or 'all' (default: all, or none with --usd)")
+    parser.add_argument("--scenes", type=int, default=1, help="scenes per family, seeds --seed, --seed+1, ... (default 1)")
+    parser.add_argument("--frames", type=int, default=8, help="frames per family scene (default 8)")
+    parser.add_argument("--width", type=int, default=128, help="image width in pixels (default 128)")
+    parser.add_argument("--height", type=int, default=128, help="image height in pixels (default 128)")
+    parser.add_argument("--spp", default="1,4,16", help="noisy sample counts, comma-separated (default 1,4,16)")
+    parser.add_argument("--ref-spp", type=int, default=1024, help="reference samples per pixel (default 1024)")
+    parser.add_argument("--samples", action="store_true", help="also write per-sample data (large)")
+    parser.add_argument("--seed", type=int, default=0, help="dataset seed: scene seeds, render seeds, splits (default 0)")
+    parser.add_argument("--usd", action="append", default=[], metavar="FILE",
+                        help="render your own USD stage too (repeatable)")
+    parser.add_argument("--executor", choices=("local", "ray"), default="local",
+                        help="local: this process, all cores (default); ray: spread frames over a Ray cluster")
+    parser.add_argument("--ray-address", default=None, help="Ray cluster address (default: start a local cluster)")
+    parser.add_argument("--ray-cpus-per-task", type=int, default=1,
+                        help="CPUs (and Dr.Jit threads) per Ray task (default 1)")
+    parser.add_argument("--force", action="store_true", help="overwrite a dataset made with another config")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def request_from_args(args):
+    from denoisebench.generator.dataset_run import GenerateRequest
+
+    return GenerateRequest(
+        out=Path(args.out),
+        families=_families(args.families, bool(args.usd)),
+        scenes=args.scenes,
+        frames=args.frames,
+        width=args.width,
+        height=args.height,
+        spp=_int_list(args.spp),
+        ref_spp=args.ref_spp,
+        samples=args.samples,
+        seed=args.seed,
+        usd=tuple(args.usd),
+        force=args.force,
+    )
+
+
+def print_summary(summary) -> None:
+    state = "complete" if summary.complete else "INCOMPLETE (rerun the command to finish it)"
+    print(
+        f"{summary.out}: {summary.scenes} scene(s), {summary.frames} frame(s) rendered"
+        + (f", {summary.skipped} already done" if summary.skipped else "")
+        + f"; {summary.files} EXR file(s) in {summary.render_seconds:.2f} s of rendering"
+        f" ({summary.samples_per_second:.3g} samples/s), {summary.wall_seconds:.1f} s wall; dataset {state}"
+    )
+    if summary.too_noisy:
+        print(f"warning: {summary.too_noisy} frame(s) have a reference not 4x less noisy than their inputs "
+              f"(reference_too_noisy in dataset.json); raise --ref-spp", file=sys.stderr)
+    for failure in summary.failures:
+        print(f"failed: scene {failure.scene} frame {failure.frame}: {failure.message}", file=sys.stderr)
+
+
+def run(args) -> int:
+    from denoisebench.generator.dataset_run import REFERENCE_SPP_FACTOR, generate_dataset, validate_request
+    from denoisebench.generator.executors import make_executor
+
+    request = request_from_args(args)
+    validate_request(request)  # before a Ray cluster is started for nothing
+    if request.ref_spp < REFERENCE_SPP_FACTOR * max(request.spp):
+        print(f"warning: --ref-spp {request.ref_spp} is below {REFERENCE_SPP_FACTOR}x the largest --spp "
+              f"({max(request.spp)}): references will likely be flagged too noisy", file=sys.stderr)
+    executor = make_executor(args.executor, args.ray_address, cpus_per_task=args.ray_cpus_per_task)
+    try:
+        summary = generate_dataset(request, executor, progress=not args.quiet)
+    finally:
+        executor.close()
+    print_summary(summary)
+    return 1 if summary.failures else 0

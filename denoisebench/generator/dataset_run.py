@@ -1,0 +1,246 @@
+"""Generate (or resume) a dataset: prepare the scenes, render the missing frames, write, finalize.
+
+:func:`generate_dataset` is what ``denoisebench generate`` and the demo run. The dataset config
+(:func:`dataset_config`) is everything that decides the bytes: families, scene count, frames,
+size, spp, reference spp, per-sample data, seed and the user's USD files (path and sha256). The
+executor is *not* part of it: local and Ray runs give the same bytes, so a run started locally may
+be finished on a cluster. Running again with the same config resumes; another config is refused
+unless ``force`` (:class:`~denoisebench.dataset.writer.DatasetWriter`).
+
+Notes:
+    User stages are checked (opened, translated, dependencies inside their folder) before
+    anything is written: one bad ``--usd`` file refuses the whole command with a one-line error
+    (exit 2) rather than leaving a dataset that silently lacks a scene.
+    A job that fails while rendering (an internal error) is reported and the others carry on; the
+    dataset is then finalized as incomplete (``complete: false``) and a rerun renders what is
+    missing.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+import time
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+
+from denoisebench.dataset import layout
+from denoisebench.dataset.manifest import assign_splits
+from denoisebench.dataset.writer import DatasetWriter
+from denoisebench.errors import UserInputError
+from denoisebench.generator import dataset_scenes as scenes_mod
+from denoisebench.generator.dataset_scenes import SceneSpec
+from denoisebench.generator.sequence import missing_jobs, write_rendered
+
+CONFIG_KIND = "denoisebench.generate"
+#: The reference should have this many times the noisy inputs' largest spp (rel_se falls as 1/sqrt(spp),
+#: and the manifest flags a reference that is not 4× less noisy than its inputs).
+REFERENCE_SPP_FACTOR = 16
+
+
+@dataclass(frozen=True)
+class GenerateRequest:
+    """What to generate (the command line's options)."""
+
+    out: Path
+    families: tuple[str, ...]
+    scenes: int = 1
+    frames: int = 8
+    width: int = 128
+    height: int = 128
+    spp: tuple[int, ...] = (1, 4, 16)
+    ref_spp: int = 1024
+    samples: bool = False
+    seed: int = 0
+    usd: tuple[str, ...] = ()
+    force: bool = False
+
+
+@dataclass
+class GenerateSummary:
+    out: Path
+    scenes: int = 0
+    frames: int = 0  # scene-frames rendered in this run
+    files: int = 0  # EXR files written in this run (noisy spp + references)
+    skipped: int = 0  # scene-frames already complete (resume)
+    render_seconds: float = 0.0
+    samples: int = 0  # pixel samples rendered in this run
+    wall_seconds: float = 0.0
+    too_noisy: int = 0  # frames whose reference is flagged
+    failures: list = field(default_factory=list)
+    complete: bool = False
+
+    @property
+    def samples_per_second(self) -> float:
+        return self.samples / self.render_seconds if self.render_seconds > 0 else 0.0
+
+
+def check_request(request: GenerateRequest) -> None:
+    """UserInputError for values no dataset can have."""
+    for name in ("scenes", "frames", "width", "height", "ref_spp"):
+        if getattr(request, name) < 1:
+            raise UserInputError(f"--{name.replace('_', '-')} must be >= 1 (got {getattr(request, name)})")
+    if max(request.width, request.height) > 16384:
+        raise UserInputError(f"--width/--height at most 16384 (got {request.width}x{request.height})")
+    if not request.spp or min(request.spp) < 1:
+        raise UserInputError(f"--spp needs positive sample counts (got {list(request.spp)})")
+    if not request.families and not request.usd:
+        raise UserInputError("nothing to generate: give --families and/or --usd")
+
+
+def validate_request(request: GenerateRequest) -> None:
+    """Every check that needs no output folder: values, family names, the user's stages."""
+    check_request(request)
+    if request.families:
+        from denoisebench.scenes import get_family
+
+        for family in request.families:
+            get_family(family)  # UnknownFamilyError is a UserInputError
+    for path in request.usd:
+        scenes_mod.check_user_stage(path)
+
+
+def _file_sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def dataset_config(request: GenerateRequest) -> dict:
+    """The config whose hash identifies the dataset (see the module docstring)."""
+    return {
+        "generator": CONFIG_KIND,
+        "families": list(request.families),
+        "scenes": request.scenes,
+        "frames": request.frames,
+        "width": request.width,
+        "height": request.height,
+        "spp": sorted(set(int(s) for s in request.spp)),
+        "ref_spp": request.ref_spp,
+        "samples": bool(request.samples),
+        "seed": request.seed,
+        "usd": [{"path": str(Path(p).resolve()), "sha256": _file_sha256(Path(p))} for p in request.usd],
+    }
+
+
+def render_versions() -> dict[str, str]:
+    """Versions that decide the renders: Mitsuba (and its variant), Dr.Jit, USD."""
+    from denoisebench.mitsuba_runtime import load_mitsuba
+
+    versions = {"mitsuba_variant": load_mitsuba().variant()}
+    for package in ("mitsuba", "drjit", "usd-core"):
+        try:
+            versions[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            versions[package] = "missing"
+    return versions
+
+
+def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -> dict:
+    camera = translated.camera
+    prefix = str(Path(spec.stage_dir)) + "/"
+    return {
+        "family": spec.family,
+        "seed": spec.seed,
+        "source": spec.source,
+        "frames": camera.frames,
+        "width": request.width,
+        "height": request.height,
+        "spp": sorted(set(int(s) for s in request.spp)),
+        "ref_spp": request.ref_spp,
+        "usd": layout.usd_path(spec.name),
+        "stage_files": list(spec.stage_files),
+        "stage_sha256": scenes_mod.stage_digest(spec.stage_dir, spec.stage_files),
+        "render_seed": spec.render_seed,
+        "effects": {"declared": list(translated.effects_declared), "inferred": list(translated.effects_inferred)},
+        "plan": plan.to_dict(),
+        "camera": {
+            "prim_path": camera.prim_path,
+            "fov_x_deg": float(camera.fov_x_deg),
+            "aperture_radius": float(camera.aperture_radius),
+            "focus_distance": float(camera.focus_distance),
+            "shutter_open": float(camera.shutter_open),
+            "shutter_close": float(camera.shutter_close),
+            "animated": bool(camera.is_animated),
+        },
+        # Paths inside OUT are made relative so that the manifest does not depend on where OUT is.
+        "warnings": [w.replace(prefix, f"{spec.name}/") for w in translated.warnings],
+    }
+
+
+def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names: list[str]) -> list[SceneSpec]:
+    """Author / copy every scene into OUT and record it with the writer."""
+    from denoisebench.generator.render_plan import RenderOptions, make_render_plan
+    from denoisebench.generator.translate import translate_usd
+    from denoisebench.scenes import get_family
+
+    entries = []
+    for family, seed, name in scenes_mod.family_scene_names(list(request.families), request.scenes, request.seed):
+        folder = writer.scene_dir(name)
+        files = scenes_mod.author_family_scene(get_family(family), folder, seed, request.frames, request.width, request.height)
+        entries.append(SceneSpec(name, family, seed, family, str(folder.resolve()), files,
+                                 scenes_mod.render_seed(request.seed, name)))
+    for path, name in zip(request.usd, user_names):
+        folder = writer.scene_dir(name)
+        files = scenes_mod.copy_user_stage(path, folder)
+        entries.append(SceneSpec(name, "usd", 0, str(path), str(folder.resolve()), files,
+                                 scenes_mod.render_seed(request.seed, name)))
+    options = RenderOptions(per_sample=bool(request.samples))
+    for spec in entries:
+        translated = translate_usd(spec.usd_path)
+        writer.add_scene(spec.name, _scene_record(spec, translated, request, make_render_plan(translated.effects, options)))
+    return entries
+
+
+def generate_dataset(request: GenerateRequest, executor, progress: bool = True, log=None) -> GenerateSummary:
+    """Generate or resume the dataset ``request`` asks for with ``executor``; return a summary."""
+    from tqdm import tqdm
+
+    log = log or (lambda line: print(line, file=sys.stderr))
+    started = time.perf_counter()
+    validate_request(request)
+    family_names = {name for _, _, name in scenes_mod.family_scene_names(list(request.families), request.scenes, request.seed)}
+    user_names = scenes_mod.user_scene_names(list(request.usd), family_names)
+
+    writer = DatasetWriter(request.out, dataset_config(request), render_versions(), force=request.force)
+    specs = _prepare_scenes(request, writer, user_names)
+    by_name = {spec.name: spec for spec in specs}
+    options = {"per_sample": bool(request.samples)}
+    jobs = []
+    for spec in specs:
+        stage_key = writer.manifest["scenes"][spec.name]["stage_sha256"]
+        jobs.extend(missing_jobs(writer, spec.name, stage_key, str(spec.usd_path), spec.render_seed, options))
+    summary = GenerateSummary(out=Path(request.out), scenes=len(specs))
+    total_frames = sum(writer.manifest["scenes"][s.name]["frames"] for s in specs)
+    summary.skipped = total_frames - len(jobs)
+    if writer.resumed and summary.skipped:
+        log(f"resuming {request.out}: {summary.skipped} of {total_frames} frame(s) already done")
+
+    scene_order = {spec.name: k + 1 for k, spec in enumerate(specs)}
+    bar = tqdm(total=total_frames, initial=summary.skipped, unit="frame", desc="generate", file=sys.stderr,
+               disable=not progress, dynamic_ncols=True)
+    try:
+        for outcome in executor.run(jobs, by_name):
+            bar.set_postfix_str(f"scene {scene_order[outcome.scene]}/{len(specs)} {outcome.scene}")
+            if not hasattr(outcome, "noisy"):
+                summary.failures.append(outcome)
+                tqdm.write(f"error: scene {outcome.scene} frame {outcome.frame}: {outcome.message}", file=sys.stderr)
+                bar.update(1)
+                continue
+            summary.files += write_rendered(writer, outcome)
+            summary.frames += 1
+            renders = outcome.noisy + ([outcome.reference] if outcome.reference else [])
+            summary.render_seconds += sum(r.seconds for r in renders)
+            summary.samples += sum(r.spp for r in renders) * request.width * request.height
+            bar.update(1)
+    finally:
+        bar.close()
+    writer.finalize(assign_splits(list(by_name), request.seed), allow_incomplete=bool(summary.failures))
+    summary.complete = bool(writer.manifest["complete"])
+    summary.too_noisy = sum(
+        1
+        for scene in writer.manifest["scenes"].values()
+        for record in scene["renders"].get(layout.REFERENCE, {}).values()
+        if record.get("reference_too_noisy")
+    )
+    summary.wall_seconds = time.perf_counter() - started
+    return summary

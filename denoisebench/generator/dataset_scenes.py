@@ -1,0 +1,178 @@
+"""The scenes of a dataset: names, seeds, and the stage files under ``OUT/<scene>/``.
+
+A family scene is authored straight into its folder (``scene.usda`` + ``textures/``); a user's
+own USD file is copied there with the files it depends on (:func:`copy_user_stage`). Either way
+the folder then holds everything needed to render the scene, listed by :class:`SceneSpec`'s
+``stage_files``, so a Ray worker on another machine can rebuild it from those bytes alone.
+
+Names and seeds are deterministic:
+
+* family scenes are ``<family>_<scene seed:03d>``, with scene seeds ``seed, seed+1, ...`` (the
+  same stage ``denoisebench scenes make FAMILY --seed S`` writes);
+* a user's stage is ``usd_<file stem>`` (other characters become ``_``; a second file with the
+  same stem gets ``_2``, in argument order);
+* every scene renders with its own ``render_seed``, a hash of the dataset seed and the scene name,
+  so no two scenes share random numbers and a scene's pixels do not depend on which others exist.
+
+Notes:
+    A user's stage may only depend on files inside its own folder (textures, sublayers,
+    references): they are copied at the same relative paths, so the stage's relative asset paths
+    still resolve. A dependency outside that folder is refused (one-line error): rewriting asset
+    paths in a user's layers is not worth the surprise. A binary root layer (``.usdc``/``.usd``)
+    is written out as text ``scene.usda`` by USD's own ``Sdf.Layer.Export``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+from denoisebench.dataset import layout
+from denoisebench.dataset.atomic import atomic_write_bytes
+from denoisebench.errors import UserInputError
+
+USD_SUFFIXES = (".usda", ".usdc", ".usd")
+
+
+@dataclass(frozen=True)
+class SceneSpec:
+    """One scene to render (plain data: picklable, sent to executors).
+
+    Attributes:
+        name: the scene's folder and manifest name.
+        family: the scene family, or ``"usd"`` for a user's stage.
+        seed: the authoring seed (0 for a user's stage).
+        source: the family name, or the user's USD file as given.
+        stage_dir: absolute ``OUT/<scene>``.
+        stage_files: paths relative to ``stage_dir`` of the stage (first, ``scene.usda``) and of
+            every file it depends on.
+        render_seed: the seed of every render of this scene.
+    """
+
+    name: str
+    family: str
+    seed: int
+    source: str
+    stage_dir: str
+    stage_files: tuple[str, ...]
+    render_seed: int
+
+    @property
+    def usd_path(self) -> Path:
+        return Path(self.stage_dir) / layout.SCENE_USD
+
+
+def render_seed(dataset_seed: int, scene: str) -> int:
+    """32-bit render seed of ``scene``: BLAKE2b of the dataset seed and the scene name."""
+    data = struct.pack("<q", int(dataset_seed)) + scene.encode("utf-8")
+    return int.from_bytes(hashlib.blake2b(data, digest_size=4).digest(), "little")
+
+
+def family_scene_names(families: list[str], count: int, seed: int) -> list[tuple[str, int, str]]:
+    """``(family, scene seed, name)`` of ``count`` scenes of each family."""
+    return [(family, seed + i, f"{family}_{seed + i:03d}") for family in families for i in range(count)]
+
+
+def user_scene_names(paths: list[str], taken: set[str]) -> list[str]:
+    """``usd_<stem>`` names for the user's files, unique among themselves and ``taken``."""
+    names = []
+    used = set(taken)
+    for path in paths:
+        base = "usd_" + (re.sub(r"[^A-Za-z0-9._-]", "_", Path(path).stem) or "stage")
+        name, k = base, 2
+        while name in used:
+            name, k = f"{base}_{k}", k + 1
+        used.add(name)
+        names.append(name)
+    return names
+
+
+def stage_digest(stage_dir: str | Path, files: tuple[str, ...]) -> str:
+    """sha256 over the stage files' relative paths and contents (what a render depends on)."""
+    digest = hashlib.sha256()
+    for relative in files:
+        digest.update(relative.encode("utf-8") + b"\0")
+        digest.update(hashlib.sha256((Path(stage_dir) / relative).read_bytes()).digest())
+    return digest.hexdigest()
+
+
+def read_stage_files(spec: SceneSpec) -> dict[str, bytes]:
+    """The bytes of every stage file of ``spec`` (what a remote worker gets)."""
+    return {relative: (Path(spec.stage_dir) / relative).read_bytes() for relative in spec.stage_files}
+
+
+def _relative_files(folder: Path, paths) -> tuple[str, ...]:
+    return tuple(sorted({Path(p).resolve().relative_to(folder.resolve()).as_posix() for p in paths}))
+
+
+def author_family_scene(family, scene_dir: Path, seed: int, frames: int, width: int, height: int) -> tuple[str, ...]:
+    """Author ``family`` into ``scene_dir``; return its stage files (``scene.usda`` first)."""
+    from pxr import UsdUtils
+
+    stage = family.author(scene_dir, seed=seed, frames=frames, width=width, height=height)
+    _, assets, _ = UsdUtils.ComputeAllDependencies(str(stage))
+    others = tuple(f for f in _relative_files(scene_dir, assets) if f != layout.SCENE_USD)
+    return (layout.SCENE_USD,) + others
+
+
+def user_stage_dependencies(path: Path) -> list[tuple[Path, str]]:
+    """``(absolute file, path relative to the stage's folder)`` of every file the stage needs.
+
+    UserInputError when a dependency lies outside the stage's folder or is a package (``.usdz``).
+    Unresolvable asset paths are left to the translator (it warns about missing textures).
+    """
+    from pxr import UsdUtils
+
+    root = path.resolve().parent
+    layers, assets, _unresolved = UsdUtils.ComputeAllDependencies(str(path))
+    out = []
+    for layer_or_asset in [layer.realPath for layer in layers[1:]] + list(assets):
+        absolute = Path(layer_or_asset).resolve()
+        try:
+            relative = absolute.relative_to(root).as_posix()
+        except ValueError:
+            raise UserInputError(
+                f"{path}: depends on {absolute}, outside the stage's folder; move it under {root} to generate from it"
+            ) from None
+        if relative == layout.SCENE_USD:
+            raise UserInputError(f"{path}: a dependency is named {layout.SCENE_USD}, which the dataset reserves for the stage")
+        out.append((absolute, relative))
+    return sorted(set(out), key=lambda item: item[1])
+
+
+def copy_user_stage(path: str | Path, scene_dir: Path) -> tuple[str, ...]:
+    """Copy a user's stage to ``scene_dir/scene.usda`` (text) with its dependencies; return the files."""
+    from pxr import Sdf
+
+    path = Path(path)
+    dependencies = user_stage_dependencies(path)
+    scene_dir.mkdir(parents=True, exist_ok=True)
+    layer = Sdf.Layer.FindOrOpen(str(path))
+    if layer is None:
+        raise UserInputError(f"{path}: cannot open USD stage")
+    # ExportToString keeps the authored (relative) asset paths; the bytes go through our atomic write.
+    atomic_write_bytes(scene_dir / layout.SCENE_USD, layer.ExportToString().encode("utf-8"))
+    for absolute, relative in dependencies:
+        atomic_write_bytes(scene_dir / relative, absolute.read_bytes())
+    return (layout.SCENE_USD,) + tuple(relative for _, relative in dependencies)
+
+
+def check_user_stage(path: str | Path):
+    """Open, check and translate a user's stage before anything is written; return the translation.
+
+    A missing or malformed file, a stage without a camera, a ``.usdz`` package or a dependency
+    outside the stage's folder is a UserInputError (one line naming the file).
+    """
+    from denoisebench.generator.translate import translate_usd
+
+    path = Path(path)
+    if not path.is_file():
+        raise UserInputError(f"{path}: no such USD file")
+    if path.suffix.lower() not in USD_SUFFIXES:
+        raise UserInputError(f"{path}: expected a {'/'.join(USD_SUFFIXES)} file (unpack a .usdz first)")
+    translated = translate_usd(path)
+    user_stage_dependencies(path)
+    return translated

@@ -1,0 +1,175 @@
+"""Render a scene's frames at every spp and the reference, and hand them to the dataset writer.
+
+The unit of work is a :class:`FrameJob`: one frame of one scene, with the noisy sample counts and
+the reference that are still missing. :func:`render_job` does it wherever it runs (this process,
+or a Ray worker: jobs and results are plain picklable data); :func:`write_rendered` then records
+the result with the :class:`~denoisebench.dataset.writer.DatasetWriter` in the driving process.
+
+Frame ``i`` is rendered at the camera's ``i``-th time sample. Noisy renders and the reference use
+the renderer's separate random streams (``reference=True``), so they never share random numbers;
+the seed of every render is the scene's ``render_seed``. The same job gives bit-identical buffers
+in any process, which is what makes resuming and the Ray executor byte-identical to a plain run.
+
+Notes:
+    Render seconds go into the manifest as the time axis of later comparisons, so they must not
+    include Dr.Jit's kernel compilation, which happens the first time a process meets a kernel
+    (a new scene, sample count, image size or frame kind) and can take seconds where rendering
+    takes milliseconds. Dr.Jit's own kernel history (``JitFlag.KernelHistory``) reports the LLVM
+    compile time of every launch; :func:`_timed_render` subtracts it, and records it apart as
+    ``jit_compile_seconds``. What remains is tracing plus execution, what a warm renderer costs.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from denoisebench.dataset import layout
+
+#: Reference layers besides color and color_var (the renderer's reference output).
+REFERENCE_EXTRA = ("diffuse", "diffuse_var", "specular", "specular_var")
+
+
+@dataclass(frozen=True)
+class FrameJob:
+    """Render frame ``frame`` of ``scene`` at each of ``spp`` (noisy) and at ``ref_spp`` (reference).
+
+    ``stage_key`` is the scene's stage digest (workers cache the loaded scene under it);
+    ``usd_path`` is where the stage is on the driver's disk (used when the stage files are not
+    shipped with the job); ``options`` are :class:`~denoisebench.generator.render_plan.RenderOptions`
+    fields.
+    """
+
+    scene: str
+    frame: int
+    stage_key: str
+    usd_path: str
+    spp: tuple[int, ...]
+    ref_spp: int | None
+    width: int
+    height: int
+    render_seed: int
+    options: dict = field(default_factory=dict)
+
+
+@dataclass
+class Render:
+    spp: int
+    buffers: dict[str, np.ndarray]
+    samples: dict[str, np.ndarray] | None
+    seconds: float  # rendering, without kernel compilation
+    compile_seconds: float = 0.0
+
+
+@dataclass
+class RenderedJob:
+    """What :func:`render_job` returns: the noisy renders, the reference (or None), the camera pose."""
+
+    scene: str
+    frame: int
+    noisy: list[Render]
+    reference: Render | None
+    pose: list
+
+
+class _LoadedScene:
+    """A translated stage, its render plan and its Mitsuba scene, ready to render."""
+
+    def __init__(self, usd_path: Path, options: dict):
+        from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
+        from denoisebench.generator.render_plan import RenderOptions, make_render_plan
+        from denoisebench.generator.translate import translate_usd
+
+        self.translated = translate_usd(usd_path)
+        self.plan = make_render_plan(self.translated.effects, RenderOptions(**options))
+        self.scene = build_mitsuba_scene(self.translated)
+
+
+# One scene per process: jobs arrive grouped by scene, and a Mitsuba scene can be large.
+_CACHE: dict[tuple, _LoadedScene] = {}
+_STAGE_DIRS: dict[str, Path] = {}
+
+
+def _materialize(stage_key: str, files: dict[str, bytes]) -> Path:
+    """Write shipped stage files into a private temporary folder (once per stage); return scene.usda."""
+    folder = _STAGE_DIRS.get(stage_key)
+    if folder is None:
+        folder = Path(tempfile.mkdtemp(prefix=f"denoisebench-stage-{stage_key[:12]}-"))
+        for relative, data in files.items():
+            target = folder / relative
+            target.parent.mkdir(parents=True, exist_ok=True)
+            target.write_bytes(data)
+        _STAGE_DIRS[stage_key] = folder
+    return folder / layout.SCENE_USD
+
+
+def _loaded(job: FrameJob, stage_files: dict[str, bytes] | None) -> _LoadedScene:
+    key = (job.stage_key, tuple(sorted(job.options.items())))
+    if key not in _CACHE:
+        _CACHE.clear()
+        usd = _materialize(job.stage_key, stage_files) if stage_files is not None else Path(job.usd_path)
+        _CACHE[key] = _LoadedScene(usd, job.options)
+    return _CACHE[key]
+
+
+def _timed_render(loaded: _LoadedScene, job: FrameJob, spp: int, reference: bool) -> Render:
+    """Render, and split the renderer's seconds into rendering and kernel compilation."""
+    import drjit as dr
+
+    from denoisebench.generator.feature_renderer import render_frame
+
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()  # drains (and so clears) the history of earlier launches
+    out = render_frame(loaded.scene, loaded.translated.camera, job.frame, loaded.plan, width=job.width,
+                       height=job.height, spp=spp, seed=job.render_seed, reference=reference)
+    compile_ms = sum(float(entry.get("backend_time", 0.0)) for entry in dr.kernel_history() if not entry.get("cache_hit"))
+    compile_seconds = min(compile_ms / 1000.0, out.seconds)
+    return Render(spp, out.buffers, None if reference else out.samples, out.seconds - compile_seconds,
+                       compile_seconds)
+
+
+def render_job(job: FrameJob, stage_files: dict[str, bytes] | None = None) -> RenderedJob:
+    """Render one :class:`FrameJob` (``stage_files``: the stage's bytes when not on this disk)."""
+    loaded = _loaded(job, stage_files)
+    camera = loaded.translated.camera
+    if not 0 <= job.frame < camera.frames:
+        raise ValueError(f"scene {job.scene!r} has {camera.frames} frame(s), not frame {job.frame}")
+    noisy = [_timed_render(loaded, job, spp, reference=False) for spp in job.spp]
+    reference = _timed_render(loaded, job, job.ref_spp, reference=True) if job.ref_spp else None
+    return RenderedJob(job.scene, job.frame, noisy, reference, np.asarray(camera.poses[job.frame]).tolist())
+
+
+def write_rendered(writer, result: RenderedJob) -> int:
+    """Record every render of ``result`` with ``writer``; return the number of files' worth written."""
+    def extra(render: Render) -> dict:
+        return {"camera_pose": result.pose, "jit_compile_seconds": render.compile_seconds}
+
+    for render in result.noisy:
+        writer.write_frame(result.scene, result.frame, render.spp, render.buffers, render.samples,
+                           seconds=render.seconds, extra=extra(render))
+    if result.reference is not None:
+        ref = result.reference
+        writer.write_reference(
+            result.scene, result.frame, ref.buffers["color"], ref.buffers["color_var"], ref.seconds,
+            spp=ref.spp, buffers={k: ref.buffers[k] for k in REFERENCE_EXTRA if k in ref.buffers}, extra=extra(ref),
+        )
+    return len(result.noisy) + (result.reference is not None)
+
+
+def missing_jobs(writer, scene: str, stage_key: str, usd_path: str, render_seed: int, options: dict) -> list[FrameJob]:
+    """The jobs still needed for ``scene`` (frames whose every file is intact are skipped)."""
+    record = writer.manifest["scenes"][scene]
+    jobs = []
+    for frame in range(record["frames"]):
+        spp = tuple(s for s in record["spp"] if not writer.is_done(scene, frame, s))
+        ref_spp = record.get("ref_spp")
+        if ref_spp and writer.is_done(scene, frame, layout.REFERENCE):
+            ref_spp = None
+        if spp or ref_spp:
+            jobs.append(FrameJob(scene, frame, stage_key, usd_path, spp, ref_spp, record["width"], record["height"],
+                                 render_seed, dict(options)))
+    return jobs
+
