@@ -120,6 +120,10 @@ def _pose_tables(camera: CameraTrack):
     return quat_a, quat_b, mats[:, :3, 3].copy(), scale
 
 
+#: Fewest rows of a per-ray pose table (see :meth:`DrCamera._table`).
+MIN_TABLE_ROWS = 64
+
+
 class DrCamera:
     """The camera of one frame as opaque Dr.Jit values; builds rays and reprojects points."""
 
@@ -152,11 +156,26 @@ class DrCamera:
             self.prev_static = self._opaque_pose(setup.prev_pose) if setup.prev_pose is not None else None
         else:
             self.static = self.prev_static = None
-            self.qa = mi.Vector4f(*[mi.Float(setup.quat_a[:, c]) for c in range(4)])
-            self.qb = mi.Vector4f(*[mi.Float(setup.quat_b[:, c]) for c in range(4)])
-            self.tr = mi.Vector3f(*[mi.Float(setup.trans[:, c]) for c in range(3)])
-            self.sc = mi.Vector3f(*[mi.Float(setup.scale[:, c]) for c in range(3)])
+            self.qa = self._table(mi.Vector4f, setup.quat_a)
+            self.qb = self._table(mi.Vector4f, setup.quat_b)
+            self.tr = self._table(mi.Vector3f, setup.trans)
+            self.sc = self._table(mi.Vector3f, setup.scale)
             self.last_frame = opaque(setup.frames - 1)
+
+    def _table(self, kind, rows: np.ndarray):
+        """A per-frame table as a Dr.Jit array (one entry per row), padded to :data:`MIN_TABLE_ROWS`.
+
+        Notes:
+            Tiny tables break kernel caching: a one-entry array becomes a literal (new code for
+            every camera), and small buffers came back with varying alignment, which Dr.Jit writes
+            into the kernel (``align 1`` / ``align 4``), so every frame compiled anew (~2.5 s).
+            Padding rows (copies of the last) are never gathered.
+        """
+        padded = np.concatenate([rows, np.repeat(rows[-1:], max(0, MIN_TABLE_ROWS - len(rows)), axis=0)])
+        columns = [self.mi.Float(np.ascontiguousarray(padded[:, c], dtype=np.float32)) for c in range(padded.shape[1])]
+        table = kind(*columns)
+        self.dr.make_opaque(table)
+        return table
 
     def _opaque_pose(self, m: np.ndarray):
         """(column0, column1, column2, translation) of a 4×4 matrix as opaque vectors."""
