@@ -290,25 +290,36 @@ def _filter_chunk(
     return filtered, alpha.mean(axis=1), beta, w_summary
 
 
-def rpf_filter(
-    samples: Mapping[str, np.ndarray],
-    *,
-    features: Sequence[str] = DEFAULT_FEATURES,
-    boxes: Sequence[int] | None = None,
-    max_samples: int = 96,
-    bins: int = 6,
-    sigma2_color: float = 2.0,
-    sigma2_feature: float = 0.01,
-    seed: int = 0,
-) -> tuple[np.ndarray, RPFWeights]:
-    """Filter per-sample data (name → S×H×W×C, needs ``color``); returns (H×W×3 float32, weights).
+@dataclass(frozen=True)
+class RPFSettings:
+    """Options of :func:`rpf_filter` (see the module docstring); validated on construction."""
 
-    ``boxes`` default to :func:`scaled_boxes` of the image.
-    """
+    features: tuple[str, ...] = DEFAULT_FEATURES
+    boxes: tuple[int, ...] | None = None  # None: scaled_boxes() of the image
+    max_samples: int = 96
+    bins: int = 6
+    sigma2_color: float = 2.0
+    sigma2_feature: float = 0.01
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.max_samples < 1 or self.bins < 2 or not (self.sigma2_color > 0 and self.sigma2_feature > 0):
+            raise ValueError("max_samples must be >= 1, bins >= 2 and sigma2_color, sigma2_feature > 0")
+        if self.boxes is not None and any(int(b) < 1 for b in self.boxes):
+            raise ValueError("box sizes must be >= 1")
+        object.__setattr__(self, "features", tuple(self.features))
+        if self.boxes is not None:
+            object.__setattr__(self, "boxes", tuple(int(b) for b in self.boxes))
+
+
+def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSettings()) -> tuple[np.ndarray, RPFWeights]:
+    """Filter per-sample data (name → S×H×W×C, needs ``color``); returns (H×W×3 float32, weights)."""
+    features, boxes, max_samples, bins = settings.features, settings.boxes, settings.max_samples, settings.bins
+    sigma2_color, sigma2_feature = settings.sigma2_color, settings.sigma2_feature
     table, layout = _sample_table(samples, features)
     spp, height, width, dims = table.shape
     boxes = list(boxes) if boxes is not None else scaled_boxes(height, width)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(settings.seed)
     weights = RPFWeights()
     for t, box in enumerate(boxes):
         m = max(spp, min(max_samples, box * box * spp))
@@ -321,7 +332,8 @@ def rpf_filter(
         for y0 in range(0, height, rows_per_chunk):
             rows = slice(y0, min(height, y0 + rows_per_chunk))
             filtered, a, b, wr = _filter_chunk(
-                table, layout, rows, box, t, rng, max_samples=max_samples, bins=bins, sigma2_color=sigma2_color, sigma2_feature=sigma2_feature
+                table, layout, rows, box, t, rng,
+                max_samples=max_samples, bins=bins, sigma2_color=sigma2_color, sigma2_feature=sigma2_feature,
             )
             count = rows.stop - rows.start
             new_color[:, rows] = filtered.reshape(spp, count, width, 3)
@@ -349,42 +361,13 @@ class RandomParameterFilter(DenoiserBase):
     needs = frozenset({"samples"})
     temporal = False
 
-    def __init__(
-        self,
-        *,
-        features: Sequence[str] = DEFAULT_FEATURES,
-        boxes: Sequence[int] | None = None,
-        max_samples: int = 96,
-        bins: int = 6,
-        sigma2_color: float = 2.0,
-        sigma2_feature: float = 0.01,
-        seed: int = 0,
-    ) -> None:
-        if max_samples < 1 or bins < 2 or not (sigma2_color > 0 and sigma2_feature > 0):
-            raise ValueError("max_samples must be >= 1, bins >= 2 and sigma2_color, sigma2_feature > 0")
-        if boxes is not None and any(int(b) < 1 for b in boxes):
-            raise ValueError("box sizes must be >= 1")
-        self.features = tuple(features)
-        self.boxes = None if boxes is None else [int(b) for b in boxes]
-        self.max_samples = int(max_samples)
-        self.bins = int(bins)
-        self.sigma2_color = float(sigma2_color)
-        self.sigma2_feature = float(sigma2_feature)
-        self.seed = int(seed)
+    def __init__(self, **options) -> None:
+        self.settings = RPFSettings(**options)  # raises ValueError/TypeError for bad options
         self.last_weights: RPFWeights | None = None
 
     def denoise(self, frame: Frame) -> np.ndarray:
         samples = frame.samples
         if samples is None or "color" not in samples:
             raise ValueError("rpf needs per-sample data with a 'color' entry")
-        image, self.last_weights = rpf_filter(
-            samples,
-            features=self.features,
-            boxes=self.boxes,
-            max_samples=self.max_samples,
-            bins=self.bins,
-            sigma2_color=self.sigma2_color,
-            sigma2_feature=self.sigma2_feature,
-            seed=self.seed,
-        )
+        image, self.last_weights = rpf_filter(samples, self.settings)
         return image
