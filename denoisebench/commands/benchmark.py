@@ -105,7 +105,8 @@ def run(args) -> int:
             return 0
         from denoisebench.leaderboard.report import write_report
 
-        index = write_report(store, plan.run_id, dataset, Path(args.out))
+        instances = {d.label: d.instance for d in plan.denoisers if d.instance is not None}
+        index = write_report(store, plan.run_id, dataset, Path(args.out), instances)
     print(f"report: {index.resolve()}")
     sys.stdout.flush()
     return 0

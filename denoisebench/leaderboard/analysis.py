@@ -1,0 +1,314 @@
+"""Numbers a report is made of, computed from one run in the results store (no drawing, no HTML).
+
+* :func:`summary_table`: per denoiser and input spp, the mean of every metric with a bootstrap 95 %
+  interval over **scenes** (frames of one scene are not independent samples), and seconds per frame.
+* :func:`accuracy_time`: per denoiser and spp, mean error (relMSE, FLIP) against mean total seconds
+  per frame (render at that spp + denoise); the noisy inputs as the "just render more samples"
+  curve; the Pareto front; and the reading in words (:func:`readings`).
+* :func:`effect_breakdown`: per denoiser and scene effect, the share of the input's error left.
+* :func:`flicker_series`: per denoiser, the per-frame flicker averaged over scenes.
+
+Notes
+-----
+* **Equivalent spp.** The noisy input's error falls as a power of spp; a line fitted to
+  log(error) against log(spp) over the measured input spp gives, for a denoiser's error e, the spp
+  that rendering alone would need (extrapolated beyond the largest measured spp; with one spp
+  measured the slope is assumed to be −1, the Monte Carlo rate for relMSE, and −0.5 for FLIP,
+  a root-mean-like error). The time of that rendering is spp × the measured render seconds per
+  sample. Beyond the reference's own spp the comparison says more about the reference's noise
+  than about the denoiser: the reading says so.
+* **The reference** has zero error against itself, which a log axis cannot show: it appears as a
+  vertical line at its render time, not as a point.
+* Failed units are left out of means and listed separately; a denoiser/spp with no successful
+  unit has no point.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .runner import NOISY
+
+#: Bootstrap resamples and seed (fixed: the same run gives the same report).
+BOOTSTRAP_RESAMPLES = 2000
+BOOTSTRAP_SEED = 0
+ERROR_METRICS = ("relmse", "flip")
+#: Assumed slope of log(error) vs log(spp) when only one input spp was measured.
+DEFAULT_SLOPE = {"relmse": -1.0, "mse": -1.0, "flip": -0.5}
+
+
+def _finite(values) -> list[float]:
+    return [float(v) for v in values if v is not None and math.isfinite(v)]
+
+
+def bootstrap_interval(values) -> tuple[float | None, float | None]:
+    """Percentile bootstrap 95 % interval of the mean (scipy.stats.bootstrap); None with < 2 values."""
+    from scipy.stats import bootstrap
+
+    data = np.asarray(_finite(values), dtype=np.float64)
+    if data.size < 2:
+        return None, None
+    if np.all(data == data[0]):
+        return float(data[0]), float(data[0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # few scenes: scipy warns that the distribution is degenerate
+        result = bootstrap(
+            (data,), np.mean, n_resamples=BOOTSTRAP_RESAMPLES, method="percentile",
+            rng=np.random.default_rng(BOOTSTRAP_SEED),
+        )
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+
+
+@dataclass
+class Cell:
+    mean: float | None
+    low: float | None
+    high: float | None
+    scenes: int
+
+
+@dataclass
+class SummaryRow:
+    denoiser: str
+    spp: int
+    metrics: dict[str, Cell]
+    denoise_seconds: float | None  # mean per frame
+    total_seconds: float | None  # mean per frame
+    render_seconds: float | None  # mean per frame
+    frames: int
+    failed_units: int
+    errors: list[str] = field(default_factory=list)
+
+
+class RunData:
+    """One run's rows from the store, indexed for the analyses."""
+
+    def __init__(self, store, run_id: str):
+        self.run = store.run(run_id)
+        self.run_id = run_id
+        self.denoisers = store.denoisers(run_id)
+        self.units = store.units(run_id)
+        self.frames = store.frames(run_id)
+        self.sequences = store.sequence_metrics(run_id)
+        self.labels = [d["label"] for d in self.denoisers if not d["load_error"]]
+        self.spp = sorted({u["spp"] for u in self.units})
+        self.scenes = sorted({u["scene"] for u in self.units})
+        self.frame_metric_names = sorted({m for f in self.frames for m in f["metrics"]} - {"flicker"})
+        self.sequence_metric_names = sorted({s["metric"] for s in self.sequences})
+
+    def ok_frames(self, label: str, spp: int, scene: str | None = None) -> list[dict]:
+        return [
+            f for f in self.frames
+            if f["denoiser"] == label and f["spp"] == spp and f["status"] == "ok" and (scene is None or f["scene"] == scene)
+        ]
+
+    def scene_mean(self, label: str, spp: int, scene: str, metric: str) -> float | None:
+        """Mean of a frame metric over the frames of one scene, or the scene's temporal value."""
+        if metric in self.sequence_metric_names and metric not in self.frame_metric_names:
+            values = [s["value"] for s in self.sequences if (s["denoiser"], s["spp"], s["scene"], s["metric"]) == (label, spp, scene, metric)]
+        else:
+            values = [f["metrics"].get(metric) for f in self.ok_frames(label, spp, scene)]
+        values = _finite(values)
+        return float(np.mean(values)) if values else None
+
+    def unit_ok(self, label: str, spp: int, scene: str) -> bool:
+        return any(u["status"] == "ok" for u in self.units if (u["denoiser"], u["spp"], u["scene"]) == (label, spp, scene))
+
+
+def summary_table(data: RunData) -> list[SummaryRow]:
+    rows = []
+    for spp in data.spp:
+        for label in data.labels:
+            units = [u for u in data.units if u["denoiser"] == label and u["spp"] == spp]
+            if not units:
+                continue
+            ok_scenes = [u["scene"] for u in units if u["status"] == "ok"]
+            cells = {}
+            for metric in data.frame_metric_names + data.sequence_metric_names:
+                per_scene = _finite(data.scene_mean(label, spp, s, metric) for s in ok_scenes)
+                low, high = bootstrap_interval(per_scene)
+                cells[metric] = Cell(float(np.mean(per_scene)) if per_scene else None, low, high, len(per_scene))
+            frames = [f for s in ok_scenes for f in data.ok_frames(label, spp, s)]
+            mean = lambda key: float(np.mean(_finite(f[key] for f in frames))) if _finite(f[key] for f in frames) else None  # noqa: E731
+            rows.append(SummaryRow(
+                label, spp, cells, mean("denoise_seconds"), mean("total_seconds"), mean("render_seconds"), len(frames),
+                sum(u["status"] != "ok" for u in units), sorted({u["error"] for u in units if u["error"]}),
+            ))
+    return rows
+
+
+# --------------------------------------------------------------------------------------------------
+# accuracy against time
+
+
+@dataclass
+class Point:
+    denoiser: str
+    spp: int
+    seconds: float  # total seconds per frame
+    error: float
+    pareto: bool = False
+
+
+@dataclass
+class NoisyFit:
+    """log(error) = intercept + slope · log(spp), and the render seconds of one sample per pixel."""
+
+    intercept: float
+    slope: float
+    seconds_per_spp: float
+    measured_spp: list[int]
+    assumed_slope: bool
+
+    def spp_for(self, error: float) -> float:
+        return math.exp((math.log(error) - self.intercept) / self.slope)
+
+    def error_at(self, spp: float) -> float:
+        return math.exp(self.intercept + self.slope * math.log(spp))
+
+
+@dataclass
+class AccuracyTime:
+    metric: str
+    points: list[Point]  # denoisers (noisy included, as label NOISY)
+    fit: NoisyFit | None
+    reference_seconds: float | None
+    reference_spp: int | None
+    hidden: list[str]  # points that cannot be drawn on log axes, and why
+
+
+def pareto_front(points: list[Point]) -> None:
+    """Mark the points no other point beats in both time and error (ties broken by neither)."""
+    for p in points:
+        p.pareto = not any(
+            (q.seconds <= p.seconds and q.error <= p.error) and (q.seconds < p.seconds or q.error < p.error)
+            for q in points
+        )
+
+
+def fit_noisy(points: list[Point], seconds_per_spp: float | None, metric: str) -> NoisyFit | None:
+    noisy = [p for p in points if p.denoiser == NOISY and p.error > 0]
+    if not noisy or not seconds_per_spp:
+        return None
+    log_spp = np.log([p.spp for p in noisy])
+    log_err = np.log([p.error for p in noisy])
+    if len(noisy) >= 2 and np.ptp(log_spp) > 0:
+        slope, intercept = np.polyfit(log_spp, log_err, 1)
+        assumed = False
+        if slope >= 0:  # more samples did not help (a converged or broken input): no extrapolation
+            return None
+    else:
+        slope, assumed = DEFAULT_SLOPE.get(metric, -1.0), True
+        intercept = float(np.mean(log_err - slope * log_spp))
+    return NoisyFit(float(intercept), float(slope), float(seconds_per_spp), sorted(p.spp for p in noisy), assumed)
+
+
+def accuracy_time(data: RunData, summary: list[SummaryRow], metric: str, reference: dict) -> AccuracyTime:
+    points, hidden = [], []
+    for row in summary:
+        cell = row.metrics.get(metric)
+        if cell is None or cell.mean is None or row.total_seconds is None:
+            continue
+        if cell.mean <= 0 or row.total_seconds <= 0:
+            hidden.append(f"{row.denoiser} at {row.spp} spp ({metric} {cell.mean:.3g}, {row.total_seconds:.3g} s): not positive, off a log axis")
+            continue
+        points.append(Point(row.denoiser, row.spp, row.total_seconds, cell.mean))
+    pareto_front(points)
+    noisy_frames = [f for f in data.frames if f["denoiser"] == NOISY and f["render_seconds"]]
+    per_spp = _finite(f["render_seconds"] / f["spp"] for f in noisy_frames)
+    fit = fit_noisy(points, float(np.mean(per_spp)) if per_spp else None, metric)
+    return AccuracyTime(metric, points, fit, reference.get("seconds"), reference.get("spp"), hidden)
+
+
+def _ratio_text(ratio: float) -> str:
+    return f"1/{1 / ratio:.0f}" if ratio < 0.5 else f"{ratio:.2g}×"
+
+
+def readings(at: AccuracyTime) -> list[str]:
+    """One sentence per denoiser at the spp where it saves the most time against rendering alone."""
+    if at.fit is None:
+        return [f"No noisy-input curve for {at.metric}: the inputs' error does not fall with spp (or no render times)."]
+    fit = at.fit
+    measured = f"{fit.measured_spp[0]}–{fit.measured_spp[-1]} spp" if len(fit.measured_spp) > 1 else f"{fit.measured_spp[0]} spp"
+    sentences = []
+    best: dict[str, tuple[float, str]] = {}
+    noisy_error = {p.spp: p.error for p in at.points if p.denoiser == NOISY}
+    for p in at.points:
+        if p.denoiser == NOISY:
+            continue
+        if p.spp in noisy_error and p.error >= noisy_error[p.spp]:
+            text = f"{p.denoiser} at {p.spp} spp does not improve on its own input ({at.metric} {p.error:.3g} vs {noisy_error[p.spp]:.3g})."
+            best.setdefault(p.denoiser, (-math.inf, text))
+            continue
+        spp_eq = fit.spp_for(p.error)
+        seconds_eq = spp_eq * fit.seconds_per_spp
+        ratio = p.seconds / seconds_eq
+        notes = []
+        if spp_eq > fit.measured_spp[-1]:
+            notes.append(f"extrapolated from the noisy inputs at {measured}" + (", slope assumed" if fit.assumed_slope else ""))
+        if at.reference_spp and spp_eq > at.reference_spp:
+            notes.append(f"beyond the {at.reference_spp}-spp reference, whose own noise then dominates the score")
+        note = f" ({'; '.join(notes)})" if notes else ""
+        if ratio <= 1:
+            text = (f"{p.denoiser} at {p.spp} spp matches {spp_eq:,.0f}-spp rendering in {at.metric} "
+                    f"at {_ratio_text(ratio)} of its time ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame){note}.")
+        else:
+            text = (f"{p.denoiser} at {p.spp} spp reaches the {at.metric} of {spp_eq:,.0f}-spp rendering but takes "
+                    f"{ratio:.2g}× as long ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame): rendering more samples is cheaper{note}.")
+        score = -math.log(ratio)
+        if p.denoiser not in best or score > best[p.denoiser][0]:
+            best[p.denoiser] = (score, text)
+    for _, text in sorted(best.values(), key=lambda item: -item[0]):
+        sentences.append(text)
+    front = [f"{p.denoiser}@{p.spp}" for p in sorted(at.points, key=lambda p: p.seconds) if p.pareto]
+    if front:
+        sentences.append(f"Pareto front ({at.metric} against time, fastest first): {', '.join(front)}.")
+    return sentences
+
+
+# --------------------------------------------------------------------------------------------------
+# effects and flicker
+
+
+def effect_breakdown(data: RunData, scene_effects: dict[str, list[str]], metric: str = "relmse") -> dict:
+    """{denoiser: {effect: geometric-mean share of the input's error left}}, plus ``overall``.
+
+    The share is denoiser error / noisy-input error per scene and spp (so scene difficulty cancels),
+    averaged geometrically over the scenes that exercise the effect.
+    """
+    effects = sorted({e for es in scene_effects.values() for e in es})
+    table: dict[str, dict[str, float | None]] = {}
+    for label in data.labels:
+        if label == NOISY:
+            continue
+        shares: dict[str, list[float]] = {}
+        for scene in data.scenes:
+            for spp in data.spp:
+                mine, noisy = data.scene_mean(label, spp, scene, metric), data.scene_mean(NOISY, spp, scene, metric)
+                if mine is None or not noisy or mine <= 0 or not data.unit_ok(label, spp, scene):
+                    continue
+                for key in ["overall", *scene_effects.get(scene, [])]:
+                    shares.setdefault(key, []).append(mine / noisy)
+        table[label] = {
+            key: (float(np.exp(np.mean(np.log(shares[key])))) if shares.get(key) else None) for key in ["overall", *effects]
+        }
+    return {"metric": metric, "effects": effects, "table": table}
+
+
+def flicker_series(data: RunData, spp: int) -> dict[str, list[float | None]]:
+    """{denoiser: [mean flicker of frame 1, 2, ...] over scenes} at ``spp`` (frame 0 has none)."""
+    series = {}
+    for label in data.labels:
+        by_frame: dict[int, list[float]] = {}
+        for f in data.ok_frames(label, spp):
+            value = f["metrics"].get("flicker")
+            if value is not None and math.isfinite(value):
+                by_frame.setdefault(f["frame"], []).append(value)
+        if by_frame:
+            last = max(by_frame)
+            series[label] = [float(np.mean(by_frame[i])) if i in by_frame else None for i in range(1, last + 1)]
+    return series

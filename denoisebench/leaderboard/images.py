@@ -1,0 +1,78 @@
+"""Images for reports: tone-mapped PNG (base64 data URIs), worst-region windows and zoomed crops.
+
+Notes
+-----
+* The tone map is the metrics' one (:func:`denoisebench.metrics.tonemap.tonemap`: Reinhard then
+  sRGB), so what the reader sees is what PSNR/SSIM measured. NaN/Inf never reach it: images shown
+  are references, sanitised inputs and checked denoiser outputs.
+* Crops are upscaled by pixel repetition (no interpolation): a zoom must show the denoiser's
+  pixels, not a resampler's.
+* Worst regions are chosen on the mean relMSE map of all the denoisers shown, so every column of a
+  comparison shows the same place; windows do not overlap.
+"""
+
+from __future__ import annotations
+
+import base64
+import io
+
+import numpy as np
+
+
+def to_png(image: np.ndarray, scale: int = 1) -> bytes:
+    """PNG bytes of the tone-mapped H×W×3 linear image, upscaled ``scale``× by pixel repetition."""
+    from PIL import Image
+
+    from denoisebench.metrics.tonemap import tonemap
+
+    display = np.clip(np.nan_to_num(tonemap(image), nan=0.0), 0.0, 1.0)
+    pixels = np.round(display * 255.0).astype(np.uint8)
+    if scale > 1:
+        pixels = np.repeat(np.repeat(pixels, scale, axis=0), scale, axis=1)
+    buffer = io.BytesIO()
+    Image.fromarray(pixels, mode="RGB").save(buffer, format="PNG", optimize=True)
+    return buffer.getvalue()
+
+
+def data_uri(png: bytes, mime: str = "image/png") -> str:
+    return f"data:{mime};base64,{base64.b64encode(png).decode('ascii')}"
+
+
+def window_size(height: int, width: int) -> int:
+    """Side of a worst-region window: a quarter of the short side, at least 4 pixels."""
+    return max(4, min(height, width) // 4)
+
+
+def worst_windows(error_map: np.ndarray, size: int, count: int = 2) -> list[tuple[int, int]]:
+    """(top, left) of up to ``count`` non-overlapping size×size windows with the largest mean error."""
+    from scipy.ndimage import uniform_filter
+
+    height, width = error_map.shape
+    size = min(size, height, width)
+    score = uniform_filter(np.nan_to_num(error_map.astype(np.float64), nan=0.0, posinf=0.0), size=size, mode="constant")
+    # the filter centres windows; keep only centres whose window lies inside the image
+    half = size // 2
+    valid = np.full(score.shape, -np.inf)
+    valid[half : height - (size - half) + 1, half : width - (size - half) + 1] = score[
+        half : height - (size - half) + 1, half : width - (size - half) + 1
+    ]
+    found: list[tuple[int, int]] = []
+    for _ in range(count):
+        index = int(np.argmax(valid))
+        if not np.isfinite(valid.flat[index]):
+            break
+        cy, cx = divmod(index, width)
+        top, left = cy - half, cx - half
+        found.append((top, left))
+        # forbid centres whose window would overlap this one
+        valid[max(0, top - size + 1 + half) : top + size + half, max(0, left - size + 1 + half) : left + size + half] = -np.inf
+    return found
+
+
+def crop(image: np.ndarray, top: int, left: int, size: int) -> np.ndarray:
+    return image[top : top + size, left : left + size]
+
+
+def crop_scale(size: int, target: int = 128) -> int:
+    """Pixel repetition that brings a crop to about ``target`` pixels."""
+    return max(1, target // max(size, 1))

@@ -1,0 +1,223 @@
+"""Write a run's report folder: index.html, report.md, results.json, results.csv, figures/.
+
+:func:`build_report` gathers everything (plain data, images as data URIs) from the results store
+and the dataset; :mod:`.report_html` and :mod:`.report_markdown` render it; this module writes
+the files.
+
+Notes
+-----
+* **Self-contained.** index.html embeds its figures and images as base64 data URIs and its style
+  and script inline: it opens offline, from any folder, with no network request.
+* **Atomic files.** Each file is written under a temporary name and renamed
+  (:func:`denoisebench.dataset.atomic.atomic_write_bytes`): a killed report leaves the previous
+  version of each file or the new one, never a torn file.
+* **Comparison frame.** Images compare the last frame of each test sequence (a temporal denoiser
+  has seen the frames before it) at the lowest input spp, where denoisers differ most.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from denoisebench.dataset import Dataset
+from denoisebench.dataset.atomic import atomic_write_bytes
+
+from . import analysis, figures, images
+from .runner import NOISY
+from .store import ResultsStore
+
+
+def _clean(value):
+    """JSON-safe: NaN/Inf → None, numpy scalars → Python."""
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if isinstance(value, (np.floating, float)):
+        return float(value) if math.isfinite(value) else None
+    if isinstance(value, np.integer):
+        return int(value)
+    return value
+
+
+def _scene_effects(dataset: Dataset, scenes: list[str]) -> dict[str, list[str]]:
+    effects = {}
+    for scene in scenes:
+        record = dataset.scene(scene).effects
+        if isinstance(record, dict):
+            names = set(record.get("declared", [])) | set(record.get("inferred", []))
+        else:
+            names = set(record or [])
+        effects[scene] = sorted(names)
+    return effects
+
+
+def _reference_info(dataset: Dataset, scenes: list[str]) -> dict:
+    seconds, spps = [], set()
+    for scene in scenes:
+        info = dataset.scene(scene)
+        for record in info.record.get("renders", {}).get("reference", {}).values():
+            if record.get("seconds") is not None:
+                seconds.append(float(record["seconds"]))
+        if info.ref_spp:
+            spps.add(int(info.ref_spp))
+    return {"seconds": float(np.mean(seconds)) if seconds else None, "spp": max(spps) if spps else None}
+
+
+def _comparisons(store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: int) -> list[dict]:
+    """Per scene: the noisy input, each denoiser and the reference at one frame, with worst-region crops."""
+    from denoisebench.metrics import relmse_map
+
+    out = []
+    for scene in data.scenes:
+        shown: list[tuple[str, np.ndarray]] = []
+        frame_index = None
+        for label in data.labels:
+            stored = store.image(data.run_id, label, scene, spp)
+            if stored is None:
+                continue
+            frame_index = stored[0] if frame_index is None else frame_index
+            if stored[0] == frame_index:
+                shown.append((label, stored[1]))
+        if frame_index is None:
+            continue
+        frame = dataset.frame(scene, spp, frame_index, samples=False, buffers=["color"])
+        reference = frame.reference
+        denoised = [img for label, img in shown if label != NOISY] or [img for _, img in shown]
+        error = np.mean([relmse_map(img, reference).reshape(reference.shape[:2] + (-1,)).mean(axis=-1) for img in denoised], axis=0)
+        size = images.window_size(*reference.shape[:2])
+        windows = images.worst_windows(error, size, count=2)
+        scale = images.crop_scale(size)
+        full_scale = max(1, 256 // max(reference.shape[:2]))
+        entries = []
+        for label, img in shown + [("reference", reference)]:
+            frame_error = None if label == "reference" else float(np.mean(relmse_map(img, reference)))
+            entries.append({
+                "label": label,
+                "kind": "input" if label == NOISY else ("reference" if label == "reference" else "denoiser"),
+                "relmse": frame_error,
+                "image": images.data_uri(images.to_png(img, full_scale)),
+                "crops": [images.data_uri(images.to_png(images.crop(img, t, l, size), scale)) for t, l in windows],
+            })
+        out.append({
+            "scene": scene, "spp": spp, "frame": int(frame_index),
+            "width": int(reference.shape[1] * full_scale), "height": int(reference.shape[0] * full_scale),
+            "windows": [{"top": t, "left": l, "size": size} for t, l in windows], "entries": entries,
+        })
+    return out
+
+
+def build_report(store: ResultsStore, run_id: str, dataset: Dataset, denoisers: dict[str, object] | None = None) -> dict:
+    """Everything the report shows, as plain data (figures as PNG/SVG, images as data URIs)."""
+    from .stability import stability_table
+
+    data = analysis.RunData(store, run_id)
+    summary = analysis.summary_table(data)
+    reference = _reference_info(dataset, data.scenes)
+    panels = [analysis.accuracy_time(data, summary, metric, reference) for metric in analysis.ERROR_METRICS]
+    palette = figures.colors(data.labels)
+    figure_files = {}
+    if any(p.points for p in panels):
+        figure_files["accuracy_time"] = figures.accuracy_time_figure(panels, palette)
+    flicker_spp = data.spp[0] if data.spp else None
+    flicker = analysis.flicker_series(data, flicker_spp) if flicker_spp is not None else {}
+    if flicker:
+        figure_files["flicker"] = figures.flicker_figure(flicker, flicker_spp, palette)
+    scene_effects = _scene_effects(dataset, data.scenes)
+    failures = [
+        {"denoiser": u["denoiser"], "scene": u["scene"], "spp": u["spp"], "error": u["error"]}
+        for u in data.units if u["status"] != "ok"
+    ]
+    return {
+        "run": data.run,
+        "denoisers": data.denoisers,
+        "scenes": data.scenes,
+        "spp": data.spp,
+        "scene_effects": scene_effects,
+        "reference": reference,
+        "frame_metrics": data.frame_metric_names,
+        "sequence_metrics": data.sequence_metric_names,
+        "summary": summary,
+        "accuracy": panels,
+        "readings": {p.metric: analysis.readings(p) for p in panels},
+        "effects": analysis.effect_breakdown(data, scene_effects),
+        "flicker": {"spp": flicker_spp, "series": flicker},
+        "failures": failures,
+        "comparisons": _comparisons(store, data, dataset, data.spp[0]) if data.spp else [],
+        "stability": stability_table(denoisers) if denoisers else None,
+        "figures": figure_files,
+        "palette": palette,
+        "frames": data.frames,
+        "sequences": data.sequences,
+    }
+
+
+def results_json(report: dict) -> dict:
+    """The machine-readable part of the report (no images)."""
+    return _clean({
+        "run": report["run"],
+        "denoisers": report["denoisers"],
+        "scenes": report["scenes"],
+        "scene_effects": report["scene_effects"],
+        "spp": report["spp"],
+        "reference": report["reference"],
+        "summary": [
+            {"denoiser": r.denoiser, "spp": r.spp, "frames": r.frames, "failed_units": r.failed_units, "errors": r.errors,
+             "denoise_seconds_per_frame": r.denoise_seconds, "total_seconds_per_frame": r.total_seconds,
+             "render_seconds_per_frame": r.render_seconds,
+             "metrics": {m: {"mean": c.mean, "ci95": [c.low, c.high], "scenes": c.scenes} for m, c in r.metrics.items()}}
+            for r in report["summary"]
+        ],
+        "accuracy_time": [
+            {"metric": p.metric, "points": [vars(q) for q in p.points], "hidden": p.hidden,
+             "noisy_fit": vars(p.fit) if p.fit else None, "reference_seconds": p.reference_seconds,
+             "reference_spp": p.reference_spp}
+            for p in report["accuracy"]
+        ],
+        "readings": report["readings"],
+        "effects": report["effects"],
+        "flicker": report["flicker"],
+        "failures": report["failures"],
+        "stability": report["stability"],
+        "frames": report["frames"],
+        "sequence_metrics": report["sequences"],
+    })
+
+
+def results_csv(report: dict) -> str:
+    """One row per frame: ids, status, seconds, then every frame metric."""
+    metrics = report["frame_metrics"] + ["flicker"]
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(["run_id", "denoiser", "scene", "spp", "frame", "status", "error", "render_seconds",
+                     "denoise_seconds", "total_seconds", "sanitized", *metrics])
+    for f in report["frames"]:
+        values = [f["metrics"].get(m) for m in metrics]
+        writer.writerow([report["run"]["run_id"], f["denoiser"], f["scene"], f["spp"], f["frame"], f["status"], f["error"] or "",
+                         f["render_seconds"], f["denoise_seconds"], f["total_seconds"], f["sanitized"],
+                         *("" if v is None else repr(float(v)) for v in values)])
+    return buffer.getvalue()
+
+
+def write_report(
+    store: ResultsStore, run_id: str, dataset: Dataset, out_dir: str | Path, denoisers: dict[str, object] | None = None
+) -> Path:
+    """Write the report folder; return the path of index.html."""
+    from .report_html import render_html
+    from .report_markdown import render_markdown
+
+    out = Path(out_dir)
+    report = build_report(store, run_id, dataset, denoisers)
+    for name, (png, svg) in report["figures"].items():
+        atomic_write_bytes(out / "figures" / f"{name}.png", png)
+        atomic_write_bytes(out / "figures" / f"{name}.svg", svg.encode("utf-8"))
+    atomic_write_bytes(out / "results.json", (json.dumps(results_json(report), indent=1, allow_nan=False) + "\n").encode("utf-8"))
+    atomic_write_bytes(out / "results.csv", results_csv(report).encode("utf-8"))
+    atomic_write_bytes(out / "report.md", render_markdown(report).encode("utf-8"))
+    return atomic_write_bytes(out / "index.html", render_html(report).encode("utf-8"))

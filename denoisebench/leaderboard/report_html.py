@@ -1,0 +1,261 @@
+"""index.html: one self-contained page (inline style and script, images as data URIs, no network).
+
+Notes
+-----
+* **Escaping.** Every name and message comes from user input (a plugin names itself); all text goes
+  through :func:`html.escape` with ``quote=True`` and is placed only in element text or quoted
+  attributes, never inside ``<script>``. The script reads what it needs from the DOM.
+* **Compare control.** Per scene: a select for the image on the left of the wipe (the noisy input
+  or a denoiser), the reference on the right, a range slider moving the wipe (``clip-path``), and a
+  button that flips between the whole left image and the whole reference. Plain JS, no library.
+* Images are upscaled by the browser with ``image-rendering: pixelated`` on top of the integer
+  upscale done when encoding, so pixels stay sharp.
+"""
+
+from __future__ import annotations
+
+from html import escape
+
+from . import formatting as fmt
+
+STYLE = """
+body{font:14px/1.45 system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:0;color:#1d1d1f;background:#fafafa}
+main{max-width:1320px;margin:0 auto;padding:18px 28px 60px}
+h1{font-size:24px;margin:8px 0 4px}h2{font-size:19px;margin:34px 0 8px;border-bottom:1px solid #ddd;padding-bottom:4px}
+h3{font-size:15px;margin:18px 0 6px}
+.meta{color:#555;font-size:13px}
+nav a{margin-right:14px;color:#0a58ca;text-decoration:none;font-size:13px}
+table{border-collapse:collapse;font-size:12.5px;margin:6px 0 14px;background:#fff}
+th,td{border:1px solid #ddd;padding:3px 7px;text-align:right;white-space:nowrap}
+th{background:#f0f0f3}td:first-child,th:first-child{text-align:left}
+tr.input td{background:#f6f6f6;color:#444}
+td.worst{background:#ffe3e0;font-weight:600}
+.readings li{margin:3px 0}
+.figure img{max-width:100%;border:1px solid #e4e4e4;background:#fff}
+.gallery{display:flex;flex-wrap:wrap;gap:10px;margin:8px 0}
+.tile{background:#fff;border:1px solid #e4e4e4;padding:5px;text-align:center;font-size:12px}
+.tile img{display:block;image-rendering:pixelated}
+.tile .crops{display:flex;gap:3px;justify-content:center;margin-top:3px}
+.tile.reference{border-color:#2a9d8f}.tile.input{border-color:#999}
+.compare{background:#fff;border:1px solid #e4e4e4;padding:8px;display:inline-block;margin:6px 0}
+.cmp-stage{position:relative;overflow:hidden;cursor:col-resize;user-select:none}
+.cmp-stage img{position:absolute;left:0;top:0;width:100%;height:100%;image-rendering:pixelated}
+.cmp-line{position:absolute;top:0;bottom:0;width:2px;background:#ffcc00;pointer-events:none}
+.cmp-caption{display:flex;justify-content:space-between;font-size:12px;color:#444;margin-top:3px}
+.cmp-controls{margin-top:6px;display:flex;gap:10px;align-items:center;font-size:12px}
+.cmp-slider{width:220px}
+.error{color:#b00020}
+.scroll{overflow-x:auto;max-width:100%}
+.note{color:#555;font-size:12.5px}
+"""
+
+SCRIPT = """
+(function () {
+  function setup(box) {
+    var stage = box.querySelector('.cmp-stage');
+    var top = box.querySelector('.cmp-top');
+    var line = box.querySelector('.cmp-line');
+    var slider = box.querySelector('.cmp-slider');
+    var select = box.querySelector('.cmp-left');
+    var toggle = box.querySelector('.cmp-toggle');
+    var leftName = box.querySelector('.cmp-left-name');
+    function wipe(percent) {
+      percent = Math.max(0, Math.min(100, Number(percent)));
+      top.style.clipPath = 'inset(0 ' + (100 - percent) + '% 0 0)';
+      line.style.left = 'calc(' + percent + '% - 1px)';
+      slider.value = String(percent);
+      box.dataset.wipe = String(percent);
+    }
+    function choose() {
+      var source = document.getElementById(select.value);
+      if (source) { top.src = source.src; }
+      leftName.textContent = select.options[select.selectedIndex].text;
+      box.dataset.left = select.value;
+    }
+    slider.addEventListener('input', function () { wipe(slider.value); });
+    select.addEventListener('change', choose);
+    toggle.addEventListener('click', function () { wipe(Number(slider.value) > 0 ? 0 : 100); });
+    stage.addEventListener('pointerdown', function (event) {
+      var rect = stage.getBoundingClientRect();
+      wipe(100 * (event.clientX - rect.left) / rect.width);
+    });
+    stage.addEventListener('pointermove', function (event) {
+      if (event.buttons !== 1) { return; }
+      var rect = stage.getBoundingClientRect();
+      wipe(100 * (event.clientX - rect.left) / rect.width);
+    });
+    choose();
+    wipe(50);
+  }
+  document.querySelectorAll('.compare').forEach(setup);
+})();
+"""
+
+
+def e(text) -> str:
+    return escape(str(text), quote=True)
+
+
+def _table(header: list[str], rows: list[list[str]], row_classes: list[str] | None = None, cell_classes=None) -> str:
+    head = "".join(f"<th>{e(h)}</th>" for h in header)
+    body = []
+    for i, row in enumerate(rows):
+        cls = f' class="{e(row_classes[i])}"' if row_classes and row_classes[i] else ""
+        cells = "".join(
+            f"<td{' class=' + chr(34) + e(cell_classes(i, j)) + chr(34) if cell_classes and cell_classes(i, j) else ''}>{e(c)}</td>"
+            for j, c in enumerate(row)
+        )
+        body.append(f"<tr{cls}>{cells}</tr>")
+    return f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>'
+
+
+def _figure(report: dict, name: str, alt: str) -> str:
+    from .images import data_uri
+
+    if name not in report["figures"]:
+        return ""
+    png, _ = report["figures"][name]
+    return f'<div class="figure"><img alt="{e(alt)}" src="{data_uri(png)}"></div>'
+
+
+def _accuracy(report: dict) -> str:
+    parts = [
+        _figure(report, "accuracy_time", "error against seconds per frame"),
+        '<p class="note">Each point is a denoiser at one input spp (the number beside it): mean error over the test '
+        "frames against mean total seconds per frame (render at that spp + denoise), log axes. The grey curve is the "
+        "noisy input at rising spp, the \u201cjust render more samples\u201d line, dashed where extrapolated; the dotted "
+        "line is the reference's render time (its error against itself is zero, which a log axis cannot show). Circled "
+        "points are on the Pareto front.</p>",
+    ]
+    for metric, sentences in report["readings"].items():
+        items = "".join(f"<li>{e(s)}</li>" for s in sentences)
+        parts.append(f"<h3>{e(metric)}</h3><ul class=\"readings\">{items}</ul>")
+    hidden = [h for p in report["accuracy"] for h in p.hidden]
+    if hidden:
+        parts.append("<p class=\"note\">Not drawn: " + e("; ".join(hidden)) + "</p>")
+    return "".join(parts)
+
+
+def _results(report: dict) -> str:
+    parts = ['<p class="note">Mean over scenes, with a bootstrap 95&nbsp;% interval over scenes in brackets when there '
+             "are at least two; \u2193 lower is better, \u2191 higher is better. Seconds are per frame.</p>"]
+    for spp in report["spp"]:
+        header, rows = fmt.summary_rows(report, spp)
+        classes = ["input" if r[0] == "noisy" else "" for r in rows]
+        parts.append(f"<h3>{spp} spp</h3>" + _table(header, rows, classes))
+    return "".join(parts)
+
+
+def _effects(report: dict) -> str:
+    if not report["effects"]["effects"]:
+        return '<p class="note">The scenes declare no effects.</p>'
+    header, rows, worst = fmt.effect_rows(report)
+    names = ["overall", *report["effects"]["effects"]]
+    labels = [r[0] for r in rows]
+
+    def worst_cell(i, j):
+        return "worst" if j >= 2 and worst.get(labels[i]) == names[j - 1] else ""
+
+    note = (f'<p class="note">Share of the noisy input\'s {e(report["effects"]["metric"])} left after denoising: geometric mean '
+            "over the scenes that exercise each effect and over spp (lower is better). Highlighted: the effect that costs "
+            "each denoiser most.</p>")
+    return note + _table(header, rows, cell_classes=worst_cell)
+
+
+def _flicker(report: dict) -> str:
+    if not report["flicker"]["series"]:
+        return '<p class="note">Sequences of one frame: no flicker to measure.</p>'
+    rows = []
+    for r in report["summary"]:
+        if r.spp == report["flicker"]["spp"]:
+            rows.append([r.denoiser, *(fmt.cell_text(r.metrics.get(m)) for m in report["sequence_metrics"])])
+    return (_figure(report, "flicker", "flicker per frame")
+            + _table(["denoiser", *(fmt.metric_heading(m) for m in report["sequence_metrics"])], rows))
+
+
+def _tile(entry: dict, element_id: str) -> str:
+    crops = "".join(f'<img alt="crop of {e(entry["label"])}" src="{c}">' for c in entry["crops"])
+    caption = e(entry["label"]) + (f"<br>relMSE {fmt.num(entry['relmse'])}" if entry["relmse"] is not None else "<br>&nbsp;")
+    return (f'<div class="tile {e(entry["kind"])}"><img id="{element_id}" alt="{e(entry["label"])}" src="{entry["image"]}">'
+            f'<div class="crops">{crops}</div><div>{caption}</div></div>')
+
+
+def _comparisons(report: dict) -> str:
+    parts = ['<p class="note">The last frame of each test sequence at the lowest input spp (temporal denoisers have seen '
+             "the frames before it), tone-mapped like the metrics. Below each image: zoomed crops of the regions where the "
+             "denoisers' mean relMSE is worst. In the compare box, pick the left image, drag the wipe or the slider, or press "
+             "the button to flip between the left image and the reference.</p>"]
+    for n, comp in enumerate(report["comparisons"]):
+        ids = [f"img-{n}-{i}" for i in range(len(comp["entries"]))]
+        tiles = "".join(_tile(entry, ids[i]) for i, entry in enumerate(comp["entries"]))
+        choices = [(ids[i], entry) for i, entry in enumerate(comp["entries"]) if entry["kind"] != "reference"]
+        ref_id = ids[-1]
+        # open on the denoiser closest to the reference in this frame
+        scored = [(entry["relmse"], k) for k, (_, entry) in enumerate(choices) if entry["kind"] == "denoiser" and entry["relmse"] is not None]
+        default = min(scored)[1] if scored else 0
+        options = "".join(
+            f'<option value="{i}"{" selected" if k == default else ""}>{e(entry["label"])}</option>' for k, (i, entry) in enumerate(choices)
+        )
+        w, h = comp["width"], comp["height"]
+        ref_src = comp["entries"][-1]["image"]
+        parts.append(
+            f'<h3>{e(comp["scene"])} \u2014 frame {comp["frame"]}, {comp["spp"]} spp</h3>'
+            f'<div class="compare" data-reference="{ref_id}">'
+            f'<div class="cmp-stage" style="width:{2 * w}px;height:{2 * h}px">'
+            f'<img class="cmp-base" alt="reference" src="{ref_src}"><img class="cmp-top" alt="left image" src="{ref_src}">'
+            '<div class="cmp-line"></div></div>'
+            '<div class="cmp-caption"><span class="cmp-left-name"></span><span>reference</span></div>'
+            f'<div class="cmp-controls"><label>left: <select class="cmp-left">{options}</select></label>'
+            '<input class="cmp-slider" type="range" min="0" max="100" value="50" aria-label="wipe position">'
+            '<button class="cmp-toggle" type="button">flip left / reference</button></div></div>'
+            f'<div class="gallery">{tiles}</div>'
+        )
+    if not report["comparisons"]:
+        parts.append('<p class="note">No denoised images were stored for this run.</p>')
+    return "".join(parts)
+
+
+def _stability(report: dict) -> str:
+    table = report["stability"]
+    if table is None:
+        return ('<p class="note">The hard-case suite (<code>denoisebench.denoisers.hard_cases</code>) is not available in '
+                "this installation; this table appears when it is.</p>")
+    return _table(*fmt.stability_rows(table))
+
+
+def _failures(report: dict) -> str:
+    parts = []
+    if report["failures"]:
+        parts.append(_table(["denoiser", "scene", "spp", "error"],
+                            [[f["denoiser"], f["scene"], str(f["spp"]), f["error"] or ""] for f in report["failures"]]))
+    for d in report["denoisers"]:
+        if d["load_error"]:
+            parts.append(f'<p class="error">{e(d["spec"])} was not run: {e(d["load_error"])}</p>')
+    return "".join(parts) or '<p class="note">Every denoiser ran on every sequence.</p>'
+
+
+def render_html(report: dict) -> str:
+    run = report["run"]
+    meta = (f"run {e(run['run_id'])} \u00b7 dataset {e(run['dataset_hash'][:12])} ({e(run['dataset_path'])}) \u00b7 split "
+            f"{e(run['config'].get('split'))} \u00b7 {len(report['scenes'])} scene(s) \u00b7 input spp "
+            f"{e(', '.join(map(str, report['spp'])))} \u00b7 reference {e(report['reference']['spp'])} spp \u00b7 started "
+            f"{e(run['created_at'])}, finished {e(run['finished_at'] or 'not yet (partial results)')}")
+    versions = ", ".join(f"{k} {v}" for k, v in sorted(run["versions"].items()))
+    sections = [
+        ("accuracy", "Accuracy against time", _accuracy(report)),
+        ("results", "Results", _results(report)),
+        ("effects", "Per-effect breakdown", _effects(report)),
+        ("flicker", "Temporal flicker", _flicker(report)),
+        ("images", "Image comparisons", _comparisons(report)),
+        ("stability", "Hard-case stability", _stability(report)),
+        ("failures", "Failures", _failures(report)),
+    ]
+    nav = "".join(f'<a href="#{key}">{e(title)}</a>' for key, title, _ in sections)
+    body = "".join(f'<section id="{key}"><h2>{e(title)}</h2>{content}</section>' for key, title, content in sections)
+    return (
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+        "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
+        f"<title>denoisebench report {e(run['run_id'])}</title><style>{STYLE}</style></head>"
+        f"<body><main><h1>denoisebench report</h1><p class=\"meta\">{meta}</p><nav>{nav}</nav>{body}"
+        f"<p class=\"meta\">software: {e(versions)}</p></main><script>{SCRIPT}</script></body></html>\n"
+    )

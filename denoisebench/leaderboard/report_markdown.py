@@ -1,0 +1,88 @@
+"""report.md: the report's text and tables in Markdown; figures linked from ``figures/``.
+
+Notes
+-----
+* Names are user input (a plugin picks its own name): ``|``, ``<``, ``>``, backticks and ``*_[]``
+  are escaped so that a name can neither break a table nor inject markup into a Markdown renderer
+  that passes HTML through.
+"""
+
+from __future__ import annotations
+
+import re
+
+from . import formatting as fmt
+
+_SPECIAL = re.compile(r"([\\`*_\[\]|<>#])")
+
+
+def md(text) -> str:
+    return _SPECIAL.sub(r"\\\1", str(text)).replace("\n", " ")
+
+
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(md(h) for h in header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(md(c) for c in row) + " |" for row in rows]
+    return lines + [""]
+
+
+def render_markdown(report: dict) -> str:
+    run = report["run"]
+    lines = [
+        "# denoisebench report",
+        "",
+        f"Run `{run['run_id']}` on dataset `{run['dataset_hash'][:12]}` ({md(run['dataset_path'])}), split "
+        f"{md(run['config'].get('split'))}: {len(report['scenes'])} scene(s), input spp {', '.join(map(str, report['spp']))}, "
+        f"reference {report['reference']['spp']} spp. Started {run['created_at']}, finished {run['finished_at'] or 'not yet (partial)'}.",
+        "",
+        "## Accuracy against time",
+        "",
+        "![error against seconds per frame](figures/accuracy_time.png)",
+        "",
+        "Each point is a denoiser at one input spp: its mean error against its total seconds per frame "
+        "(render at that spp + denoise). The grey curve is the noisy input at rising spp: what rendering "
+        "more samples buys. Circled points are on the Pareto front.",
+        "",
+    ]
+    for metric, sentences in report["readings"].items():
+        lines += [f"**{metric}**", ""] + [f"- {md(s)}" for s in sentences] + [""]
+    for panel in report["accuracy"]:
+        for hidden in panel.hidden:
+            lines.append(f"- not drawn: {md(hidden)}")
+    lines += ["## Results", "", "Mean over scenes with a bootstrap 95 % interval over scenes (↓ lower is better, ↑ higher).", ""]
+    for spp in report["spp"]:
+        header, rows = fmt.summary_rows(report, spp)
+        lines += [f"### {spp} spp", ""] + _table(header, rows)
+    header, rows, worst = fmt.effect_rows(report)
+    lines += ["## Per-effect breakdown", "",
+              f"Share of the noisy input's {report['effects']['metric']} left after denoising (geometric mean over the scenes "
+              "with the effect and over spp; lower is better).", ""]
+    if report["effects"]["effects"]:
+        lines += _table(header, rows)
+        lines += [f"- {md(label)} suffers most from **{md(effect)}**" for label, effect in worst.items()] + [""]
+    else:
+        lines += ["The scenes declare no effects.", ""]
+    lines += ["## Temporal flicker", ""]
+    if report["flicker"]["series"]:
+        lines += ["![flicker per frame](figures/flicker.png)", ""]
+    else:
+        lines += ["Sequences of one frame: no flicker to measure.", ""]
+    lines += ["## Image comparisons", "", "Open index.html for the images, zoomed crops and the interactive compare.", ""]
+    lines += ["## Hard-case stability", ""]
+    lines += _stability(report["stability"])
+    if report["failures"]:
+        lines += ["## Failures", ""] + _table(
+            ["denoiser", "scene", "spp", "error"], [[f["denoiser"], f["scene"], str(f["spp"]), f["error"] or ""] for f in report["failures"]]
+        )
+    not_loaded = [d for d in report["denoisers"] if d["load_error"]]
+    if not_loaded:
+        lines += ["## Not run", ""] + [f"- {md(d['spec'])}: {md(d['load_error'])}" for d in not_loaded] + [""]
+    versions = ", ".join(f"{k} {v}" for k, v in sorted(run["versions"].items()))
+    lines += ["## Software", "", md(versions), ""]
+    return "\n".join(lines)
+
+
+def _stability(table) -> list[str]:
+    if table is None:
+        return ["The hard-case suite (denoisebench.denoisers.hard_cases) is not available in this installation.", ""]
+    return _table(*fmt.stability_rows(table))
