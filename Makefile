@@ -22,6 +22,7 @@ demo: setup
 	$(VENV)/bin/denoisebench demo --out $(DEMO_OUT)
 
 test: setup
+	bash scripts/ensure_chromium.sh
 	$(PY) -m pytest -q tests
 
 clean:

@@ -1,0 +1,165 @@
+"""run-benchmark against the SQLite store: concurrent writers, a killed run and its resume, bad datasets.
+
+These run the real command in subprocesses on a tiny synthetic dataset (16×16, 3 frames).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+from denoisebench.dataset.synthetic import make_synthetic_dataset
+from denoisebench.leaderboard.store import ResultsStore
+
+FRAMES = 3
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory) -> Path:
+    # 4 scenes → one test scene; 2 spp
+    return make_synthetic_dataset(tmp_path_factory.mktemp("ds") / "ds", scenes=4, frames=FRAMES, height=16, width=16, spp=(1, 4))
+
+
+@pytest.fixture(scope="module")
+def plugins(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("plugins")
+    (folder / "plugins.py").write_text(textwrap.dedent(
+        """
+        import time
+        import numpy as np
+
+        class Slow:
+            name = "slow"
+            needs = frozenset({"color"})
+            temporal = False
+            def reset(self):
+                pass
+            def denoise(self, frame):
+                time.sleep(0.25)
+                return np.array(frame.color, dtype=np.float32)
+
+        class Broken:
+            name = "broken"
+            def denoise(self, frame):
+                raise RuntimeError("kaboom")
+        """
+    ))
+    return folder
+
+
+def _command(dataset: Path, db: Path, *extra: str) -> list[str]:
+    return [sys.executable, "-m", "denoisebench.cli", "benchmark", "--data", str(dataset), "--db", str(db),
+            "--metrics", "relmse", "--no-report", *extra]
+
+
+def _env(plugins: Path | None = None) -> dict:
+    env = dict(os.environ)
+    if plugins is not None:
+        env["PYTHONPATH"] = f"{plugins}{os.pathsep}{env.get('PYTHONPATH', '')}"
+    return env
+
+
+def _counts(db: Path) -> dict:
+    with ResultsStore(db, readonly=True) as store:
+        problems = store.integrity_problems()
+        runs = store.runs()
+        return {
+            "problems": problems,
+            "runs": {r["run_id"]: (len(store.units(r["run_id"])), len(store.frames(r["run_id"]))) for r in runs},
+            "finished": {r["run_id"]: r["finished_at"] is not None for r in runs},
+            "metric_rows": store.conn.execute("SELECT COUNT(*) FROM frame_metrics").fetchone()[0],
+        }
+
+
+def test_two_processes_writing_one_database_lose_no_rows(dataset, tmp_path):
+    db = tmp_path / "shared.sqlite"
+    # two processes on the same run (they race for the same units) and a third on another run
+    same = _command(dataset, db, "--denoisers", "identity,cross_bilateral_fast")
+    other = _command(dataset, db, "--denoisers", "nlmeans", "--spp", "4")
+    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env()) for cmd in (same, same, other)]
+    outputs = [p.communicate(timeout=300) for p in procs]
+    for proc, (out, err) in zip(procs, outputs):
+        assert proc.returncode == 0, err
+    counts = _counts(db)
+    assert counts["problems"] == []
+    units_same = 3 * 1 * 2  # (noisy, identity, cross_bilateral_fast) × 1 test scene × 2 spp
+    units_other = 2 * 1 * 1  # (noisy, nlmeans) × 1 scene × 1 spp
+    assert sorted(counts["runs"].values()) == sorted([(units_other, units_other * FRAMES), (units_same, units_same * FRAMES)])
+    assert all(counts["finished"].values())
+    # relmse and flip (always) per frame, flicker on frames 1.. : nothing lost, nothing doubled
+    expected_metrics = (units_same + units_other) * (2 * FRAMES + (FRAMES - 1))
+    assert counts["metric_rows"] == expected_metrics
+
+
+def test_killed_run_leaves_a_consistent_database_and_a_rerun_completes_it(dataset, plugins, tmp_path):
+    db = tmp_path / "killed.sqlite"
+    cmd = _command(dataset, db, "--denoisers", "identity", "--denoiser", "plugins:Slow")
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=_env(plugins))
+    try:
+        deadline = time.monotonic() + 120
+        written = 0
+        while time.monotonic() < deadline and written < 2:
+            time.sleep(0.2)
+            if db.exists():
+                try:
+                    with sqlite3.connect(db, timeout=5) as conn:
+                        written = conn.execute("SELECT COUNT(*) FROM units").fetchone()[0]
+                except sqlite3.OperationalError:
+                    written = 0  # schema not there yet
+        assert proc.poll() is None, "the run finished before it could be killed"
+        os.kill(proc.pid, signal.SIGKILL)  # no clean-up handlers run
+    finally:
+        proc.wait(timeout=30)
+    before = _counts(db)
+    assert before["problems"] == []
+    (run_id, (units, frames)), = before["runs"].items()
+    total = 3 * 1 * 2  # (noisy, identity, slow) × 1 scene × 2 spp
+    assert 2 <= units < total and frames == units * FRAMES
+    assert before["finished"][run_id] is False
+
+    rerun = subprocess.run(cmd, capture_output=True, text=True, env=_env(plugins), timeout=300)
+    assert rerun.returncode == 0, rerun.stderr
+    assert "resumed" in rerun.stdout
+    after = _counts(db)
+    assert after["problems"] == []
+    assert after["runs"] == {run_id: (total, total * FRAMES)}
+    assert after["finished"][run_id] is True
+
+
+def test_failing_denoiser_is_recorded_and_the_run_goes_on(dataset, plugins, tmp_path):
+    db = tmp_path / "broken.sqlite"
+    cmd = _command(dataset, db, "--denoisers", "identity", "--denoiser", "plugins:Broken", "--spp", "1")
+    result = subprocess.run(cmd, capture_output=True, text=True, env=_env(plugins), timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert "broken failed" in result.stderr and "kaboom" in result.stderr
+    with ResultsStore(db, readonly=True) as store:
+        (run,) = store.runs()
+        units = {u["denoiser"]: u for u in store.units(run["run_id"])}
+        assert units["broken"]["status"] == "failed" and "RuntimeError: kaboom" in units["broken"]["error"]
+        assert units["identity"]["status"] == "ok" and units["noisy"]["status"] == "ok"
+        frames = [f for f in store.frames(run["run_id"]) if f["denoiser"] == "broken"]
+        assert len(frames) == FRAMES and all(f["status"] == "failed" and not f["metrics"] for f in frames)
+
+
+def test_missing_reference_is_a_clear_error_naming_the_frame(tmp_path):
+    data = make_synthetic_dataset(tmp_path / "ds", scenes=1, frames=FRAMES, height=16, width=16, spp=(1,))
+    missing = data / "synthetic_000" / "reference" / "frame_0001.exr"
+    missing.unlink()
+    db = tmp_path / "r.sqlite"
+    result = subprocess.run(_command(data, db, "--denoisers", "identity"), capture_output=True, text=True, env=_env(), timeout=120)
+    assert result.returncode == 2
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert "synthetic_000" in lines[0] and "frame 1" in lines[0] and str(missing) in lines[0]
+    assert "Traceback" not in result.stderr
+    # nothing was measured
+    if db.exists():
+        assert _counts(db)["runs"] == {}
