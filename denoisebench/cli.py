@@ -22,6 +22,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "demo": ("demo", "author and preview one scene of every family (what `make demo` runs)"),
     "benchmark": ("benchmark", "run denoisers over a dataset split into SQLite and write a report (run-benchmark)"),
     "leaderboard": ("leaderboard", "rank denoisers across the runs on one dataset in a results database"),
+    "check-plugin": ("check_plugin", "run a denoiser through the hard-case suite; print a pass/fail table"),
 }
 
 EPILOG = textwrap.dedent(

@@ -1,0 +1,115 @@
+"""Run a denoiser through the hard-case suite and print a pass/fail table.
+
+SPEC is a built-in name, an entry point of the group ``denoisebench.denoisers`` or MODULE:ATTR
+(also path/to/file.py:ATTR). Every case is run under the harness contract (inputs sanitised,
+outputs checked, failures contained); a case passes when every output is a finite H×W×3 float32
+array, non-negative, with a robust mean within ×4 of the input's (see
+``denoisebench.denoisers.hard_cases``).
+
+Exit codes: 0 every case passed, 1 some case failed, 2 the denoiser cannot be found or built
+(or an unknown --case / malformed --option).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from denoisebench.errors import UserInputError
+
+EPILOG = """examples:
+  denoisebench check-plugin cross_bilateral
+  denoisebench check-plugin rpf --case fireflies --case tiny
+  denoisebench check-plugin my_package.denoise:MyDenoiser --option strength=0.5
+  denoisebench check-plugin plugins/median.py:Median --json
+  denoisebench check-plugin --list
+"""
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("spec", nargs="?", help="denoiser: built-in name, entry-point name or MODULE:ATTR")
+    parser.add_argument(
+        "--option", action="append", default=[], metavar="KEY=VALUE",
+        help="constructor keyword (VALUE parsed as JSON when it parses, else a string); repeatable",
+    )
+    parser.add_argument("--case", action="append", default=None, metavar="NAME", help="run only this case; repeatable")
+    parser.add_argument("--json", action="store_true", help="print the results as JSON instead of a table")
+    parser.add_argument("--list", action="store_true", help="list the known denoisers and the hard cases, then exit")
+
+
+def parse_options(items: list[str]) -> dict:
+    """``["radius=7", "preset=fast"]`` → ``{"radius": 7, "preset": "fast"}`` (JSON values when they parse)."""
+    options = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip().isidentifier():
+            raise UserInputError(f"--option {item!r}: expected KEY=VALUE with KEY a Python identifier")
+        try:
+            options[key.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            options[key.strip()] = value
+    return options
+
+
+def _list() -> int:
+    from denoisebench.denoisers.hard_cases import CASES
+    from denoisebench.denoisers.registry import available_denoisers
+
+    print("denoisers:")
+    for name, origin in available_denoisers().items():
+        print(f"  {name:<22} {origin}")
+    print("hard cases:")
+    for case in CASES:
+        print(f"  {case.name:<22} {case.description}")
+    return 0
+
+
+def _table(label: str, outcomes) -> str:
+    rows = [("case", "result", "seconds", "sanitised", "detail")]
+    for outcome in outcomes:
+        rows.append(
+            (outcome.case, "pass" if outcome.passed else "FAIL", f"{outcome.seconds:.3f}", str(outcome.sanitized), outcome.reason)
+        )
+    widths = [max(len(row[i]) for row in rows) for i in range(4)]
+    lines = [f"check-plugin {label}"]
+    for row in rows:
+        lines.append("  ".join(cell.ljust(width) for cell, width in zip(row[:4], widths)) + ("  " + row[4] if row[4] else ""))
+    passed = sum(outcome.passed for outcome in outcomes)
+    lines.append(f"{passed}/{len(outcomes)} cases passed")
+    return "\n".join(lines)
+
+
+def run(args) -> int:
+    if args.list:
+        return _list()
+    if not args.spec:
+        raise UserInputError("give a denoiser SPEC (or --list)")
+    from tqdm import tqdm
+
+    from denoisebench.denoisers import hard_cases
+    from denoisebench.denoisers.registry import load_denoiser
+
+    options = parse_options(args.option)
+    try:
+        cases = hard_cases.hard_cases(args.case)
+    except ValueError as error:
+        raise UserInputError(str(error)) from None
+    denoiser = load_denoiser(args.spec, **options)
+    label = getattr(denoiser, "name", None) or args.spec
+    outcomes = []
+    for case in tqdm(cases, desc=f"check {label}", unit="case", file=sys.stderr, leave=False):
+        outcomes.append(hard_cases.run_case(denoiser, case))
+    if args.json:
+        payload = {
+            "denoiser": label,
+            "spec": args.spec,
+            "passed": all(o.passed for o in outcomes),
+            "cases": [
+                {"case": o.case, "passed": o.passed, "reason": o.reason, "seconds": o.seconds, "sanitized": o.sanitized}
+                for o in outcomes
+            ],
+        }
+        print(json.dumps(payload, indent=2))
+    else:
+        print(_table(label, outcomes))
+    return 0 if all(o.passed for o in outcomes) else 1
