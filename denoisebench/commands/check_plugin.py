@@ -73,7 +73,7 @@ def _table(label: str, outcomes) -> str:
     widths = [max(len(row[i]) for row in rows) for i in range(4)]
     lines = [f"check-plugin {label}"]
     for row in rows:
-        lines.append("  ".join(cell.ljust(width) for cell, width in zip(row[:4], widths)) + ("  " + row[4] if row[4] else ""))
+        lines.append(("  ".join(cell.ljust(width) for cell, width in zip(row[:4], widths)) + "  " + row[4]).rstrip())
     passed = sum(outcome.passed for outcome in outcomes)
     lines.append(f"{passed}/{len(outcomes)} cases passed")
     return "\n".join(lines)
