@@ -74,7 +74,7 @@ SCRIPT = """
     }
     slider.addEventListener('input', function () { wipe(slider.value); });
     select.addEventListener('change', choose);
-    toggle.addEventListener('click', function () { wipe(Number(slider.value) > 0 ? 0 : 100); });
+    toggle.addEventListener('click', function () { wipe(Number(slider.value) >= 100 ? 0 : 100); });
     stage.addEventListener('pointerdown', function (event) {
       var rect = stage.getBoundingClientRect();
       wipe(100 * (event.clientX - rect.left) / rect.width);
