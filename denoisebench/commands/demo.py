@@ -1,7 +1,8 @@
 """The demo `make demo` runs: author one scene of every family and preview each.
 
 Writes OUT/scenes/<family>/scene.usda and OUT/previews/<family>.png, then prints where they are.
-Later stages (dataset generation, the benchmark report) join the demo as they land.
+Finally it benchmarks every available denoiser on the dataset's test split and writes the report
+(OUT/report/index.html, results in OUT/benchmark.sqlite).
 """
 
 from __future__ import annotations
@@ -43,4 +44,16 @@ def run(args) -> int:
     print(f"authored and previewed {len(families)} scene families in {time.perf_counter() - started:.1f} s")
     for path in previews:
         print(f"  {path}")
-    return 0
+    return _report_stage(out)
+
+
+def _report_stage(out: Path) -> int:
+    """Benchmark every available denoiser on the demo dataset's test split; print where index.html is."""
+    from denoisebench.cli import main
+
+    data = out / "dataset"
+    if not (data / "dataset.json").is_file():
+        print("report: skipped (no demo dataset)")
+        return 0
+    return main(["benchmark", "--data", str(data), "--denoisers", "all", "--db", str(out / "benchmark.sqlite"),
+                 "--out", str(out / "report")])
