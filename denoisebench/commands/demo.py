@@ -1,6 +1,8 @@
 """The demo `make demo` runs: author one scene of every family and preview each.
 
-Writes OUT/scenes/<family>/scene.usda and OUT/previews/<family>.png, then prints where they are.
+Writes OUT/scenes/<family>/scene.usda and OUT/previews/<family>.png, then a small dataset in
+OUT/dataset/ (4 families, 3 frames each, 128x128, spp 1 and 4, 256-spp references; --quick: 2
+families, 2 frames, 64x64), and prints where they are.
 Finally it benchmarks every available denoiser on the dataset's test split and writes the report
 (OUT/report/index.html, results in OUT/benchmark.sqlite).
 """
@@ -21,6 +23,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=1, help="scene seed (default 1)")
     parser.add_argument("--size", type=int, default=192, help="preview width and height (default 192)")
     parser.add_argument("--spp", type=int, default=64, help="preview samples per pixel (default 64)")
+    parser.add_argument("--quick", action="store_true",
+                        help="a smaller dataset stage (64x64, 2 families, 2 frames) for a fast look")
 
 
 def run(args) -> int:
@@ -44,7 +48,26 @@ def run(args) -> int:
     print(f"authored and previewed {len(families)} scene families in {time.perf_counter() - started:.1f} s")
     for path in previews:
         print(f"  {path}")
+    _dataset_stage(out / "dataset", args)
     return _report_stage(out)
+
+
+#: The demo dataset: several families, a few frames each; the reference has 64x the largest input spp.
+DEMO_DATASET_FAMILIES = ("cornell", "glossy_fireflies", "depth_of_field", "motion_blur")
+
+
+def _dataset_stage(out: Path, args) -> None:
+    """Generate a small dataset with the local executor (resumes when run again), print where it is."""
+    from denoisebench.commands.generate import print_summary
+    from denoisebench.generator.dataset_run import GenerateRequest, generate_dataset
+    from denoisebench.generator.executors import LocalExecutor
+
+    families = DEMO_DATASET_FAMILIES[:2] if args.quick else DEMO_DATASET_FAMILIES
+    size, frames = (64, 2) if args.quick else (128, 3)
+    request = GenerateRequest(out=out, families=families, scenes=1, frames=frames, width=size, height=size,
+                              spp=(1, 4), ref_spp=256, seed=args.seed, force=True)
+    print_summary(generate_dataset(request, LocalExecutor()))
+    print(f"dataset: {out} (open it with denoisebench.dataset.open_dataset)")
 
 
 def _report_stage(out: Path) -> int:
