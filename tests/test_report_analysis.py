@@ -1,0 +1,98 @@
+"""The report's analyses on constructed inputs with known answers: Pareto front, equivalent spp, bootstrap, worst regions."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from denoisebench.leaderboard import analysis, images
+from denoisebench.leaderboard.runner import NOISY
+
+
+def _curve(seconds_per_spp=0.01, spps=(1, 4, 16), c=0.5):
+    """Noisy points with relMSE = c/spp exactly (the Monte Carlo rate) and time = spp × seconds per spp."""
+    return [analysis.Point(NOISY, s, s * seconds_per_spp, c / s) for s in spps]
+
+
+def test_pareto_front_marks_exactly_the_undominated_points():
+    points = _curve() + [
+        analysis.Point("fast_good", 1, 0.02, 0.01),  # dominates noisy@4 and noisy@16
+        analysis.Point("slow_bad", 4, 1.0, 0.2),  # dominated by everything cheaper and better
+        analysis.Point("best", 16, 0.5, 0.001),
+    ]
+    analysis.pareto_front(points)
+    front = {(p.denoiser, p.spp) for p in points if p.pareto}
+    assert front == {(NOISY, 1), ("fast_good", 1), ("best", 16)}
+
+
+def test_equivalent_spp_and_time_ratio_follow_the_noisy_curve():
+    points = _curve() + [analysis.Point("den", 4, 0.05, 0.5 / 100)]  # the error of 100-spp rendering
+    fit = analysis.fit_noisy(points, 0.01, "relmse")
+    assert fit.slope == pytest.approx(-1.0) and not fit.assumed_slope
+    assert fit.spp_for(0.005) == pytest.approx(100.0)
+    at = analysis.AccuracyTime("relmse", points, fit, reference_seconds=10.24, reference_spp=1024, hidden=[])
+    analysis.pareto_front(points)
+    text = analysis.readings(at)[0]
+    # 100 spp take 1.0 s; the denoiser takes 0.05 s: 1/20 of the time, beyond the measured 1–16 spp
+    assert text.startswith("den at 4 spp matches 100-spp rendering") and "1/20 of its time" in text
+    assert "extrapolated" in text and "beyond" not in text
+
+
+def test_readings_say_when_rendering_is_cheaper_or_the_input_is_not_improved():
+    points = _curve() + [analysis.Point("slow", 1, 0.5, 0.5 / 8), analysis.Point("worse", 4, 0.05, 0.2)]
+    fit = analysis.fit_noisy(points, 0.01, "relmse")
+    texts = analysis.readings(analysis.AccuracyTime("relmse", points, fit, None, 256, []))
+    slow = next(t for t in texts if t.startswith("slow"))
+    assert "8-spp rendering" in slow and "(0.5 s vs 0.08 s per frame)" in slow  # 8 spp take 0.08 s
+    assert "× as long" in slow and "rendering more samples is cheaper" in slow
+    worse = next(t for t in texts if t.startswith("worse"))
+    assert "does not improve on its own input" in worse
+
+
+def test_single_spp_assumes_the_monte_carlo_slope_and_a_flat_curve_gives_no_fit():
+    fit = analysis.fit_noisy(_curve(spps=(4,)), 0.01, "relmse")
+    assert fit.assumed_slope and fit.slope == -1.0 and fit.spp_for(0.5 / 32) == pytest.approx(32.0)
+    flat = [analysis.Point(NOISY, s, s * 0.01, 0.1) for s in (1, 4)]
+    assert analysis.fit_noisy(flat, 0.01, "relmse") is None
+    assert "does not fall" in analysis.readings(analysis.AccuracyTime("relmse", flat, None, None, None, []))[0]
+
+
+def test_bootstrap_interval_brackets_the_mean_and_needs_two_scenes():
+    rng = np.random.default_rng(3)
+    values = rng.normal(1.0, 0.2, 12)
+    low, high = analysis.bootstrap_interval(values)
+    assert low < values.mean() < high
+    # the percentile interval of the mean is about ±1.96·s/√n wide
+    half = 1.96 * values.std(ddof=1) / math.sqrt(values.size)
+    assert (high - low) / 2 == pytest.approx(half, rel=0.3)
+    assert analysis.bootstrap_interval([0.5]) == (None, None)
+    assert analysis.bootstrap_interval([0.5, 0.5, 0.5]) == (0.5, 0.5)
+    assert analysis.bootstrap_interval([1.0, math.nan, 3.0]) != (None, None)  # NaN dropped, two left
+
+
+def test_worst_windows_find_planted_errors_without_overlap():
+    error = np.zeros((32, 40))
+    error[20:24, 30:34] = 5.0  # the worst
+    error[2:6, 3:7] = 2.0  # the second
+    found = images.worst_windows(error, 4, count=2)
+    assert found == [(20, 30), (2, 3)]
+    # a window at the border stays inside the image
+    edge = np.zeros((16, 16))
+    edge[-1, -1] = 1.0
+    (top, left), = images.worst_windows(edge, 4, count=1)
+    assert 0 <= top <= 12 and 0 <= left <= 12 and top + 4 == 16 and left + 4 == 16
+
+
+def test_png_of_hdr_and_black_images_is_valid_and_sized():
+    from io import BytesIO
+
+    from PIL import Image
+
+    hdr = np.full((5, 7, 3), 1e6, np.float32)
+    hdr[0, 0] = 0.0
+    image = Image.open(BytesIO(images.to_png(hdr, scale=3)))
+    assert image.size == (21, 15)
+    pixels = np.asarray(image)
+    assert pixels[0, 0].tolist() == [0, 0, 0] and pixels[-1, -1].min() >= 254
