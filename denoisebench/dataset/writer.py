@@ -224,6 +224,8 @@ class DatasetWriter:
         spp = int(spp)
         if spp not in record["spp"]:
             raise ValueError(f"scene {scene!r} renders spp {record['spp']}, not {spp}")
+        timing = _timing(seconds, spp)  # checked before anything is written
+        _check_extra(extra)
         relative = layout.noisy_path(scene, spp, frame)
         header = {"scene": scene, "frame": int(frame), "spp": spp, "kind": "noisy"}
         written = write_exr(self.path(relative), buffers, samples, header)
@@ -231,7 +233,7 @@ class DatasetWriter:
             "file": relative,
             "sha256": written.main.sha256,
             "spp": spp,
-            **_timing(seconds, spp),
+            **timing,
             "rel_se": relative_standard_error(buffers["color"], buffers.get("color_var")),
             "samples": None,
         }
@@ -262,6 +264,8 @@ class DatasetWriter:
         spp = int(spp if spp is not None else (record.get("ref_spp") or 0))
         if spp < 1:
             raise ValueError(f"scene {scene!r} has no ref_spp; pass spp=")
+        timing = _timing(seconds, spp)  # checked before anything is written
+        _check_extra(extra)
         layers = {"color": color, "color_var": color_var, **dict(buffers or {})}
         relative = layout.reference_path(scene, frame)
         header = {"scene": scene, "frame": int(frame), "spp": spp, "kind": "reference"}
@@ -270,7 +274,7 @@ class DatasetWriter:
             "file": relative,
             "sha256": written.main.sha256,
             "spp": spp,
-            **_timing(seconds, spp),
+            **timing,
             "rel_se": relative_standard_error(color, color_var),
             "noisy_rel_se_max": None,
             "reference_too_noisy": False,
@@ -278,10 +282,8 @@ class DatasetWriter:
         return self._put(scene, layout.REFERENCE, frame, entry, extra)
 
     def _put(self, scene: str, key: str, frame: int, entry: dict, extra: Mapping | None) -> dict:
-        for name, value in dict(extra or {}).items():
-            if name in _RESERVED_RECORD_KEYS:
-                raise ValueError(f"extra key {name!r} is reserved for the writer")
-            entry[name] = value
+        _check_extra(extra)
+        entry.update(dict(extra or {}))
         entry = json.loads(canonical_json(entry))
         renders = self.manifest["scenes"][scene]["renders"]
         renders.setdefault(key, {})[layout.frame_key(frame)] = entry
@@ -361,6 +363,12 @@ class DatasetWriter:
         self.manifest["splits"] = {split: sorted(splits.get(split, [])) for split in SPLITS}
         self.manifest["complete"] = not missing
         self._save()
+
+
+def _check_extra(extra: Mapping | None) -> None:
+    for name in dict(extra or {}):
+        if name in _RESERVED_RECORD_KEYS:
+            raise ValueError(f"extra key {name!r} is reserved for the writer")
 
 
 def _is_plain_name(name: str) -> bool:
