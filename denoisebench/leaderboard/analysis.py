@@ -225,7 +225,7 @@ def accuracy_time(data: RunData, summary: list[SummaryRow], metric: str, referen
 
 
 def _ratio_text(ratio: float) -> str:
-    return f"1/{1 / ratio:.0f}" if ratio < 0.5 else f"{ratio:.2g}×"
+    return f"1/{1 / ratio:.0f}" if ratio < 0.5 else f"{100 * ratio:.0f} %"
 
 
 def readings(at: AccuracyTime) -> list[str]:
