@@ -21,14 +21,23 @@ feature distances normalised by their noise)::
   outside the image take no part (no edge padding). The output is Σ w c / Σ w, a convex
   combination of the (sanitised, non-negative) input, so it is finite and non-negative.
 
+Fireflies: a symmetric weight cannot both keep a firefly out of its neighbours and let the
+neighbours into the firefly, so an isolated bright pixel would survive the filter unchanged. Before
+filtering, a pixel whose weights to its 8 neighbours sum to less than ``firefly_support`` (0.2) and
+that is brighter than its 3×3 median is replaced by that median (then the guide is rebuilt). This
+removes energy (a bias, as every firefly clamp does). Measured on rendered 32 px, 4 spp frames,
+relMSE without → with it: dim_room 3.45 → 0.078, depth_of_field 0.58 → 0.24, texture_checker
+0.122 → 0.085, cornell 0.054 → 0.036 (glossy_fireflies stays worse than the input: 0.26 against 0.13,
+its one sharp highlight on a featureless floor spreads); ``firefly_support=None`` turns it off.
+
 Defaults (``σ_c`` is in noise standard deviations):
 
 ==========  ======  =====  =========  =====  =========================================  ==========
 preset      radius  σ_s    window     σ_c    features (σ_k)                             guide dims
 ==========  ======  =====  =========  =====  =========================================  ==========
-fast        5       2.5    separable  1.4    albedo 0.1, normal 0.3                     PCA → 3
-balanced    7       3.5    separable  1.4    albedo 0.1, normal 0.3, depth 0.03         all
-high        7       3.5    full 2-D   1.4    + position 0.03, roughness 0.15            all
+fast        5       2.5    separable  5.0    albedo 0.1, normal 0.3                     PCA → 3
+balanced    7       3.5    separable  5.0    albedo 0.1, normal 0.3, depth 0.03         all
+high        8       4.0    full 2-D   5.0    + roughness 0.15                           all
 ==========  ======  =====  =========  =====  =========================================  ==========
 
 "separable" runs a horizontal then a vertical 1-D pass over the same (2r+1)² window: 4r
@@ -71,6 +80,7 @@ PRESETS: dict[str, dict] = {
     ),
 }
 
+FIREFLY_SUPPORT = 0.2  # see the module docstring, "Fireflies"
 _STRIP_PIXELS = 32768  # pixels per row strip: keeps a strip's working set in cache
 
 
@@ -208,6 +218,36 @@ def build_guide(
     return np.ascontiguousarray(guide, dtype=np.float32)
 
 
+def ring_support(guide: np.ndarray, sigma_spatial: float) -> np.ndarray:
+    """H×W: Σ of the filter's weights from each pixel to its 8 neighbours (pixels outside take no part)."""
+    _, height, width = guide.shape
+    support = np.zeros((height, width), np.float32)
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            if dy == 0 and dx == 0:
+                continue
+            p = (slice(None), slice(max(0, -dy), height - max(0, dy)), slice(max(0, -dx), width - max(0, dx)))
+            q = (slice(None), slice(max(0, dy), height - max(0, -dy)), slice(max(0, dx), width - max(0, -dx)))
+            energy = np.square(guide[p] - guide[q]).sum(axis=0) + (dy * dy + dx * dx) / (2.0 * sigma_spatial**2)
+            support[p[1:]] += np.exp(-energy)
+    return support
+
+
+def suppress_unsupported(color: np.ndarray, guide: np.ndarray, sigma_spatial: float, threshold: float) -> tuple[np.ndarray, int]:
+    """``color`` (H×W×3) with its unsupported bright pixels replaced by their 3×3 median; and how many.
+
+    A pixel is unsupported when the filter's weights to its 8 neighbours sum to less than
+    ``threshold`` (nothing around it looks alike) and it is brighter than that median.
+    """
+    support = ring_support(guide, sigma_spatial)
+    median = ndimage.median_filter(color, size=(3, 3, 1), mode="nearest")
+    bad = (support < threshold) & (color.mean(axis=-1) > median.mean(axis=-1))
+    count = int(np.count_nonzero(bad))
+    if count:
+        color = np.where(bad[..., None], median, color)
+    return color, count
+
+
 def cross_bilateral_filter(
     color: np.ndarray,
     features: Mapping[str, np.ndarray] | None = None,
@@ -220,20 +260,29 @@ def cross_bilateral_filter(
     feature_sigmas: Mapping[str, float] | None = None,
     separable: bool = True,
     guide_dims: int | None = None,
+    firefly_support: float | None = FIREFLY_SUPPORT,
 ) -> np.ndarray:
     """Filter H×W×3 ``color`` guided by ``features`` (name → H×W×C); returns H×W×3 float32."""
     color = np.maximum(np.asarray(color, np.float32), 0.0)
     features = dict(features or {})
     sigmas = DEFAULT_FEATURE_SIGMAS if feature_sigmas is None else dict(feature_sigmas)
-    guide = build_guide(
-        color,
-        features,
-        sigma_color=sigma_color,
-        feature_sigmas=sigmas,
-        color_variance=color_variance,
-        feature_variances=feature_variances,
-        guide_dims=guide_dims,
-    )
+
+    def guide_of(image: np.ndarray) -> np.ndarray:
+        return build_guide(
+            image,
+            features,
+            sigma_color=sigma_color,
+            feature_sigmas=sigmas,
+            color_variance=color_variance,
+            feature_variances=feature_variances,
+            guide_dims=guide_dims,
+        )
+
+    guide = guide_of(color)
+    if firefly_support is not None and firefly_support > 0:
+        color, replaced = suppress_unsupported(color, guide, sigma_spatial, firefly_support)
+        if replaced:
+            guide = guide_of(color)
     out = np.ascontiguousarray(np.moveaxis(color, -1, 0))
     for offsets in window_offsets(int(radius), sigma_spatial, separable):
         out = joint_bilateral_pass(out, guide, offsets)
@@ -257,6 +306,7 @@ class CrossBilateral(DenoiserBase):
         features: Iterable[str] | None = None,
         feature_sigmas: Mapping[str, float] | None = None,
         guide_dims: int | None | str = "preset",
+        firefly_support: float | None = FIREFLY_SUPPORT,
     ) -> None:
         if preset not in PRESETS:
             raise ValueError(f"unknown cross_bilateral preset {preset!r}; known: {', '.join(PRESETS)}")
@@ -286,6 +336,7 @@ class CrossBilateral(DenoiserBase):
         self.separable = bool(config["separable"])
         self.guide_dims = config["guide_dims"]
         self.feature_sigmas = sigmas
+        self.firefly_support = firefly_support
         self.name = "cross_bilateral" if preset == "balanced" else f"cross_bilateral_{preset}"
 
     def denoise(self, frame: Frame) -> np.ndarray:
@@ -302,4 +353,5 @@ class CrossBilateral(DenoiserBase):
             feature_sigmas=self.feature_sigmas,
             separable=self.separable,
             guide_dims=self.guide_dims,
+            firefly_support=self.firefly_support,
         )
