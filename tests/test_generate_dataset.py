@@ -232,3 +232,38 @@ def test_user_usd_renders_along_its_own_camera_with_its_textures(tmp_path):
     assert {f"textures/{t}" for t in textures} <= set(info.record["stage_files"])
     assert info.record["family"] == "usd" and not info.record["warnings"]
     assert ds.frame("usd_my_shot", 2, 1).reference.std() > 0  # textured, lit, not blank
+
+
+def test_a_failing_frame_is_reported_others_carry_on_and_a_rerun_completes(local_dataset, tmp_path, monkeypatch, capsys):
+    from denoisebench.generator import executors
+
+    real = executors.render_job
+
+    def flaky(job, stage_files=None):
+        if (job.scene, job.frame) == ("cornell_006", 1):
+            raise RuntimeError("simulated renderer crash\nwith a second line")
+        return real(job, stage_files)
+
+    monkeypatch.setattr(executors, "render_job", flaky)
+    out = tmp_path / "ds"
+    assert _generate(out) == 1
+    err = capsys.readouterr().err
+    assert "cornell_006 frame 1: RuntimeError: simulated renderer crash" in err and "second line" not in err
+    ds = open_dataset(out)
+    assert not ds.complete
+    assert ds.frame("cornell_006", 2, 2).color.shape == (HEIGHT, WIDTH, 3)  # later frames were rendered
+    monkeypatch.setattr(executors, "render_job", real)
+    assert _generate(out) == 0
+    _assert_same_dataset(local_dataset, out)
+
+
+def test_per_sample_data_matches_the_pixel_means(tmp_path):
+    out = tmp_path / "ds"
+    code = main(["generate", "--out", str(out), "--families", "cornell", "--frames", "2", "--width", str(WIDTH),
+                 "--height", str(HEIGHT), "--spp", "2", "--ref-spp", "16", "--samples", "--quiet"])
+    assert code == 0
+    frame = open_dataset(out, verify=True).frame("cornell_000", 2, 1)
+    assert frame.samples["pixel"].shape == (2, HEIGHT, WIDTH, 2)
+    assert "lens" not in frame.samples and "time" not in frame.samples  # no depth of field, no motion blur
+    assert ((frame.samples["pixel"] >= 0) & (frame.samples["pixel"] < 1)).all()
+    np.testing.assert_allclose(frame.samples["color"].mean(axis=0), frame.color, rtol=1e-5, atol=1e-6)
