@@ -210,18 +210,20 @@ def render_frame(
         sampler.seed(derive_seed(seed, frame, spp, stream, index), lanes)
         # Pixel-major lanes (lane = pixel * groups + group): a pixel's lanes are one contiguous block,
         # so the per-lane moments merge with block reductions on the device.
+        # Sizes enter as opaque values: as literals, every image size and spp would compile anew.
+        groups_o, pixels_o, width_o = (dr.opaque(mi.UInt32, v) for v in (groups, pixels, width))
         lane = dr.arange(mi.UInt32, lanes)
-        pixel = lane // groups
-        group = lane - pixel * groups
-        px = pixel % width
-        py = pixel // width + dr.opaque(mi.UInt32, row0)
+        pixel = lane // groups_o
+        group = lane - pixel * groups_o
+        px = pixel % width_o
+        py = pixel // width_o + dr.opaque(mi.UInt32, row0)
         lane_count = dr.opaque(mi.UInt32, base) + dr.select(group < dr.opaque(mi.UInt32, rem), mi.UInt32(1), mi.UInt32(0))
         targets = None
         if samples is not None:
             targets = {k: (dr.zeros(mi.Float, count * pixels * c), c) for k, c in sample_channels.items()}
         moments_dr = render_moments(
             mi, scene, sampler, cam, opts, px, py, lane_count, stat_channels, targets,
-            lambda s: (group + s * groups) * pixels + pixel,  # sample index within the pass, then pixel
+            lambda s: (group + s * groups_o) * pixels_o + pixel,  # sample index within the pass, then pixel
         )
         dr.eval(moments_dr, targets)  # one kernel traces everything; the merge below reads its results
         if groups > 1:

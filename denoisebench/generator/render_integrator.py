@@ -372,7 +372,8 @@ def merge_lane_moments(mi, moments: dict, lane_count, groups: int, total: int) -
 
     weight = mi.Float(lane_count)
     lanes = dr.width(lane_count)
-    owner = dr.arange(mi.UInt32, lanes) // groups
+    owner = dr.arange(mi.UInt32, lanes) // dr.opaque(mi.UInt32, groups)
+    inv_total = dr.opaque(mi.Float, 1.0 / total)
 
     def block_sums(values: dict) -> dict:
         # Scatter-adds into targets made beforehand fuse into one kernel (block_sum would allocate,
@@ -384,7 +385,7 @@ def merge_lane_moments(mi, moments: dict, lane_count, groups: int, total: int) -
         dr.eval(sums)
         return sums
 
-    means = block_sums({k: mean * (weight * (1.0 / total)) for k, (mean, _) in moments.items()})
+    means = block_sums({k: mean * (weight * inv_total) for k, (mean, _) in moments.items()})
     m2s = block_sums({
         k: m2 + weight * dr.square(mean - dr.gather(type(mean), means[k], owner)) for k, (mean, m2) in moments.items()
     })
