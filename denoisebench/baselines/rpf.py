@@ -43,6 +43,10 @@ Notes:
       colour variance (E_i[Var_P c] / Var_neighbourhood c, in [0, 1]) is variance that screen
       position cannot explain. W^r_{c,k} = 1 − (1 − W_MI)(1 − W_var) combines both. At 1 spp
       the within-pixel variance is unknown (0) and only MI counts.
+    * The lens parameter is stored as the square sample (u, v); statistics use the disk point the
+      renderer made of it (:mod:`~denoisebench.denoisers.lens_sampling`). A hit point moves
+      linearly with the disk point but non-monotonically with (u, v) one at a time, and MI summed
+      over single coordinates barely sees that dependence.
     * Samples are drawn as in the paper: Gaussian offsets (σ = b/4) around P, inside the box.
     * Histogram MI from ~100 samples is biased upwards by about (K_a − 1)(K_b − 1)/2N nats;
       without the Miller–Madow correction two independent channels would look dependent and
@@ -62,6 +66,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from denoisebench.dataset.frame import Frame
+from denoisebench.denoisers.lens_sampling import square_to_disk_concentric
 from denoisebench.denoisers.protocol import DenoiserBase
 
 DEFAULT_FEATURES = ("position", "normal", "albedo")
@@ -186,6 +191,8 @@ def _sample_table(samples: Mapping[str, np.ndarray], features: Sequence[str]) ->
     for name in RANDOM_PARAMETERS:
         if name in samples:
             array = np.asarray(samples[name], np.float32)
+            if name == "lens":  # the point on the lens, on which a defocused hit depends linearly
+                array = square_to_disk_concentric(array).astype(np.float32)
             parts.append(array)
             random_groups[name] = slice(column, column + array.shape[-1])
             column += array.shape[-1]

@@ -28,6 +28,8 @@ import numpy as np
 
 from denoisebench.dataset.frame import Frame, Sequence
 
+from .lens_sampling import square_to_disk_concentric
+
 FAMILIES = ("shapes", "textured", "glossy", "depth_of_field", "motion_blur")
 
 _LIGHT = np.array([-0.45, -0.55, 0.70])
@@ -214,10 +216,8 @@ def _halton(count: int, base: int) -> np.ndarray:
 
 
 def _disk(u: np.ndarray) -> np.ndarray:
-    """Concentric-free polar map of [0,1)² to the unit disk."""
-    r = np.sqrt(u[..., 0])
-    phi = 2 * np.pi * u[..., 1]
-    return np.stack([r * np.cos(phi), r * np.sin(phi)], axis=-1)
+    """[0,1)² → the unit disk with the renderer's concentric map (so lens samples mean the same)."""
+    return square_to_disk_concentric(u)
 
 
 def render(
