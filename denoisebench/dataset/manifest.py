@@ -13,10 +13,13 @@ Layout of the manifest (all keys sorted when saved; paths relative to the datase
           "family": str, "seed": int, "frames": int, "width": int, "height": int,
           "spp": [int, ...], "ref_spp": int | null,
           "usd": "<scene>/scene.usda", "effects": {"declared": [...], "inferred": [...]},
-          "plan": {...render plan...}, "camera": {...},  # and anything else the generator adds
+          "plan": {...render plan...}, "camera": {...},  # and anything else the generator adds:
+          # generate-dataset adds "source", "stage_files", "stage_sha256", "render_seed", "warnings"
           "renders": {
             "spp0004": {"0000": {"file", "sha256", "spp", "seconds", "seconds_per_spp",
                                   "rel_se", "samples": {"file", "sha256", "count"} | null, ...}},
+            # generate-dataset adds "camera_pose" (4×4 camera-to-world at the frame's time sample)
+            # and "jit_compile_seconds" (Dr.Jit compile time, excluded from "seconds")
             "reference": {"0000": {"file", "sha256", "spp", "seconds", "seconds_per_spp",
                                     "rel_se", "noisy_rel_se_max", "reference_too_noisy", ...}}
           }

@@ -21,6 +21,8 @@ Notes:
 
 from __future__ import annotations
 
+import atexit
+import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -98,6 +100,7 @@ def _materialize(stage_key: str, files: dict[str, bytes]) -> Path:
     folder = _STAGE_DIRS.get(stage_key)
     if folder is None:
         folder = Path(tempfile.mkdtemp(prefix=f"denoisebench-stage-{stage_key[:12]}-"))
+        atexit.register(shutil.rmtree, folder, True)  # a worker's copies go when the worker does
         for relative, data in files.items():
             target = folder / relative
             target.parent.mkdir(parents=True, exist_ok=True)
