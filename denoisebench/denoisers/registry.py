@@ -4,7 +4,8 @@ Spec grammar (first match wins):
 
 ``NAME``
     a built-in (see :data:`BUILTINS`: ``identity``, ``cross_bilateral``, ``cross_bilateral_fast``,
-    ``cross_bilateral_high``, ``rpf``, ``nlmeans``, ``oidn``, ``oidn_balanced``, ``oidn_fast``), else
+    ``cross_bilateral_high``, ``rpf``, ``nlmeans``, ``oidn``, ``oidn_balanced``, ``oidn_fast``, and the
+    learned ``dpcn``, ``kpcn``, ``rae``), else
     an entry point of the group ``denoisebench.denoisers`` (a plugin package declares
     ``[project.entry-points."denoisebench.denoisers"] my_denoiser = "my_pkg:MyDenoiser"``).
     Built-ins win over an entry point of the same name.
@@ -47,6 +48,9 @@ BUILTINS: dict[str, tuple[str, dict[str, Any]]] = {
     "oidn": ("denoisebench.baselines.oidn:OIDN", {"quality": "high"}),
     "oidn_balanced": ("denoisebench.baselines.oidn:OIDN", {"quality": "balanced"}),
     "oidn_fast": ("denoisebench.baselines.oidn:OIDN", {"quality": "fast"}),
+    "dpcn": ("denoisebench.models.denoisers:DPCN", {}),
+    "kpcn": ("denoisebench.models.denoisers:KPCN", {}),
+    "rae": ("denoisebench.models.denoisers:RAE", {}),
 }
 
 

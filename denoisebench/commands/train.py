@@ -1,0 +1,161 @@
+"""Train a learned denoiser (dpcn, kpcn or rae) on a dataset made by generate-dataset.
+
+Trains on the dataset's train split (random crops, flips and rotations; K-frame windows for the
+recurrent autoencoder), validates on whole frames of its val split, and writes a checkpoint with
+its metadata: model and configuration, dataset config hash, steps, seed, training seconds and the
+validation relMSE next to the noisy input's. The same command with --resume CKPT continues a run
+exactly where it stopped (same seed, same batches).
+
+--evaluate additionally scores the trained model on the test split against the identity and
+cross_bilateral denoisers (relMSE, mean over frames), as the shipped model cards report.
+
+Exit codes: 0 done, 2 bad input (unknown model, no such dataset, empty train split, a checkpoint
+of another model), 1 internal failure.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+from denoisebench.errors import UserInputError
+
+EPILOG = """examples:
+  denoisebench train --model kpcn --data data/small --config small --steps 2000 --out kpcn.pt
+  denoisebench train --model kpcn --data data/small --steps 1000 --resume kpcn.pt --out kpcn.pt
+  denoisebench train --model rae --data data/small --steps 0 --resume rae.pt --out rae.pt --evaluate
+  denoisebench benchmark ... --denoiser kpcn --option checkpoint=kpcn.pt   # use the result
+"""
+
+MODELS = ("dpcn", "kpcn", "rae")
+
+
+def _spp(text: str | None):
+    if text is None:
+        return None
+    try:
+        values = [int(part) for part in text.split(",") if part.strip()]
+    except ValueError:
+        raise UserInputError(f"--spp expects comma-separated integers like 4,8 (got {text!r})") from None
+    if not values or min(values) < 1:
+        raise UserInputError(f"--spp expects positive integers (got {text!r})")
+    return values
+
+
+def add_arguments(parser) -> None:
+    parser.add_argument("--model", required=True, choices=MODELS, help="which network to train")
+    parser.add_argument("--data", required=True, help="dataset folder (dataset.json inside)")
+    parser.add_argument("--config", default="small", choices=("small", "paper"),
+                        help="network size: small (trains on a CPU) or paper (default small)")
+    parser.add_argument("--steps", type=int, default=500, help="optimisation steps to add (default 500)")
+    parser.add_argument("--out", default=None, help="checkpoint to write (default checkpoints/MODEL_CONFIG.pt)")
+    parser.add_argument("--resume", default=None, metavar="CKPT", help="continue from this checkpoint")
+    parser.add_argument("--seed", type=int, default=0, help="initialisation and batch-order seed (default 0)")
+    parser.add_argument("--batch-size", type=int, default=8, help="crops per step (default 8)")
+    parser.add_argument("--crop", type=int, default=32, help="crop side in pixels (default 32)")
+    parser.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
+    parser.add_argument("--spp", default=None, help="train on these noisy spp only, e.g. 4 (default all)")
+    parser.add_argument("--sequence-length", type=int, default=7, help="frames per training window, rae only (default 7)")
+    parser.add_argument("--checkpoint-every", type=int, default=100, help="save every N steps (default 100)")
+    parser.add_argument("--threads", type=int, default=1, choices=(1, 2), help="torch threads (default 1)")
+    parser.add_argument("--evaluate", action="store_true", help="also score on the test split against identity and cross_bilateral")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def run(args) -> int:
+    from pathlib import Path
+
+    from denoisebench.dataset.errors import DatasetError
+
+    if args.steps < 0:
+        raise UserInputError(f"--steps must be >= 0 (got {args.steps})")
+    if args.batch_size < 1 or args.crop < 4:
+        raise UserInputError("--batch-size must be >= 1 and --crop >= 4")
+    if not (Path(args.data) / "dataset.json").is_file():
+        raise UserInputError(f"{args.data}: not a dataset folder (no dataset.json)")
+    from denoisebench.models.training import TrainOptions, train
+
+    options = TrainOptions(
+        model=args.model,
+        data=args.data,
+        config=args.config,
+        steps=args.steps,
+        out=args.out,
+        resume=args.resume,
+        seed=args.seed,
+        batch_size=args.batch_size,
+        crop=args.crop,
+        lr=args.lr,
+        spp=_spp(args.spp),
+        sequence_length=args.sequence_length,
+        checkpoint_every=args.checkpoint_every,
+        threads=args.threads,
+        progress=not args.quiet,
+    )
+    try:
+        meta = train(options)
+    except DatasetError as error:
+        raise UserInputError(str(error)) from None
+    validation = meta.get("validation") or {}
+    summary = f"{meta['checkpoint']}: {args.model} ({args.config}), {meta['steps']} steps, {meta['seconds']:.0f} s"
+    if validation:
+        summary += (
+            f"; val relMSE {validation['relmse']:.5f} (noisy {validation['relmse_noisy']:.5f},"
+            f" ratio {validation['relmse_ratio']:.3f})"
+        )
+    else:
+        summary += "; no val split to validate on"
+    print(summary)
+    if args.evaluate:
+        table = evaluate_on_split(meta["checkpoint"], args.model, args.data, split="test", threads=args.threads)
+        print(json.dumps(table, indent=2))
+    return 0
+
+
+def evaluate_on_split(checkpoint: str, model: str, data: str, split: str = "test", threads: int = 1,
+                      peers=("identity", "cross_bilateral"), progress: bool = True) -> dict:
+    """relMSE (mean over frames, every noisy spp) of the checkpoint and of ``peers`` on a split.
+
+    Sequences go through :func:`~denoisebench.denoisers.runner.run_sequence` (reset, frames in
+    order), so the recurrent model is scored as the benchmark scores it. Returns
+    ``{"split", "scenes", "frames", "relmse": {name: value}, "ratio": {peer: ours / peer}}``.
+    """
+    import numpy as np
+    from tqdm import tqdm
+
+    from denoisebench.dataset.reader import open_dataset
+    from denoisebench.denoisers.registry import load_denoiser
+    from denoisebench.denoisers.runner import run_sequence
+    from denoisebench.metrics.spatial import relmse
+
+    ds = open_dataset(data)
+    scenes = ds.split(split)
+    if not scenes:
+        raise UserInputError(f"{data}: split {split!r} is empty")
+    denoisers = {model: load_denoiser(model, checkpoint=checkpoint, threads=threads)}
+    denoisers.update({name: load_denoiser(name) for name in peers})
+    scores: dict[str, list[float]] = {name: [] for name in denoisers}
+    per_spp: dict[str, dict[int, list[float]]] = {name: {} for name in denoisers}
+    jobs = [(scene, spp) for scene in scenes for spp in ds.scene(scene).spp]
+    for scene, spp in tqdm(jobs, desc=f"evaluate {split}", disable=not progress):
+        sequence = ds.sequence(scene, spp)
+        for name, denoiser in denoisers.items():
+            for frame, result in zip(sequence, run_sequence(denoiser, sequence, name=name)):
+                if not result.ok:
+                    raise RuntimeError(f"{name} failed on {scene} frame {frame.index}: {result.error}")
+                value = relmse(result.output, frame.reference)
+                scores[name].append(value)
+                per_spp[name].setdefault(spp, []).append(value)
+    means = {name: float(np.mean(values)) for name, values in scores.items()}
+    return {
+        "split": split,
+        "scenes": scenes,
+        "frames": len(scores[model]),
+        "relmse": means,
+        "relmse_by_spp": {name: {str(s): float(np.mean(v)) for s, v in sorted(d.items())} for name, d in per_spp.items()},
+        "ratio": {peer: means[model] / means[peer] for peer in peers},
+    }
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(run(None))

@@ -1,0 +1,61 @@
+"""The learned models by name: how to build each, its configurations, what it reads and trains on.
+
+``dpcn`` and ``kpcn`` (:mod:`.pcn`) are spatial and train on single-frame crops; ``rae``
+(:mod:`.rae`) is temporal and trains on K-frame crop sequences.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+from torch import nn
+
+from . import pcn, rae
+from .features import OPTIONAL_BUFFERS
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    name: str
+    build: Callable[..., nn.Module]
+    configs: dict[str, dict]
+    temporal: bool
+    #: Reference layers trained against ("color" → "reference", others → "reference_<name>").
+    targets: tuple[str, ...]
+    #: Buffers a training item carries when the dataset has them (features.py fills the rest with zeros).
+    buffers: tuple[str, ...]
+
+
+MODELS: dict[str, ModelSpec] = {
+    "dpcn": ModelSpec("dpcn", pcn.make_dpcn, pcn.CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS),
+    "kpcn": ModelSpec("kpcn", pcn.make_kpcn, pcn.CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS),
+    "rae": ModelSpec("rae", rae.make_rae, rae.CONFIGS, True, ("color",), ("albedo", "normal", "depth", "roughness")),
+}
+
+
+def get_spec(name: str) -> ModelSpec:
+    try:
+        return MODELS[name]
+    except KeyError:
+        raise KeyError(f"unknown model {name!r}; models: {', '.join(MODELS)}") from None
+
+
+def model_config(name: str, config: str | dict) -> dict:
+    """The keyword arguments of a named configuration (``small``/``paper``) or a dict given as is."""
+    spec = get_spec(name)
+    if isinstance(config, dict):
+        return dict(config)
+    try:
+        return dict(spec.configs[config])
+    except KeyError:
+        raise KeyError(f"model {name!r} has configurations {', '.join(spec.configs)}, not {config!r}") from None
+
+
+def build_model(name: str, config: str | dict = "small") -> nn.Module:
+    """A freshly initialised model (weights from torch's global RNG: seed it first)."""
+    return get_spec(name).build(**model_config(name, config))
+
+
+def parameter_count(model: nn.Module) -> int:
+    return sum(p.numel() for p in model.parameters())

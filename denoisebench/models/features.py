@@ -1,0 +1,185 @@
+"""Input preparation shared by the learned denoisers: buffers → network tensors and back.
+
+Every model reads a dict of N×C×H×W float32 tensors keyed by buffer name (what
+:class:`~denoisebench.dataset.torch_dataset.CropDataset` yields after batching, and what
+:func:`frame_tensors` makes of a :class:`~denoisebench.dataset.frame.Frame`).
+
+Transforms (Bako et al. 2017, section 4.1):
+
+* diffuse is demodulated by ``albedo + ALBEDO_EPS`` (ε = 0.00316, the paper's) and remodulated after;
+* specular is taken as ``log(1 + x)`` and mapped back with ``exp(x) − 1``;
+* each feature gets its x and y gradients, and each colour buffer its per-pixel variance, carried
+  through the same transform by the delta method (Var f(X) ≈ f'(μ)² Var X).
+
+Notes
+-----
+* The network always *sees* colour as ``log(1 + ·)``, the demodulated diffuse included: a
+  demodulated firefly of 1e6 / ε ≈ 3e8 would otherwise saturate the first layer. KPCN's kernels
+  still act on the demodulated (linear) diffuse and on the log specular, as in the paper.
+* Inputs are made safe here as well as by the harness: NaN/Inf become 0 and colour is clamped to
+  [0, COLOR_MAX], so a training batch with a bad pixel cannot poison the weights.
+* Frames without ``diffuse``/``specular`` (a user's own data) are treated as all-diffuse; frames
+  without a feature or a variance get zeros for it, the same at training and at inference.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+ALBEDO_EPS = 0.00316
+#: Largest radiance passed on; far above any real pixel, far below float32 overflow after the transforms.
+COLOR_MAX = 1e8
+#: log(1 + x) outputs are clamped to this before exp(): exp(30) ≈ 1e13 stays finite in float32.
+LOG_MAX = 30.0
+
+#: Buffers the learned denoisers use when the frame has them (``color`` is the only one required).
+OPTIONAL_BUFFERS = (
+    "color_var",
+    "diffuse",
+    "diffuse_var",
+    "specular",
+    "specular_var",
+    "albedo",
+    "albedo_var",
+    "normal",
+    "normal_var",
+    "depth",
+    "depth_var",
+    "roughness",
+)
+_CHANNELS = {"albedo": 3, "normal": 3, "depth": 1, "roughness": 1}
+
+
+def safe(x: torch.Tensor, upper: float = COLOR_MAX) -> torch.Tensor:
+    """``x`` with NaN/±Inf replaced by 0 and clamped to [−upper, upper]."""
+    return torch.nan_to_num(x, nan=0.0, posinf=0.0, neginf=0.0).clamp(-upper, upper)
+
+
+def to_log(x: torch.Tensor) -> torch.Tensor:
+    """log(1 + max(x, 0)): the HDR compression used for network inputs and losses."""
+    return torch.log1p(safe(x).clamp_min(0.0))
+
+
+def from_log(y: torch.Tensor) -> torch.Tensor:
+    """Inverse of :func:`to_log` for network outputs, clamped so it never overflows."""
+    return torch.expm1(y.clamp(0.0, LOG_MAX))
+
+
+def gradients(x: torch.Tensor) -> torch.Tensor:
+    """Forward differences along x and y (N×2C×H×W), zero in the last column/row."""
+    dx = torch.zeros_like(x)
+    dy = torch.zeros_like(x)
+    dx[..., :, :-1] = x[..., :, 1:] - x[..., :, :-1]
+    dy[..., :-1, :] = x[..., 1:, :] - x[..., :-1, :]
+    return torch.cat([dx, dy], dim=1)
+
+
+def _get(buffers: dict[str, torch.Tensor], name: str, channels: int, like: torch.Tensor) -> torch.Tensor:
+    value = buffers.get(name)
+    if value is None:
+        return like.new_zeros(like.shape[0], channels, *like.shape[2:])
+    return safe(value)
+
+
+def _variance_channel(var: torch.Tensor) -> torch.Tensor:
+    """Mean over channels, compressed: one N×1×H×W channel that spans 1e-12..1e12 gently."""
+    return torch.log1p(safe(var).clamp_min(0.0).mean(dim=1, keepdim=True))
+
+
+def feature_stack(buffers: dict[str, torch.Tensor], like: torch.Tensor) -> torch.Tensor:
+    """Auxiliary features with their gradients and variances: N×24×H×W (albedo, normal, log depth; x and y gradients; 3 variances)."""
+    albedo = _get(buffers, "albedo", 3, like).clamp(0.0, 1.0)
+    normal = _get(buffers, "normal", 3, like).clamp(-1.0, 1.0)
+    depth = torch.log1p(_get(buffers, "depth", 1, like).clamp(0.0, COLOR_MAX))
+    aux = torch.cat([albedo, normal, depth], dim=1)
+    variances = [
+        _variance_channel(_get(buffers, f"{name}_var", _CHANNELS[name], like)) for name in ("albedo", "normal", "depth")
+    ]
+    return torch.cat([aux, gradients(aux)] + variances, dim=1)
+
+
+FEATURE_CHANNELS = 24
+#: Channels of one PCN branch input: colour (3), its gradients (6), its variance (1), features (21).
+PCN_INPUT_CHANNELS = 3 + 6 + 1 + FEATURE_CHANNELS
+
+
+def split_lobes(buffers: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(diffuse, diffuse_var, specular, specular_var), linear; all-diffuse when the frame has no split."""
+    color = safe(buffers["color"]).clamp(0.0, COLOR_MAX)
+    if "diffuse" in buffers and "specular" in buffers:
+        diffuse = safe(buffers["diffuse"]).clamp(0.0, COLOR_MAX)
+        specular = safe(buffers["specular"]).clamp(0.0, COLOR_MAX)
+        diffuse_var = _get(buffers, "diffuse_var", 3, color)
+        specular_var = _get(buffers, "specular_var", 3, color)
+    else:
+        diffuse, specular = color, torch.zeros_like(color)
+        diffuse_var, specular_var = _get(buffers, "color_var", 3, color), torch.zeros_like(color)
+    return diffuse, diffuse_var.clamp_min(0.0), specular, specular_var.clamp_min(0.0)
+
+
+def albedo_factor(buffers: dict[str, torch.Tensor], like: torch.Tensor) -> torch.Tensor:
+    """albedo + ε, the demodulation divisor (albedo 1 where the frame has none)."""
+    albedo = buffers.get("albedo")
+    if albedo is None:
+        return torch.ones_like(like)
+    return safe(albedo).clamp(0.0, 1.0) + ALBEDO_EPS
+
+
+def pcn_inputs(buffers: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """Both branches' inputs for DPCN/KPCN.
+
+    Returns ``diffuse_in``/``specular_in`` (N×PCN_INPUT_CHANNELS×H×W), ``diffuse_lin`` (demodulated
+    diffuse, linear), ``specular_log`` (log(1 + specular)) and ``albedo_factor`` (albedo + ε).
+    """
+    diffuse, diffuse_var, specular, specular_var = split_lobes(buffers)
+    factor = albedo_factor(buffers, diffuse)
+    diffuse_lin = diffuse / factor
+    diffuse_log = torch.log1p(diffuse_lin)
+    specular_log = torch.log1p(specular)
+    # Delta method: Var[log(1 + X / a)] ≈ Var[X] / (a (1 + X / a))² = Var[X] / (a + X)².
+    diffuse_var_log = diffuse_var / (factor + diffuse) ** 2
+    specular_var_log = specular_var / (1.0 + specular) ** 2
+    features = feature_stack(buffers, diffuse)
+    diffuse_in = torch.cat([diffuse_log, gradients(diffuse_log), _variance_channel(diffuse_var_log), features], dim=1)
+    specular_in = torch.cat(
+        [specular_log, gradients(specular_log), _variance_channel(specular_var_log), features], dim=1
+    )
+    return {
+        "diffuse_in": diffuse_in,
+        "specular_in": specular_in,
+        "diffuse_lin": diffuse_lin,
+        "diffuse_log": diffuse_log,
+        "specular_log": specular_log,
+        "albedo_factor": factor,
+    }
+
+
+#: Input channels of the recurrent autoencoder: colour (3), normal (3), depth (1), roughness (1).
+RAE_INPUT_CHANNELS = 8
+
+
+def rae_inputs(buffers: dict[str, torch.Tensor], demodulate: bool) -> tuple[torch.Tensor, torch.Tensor]:
+    """(network input N×8×H×W, albedo factor or ones): log colour (demodulated if asked), normal, depth, roughness."""
+    color = safe(buffers["color"]).clamp(0.0, COLOR_MAX)
+    factor = albedo_factor(buffers, color) if demodulate else torch.ones_like(color)
+    normal = _get(buffers, "normal", 3, color).clamp(-1.0, 1.0)
+    depth = torch.log1p(_get(buffers, "depth", 1, color).clamp(0.0, COLOR_MAX))
+    roughness = _get(buffers, "roughness", 1, color).clamp(0.0, 1.0)
+    return torch.cat([torch.log1p(color / factor), normal, depth, roughness], dim=1), factor
+
+
+def frame_tensors(frame, names=("color",) + OPTIONAL_BUFFERS) -> dict[str, torch.Tensor]:
+    """The frame's buffers among ``names`` as 1×C×H×W float32 tensors (copies: frames are read-only)."""
+    out = {}
+    for name in names:
+        if name in frame.buffers:
+            array = np.asarray(frame.buffers[name], dtype=np.float32)
+            out[name] = torch.from_numpy(np.ascontiguousarray(np.moveaxis(array, -1, 0)).copy())[None]
+    return out
+
+
+def to_image(tensor: torch.Tensor) -> np.ndarray:
+    """1×3×H×W tensor → H×W×3 float32 numpy array, finite and non-negative."""
+    image = safe(tensor.detach()[0]).clamp(0.0, COLOR_MAX)
+    return np.ascontiguousarray(image.permute(1, 2, 0).numpy(), dtype=np.float32)

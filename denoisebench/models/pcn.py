@@ -1,0 +1,144 @@
+"""DPCN and KPCN after Bako et al. 2017, "Kernel-Predicting Convolutional Networks for Denoising
+Monte Carlo Renderings" (SIGGRAPH 2017).
+
+Two branches with identical architecture and separate weights: one for the demodulated diffuse
+lobe, one for the log specular lobe (inputs from :func:`~denoisebench.models.features.pcn_inputs`).
+Each branch is a plain stack of ``layers`` convolutions of ``channels`` channels and ``kernel``×``kernel``
+support with ReLU between them (the paper: 9 × 100 × 5×5).
+
+* **DPCN** (direct prediction): the last layer outputs the denoised colour of its branch, in the
+  log domain the network sees (log(1 + demodulated diffuse), log(1 + specular)).
+* **KPCN** (kernel prediction): the last layer outputs ``kernel_size²`` (21² = 441) logits per pixel,
+  softmax-normalised into a non-negative kernel summing to one that is applied to the branch's noisy
+  buffer (demodulated diffuse, log specular) around the pixel.
+
+Then diffuse is remodulated by albedo + ε, specular exponentiated, and the two are added.
+
+Notes
+-----
+* Softmax overflow: logits are made finite and clamped to ±LOGIT_MAX before
+  :func:`torch.softmax` (which subtracts the per-pixel maximum), so extreme inputs give a valid
+  kernel, never NaN.
+* The kernel is applied with ``unfold`` in bands of rows (at most UNFOLD_BYTES of neighbourhoods at
+  once): the whole N×3·441×H·W intermediate would need 5 GB at one megapixel, and an
+  offset-by-offset loop is ten times slower to differentiate.
+* The noisy buffer is padded by replication for the kernel, so images smaller than the kernel
+  (odd sizes down to 1×1) work.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from .features import PCN_INPUT_CHANNELS, from_log, pcn_inputs, safe
+
+#: Logits beyond this carry no extra information (exp(±50) spans every float32 ratio) and keep softmax finite.
+LOGIT_MAX = 50.0
+
+CONFIGS = {
+    "paper": {"layers": 9, "channels": 100, "kernel": 5, "kernel_size": 21},
+    "small": {"layers": 5, "channels": 24, "kernel": 3, "kernel_size": 21},
+}
+
+
+def conv_stack(in_channels: int, out_channels: int, layers: int, channels: int, kernel: int) -> nn.Sequential:
+    """``layers`` convolutions with ReLU between (none after the last), 'same' zero padding."""
+    if layers < 2:
+        raise ValueError(f"a PCN branch needs at least 2 layers (got {layers})")
+    modules: list[nn.Module] = []
+    width = in_channels
+    for _ in range(layers - 1):
+        modules += [nn.Conv2d(width, channels, kernel, padding=kernel // 2), nn.ReLU(inplace=True)]
+        width = channels
+    modules.append(nn.Conv2d(width, out_channels, kernel, padding=kernel // 2))
+    return nn.Sequential(*modules)
+
+
+#: Bytes of unfolded neighbourhoods held at once by :func:`apply_kernels` (rows are processed in bands).
+UNFOLD_BYTES = 256 * 2**20
+
+
+def apply_kernels(noisy: torch.Tensor, weights: torch.Tensor, size: int) -> torch.Tensor:
+    """Per-pixel filtering: out[p] = Σ_k weights[k, p] · noisy[p + offset_k], offsets over size×size.
+
+    ``noisy`` N×C×H×W, ``weights`` N×size²×H×W (row-major offsets, dy then dx, as ``unfold`` orders them).
+    """
+    radius = size // 2
+    batch, channels, height, width = noisy.shape
+    padded = F.pad(noisy, (radius, radius, radius, radius), mode="replicate")
+    row_bytes = batch * channels * size * size * width * noisy.element_size()
+    band = max(1, min(height, UNFOLD_BYTES // max(row_bytes, 1)))
+    bands = []
+    for top in range(0, height, band):
+        rows = min(band, height - top)
+        window = padded[:, :, top : top + rows + 2 * radius]
+        patches = F.unfold(window, size).view(batch, channels, size * size, rows * width)
+        kernel = weights[:, :, top : top + rows].reshape(batch, 1, size * size, rows * width)
+        bands.append((patches * kernel).sum(dim=2).view(batch, channels, rows, width))
+    return bands[0] if len(bands) == 1 else torch.cat(bands, dim=2)
+
+
+def softmax_kernels(logits: torch.Tensor) -> torch.Tensor:
+    """Softmax over the kernel dimension (1) of finite, clamped logits: ≥ 0 and summing to 1 per pixel."""
+    return torch.softmax(safe(logits, LOGIT_MAX), dim=1)
+
+
+class PCN(nn.Module):
+    """A two-branch pixel network; ``mode`` is ``"direct"`` (DPCN) or ``"kernel"`` (KPCN).
+
+    ``forward(buffers)`` takes N×C×H×W tensors by buffer name and returns a dict with ``color``,
+    ``diffuse`` and ``specular`` (linear radiance, N×3×H×W) and, for training, ``diffuse_log`` and
+    ``specular_log`` (each branch's output in its log domain) and ``kernels`` (KPCN only).
+    """
+
+    def __init__(self, mode: str, layers: int, channels: int, kernel: int, kernel_size: int = 21):
+        super().__init__()
+        if mode not in ("direct", "kernel"):
+            raise ValueError(f"mode must be 'direct' or 'kernel', not {mode!r}")
+        if kernel_size % 2 != 1:
+            raise ValueError(f"kernel_size must be odd (got {kernel_size})")
+        self.mode = mode
+        self.kernel_size = kernel_size
+        out_channels = 3 if mode == "direct" else kernel_size * kernel_size
+        self.diffuse = conv_stack(PCN_INPUT_CHANNELS, out_channels, layers, channels, kernel)
+        self.specular = conv_stack(PCN_INPUT_CHANNELS, out_channels, layers, channels, kernel)
+
+    def _branch(self, net: nn.Module, inputs: torch.Tensor, noisy: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+        out = net(inputs)
+        if self.mode == "direct":
+            return out, None
+        kernels = softmax_kernels(out)
+        return apply_kernels(noisy, kernels, self.kernel_size), kernels
+
+    def forward(self, buffers: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        prepared = pcn_inputs(buffers)
+        factor = prepared["albedo_factor"]
+        if self.mode == "direct":
+            diffuse_log, kd = self._branch(self.diffuse, prepared["diffuse_in"], prepared["diffuse_log"])
+            diffuse = from_log(diffuse_log) * factor
+        else:
+            diffuse_lin, kd = self._branch(self.diffuse, prepared["diffuse_in"], prepared["diffuse_lin"])
+            diffuse = diffuse_lin * factor
+            diffuse_log = torch.log1p(diffuse_lin.clamp_min(0.0))
+        specular_log, ks = self._branch(self.specular, prepared["specular_in"], prepared["specular_log"])
+        specular = from_log(specular_log)
+        out = {
+            "color": diffuse + specular,
+            "diffuse": diffuse,
+            "specular": specular,
+            "diffuse_log": diffuse_log,
+            "specular_log": specular_log,
+        }
+        if kd is not None:
+            out["kernels"] = torch.stack([kd, ks], dim=1)  # N×2×size²×H×W
+        return out
+
+
+def make_dpcn(layers: int, channels: int, kernel: int, kernel_size: int = 21) -> PCN:
+    return PCN("direct", layers, channels, kernel, kernel_size)
+
+
+def make_kpcn(layers: int, channels: int, kernel: int, kernel_size: int = 21) -> PCN:
+    return PCN("kernel", layers, channels, kernel, kernel_size)

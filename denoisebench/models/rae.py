@@ -1,0 +1,113 @@
+"""The recurrent denoising autoencoder after Chaitanya et al. 2017, "Interactive Reconstruction of
+Monte Carlo Image Sequences using a Recurrent Denoising Autoencoder" (SIGGRAPH 2017).
+
+A U-Net: each encoder level is a convolution followed by a *recurrent block* (two convolutions over
+the level's features concatenated with the block's own output for the previous frame), then 2×2
+max pooling; the decoder upsamples (nearest), concatenates the level's skip connection and
+applies two convolutions. Leaky ReLU (slope 0.1) throughout, as in the paper. Input: log(1 + noisy
+RGB) (optionally demodulated by albedo + ε), normal, log(1 + depth), roughness
+(:func:`~denoisebench.models.features.rae_inputs`); output: log(1 + RGB), remodulated when the
+input was demodulated.
+
+Hidden state: ``self.hidden`` holds each level's previous output; :meth:`reset` clears it (zeros
+for the next frame). Call it between sequences; a frame of another size resets it too.
+
+Notes
+-----
+* Any image size: the input is padded by replication to a multiple of 2^levels and the output
+  cropped back, so 1×1 and odd sizes work.
+* ``forward(..., detach_hidden=False)`` keeps the graph through time for training over a
+  sequence; inference wrappers run under ``torch.no_grad``.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+from torch.nn import functional as F
+
+from .features import RAE_INPUT_CHANNELS, from_log, rae_inputs
+
+CONFIGS = {
+    # The paper's encoder widths (32, 43, 57, 76, 101) and a 144-channel bottleneck.
+    "paper": {"levels": [32, 43, 57, 76, 101], "bottleneck": 144, "demodulate": False},
+    "small": {"levels": [12, 18, 24, 32], "bottleneck": 40, "demodulate": False},
+}
+
+
+def _conv(in_channels: int, out_channels: int) -> nn.Sequential:
+    return nn.Sequential(nn.Conv2d(in_channels, out_channels, 3, padding=1), nn.LeakyReLU(0.1, inplace=True))
+
+
+class RecurrentBlock(nn.Module):
+    """h_t = conv(conv([x_t, h_{t−1}])): the level's output is also its memory of the last frame."""
+
+    def __init__(self, channels: int):
+        super().__init__()
+        self.body = nn.Sequential(_conv(2 * channels, channels), _conv(channels, channels))
+
+    def forward(self, x: torch.Tensor, hidden: torch.Tensor | None) -> torch.Tensor:
+        if hidden is None:
+            hidden = torch.zeros_like(x)
+        return self.body(torch.cat([x, hidden], dim=1))
+
+
+class RecurrentAutoencoder(nn.Module):
+    """U-Net with a recurrent block at every encoder level and at the bottleneck."""
+
+    def __init__(self, levels: list[int], bottleneck: int, demodulate: bool = False):
+        super().__init__()
+        if not levels:
+            raise ValueError("the autoencoder needs at least one level")
+        self.demodulate = bool(demodulate)
+        self.levels = list(levels)
+        self.encoders = nn.ModuleList()
+        self.recurrent = nn.ModuleList()
+        width = RAE_INPUT_CHANNELS
+        for channels in self.levels:
+            self.encoders.append(_conv(width, channels))
+            self.recurrent.append(RecurrentBlock(channels))
+            width = channels
+        self.bottleneck = _conv(width, bottleneck)
+        self.bottleneck_recurrent = RecurrentBlock(bottleneck)
+        self.decoders = nn.ModuleList()
+        width = bottleneck
+        for channels in reversed(self.levels):
+            self.decoders.append(nn.Sequential(_conv(width + channels, channels), _conv(channels, channels)))
+            width = channels
+        self.output = nn.Conv2d(width, 3, 3, padding=1)
+        self.hidden: list[torch.Tensor] | None = None
+
+    def reset(self) -> None:
+        """Forget the previous frame (call between sequences)."""
+        self.hidden = None
+
+    def forward(self, buffers: dict[str, torch.Tensor], detach_hidden: bool = False) -> dict[str, torch.Tensor]:
+        x, factor = rae_inputs(buffers, self.demodulate)
+        height, width = x.shape[-2:]
+        multiple = 2 ** len(self.levels)
+        pad_h, pad_w = (-height) % multiple, (-width) % multiple
+        if pad_h or pad_w:
+            x = F.pad(x, (0, pad_w, 0, pad_h), mode="replicate")
+        hidden = self.hidden
+        if hidden is not None and (hidden[0].shape != (x.shape[0], self.levels[0], *x.shape[-2:])):
+            hidden = None  # another image size or batch: a new sequence
+        new_hidden: list[torch.Tensor] = []
+        skips = []
+        for i, (encode, recur) in enumerate(zip(self.encoders, self.recurrent)):
+            x = recur(encode(x), None if hidden is None else hidden[i])
+            new_hidden.append(x)
+            skips.append(x)
+            x = F.max_pool2d(x, 2)
+        x = self.bottleneck_recurrent(self.bottleneck(x), None if hidden is None else hidden[-1])
+        new_hidden.append(x)
+        for decode, skip in zip(self.decoders, reversed(skips)):
+            x = F.interpolate(x, scale_factor=2, mode="nearest")
+            x = decode(torch.cat([x, skip], dim=1))
+        log_color = self.output(x)[..., :height, :width]
+        self.hidden = [h.detach() for h in new_hidden] if detach_hidden else new_hidden
+        return {"color": from_log(log_color) * factor, "log_color": log_color}
+
+
+def make_rae(levels: list[int], bottleneck: int, demodulate: bool = False) -> RecurrentAutoencoder:
+    return RecurrentAutoencoder(levels, bottleneck, demodulate)

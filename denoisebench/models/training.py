@@ -1,0 +1,280 @@
+"""The training loop behind ``denoisebench train``: data, optimisation, validation, checkpoints, resume.
+
+Data: the dataset's ``train`` split through :class:`~denoisebench.dataset.torch_dataset.CropDataset`
+(DPCN, KPCN) or :class:`~denoisebench.dataset.torch_dataset.SequenceCropDataset` (the recurrent
+autoencoder, K-frame windows) in a torch ``DataLoader``; validation on whole frames of the ``val``
+split, run the way a denoiser wrapper runs them (frames in order, ``reset()`` between sequences).
+
+Determinism: the model is initialised after ``torch.manual_seed(seed)``; batch *b* of epoch *e*
+is a fixed slice of a permutation drawn from ``(seed, e)`` and its crops come from the dataset's
+``(seed, e, item)`` generator. So a run resumed from its checkpoint at step *s* continues exactly
+as the uninterrupted run would have (tested bit for bit).
+
+Notes
+-----
+* ``torch.use_deterministic_algorithms`` is not switched on: the CPU kernels these models use are
+  deterministic already (the resume test compares weights bit for bit), and the switch costs a
+  13 s import of torch._dynamo and made KPCN's backward pass 4× slower.
+* A step whose loss or gradient is not finite is skipped (counted in ``meta["skipped_steps"]``)
+  rather than allowed to poison the weights; gradients are clipped to norm 1.
+* Validation relMSE is computed here with torch (:func:`~denoisebench.models.losses.relmse`)
+  because ``models`` may not import ``metrics`` (DESIGN.md's import direction); it follows the
+  metric's definition exactly.
+* The checkpoint written during training carries the optimiser state (for ``--resume``);
+  :func:`strip_for_shipping` drops it.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from denoisebench.dataset.reader import Dataset, open_dataset
+from denoisebench.errors import UserInputError
+
+from .catalog import build_model, get_spec, model_config
+from .checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
+from .features import frame_tensors
+from .losses import pcn_loss, rae_sequence_loss, relmse
+
+
+@dataclass
+class TrainOptions:
+    model: str
+    data: str
+    config: str = "small"
+    steps: int = 200
+    out: str | None = None
+    resume: str | None = None
+    seed: int = 0
+    batch_size: int = 8
+    crop: int = 32
+    lr: float = 1e-3
+    spp: list[int] | None = None  # None: every noisy spp of the dataset
+    sequence_length: int = 7
+    val_every: int = 0  # 0: validate once, at the end
+    val_frames: int = 8  # per val scene and spp
+    checkpoint_every: int = 100
+    threads: int = 1
+    progress: bool = True
+    extra: dict = field(default_factory=dict)
+
+
+def _available(ds: Dataset, scene: str, spp: int, wanted: tuple[str, ...], targets: tuple[str, ...]):
+    frame = ds.frame(scene, spp, 0, reference=True, samples=False)
+    buffers = tuple(name for name in wanted if name in frame.buffers)
+    ref_layers = frame.meta.get("reference_buffers", {})
+    have_targets = tuple(t for t in targets if t == "color" or t in ref_layers)
+    return buffers, have_targets
+
+
+def _train_spp(ds: Dataset, scenes: list[str], spp: list[int] | None) -> list[int]:
+    common = set.intersection(*(set(ds.scene(s).spp) for s in scenes))
+    if spp is None:
+        if not common:
+            raise UserInputError("the train scenes share no noisy sample count")
+        return sorted(common)
+    missing = sorted(set(spp) - common)
+    if missing:
+        raise UserInputError(f"--spp {missing} not rendered for every train scene (have {sorted(common)})")
+    return sorted(set(spp))
+
+
+def _batches(length: int, batch_size: int, seed: int, epoch: int) -> list[list[int]]:
+    generator = torch.Generator().manual_seed(seed * 1_000_003 + epoch)
+    order = torch.randperm(length, generator=generator).tolist()
+    # Drop the ragged tail so every step sees a full batch (unless the dataset is smaller than one).
+    count = max(1, length // batch_size)
+    return [order[i * batch_size : (i + 1) * batch_size] for i in range(count)]
+
+
+def _loss(model, spec, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    if not spec.temporal:
+        return pcn_loss(model(batch), batch)
+    frames = batch["color"].shape[1]
+    model.reset()
+    preds, refs = [], []
+    for t in range(frames):
+        out = model({name: value[:, t] for name, value in batch.items()})
+        preds.append(out["color"])
+        refs.append(batch["reference"][:, t])
+    model.reset()
+    return rae_sequence_loss(preds, refs)
+
+
+@torch.no_grad()
+def validate(model, spec, ds: Dataset, scenes: list[str], spp: list[int], max_frames: int = 8) -> dict:
+    """Mean relMSE of the model and of the noisy input over whole val frames (empty dict: no val scenes)."""
+    if not scenes:
+        return {}
+    model.eval()
+    ours, noisy, count = [], [], 0
+    for scene in scenes:
+        for s in spp:
+            if spec.temporal:
+                model.reset()
+            frames = min(ds.scene(scene).frame_count, max_frames)
+            for index in range(frames):
+                frame = ds.frame(scene, s, index, reference=True, samples=False)
+                out = model(frame_tensors(frame))["color"]
+                ref = torch.from_numpy(np.moveaxis(frame.reference, -1, 0).copy())[None]
+                ours.append(relmse(out, ref))
+                noisy.append(relmse(frame_tensors(frame, ("color",))["color"], ref))
+                count += 1
+    if spec.temporal:
+        model.reset()
+    model.train()
+    mean_ours, mean_noisy = float(np.mean(ours)), float(np.mean(noisy))
+    return {
+        "relmse": mean_ours,
+        "relmse_noisy": mean_noisy,
+        "relmse_ratio": mean_ours / mean_noisy if mean_noisy > 0 else math.inf,
+        "frames": count,
+        "scenes": list(scenes),
+        "spp": list(spp),
+    }
+
+
+def _make_dataset(spec, ds, scenes, spp, options, buffers, targets):
+    from denoisebench.dataset.torch_dataset import CropDataset, SequenceCropDataset
+
+    smallest = min(min(ds.scene(s).height, ds.scene(s).width) for s in scenes)
+    crop = min(options.crop, smallest)
+    if spec.temporal:
+        frames = min(options.sequence_length, min(ds.scene(s).frame_count for s in scenes))
+        dataset = SequenceCropDataset(
+            ds, scenes, spp, frames=frames, crop=crop, buffers=buffers, targets=targets, seed=options.seed
+        )
+        return dataset, crop, frames
+    return CropDataset(ds, scenes, spp, crop=crop, buffers=buffers, targets=targets, seed=options.seed), crop, 1
+
+
+def train(options: TrainOptions) -> dict:
+    """Train (or resume) and write the checkpoint; returns its metadata. Raises UserInputError on bad input."""
+    from tqdm import tqdm
+
+    spec = get_spec(options.model)
+    if options.steps < 0:
+        raise UserInputError(f"--steps must be >= 0 (got {options.steps})")
+    torch.set_num_threads(max(1, min(int(options.threads), 2)))
+    ds = open_dataset(options.data)
+    train_scenes, val_scenes = ds.split("train"), ds.split("val")
+    if not train_scenes:
+        raise UserInputError(f"{options.data}: the train split is empty (the dataset needs more scenes)")
+    spp = _train_spp(ds, train_scenes, options.spp)
+    if not ds.scene(train_scenes[0]).has_reference:
+        raise UserInputError(f"{options.data}: no reference frames; training needs them")
+    buffers, targets = _available(ds, train_scenes[0], spp[0], spec.buffers, spec.targets)
+
+    config = model_config(spec.name, options.config)
+    torch.manual_seed(options.seed)
+    model = build_model(spec.name, config)
+    optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
+    meta = {"steps": 0, "seconds": 0.0, "skipped_steps": 0, "history": []}
+    if options.resume:
+        payload = load_checkpoint(options.resume, expect_model=spec.name)
+        if payload["config"] != config:
+            raise UserInputError(f"{options.resume}: trained with config {payload['config']}, not {config}")
+        if "optimizer" not in payload:
+            raise UserInputError(f"{options.resume}: has no optimiser state (shipped weights cannot be resumed)")
+        model = model_from_checkpoint(payload)
+        optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
+        optimizer.load_state_dict(payload["optimizer"])
+        meta.update({k: payload["meta"][k] for k in ("steps", "seconds", "skipped_steps", "history") if k in payload["meta"]})
+
+    dataset, crop, frames = _make_dataset(spec, ds, train_scenes, spp, options, buffers, targets)
+    out = Path(options.out or f"checkpoints/{spec.name}_{options.config if isinstance(options.config, str) else 'custom'}.pt")
+    meta.update(
+        {
+            "model": spec.name,
+            "config_name": options.config if isinstance(options.config, str) else None,
+            "seed": options.seed,
+            "dataset": str(Path(options.data).resolve()),
+            "dataset_hash": ds.config_hash,
+            "dataset_config": ds.config,
+            "train_scenes": train_scenes,
+            "val_scenes": val_scenes,
+            "spp": spp,
+            "crop": crop,
+            "sequence_length": frames,
+            "batch_size": options.batch_size,
+            "lr": options.lr,
+            "buffers": list(buffers),
+            "targets": list(targets),
+            "torch": torch.__version__,
+        }
+    )
+    start_step, total = int(meta["steps"]), int(meta["steps"]) + int(options.steps)
+    per_epoch = len(_batches(len(dataset), options.batch_size, options.seed, 0))
+    model.train()
+    started = time.perf_counter()
+    bar = tqdm(total=options.steps, desc=f"train {spec.name}", unit="step", disable=not options.progress)
+    step = start_step
+    running = None
+
+    def checkpoint(validation: dict | None = None) -> None:
+        meta["steps"] = step
+        meta["seconds"] = round(meta["seconds"] + time.perf_counter() - checkpoint.since, 3)
+        checkpoint.since = time.perf_counter()
+        if validation is not None:
+            meta["validation"] = validation
+        save_checkpoint(out, spec.name, config, model, meta, config_name=meta["config_name"], optimizer=optimizer)
+
+    checkpoint.since = started
+    try:
+        while step < total:
+            epoch, offset = divmod(step, per_epoch)
+            dataset.set_epoch(epoch)
+            batches = _batches(len(dataset), options.batch_size, options.seed, epoch)[offset:]
+            loader = torch.utils.data.DataLoader(dataset, batch_sampler=batches, num_workers=0)
+            for batch in loader:
+                parts = _loss(model, spec, batch)
+                loss = parts["loss"]
+                optimizer.zero_grad(set_to_none=True)
+                if torch.isfinite(loss):
+                    loss.backward()
+                    norm = torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+                    if torch.isfinite(norm):
+                        optimizer.step()
+                    else:
+                        meta["skipped_steps"] += 1
+                else:
+                    meta["skipped_steps"] += 1
+                step += 1
+                value = float(loss.detach())
+                running = value if running is None or not math.isfinite(running) else 0.9 * running + 0.1 * value
+                bar.update(1)
+                bar.set_postfix(loss=f"{running:.4f}")
+                if step % 10 == 0 or step == total:
+                    meta["history"].append([step, round(running, 6)])
+                if options.val_every and step % options.val_every == 0 and step < total:
+                    meta.setdefault("validation_history", []).append(
+                        [step, validate(model, spec, ds, val_scenes, spp, options.val_frames).get("relmse")]
+                    )
+                if options.checkpoint_every and step % options.checkpoint_every == 0 and step < total:
+                    checkpoint()
+                if step >= total:
+                    break
+    finally:
+        bar.close()
+    meta["last_loss"] = running
+    checkpoint(validate(model, spec, ds, val_scenes, spp, options.val_frames))
+    meta["checkpoint"] = str(out)
+    return meta
+
+
+def strip_for_shipping(src: str | Path, dst: str | Path) -> Path:
+    """Copy a training checkpoint without its optimiser state (and the loss history), for shipping."""
+    payload = load_checkpoint(src)
+    model = model_from_checkpoint(payload)
+    meta = {k: v for k, v in payload["meta"].items() if k != "history"}
+    return save_checkpoint(dst, payload["model"], payload["config"], model, meta, config_name=payload.get("config_name"))
+
+
+def options_dict(options: TrainOptions) -> dict:
+    return asdict(options)
