@@ -29,7 +29,7 @@ def test_pareto_front_marks_exactly_the_undominated_points():
 
 def test_equivalent_spp_and_time_ratio_follow_the_noisy_curve():
     points = _curve() + [analysis.Point("den", 4, 0.05, 0.5 / 100)]  # the error of 100-spp rendering
-    fit = analysis.fit_noisy(points, 0.01, "relmse")
+    fit = analysis.fit_noisy(points, [(s, 0.01 * s) for s in (1, 4, 16)], "relmse")
     assert fit.slope == pytest.approx(-1.0) and not fit.assumed_slope
     assert fit.spp_for(0.005) == pytest.approx(100.0)
     at = analysis.AccuracyTime("relmse", points, fit, reference_seconds=10.24, reference_spp=1024, hidden=[])
@@ -42,7 +42,7 @@ def test_equivalent_spp_and_time_ratio_follow_the_noisy_curve():
 
 def test_readings_say_when_rendering_is_cheaper_or_the_input_is_not_improved():
     points = _curve() + [analysis.Point("slow", 1, 0.5, 0.5 / 8), analysis.Point("worse", 4, 0.05, 0.2)]
-    fit = analysis.fit_noisy(points, 0.01, "relmse")
+    fit = analysis.fit_noisy(points, [(s, 0.01 * s) for s in (1, 4, 16)], "relmse")
     texts = analysis.readings(analysis.AccuracyTime("relmse", points, fit, None, 256, []))
     slow = next(t for t in texts if t.startswith("slow"))
     assert "8-spp rendering" in slow and "(0.5 s vs 0.08 s per frame)" in slow  # 8 spp take 0.08 s
@@ -52,10 +52,10 @@ def test_readings_say_when_rendering_is_cheaper_or_the_input_is_not_improved():
 
 
 def test_single_spp_assumes_the_monte_carlo_slope_and_a_flat_curve_gives_no_fit():
-    fit = analysis.fit_noisy(_curve(spps=(4,)), 0.01, "relmse")
+    fit = analysis.fit_noisy(_curve(spps=(4,)), [(4, 0.04)], "relmse")
     assert fit.assumed_slope and fit.slope == -1.0 and fit.spp_for(0.5 / 32) == pytest.approx(32.0)
     flat = [analysis.Point(NOISY, s, s * 0.01, 0.1) for s in (1, 4)]
-    assert analysis.fit_noisy(flat, 0.01, "relmse") is None
+    assert analysis.fit_noisy(flat, [(1, 0.01), (4, 0.04)], "relmse") is None
     assert "does not fall" in analysis.readings(analysis.AccuracyTime("relmse", flat, None, None, None, []))[0]
 
 
@@ -96,3 +96,13 @@ def test_png_of_hdr_and_black_images_is_valid_and_sized():
     assert image.size == (21, 15)
     pixels = np.asarray(image)
     assert pixels[0, 0].tolist() == [0, 0, 0] and pixels[-1, -1].min() >= 254
+
+
+def test_render_time_line_keeps_the_fixed_cost_out_of_the_per_sample_cost():
+    # 0.9 s per frame whatever the spp, plus 0.02 s per sample: 1, 4 and 256 spp measured
+    offset, per_spp = analysis.fit_render_time([(1, 0.92), (4, 0.98), (256, 6.02)])
+    assert offset == pytest.approx(0.9) and per_spp == pytest.approx(0.02)
+    points = _curve(spps=(1, 4)) + [analysis.Point("den", 4, 1.2, 0.5 / 100)]
+    fit = analysis.fit_noisy(points, [(1, 0.92), (4, 0.98), (256, 6.02)], "relmse")
+    assert fit.seconds_at(100) == pytest.approx(2.9)  # not 100 × 0.92
+    assert analysis.fit_render_time([(4, 0.4)]) == (0.0, pytest.approx(0.1))

@@ -14,8 +14,9 @@ Notes
   log(error) against log(spp) over the measured input spp gives, for a denoiser's error e, the spp
   that rendering alone would need (extrapolated beyond the largest measured spp; with one spp
   measured the slope is assumed to be −1, the Monte Carlo rate for relMSE, and −0.5 for FLIP,
-  a root-mean-like error). The time of that rendering is spp × the measured render seconds per
-  sample. Beyond the reference's own spp the comparison says more about the reference's noise
+  a root-mean-like error). The time of that rendering comes from a line fitted to the measured
+  render seconds against spp (noisy inputs and the reference): offset + seconds per spp × spp
+  (:func:`fit_render_time`), since part of a frame's render time does not grow with spp. Beyond the reference's own spp the comparison says more about the reference's noise
   than about the denoiser: the reading says so.
 * **The reference** has zero error against itself, which a log axis cannot show: it appears as a
   vertical line at its render time, not as a point.
@@ -156,13 +157,17 @@ class Point:
 
 @dataclass
 class NoisyFit:
-    """log(error) = intercept + slope · log(spp), and the render seconds of one sample per pixel."""
+    """log(error) = intercept + slope · log(spp); render seconds = time_offset + seconds_per_spp · spp."""
 
     intercept: float
     slope: float
     seconds_per_spp: float
     measured_spp: list[int]
     assumed_slope: bool
+    time_offset: float = 0.0
+
+    def seconds_at(self, spp: float) -> float:
+        return self.time_offset + self.seconds_per_spp * spp
 
     def spp_for(self, error: float) -> float:
         return math.exp((math.log(error) - self.intercept) / self.slope)
@@ -190,9 +195,32 @@ def pareto_front(points: list[Point]) -> None:
         )
 
 
-def fit_noisy(points: list[Point], seconds_per_spp: float | None, metric: str) -> NoisyFit | None:
+def fit_render_time(render_times: list[tuple[float, float]]) -> tuple[float, float] | None:
+    """(offset, seconds per spp) of render seconds against spp: a line through the measured (spp, seconds).
+
+    A frame's render time has a part that does not grow with spp (scene set-up, features, writing);
+    a pure proportion would charge it once per sample and make "render more samples" look far dearer
+    than it is. With one spp measured the time is taken as proportional. Offset is kept ≥ 0.
+    """
+    pairs = [(float(s), float(t)) for s, t in render_times if t is not None and t > 0 and s > 0]
+    if not pairs:
+        return None
+    spp = np.array([p[0] for p in pairs])
+    seconds = np.array([p[1] for p in pairs])
+    if np.ptp(spp) > 0:
+        slope, offset = np.polyfit(spp, seconds, 1)
+        if slope > 0 and offset >= 0:
+            return float(offset), float(slope)
+        if slope > 0:  # negative offset: refit through the origin
+            return 0.0, float(np.sum(spp * seconds) / np.sum(spp * spp))
+    return 0.0, float(np.mean(seconds / spp))
+
+
+def fit_noisy(points: list[Point], render_times: list[tuple[float, float]], metric: str) -> NoisyFit | None:
+    """The noisy input's error against spp, and render time against spp (:func:`fit_render_time`)."""
     noisy = [p for p in points if p.denoiser == NOISY and p.error > 0]
-    if not noisy or not seconds_per_spp:
+    timing = fit_render_time(render_times)
+    if not noisy or timing is None:
         return None
     log_spp = np.log([p.spp for p in noisy])
     log_err = np.log([p.error for p in noisy])
@@ -204,7 +232,7 @@ def fit_noisy(points: list[Point], seconds_per_spp: float | None, metric: str) -
     else:
         slope, assumed = DEFAULT_SLOPE.get(metric, -1.0), True
         intercept = float(np.mean(log_err - slope * log_spp))
-    return NoisyFit(float(intercept), float(slope), float(seconds_per_spp), sorted(p.spp for p in noisy), assumed)
+    return NoisyFit(float(intercept), float(slope), timing[1], sorted(p.spp for p in noisy), assumed, timing[0])
 
 
 def accuracy_time(data: RunData, summary: list[SummaryRow], metric: str, reference: dict) -> AccuracyTime:
@@ -219,8 +247,10 @@ def accuracy_time(data: RunData, summary: list[SummaryRow], metric: str, referen
         points.append(Point(row.denoiser, row.spp, row.total_seconds, cell.mean))
     pareto_front(points)
     noisy_frames = [f for f in data.frames if f["denoiser"] == NOISY and f["render_seconds"]]
-    per_spp = _finite(f["render_seconds"] / f["spp"] for f in noisy_frames)
-    fit = fit_noisy(points, float(np.mean(per_spp)) if per_spp else None, metric)
+    render_times = [(f["spp"], f["render_seconds"]) for f in noisy_frames]
+    if reference.get("seconds") and reference.get("spp"):
+        render_times.append((reference["spp"], reference["seconds"]))  # the reference is a render time too
+    fit = fit_noisy(points, render_times, metric)
     return AccuracyTime(metric, points, fit, reference.get("seconds"), reference.get("spp"), hidden)
 
 
@@ -245,7 +275,7 @@ def readings(at: AccuracyTime) -> list[str]:
             best.setdefault(p.denoiser, (-math.inf, text))
             continue
         spp_eq = fit.spp_for(p.error)
-        seconds_eq = spp_eq * fit.seconds_per_spp
+        seconds_eq = fit.seconds_at(spp_eq)
         ratio = p.seconds / seconds_eq
         notes = []
         if spp_eq > fit.measured_spp[-1]:

@@ -60,9 +60,10 @@ def _accuracy_axis(ax, at: AccuracyTime, palette: dict[str, str]) -> None:
         for p in noisy:
             ax.annotate(f"{p.spp}", (p.seconds, p.error), textcoords="offset points", xytext=(4, 4), fontsize=7, color=NOISY_COLOR)
     if at.fit is not None and noisy:
-        end = at.reference_seconds or noisy[-1].seconds * 16
-        xs = np.geomspace(noisy[-1].seconds, max(end, noisy[-1].seconds * 1.01), 20)
-        ys = [at.fit.error_at(x / at.fit.seconds_per_spp) for x in xs]
+        # from the largest measured spp to the reference's (or 16× further), along the fitted time line
+        spps = np.geomspace(noisy[-1].spp, max(at.reference_spp or noisy[-1].spp * 16, noisy[-1].spp * 1.01), 20)
+        xs = [at.fit.seconds_at(s) for s in spps]
+        ys = [at.fit.error_at(s) for s in spps]
         ax.plot(xs, ys, "--", color=NOISY_COLOR, lw=1, label="noisy, extrapolated", zorder=2)
     labels = list(dict.fromkeys(p.denoiser for p in at.points if p.denoiser != NOISY))
     for label in labels:
