@@ -1,0 +1,227 @@
+"""DPCN, KPCN and the recurrent autoencoder: kernels, recurrence, sizes, stability, losses, checkpoints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from denoisebench.models import pcn
+from denoisebench.models.catalog import build_model
+from denoisebench.models.checkpoint import CheckpointError, load_checkpoint, model_from_checkpoint, save_checkpoint
+from denoisebench.models.losses import frame_weights, laplacian_of_gaussian, pcn_loss, rae_sequence_loss, relmse
+
+MODELS = ("dpcn", "kpcn", "rae")
+torch.set_num_threads(1)
+
+
+def batch(n=2, h=16, w=16, seed=0, scale=1.0):
+    g = torch.Generator().manual_seed(seed)
+    color = scale * torch.rand(n, 3, h, w, generator=g)
+    diffuse = 0.7 * color
+    return {
+        "color": color,
+        "color_var": 0.01 * torch.rand(n, 3, h, w, generator=g),
+        "diffuse": diffuse,
+        "specular": color - diffuse,
+        "albedo": torch.rand(n, 3, h, w, generator=g),
+        "normal": torch.nn.functional.normalize(torch.randn(n, 3, h, w, generator=g), dim=1),
+        "depth": 1.0 + torch.rand(n, 1, h, w, generator=g),
+        "roughness": torch.rand(n, 1, h, w, generator=g),
+        "reference": color.clone(),
+        "reference_diffuse": diffuse.clone(),
+        "reference_specular": (color - diffuse).clone(),
+    }
+
+
+def model(name, seed=0):
+    torch.manual_seed(seed)
+    return build_model(name, "small")
+
+
+def loss_of(name, net, b):
+    if name == "rae":
+        net.reset()
+        preds = [net(b)["color"], net(b)["color"]]
+        net.reset()
+        return rae_sequence_loss(preds, [b["reference"], b["reference"]])["loss"]
+    return pcn_loss(net(b), b)["loss"]
+
+
+# ------------------------------------------------------------------------------------------ KPCN
+
+
+def test_kpcn_kernels_are_non_negative_and_sum_to_one():
+    out = model("kpcn")(batch(h=13, w=11))
+    kernels = out["kernels"]
+    assert kernels.shape == (2, 2, 441, 13, 11)
+    assert float(kernels.detach().min()) >= 0.0
+    torch.testing.assert_close(kernels.detach().sum(dim=2), torch.ones(2, 2, 13, 11), atol=1e-5, rtol=0)
+
+
+def test_softmax_kernels_never_overflow():
+    logits = torch.tensor([1e30, -1e30, float("inf"), float("-inf"), float("nan"), 88.0, 1e4, 0.0])
+    logits = logits.view(1, 8, 1, 1).repeat(1, 1, 2, 2)
+    kernels = pcn.softmax_kernels(logits)
+    assert torch.isfinite(kernels).all() and float(kernels.min()) >= 0.0
+    torch.testing.assert_close(kernels.sum(dim=1), torch.ones(1, 2, 2))
+    # And end to end on inputs spanning 1e-6..1e6 (and a firefly far beyond).
+    b = batch(h=9, w=9, scale=1e6)
+    b["color"][0, :, 4, 4] = 1e30
+    out = model("kpcn")(b)
+    assert torch.isfinite(out["kernels"]).all() and torch.isfinite(out["color"]).all()
+
+
+def test_apply_kernels_matches_a_direct_loop_and_bands_agree(monkeypatch):
+    rng = np.random.default_rng(3)
+    noisy = rng.random((1, 2, 7, 6)).astype(np.float32)
+    weights = rng.random((1, 9, 7, 6)).astype(np.float32)
+    expected = np.zeros_like(noisy)
+    padded = np.pad(noisy, ((0, 0), (0, 0), (1, 1), (1, 1)), mode="edge")  # numpy peer of replicate padding
+    for y in range(7):
+        for x in range(6):
+            window = padded[0, :, y : y + 3, x : x + 3].reshape(2, 9)
+            expected[0, :, y, x] = window @ weights[0, :, y, x]
+    got = pcn.apply_kernels(torch.from_numpy(noisy), torch.from_numpy(weights), 3).numpy()
+    np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6)
+    monkeypatch.setattr(pcn, "UNFOLD_BYTES", 1)  # one row per band
+    banded = pcn.apply_kernels(torch.from_numpy(noisy), torch.from_numpy(weights), 3).numpy()
+    np.testing.assert_allclose(banded, got, rtol=1e-6, atol=1e-7)
+
+
+# ------------------------------------------------------------------------------------------ RAE
+
+
+def test_rae_output_depends_on_previous_frame_until_reset():
+    net = model("rae").eval()
+    first, second = batch(n=1, seed=1), batch(n=1, seed=2)
+    with torch.no_grad():
+        fresh = net(second)["color"]
+        net(first)
+        after_first = net(second)["color"]
+        net.reset()
+        after_reset = net(second)["color"]
+    assert float((after_first - fresh).abs().max()) > 1e-6
+    assert torch.equal(after_reset, fresh)
+
+
+# ------------------------------------------------------------------------------------------ sizes, stability
+
+
+@pytest.mark.parametrize("name", MODELS)
+@pytest.mark.parametrize("size", [(1, 1), (3, 5), (17, 23)])
+def test_any_image_size(name, size):
+    net = model(name).eval()
+    with torch.no_grad():
+        out = net(batch(n=1, h=size[0], w=size[1]))["color"]
+    assert out.shape == (1, 3, *size) and torch.isfinite(out).all()
+
+
+def hard_batches():
+    fire = batch(seed=4)
+    fire["color"][:, :, 3, 5] = 1e6
+    fire["diffuse"][:, :, 3, 5] = 1e6
+    zero_albedo = batch(seed=5)
+    zero_albedo["albedo"] = torch.zeros_like(zero_albedo["albedo"])
+    black = {name: torch.zeros_like(value) for name, value in batch(seed=6).items()}
+    nan = batch(seed=7)
+    nan["color"][:, 0, 2, 2] = float("nan")
+    nan["normal"][:, 1, 4, 4] = float("inf")
+    return {"fireflies": fire, "zero_albedo": zero_albedo, "black": black, "nan_inf": nan}
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_loss_and_gradients_finite_on_hard_inputs(name):
+    net = model(name)
+    for case, b in hard_batches().items():
+        net.zero_grad()
+        loss = loss_of(name, net, b)
+        assert torch.isfinite(loss), (name, case)
+        loss.backward()
+        for param in net.parameters():
+            assert torch.isfinite(param.grad).all(), (name, case)
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_a_few_steps_lower_the_loss_on_a_tiny_batch(name):
+    net = model(name)
+    b = batch(n=2, h=16, w=16, seed=8)
+    # A denoising task: a smooth reference, the noisy colour is it times mean-one noise.
+    y, x = torch.meshgrid(torch.arange(16.0), torch.arange(16.0), indexing="ij")
+    ref = (0.5 + 0.3 * torch.sin(0.4 * x) * torch.cos(0.3 * y)).expand(2, 3, 16, 16).contiguous()
+    b.update(reference=ref, reference_diffuse=ref, reference_specular=torch.zeros_like(ref), albedo=torch.ones_like(ref))
+    b.update(color=ref * (0.5 + b["color"]), specular=torch.zeros_like(ref))
+    b["diffuse"] = b["color"]
+    optimizer = torch.optim.Adam(net.parameters(), lr={"dpcn": 5e-3, "kpcn": 5e-3, "rae": 3e-3}[name])
+    losses = []
+    for _ in range(5):
+        optimizer.zero_grad()
+        loss = loss_of(name, net, b)
+        loss.backward()
+        optimizer.step()
+        losses.append(float(loss))
+    with torch.no_grad():
+        final = float(loss_of(name, net, b))
+    assert final < 0.95 * losses[0], (losses, final)
+
+
+# ------------------------------------------------------------------------------------------ losses
+
+
+def test_frame_weights_rise_and_sum_to_one():
+    weights = frame_weights(7)
+    assert torch.all(weights[1:] > weights[:-1])
+    assert float(weights.sum()) == pytest.approx(1.0)
+    assert float(weights[0] / weights[-1]) < 0.1
+
+
+def test_laplacian_of_gaussian_matches_the_metric_kernel():
+    from denoisebench.metrics.gradient import laplacian_of_gaussian as metric_log
+
+    image = np.random.default_rng(1).random((40, 40, 3)).astype(np.float32)
+    ours = laplacian_of_gaussian(torch.from_numpy(image).permute(2, 0, 1)[None])[0].permute(1, 2, 0).numpy()
+    theirs = metric_log(image)
+    # Away from the border, where the two paddings differ, the responses agree.
+    np.testing.assert_allclose(ours[8:-8, 8:-8], theirs[8:-8, 8:-8], rtol=1e-4, atol=1e-5)
+
+
+def test_relmse_matches_the_metric():
+    from denoisebench.metrics.spatial import relmse as metric_relmse
+
+    rng = np.random.default_rng(2)
+    pred, ref = rng.random((8, 8, 3)).astype(np.float32) * 5, rng.random((8, 8, 3)).astype(np.float32)
+    ours = relmse(torch.from_numpy(pred), torch.from_numpy(ref))
+    assert ours == pytest.approx(metric_relmse(pred, ref), rel=1e-6)
+
+
+# ------------------------------------------------------------------------------------------ checkpoints
+
+
+@pytest.mark.parametrize("name", MODELS)
+def test_checkpoint_round_trip_gives_identical_outputs(name, tmp_path):
+    net = model(name, seed=11).eval()
+    b = batch(n=1, h=12, w=12, seed=9)
+    path = save_checkpoint(tmp_path / "m.pt", name, {**pcn.CONFIGS["small"]} if name != "rae" else
+                           {"levels": [12, 18, 24, 32], "bottleneck": 40, "demodulate": False}, net, {"steps": 3})
+    payload = load_checkpoint(path, expect_model=name)
+    assert payload["meta"]["steps"] == 3
+    again = model_from_checkpoint(payload).eval()
+    with torch.no_grad():
+        assert torch.equal(net(b)["color"], again(b)["color"])
+
+
+def test_checkpoints_load_safely(tmp_path):
+    class Evil:
+        def __reduce__(self):
+            return (print, ("pwned",))
+
+    torch.save({"format": "denoisebench-checkpoint", "model": "kpcn", "x": Evil()}, tmp_path / "evil.pt")
+    with pytest.raises(CheckpointError, match="not a loadable checkpoint"):
+        load_checkpoint(tmp_path / "evil.pt")
+    (tmp_path / "junk.pt").write_bytes(b"not a zip")
+    with pytest.raises(CheckpointError):
+        load_checkpoint(tmp_path / "junk.pt")
+    net = model("dpcn")
+    save_checkpoint(tmp_path / "d.pt", "dpcn", pcn.CONFIGS["small"], net, {})
+    with pytest.raises(CheckpointError, match="not 'kpcn'"):
+        load_checkpoint(tmp_path / "d.pt", expect_model="kpcn")
