@@ -8,7 +8,7 @@ feature distances normalised by their noise)::
             · Π_k exp(-|f_k,p - f_k,q|² / 2σ_k,eff²)         σ_k,eff² = (σ_k·s_k)² + 2·median(Var f_k)
 
 * ``V̄`` is the per-pixel variance of the mean colour (``color_var``, averaged over channels; when
-  the frame has none, or it is all zero as at 1 spp, the colour's 3×3 spatial variance), median
+  the frame has none, or it is all zero as at 1 spp, a robust local spread: (1.4826·MAD)² over 5×5), median
   filtered 3×3 (so that a firefly's own variance does not open the filter to it) and box filtered
   5×5. Dividing the colour by the local noise standard deviation makes σ_c a count of noise
   standard deviations (a variance-stabilised colour distance; exact where V̄ is locally constant).
@@ -150,10 +150,13 @@ def _noise_variance(color: np.ndarray, variance: np.ndarray | None) -> np.ndarra
         var = np.mean(np.asarray(variance, np.float32), axis=-1)
         if not np.any(var > 0):
             var = None
-    if var is None:  # no usable variance buffer: the colour's local spatial variance
-        mean = ndimage.uniform_filter(color, size=(3, 3, 1), mode="nearest")
-        mean_sq = ndimage.uniform_filter(color * color, size=(3, 3, 1), mode="nearest")
-        var = np.mean(np.maximum(mean_sq - mean * mean, 0.0), axis=-1)
+    if var is None:
+        # no usable variance buffer: a robust local spread of the colour, (1.4826 · the 5×5 median
+        # of |c − median3(c)|)². A plain local variance would be huge all around a firefly and
+        # open the filter to it.
+        deviation = np.abs(color - ndimage.median_filter(color, size=(3, 3, 1), mode="nearest"))
+        sigma = 1.4826 * ndimage.median_filter(deviation, size=(5, 5, 1), mode="nearest")
+        var = np.mean(sigma * sigma, axis=-1)
     var = ndimage.median_filter(np.maximum(var, 0.0), size=3, mode="nearest")
     return ndimage.uniform_filter(var, size=5, mode="nearest")
 
@@ -322,6 +325,9 @@ class CrossBilateral(DenoiserBase):
         if guide_dims != "preset":
             config["guide_dims"] = guide_dims
         names = tuple(features) if features is not None else config["features"]
+        unknown = sorted(set(names) - set(DEFAULT_FEATURE_SIGMAS))
+        if unknown:
+            raise ValueError(f"unknown feature(s) {', '.join(unknown)}; known: {', '.join(DEFAULT_FEATURE_SIGMAS)}")
         sigmas = {name: DEFAULT_FEATURE_SIGMAS[name] for name in names if name in DEFAULT_FEATURE_SIGMAS}
         sigmas.update(feature_sigmas or {})
         unknown = sorted(set(sigmas) - set(DEFAULT_FEATURE_SIGMAS))

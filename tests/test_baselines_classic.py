@@ -1,0 +1,233 @@
+"""Classical baselines against peers and invariants: cross-bilateral, RPF, non-local means, OIDN."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from denoisebench.baselines import cross_bilateral as cb
+from denoisebench.baselines.identity import Identity
+from denoisebench.baselines.nlmeans import NLMeans
+from denoisebench.baselines.oidn import OIDN, clamp_isolated
+from denoisebench.baselines.rpf import RPFSettings, _Histograms, rpf_filter, scaled_boxes
+from denoisebench.dataset.frame import Frame
+from denoisebench.denoisers.registry import load_denoiser
+from denoisebench.denoisers.runner import run_frame
+from denoisebench.denoisers.synthetic import synthetic_frame
+from denoisebench.metrics.spatial import relmse
+
+
+@pytest.fixture(scope="module")
+def frame():
+    return synthetic_frame("textured", 40, 36, 4, seed=7)
+
+
+def test_identity_is_a_float32_copy(frame):
+    out = Identity().denoise(frame)
+    assert out.dtype == np.float32 and out is not frame.color
+    np.testing.assert_array_equal(out, frame.color)
+
+
+# ----------------------------------------------------------------------------------- cross-bilateral
+
+
+@pytest.mark.parametrize("separable", [False, True])
+def test_cross_bilateral_without_range_terms_is_scipy_normalised_gaussian(separable):
+    rng = np.random.default_rng(1)
+    color = rng.random((13, 17, 3)).astype(np.float32)
+    radius, sigma = 3, 1.5
+    out = cb.cross_bilateral_filter(
+        color, {}, radius=radius, sigma_spatial=sigma, sigma_color=1e12, feature_sigmas={}, separable=separable,
+        firefly_support=None,
+    )
+    taps = np.arange(-radius, radius + 1)
+    if separable:
+        # one horizontal then one vertical normalised pass
+        kernel = np.exp(-(taps**2) / (2 * sigma**2))
+        ones = np.ones(color.shape[:2])
+        step = ndimage.correlate1d(color, kernel, axis=1, mode="constant") / ndimage.correlate1d(ones, kernel, axis=1, mode="constant")[..., None]
+        peer = ndimage.correlate1d(step, kernel, axis=0, mode="constant") / ndimage.correlate1d(ones, kernel, axis=0, mode="constant")[..., None]
+    else:
+        yy, xx = np.meshgrid(taps, taps, indexing="ij")
+        kernel = np.exp(-(yy**2 + xx**2) / (2 * sigma**2))
+        ones = np.ones(color.shape[:2])
+        norm = ndimage.correlate(ones, kernel, mode="constant")
+        peer = np.stack([ndimage.correlate(color[..., c], kernel, mode="constant") for c in range(3)], -1) / norm[..., None]
+    np.testing.assert_allclose(out, peer, rtol=2e-5, atol=1e-6)
+
+
+def test_cross_bilateral_matches_brute_force_weights():
+    """Full window: every output pixel is Σ w c / Σ w with w from the guide, computed pixel by pixel."""
+    rng = np.random.default_rng(2)
+    color = rng.gamma(0.8, 1.0, (9, 11, 3)).astype(np.float32)
+    albedo = np.where(np.arange(11)[None, :, None] < 5, 0.2, 0.8) * np.ones((9, 11, 3), np.float32)
+    sigmas = {"albedo": 0.1}
+    radius, sigma_s = 2, 1.7
+    guide = cb.build_guide(color, {"albedo": albedo}, sigma_color=5.0, feature_sigmas=sigmas)
+    out = cb.cross_bilateral_filter(
+        color, {"albedo": albedo}, radius=radius, sigma_spatial=sigma_s, sigma_color=5.0, feature_sigmas=sigmas,
+        separable=False, firefly_support=None,
+    )
+    expected = np.zeros_like(color, dtype=np.float64)
+    for y in range(9):
+        for x in range(11):
+            num, den = np.zeros(3), 0.0
+            for qy in range(max(0, y - radius), min(9, y + radius + 1)):
+                for qx in range(max(0, x - radius), min(11, x + radius + 1)):
+                    dist = ((qy - y) ** 2 + (qx - x) ** 2) / (2 * sigma_s**2)
+                    w = np.exp(-dist - np.sum((guide[:, y, x].astype(np.float64) - guide[:, qy, qx]) ** 2))
+                    num += w * color[qy, qx]
+                    den += w
+            expected[y, x] = num / den
+    np.testing.assert_allclose(out, expected, rtol=1e-4, atol=1e-6)
+
+
+def test_cross_bilateral_does_not_mix_across_a_feature_edge():
+    rng = np.random.default_rng(3)
+    shape = (24, 24, 3)
+    left = np.arange(24)[None, :, None] < 12
+    clean = np.where(left, 0.2, 2.0) * np.ones(shape)
+    color = (clean * rng.gamma(2.0, 0.5, shape)).astype(np.float32)
+    albedo = np.where(left, 0.1, 0.9) * np.ones(shape, np.float32)
+    frame = Frame(buffers={"color": color, "albedo": albedo})
+    out = load_denoiser("cross_bilateral").denoise(frame)
+    # next to the edge, each side keeps its own level (a plain blur would pull 0.2 towards 1.1)
+    assert abs(out[:, 10:12].mean() - 0.2) < 0.05 and abs(out[:, 12:14].mean() - 2.0) < 0.5
+    assert relmse(out, clean.astype(np.float32)) < 0.5 * relmse(color, clean.astype(np.float32))
+
+
+def test_cross_bilateral_removes_an_isolated_firefly_only_when_asked():
+    color = np.full((15, 15, 3), 0.5, np.float32)
+    color[7, 7] = 1e5
+    frame = Frame(buffers={"color": color})
+    kept = load_denoiser("cross_bilateral", firefly_support=None).denoise(frame)
+    removed = load_denoiser("cross_bilateral").denoise(frame)
+    assert kept[7, 7, 0] > 1e4  # a symmetric weight cannot pull the firefly in
+    np.testing.assert_allclose(removed, 0.5, rtol=1e-5)
+
+
+@pytest.mark.parametrize("preset", ["fast", "balanced", "high"])
+def test_cross_bilateral_presets_lower_relmse(frame, preset):
+    out = cb.CrossBilateral(preset).denoise(frame)
+    assert relmse(out, frame.reference) < 0.5 * relmse(frame.color, frame.reference)
+
+
+def test_cross_bilateral_rejects_bad_options():
+    with pytest.raises(ValueError, match="unknown feature"):
+        cb.CrossBilateral(features=["curvature"])
+    with pytest.raises(ValueError):
+        cb.CrossBilateral(radius=-1)
+
+
+# ----------------------------------------------------------------------------------- RPF
+
+
+def test_mutual_information_matches_a_histogram2d_peer():
+    rng = np.random.default_rng(4)
+    n, m, bins = 3, 200, 6
+    x = rng.integers(0, bins, (n, m))
+    y = np.where(rng.random((n, m)) < 0.7, x, rng.integers(0, bins, (n, m)))  # dependent on x
+    z = rng.integers(0, bins, (n, m))  # independent
+    q = np.stack([x, y, z], axis=-1)
+    mask = np.ones((n, m), bool)
+    mask[1, :50] = False  # clustered-out samples do not count
+    hist = _Histograms(q, mask, bins)
+    got = hist.mutual_information(np.array([0, 0]), np.array([1, 2]))
+    for i in range(n):
+        keep = mask[i]
+        for row, other in enumerate((y, z)):
+            joint, _, _ = np.histogram2d(x[i, keep], other[i, keep], bins=bins, range=[[0, bins], [0, bins]])
+            p = joint / joint.sum()
+            pa, pb = p.sum(1), p.sum(0)
+            nz = p > 0
+            plug_in = np.sum(p[nz] * np.log(p[nz] / np.outer(pa, pb)[nz]))
+            k_ab, k_a, k_b = np.count_nonzero(p), np.count_nonzero(pa), np.count_nonzero(pb)
+            peer = max(plug_in + ((k_a - 1) + (k_b - 1) - (k_ab - 1)) / (2 * keep.sum()), 0.0)
+            assert got[row, i] == pytest.approx(peer, abs=1e-9)
+    assert np.all(got[0] > 0.3) and np.all(got[1] < 0.05)
+
+
+def test_rpf_output_is_a_convex_combination_and_deterministic(frame):
+    image, weights = rpf_filter(frame.samples)
+    again, _ = rpf_filter(frame.samples)
+    np.testing.assert_array_equal(image, again)
+    colors = frame.samples["color"]
+    assert image.dtype == np.float32 and image.shape == frame.color.shape
+    assert np.all(image >= colors.min(axis=(0, 1, 2)) - 1e-6) and np.all(image <= colors.max(axis=(0, 1, 2)) + 1e-4)
+    assert len(weights.beta) == len(weights.boxes) == len(scaled_boxes(frame.height, frame.width))
+    assert all(np.all((a >= 0) & (a <= 1)) for a in weights.alpha)
+    assert relmse(image, frame.reference) < 0.5 * relmse(frame.color, frame.reference)
+
+
+def test_rpf_constant_colour_stays_constant():
+    frame = synthetic_frame("shapes", 12, 10, 3, seed=8)
+    samples = dict(frame.samples)
+    samples["color"] = np.full_like(samples["color"], 0.37)
+    image, _ = rpf_filter(samples)
+    np.testing.assert_allclose(image, 0.37, rtol=1e-5)
+
+
+def test_rpf_feature_weights_drop_with_the_lens_on_synthetic_depth_of_field():
+    frame = synthetic_frame("depth_of_field", 32, 32, 4, seed=2)
+    decoupled = dict(frame.samples)
+    decoupled["lens"] = np.random.default_rng(1).random(frame.samples["lens"].shape).astype(np.float32)
+    _, coupled = rpf_filter(frame.samples)
+    _, reference = rpf_filter(decoupled)
+    spread = frame.samples["albedo"].std(axis=0).mean(axis=-1)
+    mask = spread > np.percentile(spread, 75)
+    for feature in ("position", "albedo"):
+        ours = np.mean([b[feature][mask].mean() for b in coupled.beta])
+        theirs = np.mean([b[feature][mask].mean() for b in reference.beta])
+        assert ours < 0.9 * theirs, feature
+
+
+def test_rpf_needs_samples_and_checks_options():
+    frame = synthetic_frame("shapes", 8, 8, 2, samples=False)
+    result = run_frame(load_denoiser("rpf"), frame)
+    assert not result.ok and "samples" in result.error
+    with pytest.raises(ValueError):
+        RPFSettings(bins=1)
+    with pytest.raises(TypeError):
+        load_denoiser("rpf").__class__(radius=3)
+
+
+@pytest.mark.parametrize("size, expected", [((512, 512), [55, 35, 17, 7]), ((64, 48), [29, 19, 9, 5]), ((3, 3), [3])])
+def test_scaled_boxes(size, expected):
+    assert scaled_boxes(*size) == expected
+
+
+# ----------------------------------------------------------------------------------- NL-means, OIDN
+
+
+def test_nlmeans_lowers_relmse_and_keeps_a_flat_image(frame):
+    out = NLMeans().denoise(frame)
+    assert relmse(out, frame.reference) < 0.6 * relmse(frame.color, frame.reference)
+    flat = Frame(buffers={"color": np.full((9, 9, 3), 0.25, np.float32)})
+    np.testing.assert_allclose(NLMeans().denoise(flat), 0.25, rtol=1e-6)
+
+
+def test_oidn_without_clamp_is_pyoidn_itself(frame):
+    import pyoidn
+
+    ours = OIDN("fast", firefly_factor=None).denoise(frame)
+    peer = pyoidn.denoise(
+        np.ascontiguousarray(np.maximum(frame.color, 0)),
+        np.ascontiguousarray(np.clip(frame.buffers["albedo"], 0, 1)),
+        np.ascontiguousarray(np.clip(frame.buffers["normal"], -1, 1)),
+        hdr=True,
+        quality="fast",
+    )
+    np.testing.assert_allclose(ours, np.maximum(peer, 0), rtol=1e-6, atol=1e-7)
+    assert relmse(ours, frame.reference) < 0.5 * relmse(frame.color, frame.reference)
+
+
+def test_clamp_isolated_caps_spikes_and_leaves_ramps():
+    image = np.full((5, 6, 3), 1.0, np.float32)
+    image[2, 3] = 1e6
+    clamped = clamp_isolated(image, 16.0)
+    assert clamped[2, 3, 0] == pytest.approx(16.0) and np.all(np.delete(clamped.reshape(-1, 3), 2 * 6 + 3, 0) == 1.0)
+    ramp = np.logspace(-6, 6, 32, dtype=np.float32)[None, :, None] * np.ones((4, 32, 3), np.float32)
+    np.testing.assert_array_equal(clamp_isolated(ramp, 16.0), ramp)
+    with pytest.raises(ValueError):
+        OIDN(firefly_factor=0.5)
