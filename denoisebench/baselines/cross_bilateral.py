@@ -103,6 +103,13 @@ def window_offsets(radius: int, sigma_spatial: float, separable: bool) -> list[l
 def joint_bilateral_pass(color: np.ndarray, guide: np.ndarray, offsets: Iterable[tuple[int, int, float]]) -> np.ndarray:
     """One filtering pass. ``color`` C×H×W, ``guide`` D×H×W (float32, already scaled so that the
     range weight is exp(-Σ_d (g_p,d - g_q,d)²)); ``offsets`` the half window. Returns C×H×W."""
+    num, den = _accumulate(color, guide, offsets)
+    num /= den
+    return num
+
+
+def _accumulate(color: np.ndarray, guide: np.ndarray, offsets: Iterable[tuple[int, int, float]]):
+    """(Σ_q w c_q over the window including the pixel itself (C×H×W), Σ_q w (H×W)); see above."""
     channels, height, width = color.shape
     depth = guide.shape[0]
     num = np.array(color, dtype=np.float32, copy=True)
@@ -139,8 +146,21 @@ def joint_bilateral_pass(color: np.ndarray, guide: np.ndarray, offsets: Iterable
             num[q] += t
             den[p[1:]] += w
             den[q[1:]] += w
-    num /= den
-    return num
+    return num, den
+
+
+def _neighbours3x3(array: np.ndarray) -> np.ndarray:
+    """9×H×W(…) stack of each pixel's 3×3 neighbourhood (edges replicated)."""
+    height, width = array.shape[:2]
+    pad = [(1, 1), (1, 1)] + [(0, 0)] * (array.ndim - 2)
+    padded = np.pad(array, pad, mode="edge")
+    return np.stack([padded[dy : dy + height, dx : dx + width] for dy in range(3) for dx in range(3)])
+
+
+def median3x3(array: np.ndarray) -> np.ndarray:
+    """3×3 median over the first two axes, edges replicated: ``scipy.ndimage.median_filter(size=3,
+    mode="nearest")`` per channel, ~5× faster here (one partition of a 9-stack)."""
+    return np.partition(_neighbours3x3(array), 4, axis=0)[4]
 
 
 def _noise_variance(color: np.ndarray, variance: np.ndarray | None) -> np.ndarray:
@@ -154,10 +174,10 @@ def _noise_variance(color: np.ndarray, variance: np.ndarray | None) -> np.ndarra
         # no usable variance buffer: a robust local spread of the colour, (1.4826 · the 5×5 median
         # of |c − median3(c)|)². A plain local variance would be huge all around a firefly and
         # open the filter to it.
-        deviation = np.abs(color - ndimage.median_filter(color, size=(3, 3, 1), mode="nearest"))
+        deviation = np.abs(color - median3x3(color))
         sigma = 1.4826 * ndimage.median_filter(deviation, size=(5, 5, 1), mode="nearest")
         var = np.mean(sigma * sigma, axis=-1)
-    var = ndimage.median_filter(np.maximum(var, 0.0), size=3, mode="nearest")
+    var = median3x3(np.maximum(var, 0.0))
     return ndimage.uniform_filter(var, size=5, mode="nearest")
 
 
@@ -187,10 +207,14 @@ def build_guide(
     color_variance: np.ndarray | None = None,
     feature_variances: Mapping[str, np.ndarray] | None = None,
     guide_dims: int | None = None,
+    noise: np.ndarray | None = None,
 ) -> np.ndarray:
-    """The scaled guide D×H×W: normalised colour (3) then the features (PCA-projected if asked)."""
+    """The scaled guide D×H×W: normalised colour (3) then the features (PCA-projected if asked).
+
+    ``noise`` is V̄ (H×W) when the caller has it already; otherwise it is estimated here."""
     color = np.asarray(color, np.float32)
-    noise = _noise_variance(color, color_variance)
+    if noise is None:
+        noise = _noise_variance(color, color_variance)
     eps = (0.01 * float(np.mean(color))) ** 2 + 1e-12
     # range weight exp(-(Δc̃)²/2) with c̃ = c / (σ_c sqrt(2 V̄ + ε)); the guide carries 1/sqrt(2)
     scale = 1.0 / (np.sqrt(2.0) * sigma_color * np.sqrt(2.0 * noise + eps))
@@ -224,16 +248,9 @@ def build_guide(
 def ring_support(guide: np.ndarray, sigma_spatial: float) -> np.ndarray:
     """H×W: Σ of the filter's weights from each pixel to its 8 neighbours (pixels outside take no part)."""
     _, height, width = guide.shape
-    support = np.zeros((height, width), np.float32)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            if dy == 0 and dx == 0:
-                continue
-            p = (slice(None), slice(max(0, -dy), height - max(0, dy)), slice(max(0, -dx), width - max(0, dx)))
-            q = (slice(None), slice(max(0, dy), height - max(0, -dy)), slice(max(0, dx), width - max(0, -dx)))
-            energy = np.square(guide[p] - guide[q]).sum(axis=0) + (dy * dy + dx * dx) / (2.0 * sigma_spatial**2)
-            support[p[1:]] += np.exp(-energy)
-    return support
+    (ring,) = window_offsets(1, sigma_spatial, separable=False)
+    _, den = _accumulate(np.zeros((0, height, width), np.float32), guide, ring)
+    return den - 1.0  # the pixel's own weight
 
 
 def suppress_unsupported(color: np.ndarray, guide: np.ndarray, sigma_spatial: float, threshold: float) -> tuple[np.ndarray, int]:
@@ -243,11 +260,21 @@ def suppress_unsupported(color: np.ndarray, guide: np.ndarray, sigma_spatial: fl
     ``threshold`` (nothing around it looks alike) and it is brighter than that median.
     """
     support = ring_support(guide, sigma_spatial)
-    median = ndimage.median_filter(color, size=(3, 3, 1), mode="nearest")
-    bad = (support < threshold) & (color.mean(axis=-1) > median.mean(axis=-1))
+    ys, xs = np.nonzero(support < threshold)
+    if ys.size == 0:
+        return color, 0
+    # the median only where it may be needed (few pixels): their 3×3 windows, edges replicated
+    height, width = color.shape[:2]
+    offsets = np.arange(-1, 2)
+    wy = np.clip(ys[:, None, None] + offsets[None, :, None], 0, height - 1)
+    wx = np.clip(xs[:, None, None] + offsets[None, None, :], 0, width - 1)
+    windows = color[wy, wx].reshape(ys.size, 9, color.shape[2])
+    median = np.partition(windows, 4, axis=1)[:, 4]
+    bad = color[ys, xs].mean(axis=-1) > median.mean(axis=-1)
     count = int(np.count_nonzero(bad))
     if count:
-        color = np.where(bad[..., None], median, color)
+        color = color.copy()
+        color[ys[bad], xs[bad]] = median[bad]
     return color, count
 
 
@@ -270,6 +297,9 @@ def cross_bilateral_filter(
     features = dict(features or {})
     sigmas = DEFAULT_FEATURE_SIGMAS if feature_sigmas is None else dict(feature_sigmas)
 
+    # V̄ from the variance buffer does not change when fireflies are replaced: estimate it once
+    noise = _noise_variance(color, color_variance) if color_variance is not None else None
+
     def guide_of(image: np.ndarray) -> np.ndarray:
         return build_guide(
             image,
@@ -279,6 +309,7 @@ def cross_bilateral_filter(
             color_variance=color_variance,
             feature_variances=feature_variances,
             guide_dims=guide_dims,
+            noise=noise,
         )
 
     guide = guide_of(color)
