@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
+import timeit
 from pathlib import Path
 
 import numpy as np
@@ -54,13 +54,9 @@ def seconds_in_denoise(name: str, frame, repeats: int) -> float:
 
 
 def best_of(fn, repeats: int) -> float:
+    """Minimum seconds of ``repeats`` calls after one warm-up call."""
     fn()
-    best = float("inf")
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
+    return min(timeit.repeat(fn, number=1, repeat=repeats))
 
 
 def main(argv=None) -> int:
