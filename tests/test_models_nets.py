@@ -159,7 +159,7 @@ def test_a_few_steps_lower_the_loss_on_a_tiny_batch(name):
         loss = loss_of(name, net, b)
         loss.backward()
         optimizer.step()
-        losses.append(float(loss))
+        losses.append(float(loss.detach()))
     with torch.no_grad():
         final = float(loss_of(name, net, b))
     assert final < 0.95 * losses[0], (losses, final)

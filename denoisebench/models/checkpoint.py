@@ -19,6 +19,7 @@ Notes
 
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
 
@@ -57,7 +58,9 @@ def save_checkpoint(
         "config": dict(config),
         "config_name": config_name,
         "state_dict": {k: v.detach().to(torch.float32).clone() for k, v in model.state_dict().items()},
-        "meta": dict(meta),
+        # Through JSON: only plain types survive, so weights_only=True can read it back (a
+        # TorchVersion or numpy scalar in meta would make the whole checkpoint unloadable).
+        "meta": json.loads(json.dumps(meta, default=str)),
     }
     if optimizer is not None:
         payload["optimizer"] = optimizer.state_dict()

@@ -6,7 +6,8 @@ Every model reads a dict of N×C×H×W float32 tensors keyed by buffer name (wha
 
 Transforms (Bako et al. 2017, section 4.1):
 
-* diffuse is demodulated by ``albedo + ALBEDO_EPS`` (ε = 0.00316, the paper's) and remodulated after;
+* diffuse is demodulated by ``albedo + ALBEDO_EPS`` (ε = 0.00316, the paper's) and remodulated after,
+  except where the albedo is below ALBEDO_MIN (emitters, background: see :func:`albedo_factor`);
 * specular is taken as ``log(1 + x)`` and mapped back with ``exp(x) − 1``;
 * each feature gets its x and y gradients, and each colour buffer its per-pixel variance, carried
   through the same transform by the delta method (Var f(X) ≈ f'(μ)² Var X).
@@ -28,6 +29,8 @@ import numpy as np
 import torch
 
 ALBEDO_EPS = 0.00316
+#: Below this mean albedo a pixel is an emitter, background or black material: not demodulated.
+ALBEDO_MIN = 0.01
 #: Largest radiance passed on; far above any real pixel, far below float32 overflow after the transforms.
 COLOR_MAX = 1e8
 #: log(1 + x) outputs are clamped to this before exp(): exp(30) ≈ 1e13 stays finite in float32.
@@ -119,11 +122,19 @@ def split_lobes(buffers: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.T
 
 
 def albedo_factor(buffers: dict[str, torch.Tensor], like: torch.Tensor) -> torch.Tensor:
-    """albedo + ε, the demodulation divisor (albedo 1 where the frame has none)."""
+    """albedo + ε, the demodulation divisor; 1 where the albedo is below ALBEDO_MIN or absent.
+
+    Emitters and background pixels have albedo 0 but carry their emission in ``diffuse``:
+    divided by ε a light of 20 becomes 6300, and any kernel weight that spills it onto a
+    neighbour (remodulated by that neighbour's albedo) paints a bright halo. Those pixels are
+    left undemodulated; so is a zero-albedo material, whose diffuse is 0 anyway.
+    """
     albedo = buffers.get("albedo")
     if albedo is None:
         return torch.ones_like(like)
-    return safe(albedo).clamp(0.0, 1.0) + ALBEDO_EPS
+    albedo = safe(albedo).clamp(0.0, 1.0)
+    dark = albedo.mean(dim=1, keepdim=True) < ALBEDO_MIN
+    return torch.where(dark, torch.ones_like(albedo), albedo + ALBEDO_EPS)
 
 
 def pcn_inputs(buffers: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:

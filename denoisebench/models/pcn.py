@@ -28,6 +28,8 @@ Notes
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import nn
 from torch.nn import functional as F
@@ -104,6 +106,14 @@ class PCN(nn.Module):
         out_channels = 3 if mode == "direct" else kernel_size * kernel_size
         self.diffuse = conv_stack(PCN_INPUT_CHANNELS, out_channels, layers, channels, kernel)
         self.specular = conv_stack(PCN_INPUT_CHANNELS, out_channels, layers, channels, kernel)
+        if mode == "kernel":
+            # Start near the identity: a centre-tap bias of log(size² − 1) gives the centre half the
+            # weight. A near-uniform 21×21 start would smear emitters over their neighbours, and
+            # the first hundreds of steps would go to unlearning that.
+            with torch.no_grad():
+                centre = (kernel_size * kernel_size) // 2
+                for branch in (self.diffuse, self.specular):
+                    branch[-1].bias[centre] += math.log(kernel_size * kernel_size - 1)
 
     def _branch(self, net: nn.Module, inputs: torch.Tensor, noisy: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
         out = net(inputs)

@@ -206,7 +206,7 @@ def train(options: TrainOptions) -> dict:
             "lr": options.lr,
             "buffers": list(buffers),
             "targets": list(targets),
-            "torch": torch.__version__,
+            "torch": str(torch.__version__),
         }
     )
     start_step, total = int(meta["steps"]), int(meta["steps"]) + int(options.steps)

@@ -1,0 +1,78 @@
+"""`denoisebench train`: checkpoints with metadata, exact resume, one-line errors."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+import torch
+
+from denoisebench.cli import main
+from denoisebench.dataset.reader import open_dataset
+from denoisebench.dataset.synthetic import make_synthetic_dataset
+from denoisebench.models.checkpoint import load_checkpoint
+
+SMALL = ["--batch-size", "2", "--crop", "16", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def data(tmp_path_factory):
+    # 5 scenes: 3 train, 1 val, 1 test (manifest.assign_splits).
+    return make_synthetic_dataset(tmp_path_factory.mktemp("syn") / "data", scenes=5, frames=3, height=20, width=20, spp=(2,))
+
+
+def train(*args):
+    return main(["train", *map(str, args), *SMALL])
+
+
+@pytest.mark.parametrize("model", ["kpcn", "rae"])
+def test_checkpoint_carries_metadata(model, data, tmp_path):
+    out = tmp_path / f"{model}.pt"
+    assert train("--model", model, "--data", data, "--steps", 3, "--out", out) == 0
+    payload = load_checkpoint(out, expect_model=model)  # weights_only=True inside
+    meta = payload["meta"]
+    assert payload["config"]["kernel_size" if model == "kpcn" else "levels"]
+    assert meta["steps"] == 3 and meta["dataset_hash"] == open_dataset(data).config_hash
+    assert meta["train_scenes"] == open_dataset(data).split("train")
+    val = meta["validation"]
+    assert val["scenes"] == open_dataset(data).split("val") and val["frames"] > 0
+    assert 0.0 < val["relmse"] < float("inf") and 0.0 < val["relmse_noisy"] < float("inf")
+    if model == "rae":
+        assert meta["sequence_length"] == 3  # the dataset's 3 frames cap the 7-frame default
+
+
+def test_resume_continues_exactly(data, tmp_path):
+    straight, split = tmp_path / "straight.pt", tmp_path / "split.pt"
+    assert train("--model", "dpcn", "--data", data, "--steps", 4, "--out", straight) == 0
+    assert train("--model", "dpcn", "--data", data, "--steps", 2, "--out", split) == 0
+    assert train("--model", "dpcn", "--data", data, "--steps", 2, "--resume", split, "--out", split) == 0
+    a, b = load_checkpoint(straight), load_checkpoint(split)
+    assert b["meta"]["steps"] == 4
+    for name, tensor in a["state_dict"].items():
+        assert torch.equal(tensor, b["state_dict"][name]), name
+
+
+def run_cli(*args):
+    return subprocess.run([sys.executable, "-m", "denoisebench.cli", *map(str, args)], capture_output=True, text=True, timeout=300)
+
+
+def test_bad_input_exits_2_with_one_line(data, tmp_path, capsys):
+    ckpt = tmp_path / "d.pt"
+    assert train("--model", "dpcn", "--data", data, "--steps", 1, "--out", ckpt) == 0
+    (tmp_path / "junk.pt").write_bytes(b"junk")
+    cases = [
+        (["--model", "kpcn", "--data", data, "--resume", ckpt, "--out", tmp_path / "k.pt"], "not 'kpcn'"),
+        (["--model", "dpcn", "--data", data, "--resume", tmp_path / "junk.pt", "--out", tmp_path / "k.pt"], "not a loadable"),
+        (["--model", "dpcn", "--data", data, "--spp", "64", "--out", tmp_path / "k.pt"], "not rendered"),
+    ]
+    capsys.readouterr()
+    for args, message in cases:
+        assert main(["train", *map(str, args), "--steps", "1", "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+        assert not (tmp_path / "k.pt").exists()
+    # And as a user runs it: a real process, no traceback.
+    result = run_cli("train", "--model", "kpcn", "--data", tmp_path / "nowhere", "--steps", 1)
+    assert result.returncode == 2 and "not a dataset folder" in result.stderr
+    assert "Traceback" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
