@@ -28,10 +28,12 @@ pixel P:
 
    with σ_p = b/4 pixels, σ_c² = σ_c0² / (1 − W^r_c)² and σ_f² = σ_f0² / (1 − W^r_c)² (W^r_c the
    mean over colour channels). The paper uses one σ² = 0.02 for both; here the colour gets its own,
-   wider σ_c0² = 2 (``sigma2_color``; σ_f0² = 0.01, ``sigma2_feature``), because our colour's
+   wider σ_c0² = 0.5 (``sigma2_color``; σ_f0² = 0.01, ``sigma2_feature``), because our colour's
    α stays larger than the paper's (see the first note) and a tight colour term keeps the noise.
-   On synthetic 48 px, 4 spp frames this takes relMSE 0.55 → 0.12 on depth of field (cross-bilateral:
-   0.17) and 0.39 → 0.11 on plain shapes (cross-bilateral: 0.04).
+   Chosen on rendered 32 px, 4 spp frames, where relMSE goes (noisy → RPF): cornell 0.140 → 0.053,
+   depth_of_field 0.614 → 0.056, dim_room 3.48 → 0.106, texture_checker 0.171 → 0.097,
+   glossy_fireflies 0.132 → 0.104, thin_geometry 0.074 → 0.034 (with σ_c0² = 2 cornell got worse
+   than its input, 0.21: noisy ceiling pixels pulled in the light's samples).
    Sample i's new colour is Σ_j w_ij c_j / Σ_j w_ij; the next pass filters these colours; the pixel
    is the mean of its samples' colours. Every output is a convex combination of input samples:
    finite and non-negative.
@@ -306,7 +308,7 @@ class RPFSettings:
     boxes: tuple[int, ...] | None = None  # None: scaled_boxes() of the image
     max_samples: int = 96
     bins: int = 6
-    sigma2_color: float = 2.0
+    sigma2_color: float = 0.5
     sigma2_feature: float = 0.01
     seed: int = 0
 
