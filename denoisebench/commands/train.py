@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 from denoisebench.errors import UserInputError
 
@@ -59,12 +60,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--checkpoint-every", type=int, default=100, help="save every N steps (default 100)")
     parser.add_argument("--threads", type=int, default=1, choices=(1, 2), help="torch threads (default 1)")
     parser.add_argument("--evaluate", action="store_true", help="also score on the test split against identity and cross_bilateral")
+    parser.add_argument("--ship", default=None, metavar="DIR",
+                        help="implies --evaluate; write DIR/MODEL_CONFIG.pt (no optimiser state) and its model card DIR/MODEL_CONFIG.md")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def run(args) -> int:
-    from pathlib import Path
-
     from denoisebench.dataset.errors import DatasetError
 
     if args.steps < 0:
@@ -106,10 +107,34 @@ def run(args) -> int:
     else:
         summary += "; no val split to validate on"
     print(summary)
-    if args.evaluate:
-        table = evaluate_on_split(meta["checkpoint"], args.model, args.data, split="test", threads=args.threads)
+    if args.evaluate or args.ship:
+        table = evaluate_on_split(meta["checkpoint"], args.model, args.data, split="test", threads=args.threads,
+                                  progress=not args.quiet)
         print(json.dumps(table, indent=2))
+        if args.ship:
+            print(ship(meta["checkpoint"], args, table))
     return 0
+
+
+def ship(checkpoint: str, args, evaluation: dict) -> str:
+    """Write the stripped weights and the model card into ``args.ship``; return a one-line summary."""
+    from denoisebench.models.card import render_card
+    from denoisebench.models.catalog import parameter_count
+    from denoisebench.models.checkpoint import load_checkpoint, model_from_checkpoint
+    from denoisebench.models.training import strip_for_shipping
+
+    folder = Path(args.ship)
+    stem = f"{args.model}_{args.config}"
+    weights = strip_for_shipping(checkpoint, folder / f"{stem}.pt")
+    payload = load_checkpoint(weights)
+    card = render_card(
+        args.model, args.config, payload["config"], parameter_count(model_from_checkpoint(payload)),
+        weights.name, weights.stat().st_size, payload["meta"], evaluation,
+        list(payload["meta"].get("commands", [])),
+        args.data,
+    )
+    (folder / f"{stem}.md").write_text(card)
+    return f"shipped {weights} ({weights.stat().st_size / 1024:.0f} KiB) and {folder / f'{stem}.md'}"
 
 
 def evaluate_on_split(checkpoint: str, model: str, data: str, split: str = "test", threads: int = 1,

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -185,7 +185,8 @@ def train(options: TrainOptions) -> dict:
         model = model_from_checkpoint(payload)
         optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
         optimizer.load_state_dict(payload["optimizer"])
-        meta.update({k: payload["meta"][k] for k in ("steps", "seconds", "skipped_steps", "history") if k in payload["meta"]})
+        kept = ("steps", "seconds", "skipped_steps", "history", "commands")
+        meta.update({k: payload["meta"][k] for k in kept if k in payload["meta"]})
 
     dataset, crop, frames = _make_dataset(spec, ds, train_scenes, spp, options, buffers, targets)
     out = Path(options.out or f"checkpoints/{spec.name}_{options.config if isinstance(options.config, str) else 'custom'}.pt")
@@ -209,6 +210,17 @@ def train(options: TrainOptions) -> dict:
             "torch": str(torch.__version__),
         }
     )
+    if int(meta["steps"]) > 0 and not meta.get("commands") and options.resume:
+        # A checkpoint from before commands were recorded: rebuild its command from its metadata.
+        earlier = TrainOptions(
+            model=spec.name, data=options.data, config=payload.get("config_name") or options.config,
+            steps=int(meta["steps"]), seed=int(payload["meta"].get("seed", 0)),
+            batch_size=int(payload["meta"].get("batch_size", options.batch_size)),
+            crop=int(payload["meta"].get("crop", options.crop)), lr=float(payload["meta"].get("lr", options.lr)),
+            sequence_length=int(payload["meta"].get("sequence_length", options.sequence_length)),
+        )
+        meta["commands"] = [command_line(earlier, str(options.resume))]
+    meta.setdefault("commands", []).append(command_line(options, str(out)))
     start_step, total = int(meta["steps"]), int(meta["steps"]) + int(options.steps)
     per_epoch = len(_batches(len(dataset), options.batch_size, options.seed, 0))
     model.train()
@@ -276,5 +288,18 @@ def strip_for_shipping(src: str | Path, dst: str | Path) -> Path:
     return save_checkpoint(dst, payload["model"], payload["config"], model, meta, config_name=payload.get("config_name"))
 
 
-def options_dict(options: TrainOptions) -> dict:
-    return asdict(options)
+def command_line(options: TrainOptions, out: str) -> str:
+    """The ``denoisebench train`` command that runs ``options`` (recorded in the checkpoint for model cards)."""
+    import shlex
+
+    parts = ["denoisebench", "train", "--model", options.model, "--data", str(options.data),
+             "--config", str(options.config), "--steps", str(options.steps), "--out", out]
+    if options.resume:
+        parts += ["--resume", str(options.resume)]
+    parts += ["--seed", str(options.seed), "--batch-size", str(options.batch_size), "--crop", str(options.crop),
+              "--lr", str(options.lr)]
+    if options.spp:
+        parts += ["--spp", ",".join(str(s) for s in options.spp)]
+    if get_spec(options.model).temporal:
+        parts += ["--sequence-length", str(options.sequence_length)]
+    return shlex.join(parts)
