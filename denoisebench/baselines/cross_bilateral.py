@@ -134,10 +134,9 @@ def _accumulate(color: np.ndarray, guide: np.ndarray, offsets: Iterable[tuple[in
                 np.subtract(guide[p], guide[q], out=d)
                 np.square(d, out=d)
                 np.add.reduce(d, axis=0, out=w)
-                w += spatial
+                np.subtract(-spatial, w, out=w)  # −(Σ_d Δg² + spatial) in one pass
             else:
-                w.fill(spatial)
-            np.negative(w, out=w)
+                w.fill(-spatial)
             np.exp(w, out=w)
             t = tmp_buf[:, :n, :m]
             np.multiply(color[q], w, out=t)
@@ -198,6 +197,14 @@ def _feature_scale(name: str, feature: np.ndarray) -> float:
     return 1.0
 
 
+def color_guide(color: np.ndarray, noise: np.ndarray, sigma_color: float) -> np.ndarray:
+    """The guide's colour part, 3×H×W: c̃ / sqrt(2) with c̃ = c / (σ_c sqrt(2 V̄ + ε))."""
+    eps = (0.01 * float(np.mean(color))) ** 2 + 1e-12
+    # range weight exp(-(Δc̃)²/2); the guide carries the 1/sqrt(2)
+    scale = 1.0 / (np.sqrt(2.0) * sigma_color * np.sqrt(2.0 * noise + eps))
+    return np.moveaxis(color * scale[..., None].astype(np.float32), -1, 0)
+
+
 def build_guide(
     color: np.ndarray,
     features: Mapping[str, np.ndarray],
@@ -215,10 +222,7 @@ def build_guide(
     color = np.asarray(color, np.float32)
     if noise is None:
         noise = _noise_variance(color, color_variance)
-    eps = (0.01 * float(np.mean(color))) ** 2 + 1e-12
-    # range weight exp(-(Δc̃)²/2) with c̃ = c / (σ_c sqrt(2 V̄ + ε)); the guide carries 1/sqrt(2)
-    scale = 1.0 / (np.sqrt(2.0) * sigma_color * np.sqrt(2.0 * noise + eps))
-    parts = [np.moveaxis(color * scale[..., None], -1, 0)]
+    parts = [color_guide(color, noise, sigma_color)]
     feature_parts = []
     for name, sigma in feature_sigmas.items():
         if name not in features or sigma is None or sigma <= 0:
@@ -298,26 +302,23 @@ def cross_bilateral_filter(
     features = dict(features or {})
     sigmas = DEFAULT_FEATURE_SIGMAS if feature_sigmas is None else dict(feature_sigmas)
 
-    # V̄ from the variance buffer does not change when fireflies are replaced: estimate it once
-    noise = _noise_variance(color, color_variance) if color_variance is not None else None
-
-    def guide_of(image: np.ndarray) -> np.ndarray:
-        return build_guide(
-            image,
-            features,
-            sigma_color=sigma_color,
-            feature_sigmas=sigmas,
-            color_variance=color_variance,
-            feature_variances=feature_variances,
-            guide_dims=guide_dims,
-            noise=noise,
-        )
-
-    guide = guide_of(color)
+    # V̄ is estimated once: replacing fireflies leaves the variance buffer (and the robust fallback)
+    # as it was, so only the guide's colour part is recomputed after it
+    noise = _noise_variance(color, color_variance)
+    guide = build_guide(
+        color,
+        features,
+        sigma_color=sigma_color,
+        feature_sigmas=sigmas,
+        color_variance=color_variance,
+        feature_variances=feature_variances,
+        guide_dims=guide_dims,
+        noise=noise,
+    )
     if firefly_support is not None and firefly_support > 0:
         color, replaced = suppress_unsupported(color, guide, sigma_spatial, firefly_support)
         if replaced:
-            guide = guide_of(color)
+            guide[:3] = np.clip(color_guide(color, noise, sigma_color), -1e15, 1e15)
     out = np.ascontiguousarray(np.moveaxis(color, -1, 0))
     for offsets in window_offsets(int(radius), sigma_spatial, separable):
         out = joint_bilateral_pass(out, guide, offsets)
