@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import importlib
 import json
+import site
 import subprocess
+import sysconfig
 import sys
 import textwrap
 from pathlib import Path
@@ -28,6 +31,10 @@ def installed_example():
         text=True,
     )
     assert done.returncode == 0, done.stderr[-2000:]
+    # make it importable in this process too (its .pth is read at start-up), so that tests that
+    # list and load every available denoiser after this one find a working entry point
+    site.addsitedir(sysconfig.get_paths()["purelib"])
+    importlib.invalidate_caches()
     return "example_median"
 
 
@@ -55,6 +62,12 @@ def test_installed_plugin_is_found_through_its_entry_point(installed_example):
     origin, size, status, improved = done.stdout.split()[-4:]
     assert "entry point" in done.stdout and "denoisebench-example-plugin" in done.stdout
     assert (size, status, improved) == ("5", "ok", "True")
+
+
+def test_installed_plugin_loads_in_process(installed_example):
+    from denoisebench.denoisers.registry import load_denoiser
+
+    assert load_denoiser(installed_example).name == installed_example
 
 
 def test_check_plugin_passes_the_installed_example(installed_example):
