@@ -1,8 +1,8 @@
 """Random Parameter Filtering (Sen & Darabi 2012, "On filtering the noise from the random parameters
 in Monte Carlo rendering"), vectorised in numpy over per-sample data.
 
-Per pass t (box sizes shrinking, the paper's 55 → 35 → 17 → 7 pixels, scaled down for images under 128 px), for every
-pixel P:
+Per pass t (box sizes shrinking: the paper's 55 → 35 → 17 → 7 pixels, scaled down for images under
+128 px), for every pixel P:
 
 1. **Gather** P's own S samples plus ``M − S`` samples drawn from the b×b box around P
    (mirrored at the image border). Each sample is a vector of colour c (3), scene features f
