@@ -28,7 +28,7 @@ from denoisebench.denoisers.protocol import DenoiserBase
 from denoisebench.denoisers.registry import DenoiserUnavailableError
 
 from .checkpoint import load_checkpoint, model_from_checkpoint
-from .features import frame_tensors, to_image
+from .features import exposure, frame_tensors, to_image
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
 
@@ -81,6 +81,7 @@ class PCNDenoiser(LearnedDenoiser):
 
     def _run(self, tensors: dict[str, torch.Tensor]) -> torch.Tensor:
         height, width = tensors["color"].shape[-2:]
+        tensors = {**tensors, "exposure": exposure(tensors["color"])}  # one scale for every tile
         if height <= self.tile and width <= self.tile:
             return self.model(tensors)["color"]
         out = torch.empty_like(tensors["color"])
@@ -88,7 +89,7 @@ class PCNDenoiser(LearnedDenoiser):
             for left in range(0, width, self.tile):
                 y0, x0 = max(0, top - self.halo), max(0, left - self.halo)
                 y1, x1 = min(height, top + self.tile + self.halo), min(width, left + self.tile + self.halo)
-                part = self.model({k: v[..., y0:y1, x0:x1] for k, v in tensors.items()})["color"]
+                part = self.model({k: v if k == "exposure" else v[..., y0:y1, x0:x1] for k, v in tensors.items()})["color"]
                 rows, cols = min(self.tile, height - top), min(self.tile, width - left)
                 out[..., top : top + rows, left : left + cols] = part[..., top - y0 : top - y0 + rows, left - x0 : left - x0 + cols]
         return out

@@ -12,6 +12,12 @@ Transforms (Bako et al. 2017, section 4.1):
 * each feature gets its x and y gradients, and each colour buffer its per-pixel variance, carried
   through the same transform by the delta method (Var f(X) ≈ f'(μ)² Var X).
 
+Before any of this, :func:`normalize_radiance` divides the radiance buffers by the image's
+exposure (a winsorised mean luminance, as OIDN's auto-exposure does) and caps isolated fireflies
+at FIREFLY_FACTOR × their neighbours; the models multiply their output back by the exposure.
+So the networks see the same range at any brightness (the 1e-6..1e6 case) and a black frame
+gives exactly black.
+
 Notes
 -----
 * The network always *sees* colour as ``log(1 + ·)``, the demodulated diffuse included: a
@@ -27,6 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+from torch.nn import functional as F
 
 ALBEDO_EPS = 0.00316
 #: Below this mean albedo a pixel is an emitter, background or black material: not demodulated.
@@ -35,6 +42,11 @@ ALBEDO_MIN = 0.01
 COLOR_MAX = 1e8
 #: log(1 + x) outputs are clamped to this before exp(): exp(30) ≈ 1e13 stays finite in float32.
 LOG_MAX = 30.0
+
+#: An isolated value above this multiple of its 8 neighbours' maximum is a firefly (the OIDN wrapper's rule).
+FIREFLY_FACTOR = 16.0
+#: The exposure is the mean luminance after clipping at this quantile (a winsorised mean).
+EXPOSURE_QUANTILE = 0.99
 
 #: Buffers the learned denoisers use when the frame has them (``color`` is the only one required).
 OPTIONAL_BUFFERS = (
@@ -57,6 +69,56 @@ _CHANNELS = {"albedo": 3, "normal": 3, "depth": 1, "roughness": 1}
 def safe(x: torch.Tensor, upper: float = COLOR_MAX) -> torch.Tensor:
     """``x`` with NaN/±Inf replaced by 0 and clamped to [−upper, upper]."""
     return torch.nan_to_num(x, nan=0.0, posinf=0.0, neginf=0.0).clamp(-upper, upper)
+
+
+def clamp_isolated(x: torch.Tensor, factor: float = FIREFLY_FACTOR) -> torch.Tensor:
+    """Each value capped at ``factor`` × the largest of its 8 neighbours (same channel; edges replicate).
+
+    A lone sample of 1e6 among pixels of 1 becomes 16; a bright region (neighbours as bright) is untouched.
+    """
+    height, width = x.shape[-2:]
+    padded = F.pad(x, (1, 1, 1, 1), mode="replicate")
+    ring = None
+    for dy in range(3):
+        for dx in range(3):
+            if dy == 1 and dx == 1:
+                continue
+            shifted = padded[..., dy : dy + height, dx : dx + width]
+            ring = shifted if ring is None else torch.maximum(ring, shifted)
+    return torch.minimum(x, ring * factor)
+
+
+def exposure(color: torch.Tensor) -> torch.Tensor:
+    """N×1×1×1 scale of each image: mean luminance clipped at its 99th percentile, else its plain mean.
+
+    0 only for an all-black image. Fireflies do not move it (they lie above the percentile).
+    """
+    lum = safe(color).clamp(0.0, COLOR_MAX).mean(dim=1).flatten(1).double()
+    ceiling = torch.quantile(lum, EXPOSURE_QUANTILE, dim=1, keepdim=True)
+    robust = torch.minimum(lum, ceiling).mean(dim=1)
+    scale = torch.where(robust > 0, robust, lum.mean(dim=1))
+    return scale.float().view(-1, 1, 1, 1)
+
+
+def normalize_radiance(buffers: dict[str, torch.Tensor]) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+    """Radiance buffers divided by the exposure (variances by its square), isolated fireflies clamped.
+
+    Returns (new buffers, output scale): multiply the network's radiance by the scale. The
+    exposure comes from ``buffers["exposure"]`` when given (a tiled wrapper computes it once for
+    the whole frame, so every tile sees the same scale), else from ``color``. The scale is 0 for a
+    black frame, whose output is then exactly black.
+    """
+    scale = buffers.get("exposure")
+    if scale is None:
+        scale = exposure(buffers["color"])
+    divisor = scale.clamp_min(1e-30)
+    out = dict(buffers)
+    for name in ("color", "diffuse", "specular"):
+        if name in buffers:
+            out[name] = clamp_isolated(safe(buffers[name]).clamp(0.0, COLOR_MAX)) / divisor
+            if f"{name}_var" in buffers:
+                out[f"{name}_var"] = safe(buffers[f"{name}_var"]).clamp(0.0, COLOR_MAX) / divisor**2
+    return out, torch.where(scale > 0, divisor, torch.zeros_like(divisor))
 
 
 def to_log(x: torch.Tensor) -> torch.Tensor:

@@ -34,7 +34,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .features import PCN_INPUT_CHANNELS, from_log, pcn_inputs, safe
+from .features import PCN_INPUT_CHANNELS, from_log, normalize_radiance, pcn_inputs, safe
 
 #: Logits beyond this carry no extra information (exp(±50) spans every float32 ratio) and keep softmax finite.
 LOGIT_MAX = 50.0
@@ -91,8 +91,8 @@ class PCN(nn.Module):
     """A two-branch pixel network; ``mode`` is ``"direct"`` (DPCN) or ``"kernel"`` (KPCN).
 
     ``forward(buffers)`` takes N×C×H×W tensors by buffer name and returns a dict with ``color``,
-    ``diffuse`` and ``specular`` (linear radiance, N×3×H×W) and, for training, ``diffuse_log`` and
-    ``specular_log`` (each branch's output in its log domain) and ``kernels`` (KPCN only).
+    ``diffuse`` and ``specular`` (linear radiance, N×3×H×W) and ``kernels`` (KPCN only,
+    N×2×size²×H×W: diffuse and specular branch).
     """
 
     def __init__(self, mode: str, layers: int, channels: int, kernel: int, kernel_size: int = 21):
@@ -106,6 +106,11 @@ class PCN(nn.Module):
         out_channels = 3 if mode == "direct" else kernel_size * kernel_size
         self.diffuse = conv_stack(PCN_INPUT_CHANNELS, out_channels, layers, channels, kernel)
         self.specular = conv_stack(PCN_INPUT_CHANNELS, out_channels, layers, channels, kernel)
+        if mode == "direct":
+            # Radiance is normalised to mean 1 (features.normalize_radiance): start at log(1 + 1), not at black.
+            with torch.no_grad():
+                for branch in (self.diffuse, self.specular):
+                    branch[-1].bias.fill_(math.log(2.0))
         if mode == "kernel":
             # Start near the identity: a centre-tap bias of log(size² − 1) gives the centre half the
             # weight. A near-uniform 21×21 start would smear emitters over their neighbours, and
@@ -123,6 +128,7 @@ class PCN(nn.Module):
         return apply_kernels(noisy, kernels, self.kernel_size), kernels
 
     def forward(self, buffers: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        buffers, scale = normalize_radiance(buffers)
         prepared = pcn_inputs(buffers)
         factor = prepared["albedo_factor"]
         if self.mode == "direct":
@@ -131,16 +137,10 @@ class PCN(nn.Module):
         else:
             diffuse_lin, kd = self._branch(self.diffuse, prepared["diffuse_in"], prepared["diffuse_lin"])
             diffuse = diffuse_lin * factor
-            diffuse_log = torch.log1p(diffuse_lin.clamp_min(0.0))
         specular_log, ks = self._branch(self.specular, prepared["specular_in"], prepared["specular_log"])
         specular = from_log(specular_log)
-        out = {
-            "color": diffuse + specular,
-            "diffuse": diffuse,
-            "specular": specular,
-            "diffuse_log": diffuse_log,
-            "specular_log": specular_log,
-        }
+        diffuse, specular = diffuse * scale, specular * scale
+        out = {"color": diffuse + specular, "diffuse": diffuse, "specular": specular}
         if kd is not None:
             out["kernels"] = torch.stack([kd, ks], dim=1)  # N×2×size²×H×W
         return out

@@ -22,11 +22,13 @@ Notes
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .features import RAE_INPUT_CHANNELS, from_log, rae_inputs
+from .features import RAE_INPUT_CHANNELS, from_log, normalize_radiance, rae_inputs
 
 CONFIGS = {
     # The paper's encoder widths (32, 43, 57, 76, 101) and a 144-channel bottleneck.
@@ -76,6 +78,9 @@ class RecurrentAutoencoder(nn.Module):
             self.decoders.append(nn.Sequential(_conv(width + channels, channels), _conv(channels, channels)))
             width = channels
         self.output = nn.Conv2d(width, 3, 3, padding=1)
+        # Radiance is normalised to mean 1 (features.normalize_radiance): start at log(1 + 1), not at black.
+        with torch.no_grad():
+            self.output.bias.fill_(math.log(2.0))
         self.hidden: list[torch.Tensor] | None = None
 
     def reset(self) -> None:
@@ -83,6 +88,7 @@ class RecurrentAutoencoder(nn.Module):
         self.hidden = None
 
     def forward(self, buffers: dict[str, torch.Tensor], detach_hidden: bool = False) -> dict[str, torch.Tensor]:
+        buffers, scale = normalize_radiance(buffers)
         x, factor = rae_inputs(buffers, self.demodulate)
         height, width = x.shape[-2:]
         multiple = 2 ** len(self.levels)
@@ -106,7 +112,7 @@ class RecurrentAutoencoder(nn.Module):
             x = decode(torch.cat([x, skip], dim=1))
         log_color = self.output(x)[..., :height, :width]
         self.hidden = [h.detach() for h in new_hidden] if detach_hidden else new_hidden
-        return {"color": from_log(log_color) * factor, "log_color": log_color}
+        return {"color": from_log(log_color) * factor * scale, "log_color": log_color}
 
 
 def make_rae(levels: list[int], bottleneck: int, demodulate: bool = False) -> RecurrentAutoencoder:
