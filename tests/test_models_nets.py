@@ -39,13 +39,13 @@ def model(name, seed=0):
     return build_model(name, "small")
 
 
-def loss_of(name, net, b):
+def loss_of(name, net, b, kind="log"):
     if name == "rae":
         net.reset()
         preds = [net(b)["color"], net(b)["color"]]
         net.reset()
-        return rae_sequence_loss(preds, [b["reference"], b["reference"]])["loss"]
-    return pcn_loss(net(b), b)["loss"]
+        return rae_sequence_loss(preds, [b["reference"], b["reference"]], kind)["loss"]
+    return pcn_loss(net(b), b, kind)["loss"]
 
 
 # ------------------------------------------------------------------------------------------ KPCN
@@ -133,13 +133,14 @@ def hard_batches():
 @pytest.mark.parametrize("name", MODELS)
 def test_loss_and_gradients_finite_on_hard_inputs(name):
     net = model(name)
-    for case, b in hard_batches().items():
-        net.zero_grad()
-        loss = loss_of(name, net, b)
-        assert torch.isfinite(loss), (name, case)
-        loss.backward()
-        for param in net.parameters():
-            assert torch.isfinite(param.grad).all(), (name, case)
+    for kind in ("log", "relative"):
+        for case, b in hard_batches().items():
+            net.zero_grad()
+            loss = loss_of(name, net, b, kind)
+            assert torch.isfinite(loss), (name, case, kind)
+            loss.backward()
+            for param in net.parameters():
+                assert torch.isfinite(param.grad).all(), (name, case, kind)
 
 
 @pytest.mark.parametrize("name", MODELS)

@@ -57,6 +57,8 @@ def add_arguments(parser) -> None:
     parser.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
     parser.add_argument("--spp", default=None, help="train on these noisy spp only, e.g. 4 (default all)")
     parser.add_argument("--sequence-length", type=int, default=7, help="frames per training window, rae only (default 7)")
+    parser.add_argument("--loss", default="log", choices=("log", "relative"),
+                        help="spatial loss: log = L1 of log(1+x); relative adds |p-r|/(r+0.01) (default log)")
     parser.add_argument("--checkpoint-every", type=int, default=100, help="save every N steps (default 100)")
     parser.add_argument("--threads", type=int, default=1, choices=(1, 2), help="torch threads (default 1)")
     parser.add_argument("--evaluate", action="store_true", help="also score on the test split against identity and cross_bilateral")
@@ -89,6 +91,7 @@ def run(args) -> int:
         lr=args.lr,
         spp=_spp(args.spp),
         sequence_length=args.sequence_length,
+        loss=args.loss,
         checkpoint_every=args.checkpoint_every,
         threads=args.threads,
         progress=not args.quiet,

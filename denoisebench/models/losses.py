@@ -1,6 +1,8 @@
-"""Training losses (torch) for the learned denoisers. All compare in the log(1 + x) domain.
+"""Training losses (torch) for the learned denoisers, in the log(1 + x) domain unless stated.
 
-* :func:`spatial_l1`: L_s, mean |log(1+p) − log(1+r)|.
+* :func:`spatial_l1`: L_s, mean |log(1+p) − log(1+r)| (``--loss log``, the default); with
+  ``--loss relative`` plus :func:`relative_l1`, mean |p−r|/(|r|+0.01): the log domain barely sees a
+  dark pixel that is 10× too bright, which relMSE (the benchmark's figure) weighs heavily.
 * :func:`gradient_l1`: L_g, HFEN-style: L1 between Laplacian-of-Gaussian responses (σ = 1.5,
   15×15, zero-sum: MATLAB's ``fspecial('log', 15, 1.5)``, the kernel ``denoisebench.metrics`` uses).
 * :func:`temporal_l1`: L_t, mean |(p_t − p_{t−1}) − (r_t − r_{t−1})|.
@@ -60,6 +62,19 @@ def spatial_l1(pred: torch.Tensor, ref: torch.Tensor) -> torch.Tensor:
     return (to_log(pred) - to_log(ref)).abs().mean()
 
 
+def relative_l1(pred: torch.Tensor, ref: torch.Tensor) -> torch.Tensor:
+    """mean(|p − r| / (|r| + 0.01)), linear: relMSE's weighting at first power, so dark pixels count."""
+    pred, ref = safe(pred), safe(ref)
+    return ((pred - ref).abs() / (ref.abs() + RELMSE_EPS)).mean()
+
+
+#: Spatial loss by name (``--loss``): "log" compares log(1 + x); "relative" adds :func:`relative_l1`.
+SPATIAL = {
+    "log": spatial_l1,
+    "relative": lambda pred, ref: spatial_l1(pred, ref) + relative_l1(pred, ref),
+}
+
+
 def gradient_l1(pred: torch.Tensor, ref: torch.Tensor) -> torch.Tensor:
     return (laplacian_of_gaussian(to_log(pred)) - laplacian_of_gaussian(to_log(ref))).abs().mean()
 
@@ -83,10 +98,11 @@ def frame_weights(frames: int) -> torch.Tensor:
     return weights / weights.sum()
 
 
-def rae_sequence_loss(preds: list[torch.Tensor], refs: list[torch.Tensor]) -> dict[str, torch.Tensor]:
+def rae_sequence_loss(preds: list[torch.Tensor], refs: list[torch.Tensor], kind: str = "log") -> dict[str, torch.Tensor]:
     """0.8·L_s + 0.1·L_g + 0.1·L_t, each a weighted sum over frames (L_t from the second frame on)."""
     weights = frame_weights(len(preds))
-    spatial = sum(w * spatial_l1(p, r) for w, p, r in zip(weights, preds, refs))
+    spatial_fn = SPATIAL[kind]
+    spatial = sum(w * spatial_fn(p, r) for w, p, r in zip(weights, preds, refs))
     gradient = sum(w * gradient_l1(p, r) for w, p, r in zip(weights, preds, refs))
     temporal = sum(
         weights[t] * temporal_l1(preds[t], preds[t - 1], refs[t], refs[t - 1]) for t in range(1, len(preds))
@@ -97,9 +113,9 @@ def rae_sequence_loss(preds: list[torch.Tensor], refs: list[torch.Tensor]) -> di
     return {"loss": total, "spatial": spatial, "gradient": gradient, "temporal": temporal}
 
 
-def pcn_loss(out: dict[str, torch.Tensor], batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-    """L1 (log domain) on colour, plus each branch against its reference lobe when the batch has it."""
-    color = spatial_l1(out["color"], batch["reference"])
+def pcn_loss(out: dict[str, torch.Tensor], batch: dict[str, torch.Tensor], kind: str = "log") -> dict[str, torch.Tensor]:
+    """Spatial loss (SPATIAL[kind]) on colour, plus log L1 on each branch against its reference lobe when the batch has it."""
+    color = SPATIAL[kind](out["color"], batch["reference"])
     total = color
     parts = {"color": color}
     if "reference_diffuse" in batch and "reference_specular" in batch:

@@ -40,7 +40,7 @@ from denoisebench.errors import UserInputError
 from .catalog import build_model, get_spec, model_config
 from .checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
 from .features import frame_tensors
-from .losses import pcn_loss, rae_sequence_loss, relmse
+from .losses import SPATIAL, pcn_loss, rae_sequence_loss, relmse
 
 
 @dataclass
@@ -57,6 +57,7 @@ class TrainOptions:
     lr: float = 1e-3
     spp: list[int] | None = None  # None: every noisy spp of the dataset
     sequence_length: int = 7
+    loss: str = "log"  # losses.SPATIAL: "log" or "relative"
     val_every: int = 0  # 0: validate once, at the end
     val_frames: int = 8  # per val scene and spp
     checkpoint_every: int = 100
@@ -93,9 +94,9 @@ def _batches(length: int, batch_size: int, seed: int, epoch: int) -> list[list[i
     return [order[i * batch_size : (i + 1) * batch_size] for i in range(count)]
 
 
-def _loss(model, spec, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+def _loss(model, spec, batch: dict[str, torch.Tensor], kind: str = "log") -> dict[str, torch.Tensor]:
     if not spec.temporal:
-        return pcn_loss(model(batch), batch)
+        return pcn_loss(model(batch), batch, kind)
     frames = batch["color"].shape[1]
     model.reset()
     preds, refs = [], []
@@ -104,7 +105,7 @@ def _loss(model, spec, batch: dict[str, torch.Tensor]) -> dict[str, torch.Tensor
         preds.append(out["color"])
         refs.append(batch["reference"][:, t])
     model.reset()
-    return rae_sequence_loss(preds, refs)
+    return rae_sequence_loss(preds, refs, kind)
 
 
 @torch.no_grad()
@@ -161,6 +162,8 @@ def train(options: TrainOptions) -> dict:
     spec = get_spec(options.model)
     if options.steps < 0:
         raise UserInputError(f"--steps must be >= 0 (got {options.steps})")
+    if options.loss not in SPATIAL:
+        raise UserInputError(f"unknown loss {options.loss!r}; losses: {', '.join(SPATIAL)}")
     torch.set_num_threads(max(1, min(int(options.threads), 2)))
     ds = open_dataset(options.data)
     train_scenes, val_scenes = ds.split("train"), ds.split("val")
@@ -205,6 +208,7 @@ def train(options: TrainOptions) -> dict:
             "sequence_length": frames,
             "batch_size": options.batch_size,
             "lr": options.lr,
+            "loss": options.loss,
             "buffers": list(buffers),
             "targets": list(targets),
             "torch": str(torch.__version__),
@@ -245,7 +249,7 @@ def train(options: TrainOptions) -> dict:
             batches = _batches(len(dataset), options.batch_size, options.seed, epoch)[offset:]
             loader = torch.utils.data.DataLoader(dataset, batch_sampler=batches, num_workers=0)
             for batch in loader:
-                parts = _loss(model, spec, batch)
+                parts = _loss(model, spec, batch, options.loss)
                 loss = parts["loss"]
                 optimizer.zero_grad(set_to_none=True)
                 if torch.isfinite(loss):
@@ -302,4 +306,6 @@ def command_line(options: TrainOptions, out: str) -> str:
         parts += ["--spp", ",".join(str(s) for s in options.spp)]
     if get_spec(options.model).temporal:
         parts += ["--sequence-length", str(options.sequence_length)]
+    if options.loss != "log":
+        parts += ["--loss", options.loss]
     return shlex.join(parts)
