@@ -79,6 +79,9 @@ def render_card(
         *train_commands,
         "```",
         "",
+        "The last command, run with `--ship denoisebench/models/weights` added, also scored the test split "
+        "and wrote these weights (without optimiser state) and this card.",
+        "",
         f"* dataset config hash `{meta.get('dataset_hash')}`; config `{meta.get('dataset_config')}`",
         f"* train scenes ({len(meta.get('train_scenes', []))}): {', '.join(meta.get('train_scenes', []))}",
         f"* val scenes: {', '.join(meta.get('val_scenes', [])) or 'none'}; test (held-out) scenes: {', '.join(evaluation['scenes'])}",
