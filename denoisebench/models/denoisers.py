@@ -76,8 +76,10 @@ class PCNDenoiser(LearnedDenoiser):
         super().__init__(checkpoint, threads)
         self.tile = max(8, int(tile))
         cfg = self.config
-        # Receptive radius: each conv adds kernel//2, the input gradients 1, the applied kernel size//2.
-        self.halo = cfg["layers"] * (cfg["kernel"] // 2) + 1 + (cfg.get("kernel_size", 1) // 2 if self.model.mode == "kernel" else 0)
+        # Receptive radius: each conv adds kernel//2, the input gradients 1, the firefly clamp 1, and
+        # KPCN's applied kernel size//2 (it reads noisy pixels that far away).
+        applied = cfg.get("kernel_size", 1) // 2 if self.model.mode == "kernel" else 0
+        self.halo = cfg["layers"] * (cfg["kernel"] // 2) + 2 + applied
 
     def _run(self, tensors: dict[str, torch.Tensor]) -> torch.Tensor:
         height, width = tensors["color"].shape[-2:]
