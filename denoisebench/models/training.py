@@ -188,6 +188,8 @@ def train(options: TrainOptions) -> dict:
         model = model_from_checkpoint(payload)
         optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
         optimizer.load_state_dict(payload["optimizer"])
+        for group in optimizer.param_groups:  # load_state_dict restored the old rate; --lr wins
+            group["lr"] = options.lr
         kept = ("steps", "seconds", "skipped_steps", "history", "commands")
         meta.update({k: payload["meta"][k] for k in kept if k in payload["meta"]})
 
