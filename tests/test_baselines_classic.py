@@ -83,6 +83,24 @@ def test_cross_bilateral_matches_brute_force_weights():
     np.testing.assert_allclose(out, expected, rtol=1e-4, atol=1e-6)
 
 
+@pytest.mark.parametrize("separable", [True, False])
+def test_cross_bilateral_threads_agree_with_one_thread_and_repeat_bytes(monkeypatch, separable):
+    """The (strip, offset) pairs split over threads: same sums as one thread, same bytes run to run."""
+    rng = np.random.default_rng(5)
+    color = rng.gamma(0.8, 1.0, (150, 161, 3)).astype(np.float32)
+    normal = rng.normal(size=(150, 161, 3)).astype(np.float32)
+    monkeypatch.setattr(cb, "_STRIP_PIXELS", 2000)  # many strips, so every thread gets pairs from several
+    monkeypatch.setattr(cb, "_MIN_PIXELS_PER_WORKER", 1)
+
+    def run(workers):
+        monkeypatch.setattr(cb, "_workers", lambda: workers)
+        return cb.cross_bilateral_filter(color, {"normal": normal}, radius=4, separable=separable)
+
+    one, three = run(1), run(3)
+    np.testing.assert_allclose(three, one, rtol=2e-5, atol=1e-7)
+    assert np.array_equal(run(3), three)
+
+
 def test_cross_bilateral_does_not_mix_across_a_feature_edge():
     rng = np.random.default_rng(3)
     shape = (24, 24, 3)

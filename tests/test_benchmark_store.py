@@ -163,3 +163,15 @@ def test_missing_reference_is_a_clear_error_naming_the_frame(tmp_path):
     # nothing was measured
     if db.exists():
         assert _counts(db)["runs"] == {}
+
+
+def test_split_all_scores_every_scene_of_the_dataset(dataset, tmp_path):
+    # the demo's benchmark-only dataset: --split all covers the 4 scenes, --split test only its one
+    db = tmp_path / "all.sqlite"
+    for split in ("all", "test"):
+        result = subprocess.run(_command(dataset, db, "--denoisers", "identity", "--spp", "1", "--split", split),
+                                capture_output=True, text=True, env=_env(), timeout=300)
+        assert result.returncode == 0, result.stderr
+    with ResultsStore(db, readonly=True) as store:
+        scenes = {run["config"]["split"]: {u["scene"] for u in store.units(run["run_id"])} for run in store.runs()}
+    assert len(scenes["all"]) == 4 and len(scenes["test"]) == 1 and scenes["test"] < scenes["all"]

@@ -20,6 +20,9 @@ feature distances normalised by their noise)::
 * Each pair (p, q) is evaluated once and used for both pixels (the weight is symmetric); pixels
   outside the image take no part (no edge padding). The output is Σ w c / Σ w, a convex
   combination of the (sanitised, non-negative) input, so it is finite and non-negative.
+* The pairs are evaluated in row strips on several threads (``_accumulate``), each with its own
+  sums; the result is reproducible for a given number of CPUs and equal across CPU counts to
+  float32 rounding.
 
 Fireflies: a symmetric weight cannot both keep a firefly out of its neighbours and let the
 neighbours into the firefly, so an isolated bright pixel would survive the filter unchanged. Before
@@ -49,6 +52,8 @@ Features the frame lacks are skipped, so the filter also runs on color alone.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from typing import Iterable, Mapping
 
 import numpy as np
@@ -82,6 +87,8 @@ PRESETS: dict[str, dict] = {
 
 FIREFLY_SUPPORT = 0.2  # see the module docstring, "Fireflies"
 _STRIP_PIXELS = 32768  # pixels per row strip: keeps a strip's working set in cache
+_MAX_WORKERS = 8  # threads of one filter pass (see _accumulate)
+_MIN_PIXELS_PER_WORKER = 16384  # below this a thread costs more than it saves
 
 
 def window_offsets(radius: int, sigma_spatial: float, separable: bool) -> list[list[tuple[int, int, float]]]:
@@ -109,43 +116,79 @@ def joint_bilateral_pass(color: np.ndarray, guide: np.ndarray, offsets: Iterable
 
 
 def _accumulate(color: np.ndarray, guide: np.ndarray, offsets: Iterable[tuple[int, int, float]]):
-    """(Σ_q w c_q over the window including the pixel itself (C×H×W), Σ_q w (H×W)); see above."""
+    """(Σ_q w c_q over the window including the pixel itself (C×H×W), Σ_q w (H×W)); see above.
+
+    The (row strip, offset) pairs are dealt round-robin to up to ``_workers()`` threads, each
+    summing into its own accumulators (numpy's ufuncs release the GIL; a pair writes rows of
+    two strips, so shared accumulators would race). The partial sums are added in a fixed order,
+    so a given thread count always gives the same bytes."""
     channels, height, width = color.shape
-    depth = guide.shape[0]
-    num = np.array(color, dtype=np.float32, copy=True)
-    den = np.ones((height, width), np.float32)
     offsets = list(offsets)
     rows = max(1, _STRIP_PIXELS // max(width, 1))
+    tasks = [(y0, offset) for y0 in range(0, height, rows) for offset in offsets]
+    workers = max(1, min(_workers(), len(tasks), height * width // _MIN_PIXELS_PER_WORKER))
+    partials = [np.zeros((channels, height, width), np.float32) for _ in range(workers)]
+    dens = [np.zeros((height, width), np.float32) for _ in range(workers)]
+    partials[0] += color
+    dens[0] += 1.0
+    if workers == 1:
+        _accumulate_tasks(color, guide, tasks, rows, partials[0], dens[0])
+    else:
+        with ThreadPoolExecutor(workers) as pool:
+            futures = [
+                pool.submit(_accumulate_tasks, color, guide, tasks[k::workers], rows, partials[k], dens[k])
+                for k in range(workers)
+            ]
+            for future in futures:
+                future.result()
+    num, den = partials[0], dens[0]
+    for k in range(1, workers):
+        num += partials[k]
+        den += dens[k]
+    return num, den
+
+
+def _workers() -> int:
+    """Threads for the filter: the CPUs this process may use, at most _MAX_WORKERS."""
+    try:
+        available = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        available = os.cpu_count() or 1
+    return max(1, min(available, _MAX_WORKERS))
+
+
+def _accumulate_tasks(color, guide, tasks, rows: int, num: np.ndarray, den: np.ndarray) -> None:
+    """Add the pairs of ``tasks`` ((strip top row, (dy, dx, spatial exponent))) into ``num``/``den``."""
+    channels, height, width = color.shape
+    depth = guide.shape[0]
     diff_buf = np.empty((max(depth, 1), rows, width), np.float32)
     weight_buf = np.empty((rows, width), np.float32)
     tmp_buf = np.empty((channels, rows, width), np.float32)
-    for y0 in range(0, height, rows):
-        for dy, dx, spatial in offsets:
-            y1 = min(y0 + rows, height - dy)
-            x0, x1 = max(0, -dx), width - max(0, dx)
-            if y1 <= y0 or x1 <= x0:
-                continue
-            n, m = y1 - y0, x1 - x0
-            p = (slice(None), slice(y0, y1), slice(x0, x1))
-            q = (slice(None), slice(y0 + dy, y1 + dy), slice(x0 + dx, x1 + dx))
-            w = weight_buf[:n, :m]
-            if depth:
-                d = diff_buf[:, :n, :m]
-                np.subtract(guide[p], guide[q], out=d)
-                np.square(d, out=d)
-                np.add.reduce(d, axis=0, out=w)
-                np.subtract(-spatial, w, out=w)  # −(Σ_d Δg² + spatial) in one pass
-            else:
-                w.fill(-spatial)
-            np.exp(w, out=w)
-            t = tmp_buf[:, :n, :m]
-            np.multiply(color[q], w, out=t)
-            num[p] += t
-            np.multiply(color[p], w, out=t)
-            num[q] += t
-            den[p[1:]] += w
-            den[q[1:]] += w
-    return num, den
+    for y0, (dy, dx, spatial) in tasks:
+        y1 = min(y0 + rows, height - dy)
+        x0, x1 = max(0, -dx), width - max(0, dx)
+        if y1 <= y0 or x1 <= x0:
+            continue
+        n, m = y1 - y0, x1 - x0
+        p = (slice(None), slice(y0, y1), slice(x0, x1))
+        q = (slice(None), slice(y0 + dy, y1 + dy), slice(x0 + dx, x1 + dx))
+        w = weight_buf[:n, :m]
+        if depth:
+            d = diff_buf[:, :n, :m]
+            np.subtract(guide[p], guide[q], out=d)
+            np.square(d, out=d)
+            np.add.reduce(d, axis=0, out=w)
+            np.subtract(-spatial, w, out=w)  # −(Σ_d Δg² + spatial) in one pass
+        else:
+            w.fill(-spatial)
+        np.exp(w, out=w)
+        t = tmp_buf[:, :n, :m]
+        np.multiply(color[q], w, out=t)
+        num[p] += t
+        np.multiply(color[p], w, out=t)
+        num[q] += t
+        den[p[1:]] += w
+        den[q[1:]] += w
 
 
 def _neighbours3x3(array: np.ndarray) -> np.ndarray:

@@ -63,7 +63,8 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--option", action="append", default=[], metavar="SPEC:KEY=VALUE", help="constructor option of a denoiser")
     parser.add_argument("--spp", default=None, help="input spp to benchmark, e.g. 1,4,16 (default: every spp of the split)")
-    parser.add_argument("--split", default="test", choices=("train", "val", "test"), help="dataset split (default test)")
+    parser.add_argument("--split", default="test", choices=("train", "val", "test", "all"),
+                        help="dataset split, or all for every scene of a benchmark-only dataset (default test)")
     parser.add_argument("--metrics", default="", help="comma-separated metrics (default every registered; relmse and flip always)")
     parser.add_argument("--out", default="report", help="report folder (default report)")
     parser.add_argument("--db", default="benchmark.sqlite", help="results database (default benchmark.sqlite)")

@@ -287,7 +287,9 @@ class RunPlan:
 
 def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore) -> RunPlan:
     """Check the inputs, load the denoisers, create (or find) the run in the store."""
-    scenes = dataset.split(config.split)
+    # "all": every scene, for a dataset made only to be benchmarked (the demo's); a learned model's
+    # own training scenes would then be among them, so the report says which split it scored.
+    scenes = dataset.scenes if config.split == "all" else dataset.split(config.split)
     if not scenes:
         raise UserInputError(f"{dataset.root}: split {config.split!r} has no scenes")
     spp = sorted({int(s) for s in config.spp}) if config.spp else sorted(set.intersection(*(set(dataset.scene(s).spp) for s in scenes)))
