@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from denoisebench.models import pcn
-from denoisebench.models.catalog import build_model
+from denoisebench.models.catalog import build_model, model_config
 from denoisebench.models.checkpoint import CheckpointError, load_checkpoint, model_from_checkpoint, save_checkpoint
 from denoisebench.models.losses import frame_weights, laplacian_of_gaussian, pcn_loss, rae_sequence_loss, relmse
 
@@ -166,6 +166,27 @@ def test_a_few_steps_lower_the_loss_on_a_tiny_batch(name):
     assert final < 0.99 * losses[0], (losses, final)
 
 
+@pytest.mark.parametrize("name", ("dpcn", "rae"))
+def test_black_outputs_still_get_a_gradient_back_up(name):
+    """Direct outputs below log 0 clamp to black; the clamp must not cut the gradient (a relative
+    loss's first steps push dark pixels there, and a dead network then stays black for good)."""
+    net = model(name)
+    head = net.output if name == "rae" else net.diffuse[-1]
+    with torch.no_grad():
+        head.bias.fill_(-5.0)  # every pixel's log output well below 0: the image is black
+        if name == "dpcn":
+            net.specular[-1].bias.fill_(-5.0)
+    b = batch(seed=3)
+    b.update(albedo=torch.ones_like(b["color"]))
+    with torch.no_grad():
+        assert float(loss_of(name, net, b, "relative")) > 0
+        before = net(b) if name != "rae" else (net.reset(), net(b))[1]
+    assert float(before["color"].max()) == 0.0
+    net.zero_grad()
+    loss_of(name, net, b, "relative").backward()
+    assert float(head.bias.grad.sum()) < 0  # descent raises the bias, i.e. brightens the image
+
+
 # ------------------------------------------------------------------------------------------ losses
 
 
@@ -202,8 +223,7 @@ def test_relmse_matches_the_metric():
 def test_checkpoint_round_trip_gives_identical_outputs(name, tmp_path):
     net = model(name, seed=11).eval()
     b = batch(n=1, h=12, w=12, seed=9)
-    path = save_checkpoint(tmp_path / "m.pt", name, {**pcn.CONFIGS["small"]} if name != "rae" else
-                           {"levels": [12, 18, 24, 32], "bottleneck": 40, "demodulate": False}, net, {"steps": 3})
+    path = save_checkpoint(tmp_path / "m.pt", name, model_config(name, "small"), net, {"steps": 3})
     payload = load_checkpoint(path, expect_model=name)
     assert payload["meta"]["steps"] == 3
     again = model_from_checkpoint(payload).eval()

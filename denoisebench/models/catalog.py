@@ -28,8 +28,8 @@ class ModelSpec:
 
 
 MODELS: dict[str, ModelSpec] = {
-    "dpcn": ModelSpec("dpcn", pcn.make_dpcn, pcn.CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS),
-    "kpcn": ModelSpec("kpcn", pcn.make_kpcn, pcn.CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS),
+    "dpcn": ModelSpec("dpcn", pcn.make_dpcn, pcn.DPCN_CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS),
+    "kpcn": ModelSpec("kpcn", pcn.make_kpcn, pcn.KPCN_CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS),
     "rae": ModelSpec("rae", rae.make_rae, rae.CONFIGS, True, ("color",), ("albedo", "normal", "depth", "roughness")),
 }
 

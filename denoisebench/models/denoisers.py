@@ -79,7 +79,8 @@ class PCNDenoiser(LearnedDenoiser):
         # Receptive radius: each conv adds kernel//2, the input gradients 1, the firefly clamp 1, and
         # KPCN's applied kernel size//2 (it reads noisy pixels that far away).
         applied = cfg.get("kernel_size", 1) // 2 if self.model.mode == "kernel" else 0
-        self.halo = cfg["layers"] * (cfg["kernel"] // 2) + 2 + applied
+        head = cfg.get("head_kernel") or cfg["kernel"]
+        self.halo = (cfg["layers"] - 1) * (cfg["kernel"] // 2) + head // 2 + 2 + applied
 
     def _run(self, tensors: dict[str, torch.Tensor]) -> torch.Tensor:
         height, width = tensors["color"].shape[-2:]

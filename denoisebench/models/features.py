@@ -127,8 +127,14 @@ def to_log(x: torch.Tensor) -> torch.Tensor:
 
 
 def from_log(y: torch.Tensor) -> torch.Tensor:
-    """Inverse of :func:`to_log` for network outputs, clamped so it never overflows."""
-    return torch.expm1(y.clamp(0.0, LOG_MAX))
+    """Inverse of :func:`to_log` for network outputs, clamped to [0, LOG_MAX] so it never overflows.
+
+    The clamp passes gradients straight through (its backward is the identity): with a plain
+    clamp a network whose outputs once fall below 0 (the first steps of a relative loss push
+    every dark pixel there) gets zero gradient everywhere and stays black for good.
+    """
+    clamped = y.clamp(0.0, LOG_MAX)
+    return torch.expm1(y + (clamped - y).detach())
 
 
 def gradients(x: torch.Tensor) -> torch.Tensor:

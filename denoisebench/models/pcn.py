@@ -39,14 +39,32 @@ from .features import PCN_INPUT_CHANNELS, from_log, normalize_radiance, pcn_inpu
 #: Logits beyond this carry no extra information (exp(±50) spans every float32 ratio) and keep softmax finite.
 LOGIT_MAX = 50.0
 
-CONFIGS = {
-    "paper": {"layers": 9, "channels": 100, "kernel": 5, "kernel_size": 21},
+PAPER_CONFIG = {"layers": 9, "channels": 100, "kernel": 5, "kernel_size": 21}
+
+DPCN_CONFIGS = {
+    "paper": dict(PAPER_CONFIG),
     "small": {"layers": 5, "channels": 24, "kernel": 3, "kernel_size": 21},
 }
 
+# KPCN's small branch must *see* as far as its kernel reaches: five 5×5 layers give a 21-pixel
+# receptive field, the 21×21 kernel's (five 3×3 layers saw 11 pixels and could not tell which of
+# the outer taps to trust). The 1×1 head keeps the 24 → 441 logits layer cheap.
+KPCN_CONFIGS = {
+    "paper": dict(PAPER_CONFIG),
+    "small": {"layers": 6, "channels": 24, "kernel": 5, "kernel_size": 21, "head_kernel": 1},
+}
 
-def conv_stack(in_channels: int, out_channels: int, layers: int, channels: int, kernel: int) -> nn.Sequential:
-    """``layers`` convolutions with ReLU between (none after the last), 'same' zero padding."""
+#: Kept for callers that predate the split (the DPCN configurations).
+CONFIGS = DPCN_CONFIGS
+
+
+def conv_stack(
+    in_channels: int, out_channels: int, layers: int, channels: int, kernel: int, head_kernel: int | None = None
+) -> nn.Sequential:
+    """``layers`` convolutions with ReLU between (none after the last), 'same' zero padding.
+
+    The last convolution has ``head_kernel``×``head_kernel`` support (default: ``kernel``).
+    """
     if layers < 2:
         raise ValueError(f"a PCN branch needs at least 2 layers (got {layers})")
     modules: list[nn.Module] = []
@@ -54,7 +72,8 @@ def conv_stack(in_channels: int, out_channels: int, layers: int, channels: int, 
     for _ in range(layers - 1):
         modules += [nn.Conv2d(width, channels, kernel, padding=kernel // 2), nn.ReLU(inplace=True)]
         width = channels
-    modules.append(nn.Conv2d(width, out_channels, kernel, padding=kernel // 2))
+    head = kernel if head_kernel is None else head_kernel
+    modules.append(nn.Conv2d(width, out_channels, head, padding=head // 2))
     return nn.Sequential(*modules)
 
 
@@ -95,7 +114,9 @@ class PCN(nn.Module):
     N×2×size²×H×W: diffuse and specular branch).
     """
 
-    def __init__(self, mode: str, layers: int, channels: int, kernel: int, kernel_size: int = 21):
+    def __init__(
+        self, mode: str, layers: int, channels: int, kernel: int, kernel_size: int = 21, head_kernel: int | None = None
+    ):
         super().__init__()
         if mode not in ("direct", "kernel"):
             raise ValueError(f"mode must be 'direct' or 'kernel', not {mode!r}")
@@ -104,8 +125,8 @@ class PCN(nn.Module):
         self.mode = mode
         self.kernel_size = kernel_size
         out_channels = 3 if mode == "direct" else kernel_size * kernel_size
-        self.diffuse = conv_stack(PCN_INPUT_CHANNELS, out_channels, layers, channels, kernel)
-        self.specular = conv_stack(PCN_INPUT_CHANNELS, out_channels, layers, channels, kernel)
+        self.diffuse = conv_stack(PCN_INPUT_CHANNELS, out_channels, layers, channels, kernel, head_kernel)
+        self.specular = conv_stack(PCN_INPUT_CHANNELS, out_channels, layers, channels, kernel, head_kernel)
         if mode == "direct":
             # Radiance is normalised to mean 1 (features.normalize_radiance): start at log(1 + 1), not at black.
             with torch.no_grad():
@@ -146,9 +167,9 @@ class PCN(nn.Module):
         return out
 
 
-def make_dpcn(layers: int, channels: int, kernel: int, kernel_size: int = 21) -> PCN:
-    return PCN("direct", layers, channels, kernel, kernel_size)
+def make_dpcn(layers: int, channels: int, kernel: int, kernel_size: int = 21, head_kernel: int | None = None) -> PCN:
+    return PCN("direct", layers, channels, kernel, kernel_size, head_kernel)
 
 
-def make_kpcn(layers: int, channels: int, kernel: int, kernel_size: int = 21) -> PCN:
-    return PCN("kernel", layers, channels, kernel, kernel_size)
+def make_kpcn(layers: int, channels: int, kernel: int, kernel_size: int = 21, head_kernel: int | None = None) -> PCN:
+    return PCN("kernel", layers, channels, kernel, kernel_size, head_kernel)

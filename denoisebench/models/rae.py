@@ -33,7 +33,9 @@ from .features import RAE_INPUT_CHANNELS, from_log, normalize_radiance, rae_inpu
 CONFIGS = {
     # The paper's encoder widths (32, 43, 57, 76, 101) and a 144-channel bottleneck.
     "paper": {"levels": [32, 43, 57, 76, 101], "bottleneck": 144, "demodulate": False},
-    "small": {"levels": [12, 18, 24, 32], "bottleneck": 40, "demodulate": False},
+    # Demodulated: a network this small cannot carry texture through its bottleneck, so it
+    # denoises untextured illumination and the albedo puts the texture back (as Chaitanya et al. do).
+    "small": {"levels": [12, 18, 24, 32], "bottleneck": 40, "demodulate": True},
 }
 
 
