@@ -4,12 +4,14 @@ Both render the same scene at the same resolution, spp and max depth (Mitsuba wi
 and a box filter, the pixel filter of our noisy buffers). Ours is timed twice: as a noisy frame
 (the diffuse/specular split, every feature buffer and all per-pixel variances, returned as host
 arrays) and as a reference frame (color, diffuse, specular and their variances: no features).
-Each renderer is warmed up once (JIT compilation), then timed ``--repeats`` times, interleaved, and
+Each renderer is warmed up once (JIT compilation; for ours also the ``dr.freeze`` recording of its
+passes, which later frames of a dataset replay), then timed ``--repeats`` times, interleaved, and
 the medians are compared; the minimum is printed too, since other processes on a shared machine
-only ever add time.
+only ever add time. ``--no-freeze`` traces our passes afresh every frame instead (the cost of a
+one-off frame; Mitsuba's ``path`` traces its C++ integrator every time, which is cheap).
 
     .venv/bin/python bench/render_throughput.py [--scene cornell|glossy] [--size 128] [--spp 16]
-        [--max-depth 8] [--repeats 7] [--target-lanes N]
+        [--max-depth 8] [--repeats 7] [--target-lanes N] [--no-freeze]
 
 Prints samples per second of each and the ratios ours / path (the target is >= 0.9).
 """
@@ -26,6 +28,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from denoisebench.generator import feature_renderer  # noqa: E402
 from denoisebench.generator.camera_track import CameraTrack  # noqa: E402
 from denoisebench.generator.feature_renderer import load_scene, render_frame  # noqa: E402
 from denoisebench.generator.render_plan import RenderOptions, make_render_plan  # noqa: E402
@@ -50,7 +53,9 @@ def main(argv=None) -> int:
     parser.add_argument("--max-depth", type=int, default=8)
     parser.add_argument("--repeats", type=int, default=7)
     parser.add_argument("--target-lanes", type=int, default=None, help="render_frame's target_lanes")
+    parser.add_argument("--no-freeze", action="store_true", help="trace our passes afresh every frame")
     args = parser.parse_args(argv)
+    feature_renderer.FREEZE_PASSES = not args.no_freeze
 
     mi = load_mitsuba()
     import drjit as dr
@@ -107,7 +112,8 @@ def main(argv=None) -> int:
             times[name].append(run(k))
     samples = size * size * spp
     print(f"scene={args.scene} {size}x{size} spp={spp} max_depth={args.max_depth} repeats={args.repeats} "
-          f"threads={dr.thread_count()} target_lanes={extra.get('target_lanes', 'default')}")
+          f"threads={dr.thread_count()} target_lanes={extra.get('target_lanes', 'default')} "
+          f"frozen={feature_renderer.FREEZE_PASSES}")
     medians = {name: statistics.median(t) for name, t in times.items()}
     for name, t in times.items():
         print(f"{labels[name]:36s}: {samples / medians[name] / 1e6:7.3f} Msamples/s  "

@@ -25,6 +25,10 @@ Conventions:
   ``(seed, frame, spp, stream, pass)`` where stream is 0 for noisy and 1 for reference renders, so
   frames, sample counts and the reference never share random numbers, and the same arguments give
   bit-identical buffers.
+* Each pass configuration (kernel options, camera switches, buffers, band and sample sizes) is
+  recorded once per scene with ``dr.freeze`` and replayed for later frames, whose camera and seed
+  are the recording's inputs: a replay launches the kernels a fresh trace would, so bytes do not
+  depend on it (:data:`FREEZE_PASSES` turns it off; tests/test_render_frozen.py compares the two).
 * Passes hold at most :data:`MAX_PATHS_PER_PASS` paths: a frame is split into bands of rows and
   chunks of samples, whose statistics are merged exactly (Chan et al.'s pairwise update).
 * Random numbers depend on the pass layout (:data:`MAX_PATHS_PER_PASS`, ``target_lanes``), which
@@ -41,8 +45,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from denoisebench.generator.camera_track import CameraTrack
-from denoisebench.generator.render_camera import DrCamera, camera_setup
-from denoisebench.generator.render_integrator import KernelOptions, merge_lane_moments, render_moments, scene_has_delta_only_bsdf
+from denoisebench.generator.render_camera import CameraSwitches, DrCamera, camera_setup, camera_switches, camera_values
+from denoisebench.generator.render_integrator import (
+    KernelOptions,
+    moment_layout,
+    pixel_moments,
+    render_moments,
+    scene_has_delta_only_bsdf,
+)
 from denoisebench.generator.render_plan import RenderPlan
 from denoisebench.mitsuba_runtime import load_mitsuba
 
@@ -73,6 +83,129 @@ FEATURE_CHANNELS = {"albedo": 3, "normal": 3, "depth": 1, "position": 3, "roughn
 
 NOISY_STREAM = 0
 REFERENCE_STREAM = 1
+
+
+@dataclass(frozen=True)
+class _PassConfig:
+    """Everything that shapes one pass's kernels (hashable); the numbers that vary per frame are not here."""
+
+    opts: KernelOptions
+    switches: CameraSwitches
+    stat_channels: tuple  # (name, channels) of the per-pixel statistics, in output order
+    sample_channels: tuple  # (name, channels) of per-sample data, () without
+    band: int  # rows of the pass
+    width: int
+    count: int  # samples per pixel in the pass
+    groups: int  # lanes per pixel
+
+
+def _render_pass(scene, seed, row0, camera_values: dict, config: _PassConfig):
+    """Trace one pass: ``config.count`` samples of every pixel of rows ``row0 .. row0 + band``.
+
+    Returns ``(packed, targets)``: the per-pixel moments packed as :func:`moment_layout` says, and
+    the per-sample arrays (name → flat Float, sample-major) or ``None``. Dr.Jit arrays, evaluated.
+    """
+    mi = load_mitsuba()
+    import drjit as dr
+
+    band, width, count, groups = config.band, config.width, config.count, config.groups
+    stat_channels = dict(config.stat_channels)
+    pixels = band * width
+    base, rem = divmod(count, groups)
+    lanes = pixels * groups
+    cam = DrCamera(mi, config.switches, camera_values)
+    sampler = mi.load_dict({"type": "independent", "sample_count": 1})
+    sampler.seed(seed, lanes)
+    # Pixel-major lanes (lane = pixel * groups + group): a pixel's lanes are one contiguous block.
+    # Sizes enter as opaque values: as literals, every image size and spp would compile anew.
+    groups_o, pixels_o, width_o = (dr.opaque(mi.UInt32, v) for v in (groups, pixels, width))
+    lane = dr.arange(mi.UInt32, lanes)
+    pixel = lane // groups_o
+    group = lane - pixel * groups_o
+    px = pixel % width_o
+    py = pixel // width_o + row0
+    lane_count = dr.opaque(mi.UInt32, base) + dr.select(group < dr.opaque(mi.UInt32, rem), mi.UInt32(1), mi.UInt32(0))
+    targets = None
+    if config.sample_channels:
+        targets = {k: (dr.zeros(mi.Float, count * pixels * c), c) for k, c in config.sample_channels}
+    moments_dr = render_moments(
+        mi, scene, sampler, cam, config.opts, px, py, lane_count, stat_channels, targets,
+        lambda s: (group + s * groups_o) * pixels_o + pixel,  # sample index within the pass, then pixel
+    )
+    if groups > 1:
+        dr.eval(moments_dr, targets)  # one kernel traces everything; the merge gathers from its results
+    packed, _ = pixel_moments(mi, moments_dr, stat_channels, groups, base, rem, count)
+    targets = None if targets is None else {k: target for k, (target, _) in targets.items()}
+    # One lane per pixel: tracing and packing are a single kernel. Several: the merge kernel.
+    dr.eval(packed, targets)
+    return packed, targets
+
+
+#: Record passes with ``dr.freeze`` and replay them (False: trace every pass afresh; same bits).
+FREEZE_PASSES = True
+#: Passes compiled with ``dr.freeze`` for the most recent scene, one per :class:`_PassConfig`, oldest first.
+_COMPILED: dict = {}
+_COMPILED_SCENE: list = [None]  # the scene they were recorded with (a strong reference: see below)
+#: Most pass configurations kept compiled at once (each holds its recorded kernels).
+MAX_COMPILED_PASSES = 8
+
+
+def _compiled_pass(scene, config: _PassConfig):
+    """The frozen (``dr.freeze``) :func:`_render_pass` for ``scene`` and ``config``.
+
+    Notes:
+        Tracing the Python integrator costs ~10-20 ms per pass and assembling its ~6000-op
+        kernel a few more, which on a 64x64 16-spp frame was a sixth of the time; a frozen function
+        records the kernel launches once and replays them for later frames, whose camera and seed
+        arrive as Dr.Jit inputs. A replay launches the very kernels a fresh trace would (the tests
+        compare the two bit for bit).
+
+        One frozen function per configuration: a single one that alternated between two (noisy and
+        reference frames) re-recorded on every call. Image sizes are in the configuration because
+        sizes taken with ``dr.width`` inside become constants of the recording.
+
+        Recordings are only reused for the scene object they were made with (its BSDF and shape
+        code is inlined in the kernels): a different scene drops them all. The module keeps that
+        scene alive, so that no new scene can ever reuse its ``id``; one scene at most.
+    """
+    import drjit as dr
+
+    if not FREEZE_PASSES:
+        return _render_pass
+    if _COMPILED_SCENE[0] is not scene:
+        _COMPILED.clear()
+        _COMPILED_SCENE[0] = scene
+    function = _COMPILED.pop(config, None)
+    if function is None:
+        function = _FreezeOrTrace(dr.freeze(_render_pass, warn_after=2))
+        while len(_COMPILED) >= MAX_COMPILED_PASSES:
+            _COMPILED.pop(next(iter(_COMPILED)))
+    _COMPILED[config] = function  # most recently used last
+    return function
+
+
+class _FreezeOrTrace:
+    """A frozen pass that falls back to plain tracing where Dr.Jit refuses to record it.
+
+    Notes:
+        Dr.Jit validates a recording: a virtual call whose instances are not among the function's
+        inputs aborts it. That happens when the scene has no instance of a domain (a scene without
+        emitters) while other live scenes have some: the call is then over *their* instances. The
+        pass is traced normally instead (same kernels, same bits), for good for this configuration.
+    """
+
+    def __init__(self, frozen):
+        self.frozen = frozen
+
+    def __call__(self, *args):
+        if self.frozen is not None:
+            try:
+                return self.frozen(*args)
+            except RuntimeError as error:
+                if "frozen function" not in str(error):
+                    raise
+                self.frozen = None
+        return _render_pass(*args)
 
 
 @dataclass
@@ -122,12 +255,6 @@ class _Moments:
         else:
             var = np.zeros_like(mean)
         return mean, var
-
-
-def _to_numpy(value, channels: int, lanes: int) -> np.ndarray:
-    """lanes×channels float32 array of a Dr.Jit value."""
-    parts = [value] if channels == 1 else [value[c] for c in range(channels)]
-    return np.stack([np.broadcast_to(np.asarray(p, dtype=np.float32).reshape(-1), (lanes,)) for p in parts], -1)
 
 
 def _plan_passes(height: int, width: int, spp: int, max_paths: int):
@@ -183,7 +310,6 @@ def render_frame(
         follow_delta_albedo="albedo" in features and scene_has_delta_only_bsdf(mi, scene),
         jitter=_jitter,
     )
-    cam = DrCamera(mi, setup)
     stream = REFERENCE_STREAM if reference else NOISY_STREAM
     keep_samples = plan.per_sample and not reference
 
@@ -200,45 +326,25 @@ def render_frame(
     else:
         samples = None
 
-    sampler = mi.load_dict({"type": "independent", "sample_count": 1})
+    switches = camera_switches(setup)
+    values = camera_values(mi, setup)
+    layout = moment_layout(stat_channels)
     passes = _plan_passes(height, width, spp, max_paths_per_pass)
     for index, (row0, band, s0, count) in enumerate(passes):
-        pixels = band * width
-        groups = max(1, min(count, -(-target_lanes // pixels)))  # lanes per pixel (each loops over samples)
-        base, rem = divmod(count, groups)
-        lanes = pixels * groups
-        sampler.seed(derive_seed(seed, frame, spp, stream, index), lanes)
-        # Pixel-major lanes (lane = pixel * groups + group): a pixel's lanes are one contiguous block,
-        # so the per-lane moments merge with block reductions on the device.
-        # Sizes enter as opaque values: as literals, every image size and spp would compile anew.
-        groups_o, pixels_o, width_o = (dr.opaque(mi.UInt32, v) for v in (groups, pixels, width))
-        lane = dr.arange(mi.UInt32, lanes)
-        pixel = lane // groups_o
-        group = lane - pixel * groups_o
-        px = pixel % width_o
-        py = pixel // width_o + dr.opaque(mi.UInt32, row0)
-        lane_count = dr.opaque(mi.UInt32, base) + dr.select(group < dr.opaque(mi.UInt32, rem), mi.UInt32(1), mi.UInt32(0))
-        targets = None
-        if samples is not None:
-            targets = {k: (dr.zeros(mi.Float, count * pixels * c), c) for k, c in sample_channels.items()}
-        moments_dr = render_moments(
-            mi, scene, sampler, cam, opts, px, py, lane_count, stat_channels, targets,
-            lambda s: (group + s * groups_o) * pixels_o + pixel,  # sample index within the pass, then pixel
-        )
-        dr.eval(moments_dr, targets)  # one kernel traces everything; the merge below reads its results
-        if groups > 1:
-            moments_dr = merge_lane_moments(mi, moments_dr, lane_count, groups, count)
-            dr.eval(moments_dr)
+        groups = max(1, min(count, -(-target_lanes // (band * width))))  # lanes per pixel (each loops over samples)
+        config = _PassConfig(opts, switches, tuple(stat_channels.items()), tuple(sample_channels.items()),
+                             band, width, count, groups)
+        seed_dr = dr.opaque(mi.UInt32, derive_seed(seed, frame, spp, stream, index))
+        packed, targets = _compiled_pass(scene, config)(scene, seed_dr, dr.opaque(mi.UInt32, row0), values, config)
+        host = np.asarray(packed, dtype=np.float32).reshape(band, width, layout["stride"])  # one copy
         rows = slice(row0, row0 + band)
         for name, chans in stat_channels.items():
-            mean_dr, m2_dr = moments_dr[name]
-            mean_b = _to_numpy(mean_dr, chans, pixels).reshape(band, width, chans)
-            m2_b = _to_numpy(m2_dr, chans, pixels).reshape(band, width, chans)
-            moments[name].add(rows, s0, count, mean_b, m2_b)
+            mean_at, m2_at = layout[name]
+            moments[name].add(rows, s0, count, host[..., mean_at : mean_at + chans], host[..., m2_at : m2_at + chans])
         if samples is not None:
-            for name, (target, chans) in targets.items():
-                samples[name][s0 : s0 + count, rows] = np.asarray(target).reshape(count, band, width, chans)
-        del moments_dr, targets
+            for name, chans in sample_channels.items():
+                samples[name][s0 : s0 + count, rows] = np.asarray(targets[name]).reshape(count, band, width, chans)
+        del packed, targets
 
     buffers = {}
     for name, m in moments.items():

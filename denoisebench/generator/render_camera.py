@@ -120,68 +120,126 @@ def _pose_tables(camera: CameraTrack):
     return quat_a, quat_b, mats[:, :3, 3].copy(), scale
 
 
-#: Fewest rows of a per-ray pose table (see :meth:`DrCamera._table`).
+#: Fewest rows of a per-ray pose table (see :func:`_table`).
 MIN_TABLE_ROWS = 64
+
+#: Per-frame numbers of the camera, in the order of the packed ``scalars`` array of :func:`camera_values`.
+_SCALARS = ("tan_x", "tan_y", "inv_w", "inv_h", "width", "height", "aperture", "focus", "near", "far",
+            "time_center", "time_span", "frame_time", "last_frame")
+
+
+@dataclass(frozen=True)
+class CameraSwitches:
+    """What about the camera changes the kernel's code (hashable: part of a compiled pass's key)."""
+
+    thin_lens: bool
+    time_sampling: bool
+    has_previous: bool  # frame > 0: motion vectors are computed
+    per_ray_pose: bool  # animated camera under time sampling: poses slerped per ray from tables
+
+
+def camera_switches(setup: CameraSetup) -> CameraSwitches:
+    return CameraSwitches(
+        thin_lens=setup.thin_lens,
+        time_sampling=setup.time_sampling,
+        has_previous=setup.has_previous,
+        per_ray_pose=setup.static_pose is None,
+    )
+
+
+def camera_values(mi, setup: CameraSetup) -> dict:
+    """Every number of the frame's camera as Dr.Jit arrays: what a compiled pass takes as input.
+
+    Notes:
+        The per-frame numbers (field of view, clipping, lens, time, static poses) travel as *one*
+        array, read in the kernel by gathers at fixed positions: as separate opaque scalars, each
+        was its own memset task on Dr.Jit's thread pool (~40 per frame), and as literals each new
+        value would compile a new kernel.
+    """
+    scalars = {
+        "tan_x": setup.tan_half_x,
+        "tan_y": setup.tan_half_y,
+        "inv_w": 1.0 / setup.width,
+        "inv_h": 1.0 / setup.height,
+        "width": setup.width,
+        "height": setup.height,
+        "aperture": setup.aperture_radius,
+        "focus": setup.focus_distance,
+        "near": setup.near_clip,
+        "far": setup.far_clip,
+        "time_center": setup.time_center,
+        "time_span": setup.time_span,
+        "frame_time": float(setup.frame),
+        "last_frame": float(setup.frames - 1),
+    }
+    packed = [float(scalars[name]) for name in _SCALARS]
+    if setup.static_pose is not None:
+        # Columns 0..3 (three axes and the translation), rows 0..2, for this frame and the previous one.
+        for pose in (setup.static_pose, setup.prev_pose if setup.prev_pose is not None else setup.static_pose):
+            packed += [float(pose[r, c]) for c in range(4) for r in range(3)]
+        return {"scalars": mi.Float(np.asarray(packed, dtype=np.float32))}
+    return {
+        "scalars": mi.Float(np.asarray(packed, dtype=np.float32)),
+        "qa": _table(mi, mi.Vector4f, setup.quat_a),
+        "qb": _table(mi, mi.Vector4f, setup.quat_b),
+        "tr": _table(mi, mi.Vector3f, setup.trans),
+        "sc": _table(mi, mi.Vector3f, setup.scale),
+    }
+
+
+def _table(mi, kind, rows: np.ndarray):
+    """A per-frame table as a Dr.Jit array (one entry per row), padded to :data:`MIN_TABLE_ROWS`.
+
+    Notes:
+        Tiny tables break kernel caching: a one-entry array becomes a literal (new code for
+        every camera), and small buffers came back with varying alignment, which Dr.Jit writes
+        into the kernel (``align 1`` / ``align 4``), so every frame compiled anew (~2.5 s).
+        Padding rows (copies of the last) are never gathered.
+    """
+    import drjit as dr
+
+    padded = np.concatenate([rows, np.repeat(rows[-1:], max(0, MIN_TABLE_ROWS - len(rows)), axis=0)])
+    columns = [mi.Float(np.ascontiguousarray(padded[:, c], dtype=np.float32)) for c in range(padded.shape[1])]
+    table = kind(*columns)
+    dr.make_opaque(table)
+    return table
 
 
 class DrCamera:
-    """The camera of one frame as opaque Dr.Jit values; builds rays and reprojects points."""
+    """The camera of one frame in Dr.Jit; builds rays and reprojects points.
 
-    def __init__(self, mi, setup: CameraSetup):
+    Built from :func:`camera_switches` (Python switches that shape the code) and
+    :func:`camera_values` (Dr.Jit arrays), so that a compiled pass can take the values as inputs.
+    """
+
+    def __init__(self, mi, switches: CameraSwitches, values: dict):
         import drjit as dr
 
         self.mi = mi
         self.dr = dr
-        self.setup = setup
-        F = mi.Float
+        self.switches = switches
+        scalars = values["scalars"]
 
-        def opaque(value):
-            return dr.opaque(F, float(value))
+        def scalar(i: int):
+            return dr.gather(mi.Float, scalars, mi.UInt32(i))
 
-        self.tan_x = opaque(setup.tan_half_x)
-        self.tan_y = opaque(setup.tan_half_y)
-        self.inv_w = opaque(1.0 / setup.width)
-        self.inv_h = opaque(1.0 / setup.height)
-        self.width = opaque(setup.width)
-        self.height = opaque(setup.height)
-        self.aperture = opaque(setup.aperture_radius)
-        self.focus = opaque(setup.focus_distance)
-        self.near = opaque(setup.near_clip)
-        self.far = opaque(setup.far_clip)
-        self.time_center = opaque(setup.time_center)
-        self.time_span = opaque(setup.time_span)
-        self.frame_time = opaque(float(setup.frame))
-        if setup.static_pose is not None:
-            self.static = self._opaque_pose(setup.static_pose)
-            self.prev_static = self._opaque_pose(setup.prev_pose) if setup.prev_pose is not None else None
+        for i, name in enumerate(_SCALARS):
+            setattr(self, name, scalar(i))
+        if not switches.per_ray_pose:
+            base = len(_SCALARS)
+
+            def pose(at: int):
+                return tuple(mi.Vector3f(*[scalar(at + 3 * c + r) for r in range(3)]) for c in range(4))
+
+            self.static = pose(base)
+            self.prev_static = pose(base + 12) if switches.has_previous else None
         else:
             self.static = self.prev_static = None
-            self.qa = self._table(mi.Vector4f, setup.quat_a)
-            self.qb = self._table(mi.Vector4f, setup.quat_b)
-            self.tr = self._table(mi.Vector3f, setup.trans)
-            self.sc = self._table(mi.Vector3f, setup.scale)
-            self.last_frame = opaque(setup.frames - 1)
+            self.qa, self.qb, self.tr, self.sc = values["qa"], values["qb"], values["tr"], values["sc"]
 
-    def _table(self, kind, rows: np.ndarray):
-        """A per-frame table as a Dr.Jit array (one entry per row), padded to :data:`MIN_TABLE_ROWS`.
-
-        Notes:
-            Tiny tables break kernel caching: a one-entry array becomes a literal (new code for
-            every camera), and small buffers came back with varying alignment, which Dr.Jit writes
-            into the kernel (``align 1`` / ``align 4``), so every frame compiled anew (~2.5 s).
-            Padding rows (copies of the last) are never gathered.
-        """
-        padded = np.concatenate([rows, np.repeat(rows[-1:], max(0, MIN_TABLE_ROWS - len(rows)), axis=0)])
-        columns = [self.mi.Float(np.ascontiguousarray(padded[:, c], dtype=np.float32)) for c in range(padded.shape[1])]
-        table = kind(*columns)
-        self.dr.make_opaque(table)
-        return table
-
-    def _opaque_pose(self, m: np.ndarray):
-        """(column0, column1, column2, translation) of a 4×4 matrix as opaque vectors."""
-        dr, mi = self.dr, self.mi
-        cols = [mi.Vector3f(*[dr.opaque(mi.Float, float(m[r, c])) for r in range(3)]) for c in range(4)]
-        return tuple(cols)
+    @classmethod
+    def for_setup(cls, mi, setup: CameraSetup) -> "DrCamera":
+        return cls(mi, camera_switches(setup), camera_values(mi, setup))
 
     # ------------------------------------------------------------------ poses
     def pose_at(self, time):
@@ -220,7 +278,7 @@ class DrCamera:
 
     def previous_pose(self, time):
         """Pose one frame before the ray's time (``None`` at frame 0: no previous frame)."""
-        if not self.setup.has_previous:
+        if not self.switches.has_previous:
             return None
         return self.prev_static if self.static is not None else self.pose_at(time - 1.0)
 
@@ -233,7 +291,7 @@ class DrCamera:
         near_p = mi.Vector3f(-ndc_x * self.tan_x, -ndc_y * self.tan_y, 1.0)  # +X left, +Y up in camera space
         pose = self.current_pose(time)
         c0, c1, c2, origin = pose
-        if self.setup.thin_lens:
+        if self.switches.thin_lens:
             lens = mi.warp.square_to_uniform_disk_concentric(lens_uv) * self.aperture
             d_local = dr.normalize(near_p * self.focus - mi.Vector3f(lens.x, lens.y, 0.0))
             o = origin + c0 * lens.x + c1 * lens.y

@@ -45,6 +45,7 @@ frame and motion is 0. Everything is finite.
 from __future__ import annotations
 
 import functools
+import importlib
 from dataclasses import dataclass
 
 from denoisebench.generator.render_camera import DrCamera
@@ -82,13 +83,33 @@ def scene_has_delta_only_bsdf(mi, scene) -> bool:
     return False
 
 
+def _diffuse_part(mi, bsdf, ctx_diffuse, si, wo, val, active):
+    """The diffuse lobes' share of ``val`` (the full BSDF value): a second evaluation only when needed.
+
+    Notes:
+        Inside :func:`drjit.dispatch` ``bsdf`` is one concrete instance, so its lobe flags are known
+        while the kernel is traced. A BSDF whose lobes are all diffuse (``diffuse``, ``twosided``
+        diffuse) has ``val`` as its diffuse part, one without diffuse lobes (conductors, dielectrics)
+        has 0: both are exactly what the Diffuse-masked evaluation returns, without paying for it.
+        Only mixed BSDFs (principled, plastics) evaluate twice.
+    """
+    # Lobe bits only (BSDFFlags.All also holds Anisotropic, Delta1D, ...).
+    lobes = int(bsdf.flags()) & int(mi.BSDFFlags.Diffuse | mi.BSDFFlags.Glossy | mi.BSDFFlags.Delta)
+    diffuse = int(mi.BSDFFlags.Diffuse)
+    if lobes & diffuse == 0:
+        return mi.Color3f(0.0)
+    if lobes & ~diffuse == 0:
+        return mi.Color3f(val)
+    return bsdf.eval(ctx_diffuse, si, wo, active)
+
+
 def _first_vertex_bsdf(split, want_features, bsdf, ctx, ctx_diffuse, si, wo, sample1, sample2, active_em, active):
     """Everything the first vertex asks of its BSDF, in one dynamic dispatch per BSDF instance."""
     import drjit as dr
     import mitsuba as mi
 
     val, pdf, bs, weight = bsdf.eval_pdf_sample(ctx, si, wo, sample1, sample2, active)
-    val_diffuse = bsdf.eval(ctx_diffuse, si, wo, active_em) if split else mi.Color3f(0.0)
+    val_diffuse = _diffuse_part(mi, bsdf, ctx_diffuse, si, wo, val, active_em) if split else mi.Color3f(0.0)
     if want_features:
         flags = bsdf.flags()
         if mi.has_flag(flags, mi.BSDFFlags.Diffuse):
@@ -128,7 +149,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     """
     import drjit as dr
 
-    setup = camera.setup
+    switches = camera.switches
     out = {}
 
     # ------------------------------------------------------------ camera ray
@@ -138,13 +159,13 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
         offset = mi.Point2f(0.5, 0.5)
     film = mi.Point2f(mi.Float(pixel_x) + offset.x, mi.Float(pixel_y) + offset.y)
     out["pixel"] = offset
-    if setup.time_sampling:
+    if switches.time_sampling:
         shutter = sampler.next_1d()
         time = camera.sample_time(shutter)
         out["time"] = shutter
     else:
         time = camera.frame_time + mi.Float(0.0) * film.x  # per-lane array
-    if setup.thin_lens:
+    if switches.thin_lens:
         lens_uv = sampler.next_2d()
         out["lens"] = lens_uv
     else:
@@ -231,14 +252,15 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
         beta = dr.select(rr_active, beta * dr.rcp(rr_prob), beta)
         active = active_next & (~rr_active | rr_continue) & (beta_max != 0.0)
         rest = mi.Color3f(0.0)
-        if not (opts.features and opts.follow_delta_albedo):
-            albedo_pending = mi.Bool(False)
         follow = opts.features and opts.follow_delta_albedo
+        # The delta-chain albedo rides in the loop state only when it is followed: an unchanging
+        # state variable makes Dr.Jit record the loop body twice (loop-invariant detection).
+        follow_state = (albedo, albedo_pending) if follow else ()
 
-        def cond(sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active, albedo, pending):
+        def cond(sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active, *follow_state):
             return active
 
-        def body(sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active, albedo, pending):
+        def body(sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active, *follow_state):
             si = scene.ray_intersect(ray, mi.RayFlags.All, False, active)
             prev_si = mi.Interaction3f(dr.zeros(mi.Float), ray.time, mi.Color0f(), prev_p, prev_n)
             ds = mi.DirectionSample3f(scene, si, prev_si)
@@ -251,9 +273,11 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             bsdf = si.bsdf(ray)
             smooth = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
             if follow:
+                albedo, pending = follow_state
                 here = pending & active & si.is_valid() & smooth
                 albedo = dr.select(here, beta * bsdf.eval_diffuse_reflectance(si, here), albedo)
                 pending = pending & active & si.is_valid() & ~smooth
+                follow_state = (albedo, pending)
             active_em = active_next & smooth
             ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
             active_em &= ds.pdf != 0.0
@@ -279,19 +303,19 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             rr_continue = sampler.next_1d() < rr_prob
             beta = dr.select(rr_active, beta * dr.rcp(rr_prob), beta)
             active = active_next & (~rr_active | rr_continue) & (beta_max != 0.0)
-            return sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active, albedo, pending
+            return (sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active,
+                    *follow_state)
 
-        albedo_state = albedo if opts.features else mi.Color3f(0.0)
         state = dr.while_loop(
             state=(sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active,
-                   albedo_state, albedo_pending),
+                   *follow_state),
             cond=cond,
             body=body,
             label="denoisebench feature path tracer",
             max_iterations=max(opts.max_depth - 1, 1),
         )
         rest = state[5]
-        if opts.features:
+        if follow:
             albedo = state[11]
         if opts.lobe_split:
             diffuse += dr.select(first_is_diffuse, rest, 0.0)
@@ -350,43 +374,95 @@ def render_moments(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pi
                     dr.scatter(target, value if channels == 1 else value[c], slot * channels + c)
         return sampler, s + 1, new_mean, new_m2
 
-    sampler, s, mean, m2 = dr.while_loop(
-        state=(sampler, s, mean, m2), cond=cond, body=body, label="denoisebench samples per pixel"
-    )
+    # Dr.Jit's loop optimisation records a loop twice whenever a state variable is loop-invariant,
+    # and the sampler always carries one (its PCG32 stream increment); nested in the sample loop,
+    # the path loop was recorded four times per frame. Python tracing is a fixed cost per frame
+    # (~20 ms, a sixth of a 64x64 16-spp frame), so record once: the invariants stay plain loop
+    # variables, which costs nothing measurable and gives the same bits.
+    with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
+        sampler, s, mean, m2 = dr.while_loop(
+            state=(sampler, s, mean, m2), cond=cond, body=body, label="denoisebench samples per pixel"
+        )
     return {k: (mean[k], m2[k]) for k in names}
 
 
-def merge_lane_moments(mi, moments: dict, lane_count, groups: int, total: int) -> dict:
-    """Merge the moments of ``groups`` consecutive lanes (one pixel's) into per-pixel moments.
+def pixel_moments(mi, moments: dict, names: dict, groups: int, base: int, rem: int, total: int):
+    """Per-pixel moments of :func:`render_moments`' per-lane ones, packed into one flat array.
 
-    ``moments`` is :func:`render_moments`' result, ``lane_count`` the samples each lane took (they
-    add up to ``total`` per pixel). Chan et al.'s pairwise rule generalised to K groups:
-    ``mean = Σ n_k mean_k / n`` and ``M2 = Σ (M2_k + n_k (mean_k - mean)²)``.
+    A pixel owns ``groups`` consecutive lanes (lane = pixel * groups + group); group ``g`` took
+    ``base + (g < rem)`` of the pixel's ``total`` samples. Lanes merge by Chan et al.'s rule
+    generalised to K groups: ``mean = Σ n_k mean_k / n`` and ``M2 = Σ (M2_k + n_k (mean_k - mean)²)``.
+    Returns ``(packed, layout)``: ``packed`` is a flat Float, pixel-major, ``stride`` values per pixel;
+    ``layout`` maps each name of ``names`` (name → channels) to the column offsets of its mean and
+    M2, and ``"stride"`` to the row length.
 
     Notes:
-        Block reductions need a pixel's lanes to be contiguous (lane = pixel * groups + group).
-        Merging on the device keeps the host transfer at one value per pixel, which matters for
-        small images, where every pixel gets many lanes.
+        One kernel merges and packs: each pixel gathers its lanes in a loop, in group order, so the
+        sums are the same bits on every run and thread count (scatter-adds from lanes that two
+        threads share would add in either order). Packing makes the host transfer one copy instead
+        of one per channel, which for small frames cost as much as the merge. With one lane per
+        pixel nothing is merged and the moments are copied as they are.
     """
     import drjit as dr
 
-    weight = mi.Float(lane_count)
-    lanes = dr.width(lane_count)
-    owner = dr.arange(mi.UInt32, lanes) // dr.opaque(mi.UInt32, groups)
-    inv_total = dr.opaque(mi.Float, 1.0 / total)
+    layout = moment_layout(names)
+    stride = layout["stride"]
+    lanes = dr.width(next(iter(moments.values()))[0])
+    pixels = lanes // groups
+    pixel = dr.arange(mi.UInt32, pixels)
 
-    def block_sums(values: dict) -> dict:
-        # Scatter-adds into targets made beforehand fuse into one kernel (block_sum would allocate,
-        # and so launch, once per buffer).
-        sums = {k: dr.zeros(type(v), lanes // groups) for k, v in values.items()}
-        dr.eval(sums)
-        for k, v in values.items():
-            dr.scatter_add(sums[k], v, owner)
-        dr.eval(sums)
-        return sums
+    if groups == 1:
+        merged = moments
+    else:
+        # Sizes as opaque values, so that every image size shares one compiled kernel.
+        groups_o = dr.opaque(mi.UInt32, groups)
+        first = pixel * groups_o
+        inv_total = dr.opaque(mi.Float, 1.0 / total)
 
-    means = block_sums({k: mean * (weight * inv_total) for k, (mean, _) in moments.items()})
-    m2s = block_sums({
-        k: m2 + weight * dr.square(mean - dr.gather(type(mean), means[k], owner)) for k, (mean, m2) in moments.items()
-    })
-    return {k: (means[k], m2s[k]) for k in moments}
+        def lane_weight(g):
+            return mi.Float(dr.opaque(mi.UInt32, base) + dr.select(g < dr.opaque(mi.UInt32, rem), 1, 0))
+
+        def cond(g, acc):
+            return g < groups_o
+
+        def mean_body(g, acc):
+            w = lane_weight(g) * inv_total
+            lane = first + g
+            return g + 1, {k: dr.fma(dr.gather(type(m), m, lane), w, acc[k]) for k, (m, _) in moments.items()}
+
+        zeros = {k: dr.zeros(type(m), pixels) for k, (m, _) in moments.items()}
+        _, means = dr.while_loop((mi.UInt32(0), zeros), cond, mean_body, label="denoisebench lane means")
+
+        def m2_body(g, acc):
+            w = lane_weight(g)
+            lane = first + g
+            new = {}
+            for k, (m, m2) in moments.items():
+                d = dr.gather(type(m), m, lane) - means[k]
+                new[k] = acc[k] + dr.fma(w, dr.square(d), dr.gather(type(m2), m2, lane))
+            return g + 1, new
+
+        _, m2s = dr.while_loop((mi.UInt32(0), zeros), cond, m2_body, label="denoisebench lane M2")
+        merged = {k: (means[k], m2s[k]) for k in moments}
+
+    columns = []
+    for k, c in names.items():
+        for value in merged[k]:
+            columns += [value] if c == 1 else [value[j] for j in range(c)]
+    # One scatter of a ``stride``-wide array writes whole rows (pixel * stride + column): separate
+    # scatters into one target would each launch a kernel (Dr.Jit flushes a dirty target first), and
+    # when the moments are not evaluated yet, each would trace all paths again.
+    row_type = getattr(importlib.import_module(type(columns[0]).__module__), "ArrayXf")
+    packed = dr.empty(mi.Float, pixels * stride)
+    dr.scatter(packed, row_type(*columns), pixel)
+    return packed, layout
+
+
+def moment_layout(names: dict) -> dict:
+    """Columns of :func:`pixel_moments`' packed rows: name → (mean offset, M2 offset), and ``"stride"``."""
+    layout, offset = {}, 0
+    for k, c in names.items():
+        layout[k] = (offset, offset + c)
+        offset += 2 * c
+    layout["stride"] = offset
+    return layout

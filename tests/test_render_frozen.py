@@ -1,0 +1,88 @@
+"""Frozen render passes replay exactly what a fresh trace computes.
+
+The feature renderer records each pass configuration once with ``dr.freeze`` and replays its kernels
+for later frames; the camera pose, lens, time, seed and rows must be inputs of the recording, never
+constants baked into it. Peer: the same frame traced afresh (``FREEZE_PASSES`` off), bit for bit,
+for frames rendered *after* the recording one, and after other configurations ran in between.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from denoisebench.generator import feature_renderer
+from denoisebench.generator.feature_renderer import load_scene, render_frame
+from denoisebench.generator.camera_track import CameraTrack
+from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
+from denoisebench.generator.render_plan import RenderOptions, make_render_plan
+from denoisebench.generator.translate import translate_usd
+from denoisebench.mitsuba_runtime import load_mitsuba
+from denoisebench.scenes import get_family
+
+SIZE = 16
+
+
+pytestmark = pytest.mark.skipif(not load_mitsuba().variant().startswith("llvm"),
+                                reason="needs the LLVM variant (libLLVM >= 16)")
+
+
+def _assert_same(a, b, frame) -> None:
+    assert a.buffers.keys() == b.buffers.keys()
+    for name in a.buffers:
+        assert np.array_equal(a.buffers[name], b.buffers[name]), (frame, name)
+    assert (a.samples is None) == (b.samples is None)
+    for name in a.samples or {}:
+        assert np.array_equal(a.samples[name], b.samples[name]), (frame, name)
+
+
+# motion_blur: per-ray poses and time; depth_of_field: thin lens; glass_env: delta chains, environment.
+@pytest.mark.parametrize("family", ["motion_blur", "depth_of_field", "glass_env"])
+def test_replayed_frames_equal_fresh_traces(monkeypatch, tmp_path, family):
+    translated = translate_usd(get_family(family).author(tmp_path, seed=0, frames=4, width=SIZE, height=SIZE))
+    scene = build_mitsuba_scene(translated)
+    plan = make_render_plan(translated.effects, RenderOptions(per_sample=True))
+    # Frame 0 has no previous frame (another configuration); frame 1 records, frames 2 and 3 replay
+    # with other poses, times and seeds, and the reference configuration runs in between.
+    frames = [0, 1, 2, 3]
+    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", True)
+    frozen = []
+    for f in frames:
+        frozen.append(render_frame(scene, translated.camera, f, plan, width=SIZE, height=SIZE, spp=2, seed=3))
+        render_frame(scene, translated.camera, f, plan, width=SIZE, height=SIZE, spp=4, seed=3, reference=True)
+    frozen_ref = render_frame(scene, translated.camera, 3, plan, width=SIZE, height=SIZE, spp=4, seed=3, reference=True)
+    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", False)
+    for f, out in zip(frames, frozen):
+        _assert_same(out, render_frame(scene, translated.camera, f, plan, width=SIZE, height=SIZE, spp=2, seed=3), f)
+    fresh_ref = render_frame(scene, translated.camera, 3, plan, width=SIZE, height=SIZE, spp=4, seed=3, reference=True)
+    _assert_same(frozen_ref, fresh_ref, "reference")
+    # The frames really differ (the camera moves), so equal bytes are not one replayed frame.
+    assert not np.array_equal(frozen[2].buffers["color"], frozen[3].buffers["color"])
+
+
+def test_sizes_seeds_and_scenes_change_between_replays(monkeypatch):
+    box = load_mitsuba().cornell_box()
+    del box["sensor"]
+    scenes = [load_scene(box), load_scene(box)]  # equal content, distinct objects
+    pose = np.eye(4)
+    pose[2, 3] = 3.9
+    camera = CameraTrack(poses=np.stack([pose, pose, pose]), fov_x_deg=39.3)
+    plan = make_render_plan(["area_lights", "indirect"])
+    calls = [
+        (scenes[0], dict(width=SIZE, height=SIZE, spp=3, seed=1)),
+        (scenes[0], dict(width=SIZE, height=SIZE, spp=3, seed=2)),  # replay, other seed
+        (scenes[0], dict(width=SIZE + 5, height=SIZE - 3, spp=3, seed=2)),  # other (odd) size
+        (scenes[0], dict(width=SIZE, height=SIZE, spp=5, seed=2)),  # other spp: other lanes per pixel
+        (scenes[1], dict(width=SIZE, height=SIZE, spp=3, seed=2)),  # other scene object
+        (scenes[0], dict(width=SIZE, height=SIZE, spp=3, seed=2, max_paths_per_pass=SIZE * 5)),  # row bands
+    ]
+    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", True)
+    frozen = [render_frame(scene, camera, 1, plan, **kw) for scene, kw in calls[:2]]
+    # The second call replayed the first one's recording: no fallback to tracing, no re-recording.
+    (compiled,) = feature_renderer._COMPILED.values()
+    assert compiled.frozen is not None and compiled.frozen.n_recordings == 1
+    frozen += [render_frame(scene, camera, 1, plan, **kw) for scene, kw in calls[2:]]
+    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", False)
+    for k, ((scene, kw), out) in enumerate(zip(calls, frozen)):
+        _assert_same(out, render_frame(scene, camera, 1, plan, **kw), k)
+    assert not np.array_equal(frozen[0].buffers["color"], frozen[1].buffers["color"])  # seeds do matter
