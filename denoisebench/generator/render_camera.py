@@ -237,10 +237,6 @@ class DrCamera:
             self.static = self.prev_static = None
             self.qa, self.qb, self.tr, self.sc = values["qa"], values["qb"], values["tr"], values["sc"]
 
-    @classmethod
-    def for_setup(cls, mi, setup: CameraSetup) -> "DrCamera":
-        return cls(mi, camera_switches(setup), camera_values(mi, setup))
-
     # ------------------------------------------------------------------ poses
     def pose_at(self, time):
         """Per-ray pose (three scaled rotation columns and translation) at fractional frame ``time``."""
