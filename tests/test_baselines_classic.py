@@ -76,7 +76,7 @@ def test_cross_bilateral_matches_brute_force_weights():
             for qy in range(max(0, y - radius), min(9, y + radius + 1)):
                 for qx in range(max(0, x - radius), min(11, x + radius + 1)):
                     dist = ((qy - y) ** 2 + (qx - x) ** 2) / (2 * sigma_s**2)
-                    w = np.exp(-dist - np.sum((guide[:, y, x].astype(np.float64) - guide[:, qy, qx]) ** 2))
+                    w = np.exp(-dist + guide.log_weight((y, x), (qy, qx)))
                     num += w * color[qy, qx]
                     den += w
             expected[y, x] = num / den
@@ -113,6 +113,25 @@ def test_cross_bilateral_does_not_mix_across_a_feature_edge():
     # next to the edge, each side keeps its own level (a plain blur would pull 0.2 towards 1.1)
     assert abs(out[:, 10:12].mean() - 0.2) < 0.05 and abs(out[:, 12:14].mean() - 2.0) < 0.5
     assert relmse(out, clean.astype(np.float32)) < 0.5 * relmse(color, clean.astype(np.float32))
+
+
+def test_cross_bilateral_keeps_a_dark_pixel_dark_beside_a_noisy_highlight():
+    """A dark floor pixel whose samples agree (tight variance) next to a bright, very noisy highlight:
+    the pair is measured against the dark pixel's noise, so nothing of the highlight bleeds in
+    (a mean-smoothed or summed variance lets it: the glossy_fireflies failure)."""
+    rng = np.random.default_rng(11)
+    shape = (24, 24, 3)
+    highlight = np.zeros(shape[:2], bool)
+    highlight[8:16, 12:] = True
+    clean = np.where(highlight[..., None], 100.0, 1e-3) * np.ones(shape)
+    # 4-spp-like highlight: the mean of 4 exponential samples (relative noise 0.5); the floor exact
+    color = np.where(highlight[..., None], clean * rng.gamma(4.0, 0.25, shape[:2])[..., None], clean).astype(np.float32)
+    variance = np.where(highlight[..., None], (0.5 * clean) ** 2, 1e-12).astype(np.float32)
+    frame = Frame(buffers={"color": color, "color_var": variance})
+    out = load_denoiser("cross_bilateral").denoise(frame)
+    floor = ~highlight
+    assert out[floor].max() < 2e-3  # at most 1e-3 of the highlight would be 0.1: 100× this
+    assert relmse(out, clean.astype(np.float32)) < relmse(color, clean.astype(np.float32))
 
 
 def test_cross_bilateral_removes_an_isolated_firefly_only_when_asked():
@@ -249,3 +268,13 @@ def test_clamp_isolated_caps_spikes_and_leaves_ramps():
     np.testing.assert_array_equal(clamp_isolated(ramp, 16.0), ramp)
     with pytest.raises(ValueError):
         OIDN(firefly_factor=0.5)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 5), (4, 1), (7, 9), (7, 9, 3), (64, 48)])
+def test_median3x3_equals_scipy_median_filter(shape):
+    """The column-sorting median of 9 against scipy.ndimage.median_filter (size 3, edges replicated), ties included."""
+    rng = np.random.default_rng(len(shape) * 100 + shape[0])
+    values = rng.random(shape).astype(np.float32)
+    values[rng.random(shape) < 0.3] = 0.5
+    size = (3, 3) + (1,) * (len(shape) - 2)
+    assert np.array_equal(cb.median3x3(values), ndimage.median_filter(values, size=size, mode="nearest"))

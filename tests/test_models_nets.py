@@ -82,10 +82,16 @@ def test_apply_kernels_matches_a_direct_loop_and_bands_agree(monkeypatch):
         for x in range(6):
             window = padded[0, :, y : y + 3, x : x + 3].reshape(2, 9)
             expected[0, :, y, x] = window @ weights[0, :, y, x]
-    got = pcn.apply_kernels(torch.from_numpy(noisy), torch.from_numpy(weights), 3).numpy()
+    got = pcn.apply_kernels(torch.from_numpy(noisy), torch.from_numpy(weights), 3).numpy()  # shifted views
     np.testing.assert_allclose(got, expected, rtol=1e-5, atol=1e-6)
-    monkeypatch.setattr(pcn, "UNFOLD_BYTES", 1)  # one row per band
-    banded = pcn.apply_kernels(torch.from_numpy(noisy), torch.from_numpy(weights), 3).numpy()
+    # the unfold path (taken while autograd records), whole and one row per band
+    grad_weights = torch.from_numpy(weights).requires_grad_()
+    unfolded = pcn.apply_kernels(torch.from_numpy(noisy), grad_weights, 3)
+    unfolded.sum().backward()
+    np.testing.assert_allclose(unfolded.detach().numpy(), got, rtol=1e-6, atol=1e-7)
+    assert grad_weights.grad is not None and torch.isfinite(grad_weights.grad).all()
+    monkeypatch.setattr(pcn, "UNFOLD_BYTES", 1)
+    banded = pcn.apply_kernels(torch.from_numpy(noisy), torch.from_numpy(weights).requires_grad_(), 3).detach().numpy()
     np.testing.assert_allclose(banded, got, rtol=1e-6, atol=1e-7)
 
 

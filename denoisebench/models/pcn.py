@@ -19,9 +19,11 @@ Notes
 * Softmax overflow: logits are made finite and clamped to ±LOGIT_MAX before
   :func:`torch.softmax` (which subtracts the per-pixel maximum), so extreme inputs give a valid
   kernel, never NaN.
-* The kernel is applied with ``unfold`` in bands of rows (at most UNFOLD_BYTES of neighbourhoods at
-  once): the whole N×3·441×H·W intermediate would need 5 GB at one megapixel, and an
-  offset-by-offset loop is ten times slower to differentiate.
+* The kernel is applied in two ways with the same sums. While autograd records (training):
+  ``unfold`` in bands of rows (at most UNFOLD_BYTES of neighbourhoods at once; the whole
+  N×3·441×H·W intermediate would need 5 GB at one megapixel), because an offset-by-offset loop
+  is ten times slower to differentiate. Otherwise (inference): one in-place multiply-add per
+  offset over shifted views, which writes nothing of that size and is ~10× faster on a CPU.
 * The noisy buffer is padded by replication for the kernel, so images smaller than the kernel
   (odd sizes down to 1×1) work.
 """
@@ -77,7 +79,7 @@ def conv_stack(
     return nn.Sequential(*modules)
 
 
-#: Bytes of unfolded neighbourhoods held at once by :func:`apply_kernels` (rows are processed in bands).
+#: Bytes of unfolded neighbourhoods held at once by the unfold path of :func:`apply_kernels`.
 UNFOLD_BYTES = 256 * 2**20
 
 
@@ -85,11 +87,31 @@ def apply_kernels(noisy: torch.Tensor, weights: torch.Tensor, size: int) -> torc
     """Per-pixel filtering: out[p] = Σ_k weights[k, p] · noisy[p + offset_k], offsets over size×size.
 
     ``noisy`` N×C×H×W, ``weights`` N×size²×H×W (row-major offsets, dy then dx, as ``unfold`` orders them).
+    Borders are replicated. Two ways to the same sums (see the module Notes): ``unfold`` in bands
+    when autograd records (fast to differentiate), one multiply-add per offset otherwise (fast
+    forward, nothing of size C·size²·H·W written).
     """
     radius = size // 2
-    batch, channels, height, width = noisy.shape
     padded = F.pad(noisy, (radius, radius, radius, radius), mode="replicate")
-    row_bytes = batch * channels * size * size * width * noisy.element_size()
+    if torch.is_grad_enabled() and (noisy.requires_grad or weights.requires_grad):
+        return _apply_unfolded(padded, weights, size)
+    return _apply_shifted(padded, weights, size)
+
+
+def _apply_shifted(padded: torch.Tensor, weights: torch.Tensor, size: int) -> torch.Tensor:
+    height, width = weights.shape[-2:]
+    out = torch.zeros(padded.shape[:2] + (height, width), dtype=padded.dtype)
+    for k in range(size * size):
+        dy, dx = divmod(k, size)
+        out.addcmul_(padded[:, :, dy : dy + height, dx : dx + width], weights[:, k : k + 1])
+    return out
+
+
+def _apply_unfolded(padded: torch.Tensor, weights: torch.Tensor, size: int) -> torch.Tensor:
+    batch, channels = padded.shape[:2]
+    height, width = weights.shape[-2:]
+    radius = size // 2
+    row_bytes = batch * channels * size * size * width * padded.element_size()
     band = max(1, min(height, UNFOLD_BYTES // max(row_bytes, 1)))
     bands = []
     for top in range(0, height, band):
