@@ -197,6 +197,19 @@ def test_rpf_output_is_a_convex_combination_and_deterministic(frame):
     assert relmse(image, frame.reference) < 0.5 * relmse(frame.color, frame.reference)
 
 
+def test_rpf_same_bytes_on_one_thread_and_several(monkeypatch):
+    """Each (pass, chunk of rows) has its own generator: threads change nothing."""
+    import denoisebench.baselines.rpf as rpf_module
+
+    frame = synthetic_frame("shapes", 24, 20, 3, seed=5)
+    monkeypatch.setattr(rpf_module, "_CHUNK_PAIRS", 20_000)  # several chunks per pass
+    monkeypatch.setattr(rpf_module, "_workers", lambda: 1)
+    one, _ = rpf_filter(frame.samples)
+    monkeypatch.setattr(rpf_module, "_workers", lambda: 3)
+    three, _ = rpf_filter(frame.samples)
+    assert np.array_equal(one, three)
+
+
 def test_rpf_constant_colour_stays_constant():
     frame = synthetic_frame("shapes", 12, 10, 3, seed=8)
     samples = dict(frame.samples)

@@ -57,7 +57,6 @@ Features the frame lacks are skipped, so the filter also runs on color alone.
 
 from __future__ import annotations
 
-import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Iterable, Mapping, NamedTuple
 
@@ -66,6 +65,8 @@ from scipy import ndimage
 
 from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.protocol import DenoiserBase
+
+from .threads import available_threads
 
 DEFAULT_FEATURE_SIGMAS: dict[str, float] = {
     "albedo": 0.1,
@@ -173,12 +174,8 @@ def _accumulate(color: np.ndarray, guide: Guide, offsets: Iterable[tuple[int, in
 
 
 def _workers() -> int:
-    """Threads for the filter: the CPUs this process may use, at most _MAX_WORKERS."""
-    try:
-        available = len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        available = os.cpu_count() or 1
-    return max(1, min(available, _MAX_WORKERS))
+    """Threads for the filter (patched in tests)."""
+    return available_threads(_MAX_WORKERS)
 
 
 def _accumulate_tasks(color, guide: Guide, tasks, rows: int, num: np.ndarray, den: np.ndarray) -> None:
