@@ -287,3 +287,18 @@ def test_output_scales_with_exposure_and_black_stays_black(name):
             net.reset()
         black = net({key: torch.zeros_like(v) for key, v in b.items()})["color"]
     assert torch.equal(black, torch.zeros_like(black))
+
+
+def test_softmax_kernels_inference_path_equals_the_autograd_path():
+    """Under no_grad the clean-up and softmax run in place: same kernels, NaN/±Inf/huge logits included."""
+    logits = torch.randn(2, 9, 5, 4) * 30.0
+    logits[0, 3, 1, 1] = float("nan")
+    logits[0, :, 2, 2] = float("inf")
+    logits[1, 4, 0, 0] = float("-inf")
+    logits[1, :, 3, 3] = 1e30
+    tracked = pcn.softmax_kernels(logits.clone().requires_grad_()).detach()
+    with torch.no_grad():
+        in_place = pcn.softmax_kernels(logits.clone())
+    assert torch.isfinite(in_place).all() and (in_place >= 0).all()
+    torch.testing.assert_close(in_place, tracked, rtol=1e-5, atol=1e-7)
+    torch.testing.assert_close(in_place.sum(dim=1), torch.ones(2, 5, 4), rtol=1e-5, atol=1e-6)

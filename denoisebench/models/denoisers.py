@@ -72,8 +72,11 @@ class PCNDenoiser(LearnedDenoiser):
 
     needs = frozenset({"color", "albedo", "normal", "depth"})
 
-    def __init__(self, checkpoint: str | None = None, threads: int = 1, tile: int = 128):
+    def __init__(self, checkpoint: str | None = None, threads: int = 1, tile: int = 256):
         super().__init__(checkpoint, threads)
+        self.model.return_kernels = False
+        # tiles bound memory (KPCN holds 2·441 kernel planes per pixel: ~0.7 GB at 300² with the halo);
+        # each tile recomputes a halo, 1.4× the pixels at 256 (1.8× at 128)
         self.tile = max(8, int(tile))
         cfg = self.config
         # Receptive radius: each conv adds kernel//2, the input gradients 1, the firefly clamp 1, and

@@ -125,7 +125,13 @@ def _apply_unfolded(padded: torch.Tensor, weights: torch.Tensor, size: int) -> t
 
 def softmax_kernels(logits: torch.Tensor) -> torch.Tensor:
     """Softmax over the kernel dimension (1) of finite, clamped logits: ≥ 0 and summing to 1 per pixel."""
-    return torch.softmax(safe(logits, LOGIT_MAX), dim=1)
+    if torch.is_grad_enabled() and logits.requires_grad:
+        return torch.softmax(safe(logits, LOGIT_MAX), dim=1)
+    # inference: the same clean-up in place (the logits are size² channels, the largest tensor here)
+    # and torch.softmax's steps in place (it is ~1.5x slower over a strided channel axis on a CPU)
+    logits = torch.nan_to_num_(logits, nan=0.0, posinf=0.0, neginf=0.0).clamp_(-LOGIT_MAX, LOGIT_MAX)
+    weights = logits.sub_(logits.amax(dim=1, keepdim=True)).exp_()
+    return weights.div_(weights.sum(dim=1, keepdim=True))
 
 
 class PCN(nn.Module):
@@ -133,7 +139,7 @@ class PCN(nn.Module):
 
     ``forward(buffers)`` takes N×C×H×W tensors by buffer name and returns a dict with ``color``,
     ``diffuse`` and ``specular`` (linear radiance, N×3×H×W) and ``kernels`` (KPCN only,
-    N×2×size²×H×W: diffuse and specular branch).
+    N×2×size²×H×W: diffuse and specular branch; unless ``return_kernels`` is off).
     """
 
     def __init__(
@@ -145,6 +151,9 @@ class PCN(nn.Module):
         if kernel_size % 2 != 1:
             raise ValueError(f"kernel_size must be odd (got {kernel_size})")
         self.mode = mode
+        #: whether ``forward`` returns KPCN's kernels (tests and training read them; inference
+        #: wrappers turn this off: stacking 2·size² planes per pixel costs as much as the softmax)
+        self.return_kernels = True
         self.kernel_size = kernel_size
         out_channels = 3 if mode == "direct" else kernel_size * kernel_size
         self.diffuse = conv_stack(PCN_INPUT_CHANNELS, out_channels, layers, channels, kernel, head_kernel)
@@ -184,7 +193,7 @@ class PCN(nn.Module):
         specular = from_log(specular_log)
         diffuse, specular = diffuse * scale, specular * scale
         out = {"color": diffuse + specular, "diffuse": diffuse, "specular": specular}
-        if kd is not None:
+        if kd is not None and self.return_kernels:
             out["kernels"] = torch.stack([kd, ks], dim=1)  # N×2×size²×H×W
         return out
 
