@@ -249,7 +249,7 @@ def test_checkpoints_load_safely(tmp_path):
     with pytest.raises(CheckpointError):
         load_checkpoint(tmp_path / "junk.pt")
     net = model("dpcn")
-    save_checkpoint(tmp_path / "d.pt", "dpcn", pcn.CONFIGS["small"], net, {})
+    save_checkpoint(tmp_path / "d.pt", "dpcn", pcn.DPCN_CONFIGS["small"], net, {})
     with pytest.raises(CheckpointError, match="not 'kpcn'"):
         load_checkpoint(tmp_path / "d.pt", expect_model="kpcn")
 

@@ -93,7 +93,6 @@ PRESETS: dict[str, dict] = {
 
 FIREFLY_SUPPORT = 0.2  # see the module docstring, "Fireflies"
 _STRIP_PIXELS = 32768  # pixels per row strip: keeps a strip's working set in cache
-_MAX_WORKERS = 8  # threads of one filter pass (see _accumulate)
 _MIN_PIXELS_PER_WORKER = 16384  # below this a thread costs more than it saves
 
 
@@ -175,7 +174,7 @@ def _accumulate(color: np.ndarray, guide: Guide, offsets: Iterable[tuple[int, in
 
 def _workers() -> int:
     """Threads for the filter (patched in tests)."""
-    return available_threads(_MAX_WORKERS)
+    return available_threads()
 
 
 def _accumulate_tasks(color, guide: Guide, tasks, rows: int, num: np.ndarray, den: np.ndarray) -> None:

@@ -56,9 +56,6 @@ KPCN_CONFIGS = {
     "small": {"layers": 6, "channels": 24, "kernel": 5, "kernel_size": 21, "head_kernel": 1},
 }
 
-#: Kept for callers that predate the split (the DPCN configurations).
-CONFIGS = DPCN_CONFIGS
-
 
 def conv_stack(
     in_channels: int, out_channels: int, layers: int, channels: int, kernel: int, head_kernel: int | None = None
@@ -100,7 +97,7 @@ def apply_kernels(noisy: torch.Tensor, weights: torch.Tensor, size: int) -> torc
 
 def _apply_shifted(padded: torch.Tensor, weights: torch.Tensor, size: int) -> torch.Tensor:
     height, width = weights.shape[-2:]
-    out = torch.zeros(padded.shape[:2] + (height, width), dtype=padded.dtype)
+    out = torch.zeros(padded.shape[:2] + (height, width), dtype=padded.dtype, device=padded.device)
     for k in range(size * size):
         dy, dx = divmod(k, size)
         out.addcmul_(padded[:, :, dy : dy + height, dx : dx + width], weights[:, k : k + 1])
@@ -124,7 +121,9 @@ def _apply_unfolded(padded: torch.Tensor, weights: torch.Tensor, size: int) -> t
 
 
 def softmax_kernels(logits: torch.Tensor) -> torch.Tensor:
-    """Softmax over the kernel dimension (1) of finite, clamped logits: ≥ 0 and summing to 1 per pixel."""
+    """Softmax over the kernel dimension (1) of finite, clamped logits: ≥ 0 and summing to 1 per pixel.
+
+    Without autograd recording, ``logits`` is overwritten (it becomes the result)."""
     if torch.is_grad_enabled() and logits.requires_grad:
         return torch.softmax(safe(logits, LOGIT_MAX), dim=1)
     # inference: the same clean-up in place (the logits are size² channels, the largest tensor here)
