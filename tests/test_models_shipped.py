@@ -37,7 +37,7 @@ def test_weights_are_small_safe_and_documented(name):
 
 #: (model, peer) pairs whose shipped small weights do not (yet) beat the peer on the held-out
 #: scenes: the issue asks for a win; strict xfail turns green into a failure once they do.
-NOT_YET_BEATEN: set[tuple[str, str]] = {("rae", "cross_bilateral")}
+NOT_YET_BEATEN: set[tuple[str, str]] = set()
 
 
 @pytest.mark.parametrize(

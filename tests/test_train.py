@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 
@@ -51,6 +52,24 @@ def test_resume_continues_exactly(data, tmp_path):
     assert b["meta"]["steps"] == 4
     for name, tensor in a["state_dict"].items():
         assert torch.equal(tensor, b["state_dict"][name]), name
+
+
+def test_ship_writes_weights_and_a_card_that_replays_the_commands(data, tmp_path):
+    ck, shipped = tmp_path / "ck.pt", tmp_path / "ship"
+    shipped.mkdir()
+    assert train("--model", "rae", "--data", data, "--steps", 1, "--out", ck) == 0
+    assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", ck, "--out", ck, "--threads", 2,
+                 "--ship", shipped) == 0
+    payload = load_checkpoint(shipped / "rae_small.pt", expect_model="rae")
+    assert "optimizer" not in payload and payload["meta"]["steps"] == 2 and payload["meta"]["threads"] == [1, 2]
+    card = (shipped / "rae_small.md").read_text()
+    first, second = payload["meta"]["commands"]
+    assert "--threads" not in first and second.endswith("--threads 2") and "--resume" in second
+    assert first in card and second in card and "1 and 2 CPU threads" in card
+    test_scenes = open_dataset(data).split("test")
+    assert f"test (held-out) scenes: {', '.join(test_scenes)}" in card
+    for peer in ("identity", "cross_bilateral"):
+        assert re.search(rf"against {peer}: relMSE [0-9.]+ vs [0-9.]+, ratio [0-9.]+ \([0-9.]+% (lower|HIGHER)\)", card)
 
 
 def run_cli(*args):

@@ -19,7 +19,8 @@ DESCRIPTIONS = {
     "the noisy lobe.",
     "rae": "Recurrent denoising autoencoder after Chaitanya et al. 2017: a U-Net with a recurrent block at "
     "every encoder level and the bottleneck, trained on 7-frame sequences with 0.8·L_s + 0.1·L_g + 0.1·L_t. "
-    "Temporal: frames in order, reset() between sequences.",
+    "Temporal: frames in order, reset() between sequences. With `residual` (the small configuration) the "
+    "last layer outputs a correction to the input's own log colour rather than the colour itself.",
 }
 
 
@@ -41,6 +42,15 @@ def generate_command(config: dict, out: str) -> str:
         parts.append("--samples")
     parts += ["--seed", str(config.get("seed", 0))]
     return shlex.join(parts)
+
+
+def _threads(used: list[int]) -> str:
+    """'one CPU thread', 'two CPU threads', or '1 and 2 CPU threads' when the commands differed."""
+    words = {1: "one", 2: "two"}
+    if len(used) == 1:
+        n = used[0]
+        return f"{words.get(n, n)} CPU thread{'s' if n != 1 else ''}"
+    return f"{' and '.join(str(n) for n in used)} CPU threads (see the commands)"
 
 
 def _pct(ours: float, peer: float) -> str:
@@ -88,7 +98,7 @@ def render_card(
         f"* {meta.get('steps')} steps of batch {meta.get('batch_size')} × {meta.get('crop')}² crops"
         + (f" × {meta.get('sequence_length')} frames" if model == "rae" else "")
         + f", spp {meta.get('spp')}, Adam lr {meta.get('lr')}, seed {meta.get('seed')}, torch {meta.get('torch')}",
-        f"* training time: {meta.get('seconds', 0.0) / 60.0:.1f} min on one CPU thread of a shared 2-core machine"
+        f"* training time: {meta.get('seconds', 0.0) / 60.0:.1f} min on {_threads(meta.get('threads', [1]))} of a shared 2-core machine"
         + (f" ({meta.get('skipped_steps')} non-finite steps skipped)" if meta.get("skipped_steps") else ""),
         "",
         "## Validation (val split, whole frames, during training)",

@@ -190,7 +190,7 @@ def train(options: TrainOptions) -> dict:
         optimizer.load_state_dict(payload["optimizer"])
         for group in optimizer.param_groups:  # load_state_dict restored the old rate; --lr wins
             group["lr"] = options.lr
-        kept = ("steps", "seconds", "skipped_steps", "history", "commands")
+        kept = ("steps", "seconds", "skipped_steps", "history", "commands", "threads")
         meta.update({k: payload["meta"][k] for k in kept if k in payload["meta"]})
 
     dataset, crop, frames = _make_dataset(spec, ds, train_scenes, spp, options, buffers, targets)
@@ -227,6 +227,8 @@ def train(options: TrainOptions) -> dict:
         )
         meta["commands"] = [command_line(earlier, str(options.resume))]
     meta.setdefault("commands", []).append(command_line(options, str(out)))
+    # Every torch thread count the training ran with (the card's training time depends on it).
+    meta["threads"] = sorted(set(meta.get("threads", [])) | {max(1, min(int(options.threads), 2))})
     start_step, total = int(meta["steps"]), int(meta["steps"]) + int(options.steps)
     per_epoch = len(_batches(len(dataset), options.batch_size, options.seed, 0))
     model.train()
@@ -310,4 +312,6 @@ def command_line(options: TrainOptions, out: str) -> str:
         parts += ["--sequence-length", str(options.sequence_length)]
     if options.loss != "log":
         parts += ["--loss", options.loss]
+    if int(options.threads) != 1:
+        parts += ["--threads", str(options.threads)]
     return shlex.join(parts)
