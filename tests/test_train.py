@@ -58,14 +58,16 @@ def test_ship_writes_weights_and_a_card_that_replays_the_commands(data, tmp_path
     ck, shipped = tmp_path / "ck.pt", tmp_path / "ship"
     shipped.mkdir()
     assert train("--model", "rae", "--data", data, "--steps", 1, "--out", ck) == 0
-    assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", ck, "--out", ck, "--threads", 2,
-                 "--ship", shipped) == 0
+    assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", ck, "--out", ck, "--threads", 2) == 0
+    # --steps 0: validate and ship the checkpoint as it is (e.g. the one the val split chose)
+    assert train("--model", "rae", "--data", data, "--steps", 0, "--resume", ck, "--out", ck, "--ship", shipped) == 0
     payload = load_checkpoint(shipped / "rae_small.pt", expect_model="rae")
     assert "optimizer" not in payload and payload["meta"]["steps"] == 2 and payload["meta"]["threads"] == [1, 2]
     card = (shipped / "rae_small.md").read_text()
-    first, second = payload["meta"]["commands"]
+    first, second, third = payload["meta"]["commands"]
     assert "--threads" not in first and second.endswith("--threads 2") and "--resume" in second
-    assert first in card and second in card and "1 and 2 CPU threads" in card
+    assert all(c in card for c in (first, second, third)) and "1 and 2 CPU threads" in card
+    assert "--steps 0" in third and "It adds no steps" in card
     test_scenes = open_dataset(data).split("test")
     assert f"test (held-out) scenes: {', '.join(test_scenes)}" in card
     for peer in ("identity", "cross_bilateral"):

@@ -90,7 +90,9 @@ def render_card(
         "```",
         "",
         "The last command, run with `--ship denoisebench/models/weights` added, also scored the test split "
-        "and wrote these weights (without optimiser state) and this card.",
+        "and wrote these weights (without optimiser state) and this card."
+        + (" It adds no steps (`--steps 0`): it validates and ships the checkpoint the command before it wrote."
+           if train_commands and " --steps 0 " in f"{train_commands[-1]} " else ""),
         "",
         f"* dataset config hash `{meta.get('dataset_hash')}`; config `{meta.get('dataset_config')}`",
         f"* train scenes ({len(meta.get('train_scenes', []))}): {', '.join(meta.get('train_scenes', []))}",
