@@ -164,7 +164,8 @@ def train(options: TrainOptions) -> dict:
         raise UserInputError(f"--steps must be >= 0 (got {options.steps})")
     if options.loss not in SPATIAL:
         raise UserInputError(f"unknown loss {options.loss!r}; losses: {', '.join(SPATIAL)}")
-    torch.set_num_threads(max(1, min(int(options.threads), 2)))
+    threads = max(1, min(int(options.threads), 2))
+    torch.set_num_threads(threads)
     ds = open_dataset(options.data)
     train_scenes, val_scenes = ds.split("train"), ds.split("val")
     if not train_scenes:
@@ -228,7 +229,7 @@ def train(options: TrainOptions) -> dict:
         meta["commands"] = [command_line(earlier, str(options.resume))]
     meta.setdefault("commands", []).append(command_line(options, str(out)))
     # Every torch thread count the training ran with (the card's training time depends on it).
-    meta["threads"] = sorted(set(meta.get("threads", [])) | {max(1, min(int(options.threads), 2))})
+    meta["threads"] = sorted(set(meta.get("threads", [])) | {threads})
     start_step, total = int(meta["steps"]), int(meta["steps"]) + int(options.steps)
     per_epoch = len(_batches(len(dataset), options.batch_size, options.seed, 0))
     model.train()
