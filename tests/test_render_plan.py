@@ -7,9 +7,8 @@ import json
 import pytest
 
 from denoisebench.generator.render_plan import (
-    DEFAULT_INDIRECT_DEPTH,
-    DELTA_CHAIN_DEPTH,
-    DIRECT_ONLY_DEPTH,
+    DEFAULT_RR_DEPTH,
+    UNBOUNDED_DEPTH,
     RenderOptions,
     RenderPlan,
     make_render_plan,
@@ -21,7 +20,8 @@ def test_nothing_special_is_the_cheapest_plan():
     plan = make_render_plan([])
     assert plan.camera_model == "pinhole"
     assert not plan.time_sampling
-    assert plan.max_depth == DIRECT_ONLY_DEPTH
+    assert plan.max_depth == UNBOUNDED_DEPTH and plan.rr_depth == DEFAULT_RR_DEPTH == 5  # Mitsuba path's defaults
+    assert plan.max_depth_source == "default" and not plan.transport_restricted
     assert plan.random_parameters == ("pixel",)
     assert not plan.lobe_split
     assert plan.pixel_filter == "box"
@@ -37,21 +37,17 @@ def test_each_effect_present_and_absent(effect):
     elif effect == "motion_blur":
         assert with_effect.time_sampling and not without.time_sampling
         assert "time" in with_effect.random_parameters and "time" not in without.random_parameters
-    elif effect == "indirect":
-        assert with_effect.max_depth == DEFAULT_INDIRECT_DEPTH
-        assert without.max_depth == DELTA_CHAIN_DEPTH  # specular/transmission still present
-        assert make_render_plan(["indirect"]).max_depth == DEFAULT_INDIRECT_DEPTH
-        assert make_render_plan(["glossy"]).max_depth == DIRECT_ONLY_DEPTH
     elif effect in ("specular", "transmission"):
-        assert make_render_plan([effect]).max_depth == DELTA_CHAIN_DEPTH
         assert make_render_plan([effect]).lobe_split
     elif effect == "glossy":
         assert make_render_plan([effect]).lobe_split and not make_render_plan(["textures"]).lobe_split
-    else:  # textures, area_lights, environment change what is rendered, not how
+    else:  # textures, area_lights, environment, indirect change what is rendered, not how
         import dataclasses
 
         assert make_render_plan([effect]) == dataclasses.replace(make_render_plan([]), effects=(effect,))
     assert with_effect.effects == EFFECTS and effect not in without.effects
+    # The plan prunes work, never light: no effect, present or absent, restricts transport.
+    assert with_effect.max_depth == without.max_depth == make_render_plan([effect]).max_depth == UNBOUNDED_DEPTH
 
 
 def test_options_cannot_change_a_scene_without_the_effect():
@@ -67,9 +63,12 @@ def test_options_cannot_change_a_scene_without_the_effect():
 def test_user_depth_and_per_sample_options():
     plan = make_render_plan(["indirect"], RenderOptions(max_depth=3, per_sample=True))
     assert plan.max_depth == 3 and plan.per_sample
-    assert any("set by the user" in note for note in plan.notes)
-    with pytest.raises(ValueError, match="max_depth"):
-        RenderOptions(max_depth=0)
+    assert plan.max_depth_source == "user" and plan.transport_restricted
+    assert "max_depth 3" in plan.transport_line() and "--max-depth" in plan.transport_line()
+    assert any("by the user" in note for note in plan.notes)
+    for bad in (0, -2, 2.5, True):
+        with pytest.raises(ValueError, match="max_depth"):
+            RenderOptions(max_depth=bad)
     with pytest.raises(ValueError, match="aperture_scale"):
         RenderOptions(aperture_scale=-1)
 
@@ -90,3 +89,41 @@ def test_json_round_trip():
 def test_unknown_effect_is_named():
     with pytest.raises(ValueError, match="unknown effect.*caustics"):
         make_render_plan(["glossy", "caustics"])
+
+
+def test_depth_restriction_sources_and_precedence():
+    """Stage metadata restricts depth only when the user does not; the plan names who asked."""
+    stage = make_render_plan(["glossy"], stage_max_depth=4)
+    assert (stage.max_depth, stage.max_depth_source) == (4, "stage")
+    assert "stage" in stage.transport_line()
+    user = make_render_plan(["glossy"], RenderOptions(max_depth=2), stage_max_depth=4)
+    assert (user.max_depth, user.max_depth_source) == (2, "user")
+    # -1 from the user lifts a stage's restriction (and the plan is then the default one).
+    lifted = make_render_plan(["glossy"], RenderOptions(max_depth=-1), stage_max_depth=4)
+    assert lifted.max_depth == UNBOUNDED_DEPTH and not lifted.transport_restricted
+    assert "full transport" in make_render_plan(["glossy"]).transport_line()
+    with pytest.raises(ValueError, match="maxDepth"):
+        make_render_plan([], stage_max_depth=0)
+    assert RenderPlan.from_dict(json.loads(stage.to_json())) == stage
+
+
+def test_stage_metadata_max_depth_is_read(tmp_path):
+    """``customLayerData["denoisebench"]["maxDepth"]`` reaches the translated scene; bad values are user errors."""
+    from pxr import Usd, UsdGeom
+
+    from denoisebench.errors import UserInputError
+    from denoisebench.generator.translate import translate_usd
+
+    def stage_with(meta):
+        path = tmp_path / f"s{len(list(tmp_path.iterdir()))}.usda"
+        stage = Usd.Stage.CreateNew(str(path))
+        UsdGeom.Camera.Define(stage, "/cam")
+        if meta is not None:
+            stage.GetRootLayer().customLayerData = {"denoisebench": meta}
+        stage.GetRootLayer().Save()
+        return path
+
+    assert translate_usd(stage_with(None)).max_depth is None
+    assert translate_usd(stage_with({"maxDepth": 3})).max_depth == 3
+    with pytest.raises(UserInputError, match="maxDepth"):
+        translate_usd(stage_with({"maxDepth": 0}))

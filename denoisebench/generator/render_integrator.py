@@ -4,7 +4,9 @@ The estimator is Mitsuba 3's ``path`` integrator (``src/integrators/path.cpp``) 
 next-event estimation at every non-delta vertex, BSDF sampling to continue, both combined by multiple
 importance sampling with the power heuristic; Russian roulette from ``rr_depth`` with Mitsuba's
 survival probability ``min(max(throughput) * eta^2, 0.95)``; ``max_depth`` in Mitsuba's convention
-(1: only emitters seen directly, 2: direct lighting, ...). It is therefore an unbiased estimator of
+(1: only emitters seen directly, 2: direct lighting, ..., -1: unbounded, which Mitsuba stores as
+``(uint32) -1`` and we express by dropping the depth test, so paths end only by Russian roulette, by
+escaping, or at zero throughput). It is therefore an unbiased estimator of
 the very image ``path`` renders at the same ``max_depth`` (tests/test_feature_renderer.py checks
 this statistically).
 
@@ -62,6 +64,16 @@ class KernelOptions:
     motion: bool
     follow_delta_albedo: bool  # the scene has delta-only BSDFs: continue the albedo through them
     jitter: bool = True  # False: every sample at the pixel center (tests compare with Mitsuba's aov)
+
+    @property
+    def bounded(self) -> bool:
+        """False for ``max_depth == -1`` (unbounded: no depth test in the loop at all)."""
+        return self.max_depth != -1
+
+    @property
+    def bounces(self) -> bool:
+        """Paths go past the camera's first hit (next-event estimation and BSDF sampling happen)."""
+        return not self.bounded or self.max_depth > 1
 
 
 def _mis_weight(dr, pdf_a, pdf_b):
@@ -194,7 +206,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             keep = front_now & front_prev
             out["motion"] = dr.select(keep, mi.Vector2f(prev_xy - now_xy), mi.Vector2f(0.0))
 
-    need_bsdf = opts.max_depth > 1 or opts.features
+    need_bsdf = opts.bounces or opts.features
     if not need_bsdf:
         out.update(color=diffuse, diffuse=diffuse, specular=specular)
         return out
@@ -203,10 +215,10 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     ctx = mi.BSDFContext()
     ctx_diffuse = mi.BSDFContext()
     ctx_diffuse.type_mask = int(mi.BSDFFlags.Diffuse)
-    active_next = valid & (opts.max_depth > 1)
+    active_next = valid & opts.bounces
     smooth = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
     active_em = active_next & smooth
-    if opts.max_depth > 1:
+    if opts.bounces:
         ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
         active_em &= ds.pdf != 0.0
         wo = si.to_local(ds.d)
@@ -216,7 +228,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
         wo = mi.Vector3f(0.0, 0.0, 1.0)
         sample1 = mi.Float(0.5)
         sample2 = mi.Point2f(0.5)
-    split = opts.lobe_split and opts.max_depth > 1
+    split = opts.lobe_split and opts.bounces
     val, pdf, bs, weight, val_diffuse, albedo, rough = dr.dispatch(
         bsdf, functools.partial(_first_vertex_bsdf, split, opts.features),
         ctx, ctx_diffuse, si, wo, sample1, sample2, active_em, valid,
@@ -226,7 +238,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
         albedo = dr.select(valid & smooth, albedo, 0.0)
         albedo_pending = valid & ~smooth
 
-    if opts.max_depth > 1:
+    if opts.bounces:
         mis_em = dr.select(ds.delta, 1.0, _mis_weight(dr, ds.pdf, pdf))
         nee = dr.select(active_em, val * em_weight * mis_em, 0.0)
         if split:
@@ -269,7 +281,9 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             emitted = ds.emitter.eval(si, active & (prev_pdf > 0.0))
             rest = dr.select(active, rest + beta * mis * emitted, rest)
 
-            active_next = active & (depth + 1 < opts.max_depth) & si.is_valid()
+            active_next = active & si.is_valid()
+            if opts.bounded:
+                active_next &= depth + 1 < opts.max_depth
             bsdf = si.bsdf(ray)
             smooth = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
             if follow:
@@ -312,7 +326,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             cond=cond,
             body=body,
             label="denoisebench feature path tracer",
-            max_iterations=max(opts.max_depth - 1, 1),
+            max_iterations=max(opts.max_depth - 1, 1) if opts.bounded else None,
         )
         rest = state[5]
         if follow:

@@ -2,9 +2,25 @@
 
 :func:`make_render_plan` is a pure function of the effects and the user's :class:`RenderOptions`.
 No depth of field means a pinhole camera and no lens channels; no motion blur means no time
-sampling; no indirect-lighting effect means paths stop after direct light (plus the bounces that
-delta and transmissive surfaces need to show what lies behind them). The plan is written into the
-dataset manifest for every scene, so a reader knows which channels exist and why.
+sampling; no non-diffuse BSDF means no lobe-split evaluation. The plan is written into the dataset
+manifest for every scene, so a reader knows which channels exist and why.
+
+**The plan prunes work, never light.** It may skip only what leaves the expected image unchanged
+(the pinhole, the missing time and lens samples, the lobe split, channels that do not exist). Light
+transport is complete by default: ``max_depth = -1`` (unbounded) with Russian roulette from depth
+``rr_depth = 5``, exactly Mitsuba's ``path`` integrator at its defaults, whatever the scene's
+effects (``indirect`` stays an effect name for per-effect breakdowns; it no longer decides depth).
+
+Transport is restricted only on purpose, and the plan says who asked (``max_depth_source``):
+
+* ``"user"``: :attr:`RenderOptions.max_depth` (``--max-depth N`` on ``generate-dataset`` and
+  ``scenes preview``); it wins over the stage;
+* ``"stage"``: the stage's own metadata, ``customLayerData["denoisebench"]["maxDepth"] = N``
+  (:data:`STAGE_MAX_DEPTH_KEY`, read by the translator);
+* ``"default"``: neither: unbounded.
+
+Pitfall: a restricted depth changes the expected image (``max_depth 2`` is direct light only); such
+a reference is the image *of that restriction*, and reports show it next to the scene.
 """
 
 from __future__ import annotations
@@ -14,11 +30,24 @@ from dataclasses import asdict, dataclass, field
 
 from denoisebench.scenes.effects import validate_effects
 
-#: Path depth (Mitsuba's convention: 1 = emitters only, 2 = direct light) per kind of transport.
-DIRECT_ONLY_DEPTH = 2
-# Mirrors and glass need a few delta bounces to show what they reflect or refract (in, out, hit, light).
-DELTA_CHAIN_DEPTH = 6
-DEFAULT_INDIRECT_DEPTH = 8
+#: Path depth in Mitsuba's convention (1 = emitters only, 2 = direct light, -1 = unbounded).
+UNBOUNDED_DEPTH = -1
+#: Mitsuba ``path``'s default Russian roulette start depth.
+DEFAULT_RR_DEPTH = 5
+#: Key of a stage's ``customLayerData["denoisebench"]`` that restricts its path depth.
+STAGE_MAX_DEPTH_KEY = "maxDepth"
+#: Who decided a plan's depth.
+DEPTH_SOURCES = ("default", "user", "stage")
+
+
+def check_max_depth(value, what: str = "max_depth") -> int:
+    """``value`` as a path depth: -1 (unbounded) or >= 1; ValueError naming ``what`` otherwise."""
+    if isinstance(value, bool) or not isinstance(value, int) and not (isinstance(value, float) and value.is_integer()):
+        raise ValueError(f"{what} must be an integer >= 1, or -1 for unbounded (got {value!r})")
+    value = int(value)
+    if value != UNBOUNDED_DEPTH and value < 1:
+        raise ValueError(f"{what} must be >= 1, or -1 for unbounded (got {value})")
+    return value
 
 
 @dataclass(frozen=True)
@@ -26,8 +55,8 @@ class RenderOptions:
     """User choices that shape a plan.
 
     Attributes:
-        max_depth: path depth to use instead of the one the effects imply (None: derive it).
-        indirect_depth: depth for scenes with the ``indirect`` effect.
+        max_depth: the user's restriction of path depth (None: the stage's, else unbounded;
+            -1: unbounded even when the stage restricts it).
         per_sample: write per-sample data (features and random parameters, one EXR part per sample).
         aperture_scale: multiplies the lens radius; ignored without depth of field.
         shutter_scale: multiplies the shutter interval; ignored without motion blur.
@@ -35,17 +64,16 @@ class RenderOptions:
     """
 
     max_depth: int | None = None
-    indirect_depth: int = DEFAULT_INDIRECT_DEPTH
     per_sample: bool = False
     aperture_scale: float = 1.0
     shutter_scale: float = 1.0
-    rr_depth: int = 5
+    rr_depth: int = DEFAULT_RR_DEPTH
 
     def __post_init__(self) -> None:
-        if self.max_depth is not None and self.max_depth < 1:
-            raise ValueError(f"max_depth must be >= 1 (got {self.max_depth})")
-        if self.indirect_depth < DIRECT_ONLY_DEPTH:
-            raise ValueError(f"indirect_depth must be >= {DIRECT_ONLY_DEPTH} (got {self.indirect_depth})")
+        if self.max_depth is not None:
+            check_max_depth(self.max_depth)
+        if self.rr_depth < 1:
+            raise ValueError(f"rr_depth must be >= 1 (got {self.rr_depth})")
         if self.aperture_scale < 0 or self.shutter_scale < 0:
             raise ValueError("aperture_scale and shutter_scale must be >= 0")
 
@@ -58,7 +86,8 @@ class RenderPlan:
         effects: the scene's effects (vocabulary order).
         camera_model: ``"pinhole"`` or ``"thin_lens"``.
         time_sampling: sample a time per ray within the shutter (camera motion blur).
-        max_depth: maximum path depth (Mitsuba's convention).
+        max_depth: maximum path depth (Mitsuba's convention; -1: unbounded, the default).
+        max_depth_source: who decided it: ``"default"`` (unbounded), ``"user"`` or ``"stage"``.
         rr_depth: Russian roulette start depth.
         lobe_split: render diffuse and specular separately (the scene has non-diffuse lobes);
             without it the specular buffer is identically zero and diffuse equals color.
@@ -83,6 +112,7 @@ class RenderPlan:
     aperture_scale: float = 1.0
     shutter_scale: float = 1.0
     pixel_filter: str = "box"
+    max_depth_source: str = "default"
     notes: tuple[str, ...] = field(default_factory=tuple)
 
     def to_json(self) -> str:
@@ -101,8 +131,26 @@ class RenderPlan:
         return cls(**fields)
 
 
-def make_render_plan(effects, options: RenderOptions | None = None) -> RenderPlan:
-    """Derive the render plan of a scene from its effects and the user's options (pure)."""
+    @property
+    def transport_restricted(self) -> bool:
+        """True when paths are cut at a finite depth (the expected image lacks some light)."""
+        return self.max_depth != UNBOUNDED_DEPTH
+
+    def transport_line(self) -> str:
+        """One line for reports: ``full transport (...)`` or the restriction and who asked for it."""
+        if not self.transport_restricted:
+            return f"full transport (unbounded depth, Russian roulette from depth {self.rr_depth})"
+        who = {"user": "the user (--max-depth)", "stage": "the stage's metadata"}.get(self.max_depth_source,
+                                                                                     self.max_depth_source)
+        return f"restricted transport: max_depth {self.max_depth}, set by {who}"
+
+
+def make_render_plan(effects, options: RenderOptions | None = None, stage_max_depth: int | None = None) -> RenderPlan:
+    """Derive the render plan of a scene from its effects, the user's options and the stage's own
+    depth restriction (``customLayerData["denoisebench"]["maxDepth"]``, None when absent); pure.
+
+    Depth: the user's ``options.max_depth`` wins, then ``stage_max_depth``, else unbounded.
+    """
     options = options or RenderOptions()
     effects = validate_effects(effects)
     present = set(effects)
@@ -111,16 +159,13 @@ def make_render_plan(effects, options: RenderOptions | None = None) -> RenderPla
     depth_of_field = "depth_of_field" in present
     motion_blur = "motion_blur" in present
     if options.max_depth is not None:
-        max_depth = options.max_depth
-        notes.append(f"max_depth {max_depth} set by the user")
-    elif "indirect" in present:
-        max_depth = options.indirect_depth
-    elif present & {"specular", "transmission"}:
-        max_depth = DELTA_CHAIN_DEPTH
-        notes.append("no indirect effect: paths end after direct light, except through delta/transmissive chains")
+        max_depth, source = options.max_depth, "user"
+    elif stage_max_depth is not None:
+        max_depth, source = check_max_depth(stage_max_depth, f"stage metadata {STAGE_MAX_DEPTH_KEY}"), "stage"
     else:
-        max_depth = DIRECT_ONLY_DEPTH
-        notes.append("no indirect effect: direct lighting only")
+        max_depth, source = UNBOUNDED_DEPTH, "default"
+    if max_depth != UNBOUNDED_DEPTH:
+        notes.append(f"transport restricted to max_depth {max_depth} by the {source}")
 
     random_parameters = ("pixel",) + (("lens",) if depth_of_field else ()) + (("time",) if motion_blur else ())
     features = ("albedo", "normal", "depth", "position", "roughness", "motion")
@@ -136,5 +181,6 @@ def make_render_plan(effects, options: RenderOptions | None = None) -> RenderPla
         per_sample=options.per_sample,
         aperture_scale=options.aperture_scale if depth_of_field else 1.0,
         shutter_scale=options.shutter_scale if motion_blur else 1.0,
+        max_depth_source=source,
         notes=tuple(notes),
     )

@@ -16,6 +16,7 @@ import numpy as np
 from denoisebench.errors import UserInputError
 from denoisebench.generator import usd_geometry as geometry
 from denoisebench.generator.effects_inference import infer_effects
+from denoisebench.generator.render_plan import STAGE_MAX_DEPTH_KEY, check_max_depth
 from denoisebench.generator.translated_scene import TranslatedScene
 from denoisebench.generator.usd_camera import find_camera, read_camera
 from denoisebench.generator.usd_lights import read_light
@@ -117,6 +118,12 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "") -> 
     except ValueError as error:
         raise UserInputError(f"{source or 'stage'}: {error}") from None
     inferred = infer_effects(camera, used_materials, light_kinds, shapes, emitters)
+    stage_depth = metadata.get(STAGE_MAX_DEPTH_KEY)
+    if stage_depth is not None:
+        try:
+            stage_depth = check_max_depth(stage_depth, f"customLayerData denoisebench.{STAGE_MAX_DEPTH_KEY}")
+        except ValueError as error:
+            raise UserInputError(f"{source or 'stage'}: {error}") from None
     return TranslatedScene(
         scene_dict={"bsdfs": bsdfs, "shapes": shapes, "emitters": emitters},
         camera=camera,
@@ -126,6 +133,7 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "") -> 
         source=source,
         family=str(metadata.get("family", "")),
         seed=int(metadata["seed"]) if "seed" in metadata else None,
+        max_depth=stage_depth,
     )
 
 

@@ -26,6 +26,8 @@ class TranslatedScene:
         warnings: one line per prim or property that was skipped or approximated.
         source: path of the stage file, when it came from one.
         family, seed: denoisebench metadata when a scene family authored the stage.
+        max_depth: the stage's own path-depth restriction, ``customLayerData["denoisebench"]["maxDepth"]``
+            (None when absent: full transport; see :mod:`~denoisebench.generator.render_plan`).
     """
 
     scene_dict: dict
@@ -36,6 +38,7 @@ class TranslatedScene:
     source: str = ""
     family: str = ""
     seed: int | None = None
+    max_depth: int | None = None
 
     @property
     def effects(self) -> tuple[str, ...]:
