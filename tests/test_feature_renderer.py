@@ -299,3 +299,34 @@ def check_finite(buffers: dict) -> None:
         assert np.all(np.isfinite(value)), name
         if name.endswith("_var"):
             assert value.min() >= 0.0, name
+
+
+def test_second_hit_channels_only_with_per_sample_data_and_same_image(mi, family_scene):
+    """RPF's per-sample extras: light/bounce random numbers are uniform, second hits are unit-normal
+    points, and asking for them leaves the image's bytes unchanged."""
+    translated, scene = family_scene("cornell")
+    with_samples = make_render_plan(translated.effects, RenderOptions(per_sample=True))
+    without = make_render_plan(translated.effects, RenderOptions(per_sample=False))
+    a = render_frame(scene, translated.camera, 1, with_samples, width=SIZE, height=SIZE, spp=4, seed=3)
+    b = render_frame(scene, translated.camera, 1, without, width=SIZE, height=SIZE, spp=4, seed=3)
+    assert b.samples is None
+    for name in a.buffers:
+        assert np.array_equal(a.buffers[name], b.buffers[name]), name
+    for name in ("light", "bounce"):
+        values = a.samples[name]
+        assert values.shape == (4, SIZE, SIZE, 2)
+        assert 0.0 <= values.min() and values.max() < 1.0
+        # uniform numbers: mean 1/2, variance 1/12 (a constant or the pixel offset would fail)
+        assert abs(values.mean() - 0.5) < 0.02 and abs(values.var() - 1 / 12) < 0.01, name
+        assert not np.array_equal(values, a.samples["pixel"]), name
+    hit = np.linalg.norm(a.samples["normal2"], axis=-1) > 0.5
+    assert 0.5 < hit.mean() <= 1.0  # the Cornell box is closed on most sides
+    assert np.allclose(np.linalg.norm(a.samples["normal2"][hit], axis=-1), 1.0, atol=1e-3)
+    assert not a.samples["position2"][~hit].any()
+    # the second hit is elsewhere than the first
+    moved = np.linalg.norm(a.samples["position2"] - a.samples["position"], axis=-1)[hit]
+    assert np.median(moved) > 1e-2
+
+    direct = make_render_plan(translated.effects, RenderOptions(per_sample=True, max_depth=1))
+    c = render_frame(scene, translated.camera, 1, direct, width=SIZE, height=SIZE, spp=2, seed=3)
+    assert not {"light", "bounce", "position2", "normal2"} & set(c.samples)  # no bounce, no channels

@@ -3,7 +3,8 @@
 Channel names are ``layer.channel``: ``color.R/G/B``, ``diffuse.R/G/B``, ``specular.R/G/B``,
 ``albedo.R/G/B``, ``normal.X/Y/Z``, ``depth.Z``, ``position.X/Y/Z``, ``roughness.Y``,
 ``motion.X/Y``; a variance ``<name>_var`` has its base's channel names (``color_var.R``...). The
-per-sample random parameters are ``pixel.X/Y``, ``lens.U/V`` and ``time.T``. A layer we do not know
+per-sample random parameters are ``pixel.X/Y``, ``lens.U/V``, ``time.T``, ``light.U/V`` and
+``bounce.U/V``, the second-hit features ``position2.X/Y/Z`` and ``normal2.X/Y/Z``. A layer we do not know
 gets ``C0, C1, ...`` (``Y`` when it has a single channel).
 
 Storage type (the rule):
@@ -63,6 +64,11 @@ CHANNEL_NAMES: dict[str, tuple[str, ...]] = {
     "pixel": ("X", "Y"),
     "lens": ("U", "V"),
     "time": ("T",),
+    "light": ("U", "V"),
+    "bounce": ("U", "V"),
+    # per-sample second-hit features (where the first bounce lands)
+    "position2": ("X", "Y", "Z"),
+    "normal2": ("X", "Y", "Z"),
 }
 
 #: Layers stored as HALF when every value fits (never their variances).

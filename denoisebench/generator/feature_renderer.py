@@ -18,7 +18,10 @@ Conventions:
 * Per-sample data (``plan.per_sample`` and not ``reference``) is S×H×W×C per buffer, plus the
   random parameters that exist in the plan, as the uniform numbers that drove them: ``pixel`` (the
   sub-pixel offset in [0,1)²), ``lens`` (the square sample in [0,1)² mapped to the disk; thin lens
-  only), ``time`` (the shutter fraction in [0,1); motion blur only).
+  only), ``time`` (the shutter fraction in [0,1); motion blur only). When paths bounce (max_depth
+  not 1) it also holds :data:`SECOND_HIT_CHANNELS` for RPF: ``light`` and ``bounce`` (the first
+  vertex's light-sample and bounce-direction random numbers in [0,1)²) and ``position2``/``normal2``
+  (where the first bounce lands; 0 on a miss). Images are the same bytes with or without them.
 * ``reference=True``: color, diffuse and specular with their variances only (no features), from an
   independent random stream.
 * Seeds: each pass seeds Mitsuba's ``independent`` sampler with a 32-bit hash (BLAKE2b) of
@@ -40,7 +43,7 @@ from __future__ import annotations
 import hashlib
 import struct
 import time as _time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -78,6 +81,9 @@ SAMPLE_BUFFERS = {
     "roughness": 1,
 }
 RANDOM_PARAMETER_CHANNELS = {"pixel": 2, "lens": 2, "time": 1}
+#: Per-sample channels of paths that bounce (render_integrator's ``second_hit``): the first vertex's
+#: light-sample and bounce-direction random numbers, and the bounce ray's hit point and normal.
+SECOND_HIT_CHANNELS = {"light": 2, "bounce": 2, "position2": 3, "normal2": 3}
 FEATURES = ("albedo", "normal", "depth", "position", "roughness", "motion")
 FEATURE_CHANNELS = {"albedo": 3, "normal": 3, "depth": 1, "position": 3, "roughness": 1, "motion": 2}
 
@@ -312,6 +318,8 @@ def render_frame(
     )
     stream = REFERENCE_STREAM if reference else NOISY_STREAM
     keep_samples = plan.per_sample and not reference
+    if keep_samples and opts.features and opts.bounces:
+        opts = replace(opts, second_hit=True)  # RPF's bounce random numbers and second-hit features
 
     stat_channels = {"color": 3, "diffuse": 3, "specular": 3}
     for name in features:
@@ -322,6 +330,8 @@ def render_frame(
     if keep_samples:
         sample_channels = {k: c for k, c in SAMPLE_BUFFERS.items() if k in stat_channels}
         sample_channels.update({k: RANDOM_PARAMETER_CHANNELS[k] for k in plan.random_parameters})
+        if opts.second_hit:
+            sample_channels.update(SECOND_HIT_CHANNELS)
         samples = {k: np.zeros((spp, height, width, c), np.float32) for k, c in sample_channels.items()}
     else:
         samples = None

@@ -38,6 +38,14 @@ Features (the first vertex is the camera ray's first intersection):
 * ``motion``: the first-hit point projected through the pinhole (lens center) of the camera one frame
   earlier than the ray's time, minus its projection at the ray's time (pixels, x right, y down).
 
+With ``KernelOptions.second_hit`` (per-sample data only; paths that bounce) a sample also carries
+what Sen & Darabi's random parameter filter analyses: ``light`` (the 2-D random numbers of the
+first vertex's light sample), ``bounce`` (the 2-D random numbers that chose the first bounce's
+direction: ``sample2`` of ``bsdf.sample``) and ``position2``/``normal2`` (world-space point and
+shading normal where that bounce ray lands; 0 where it misses or the path ends at the first hit).
+The second hit costs one more intersection per sample; the path itself draws the same random numbers
+with or without these channels, so the image is the same bytes.
+
 Background (miss) convention: color is the environment's radiance (0 without one); albedo, normal,
 depth, position and roughness are 0; motion reprojects the ray *direction* (a point at infinity, so
 rotation only). Points behind either camera get zero motion. At frame 0 there is no previous
@@ -64,6 +72,8 @@ class KernelOptions:
     motion: bool
     follow_delta_albedo: bool  # the scene has delta-only BSDFs: continue the albedo through them
     jitter: bool = True  # False: every sample at the pixel center (tests compare with Mitsuba's aov)
+    # Per-sample data for RPF: the first vertex's light and bounce random numbers and the second hit
+    second_hit: bool = False
 
     @property
     def bounded(self) -> bool:
@@ -219,7 +229,8 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     smooth = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
     active_em = active_next & smooth
     if opts.bounces:
-        ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
+        light_uv = sampler.next_2d()
+        ds, em_weight = scene.sample_emitter_direction(si, light_uv, True, active_em)
         active_em &= ds.pdf != 0.0
         wo = si.to_local(ds.d)
         sample1 = sampler.next_1d()
@@ -252,6 +263,14 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
         beta = mi.Spectrum(weight)
         eta = mi.Float(bs.eta)
         ray = si.spawn_ray(si.to_world(bs.wo))
+        if opts.second_hit:
+            # RPF's random parameters and second-hit features (same random numbers as without them)
+            out["light"] = light_uv
+            out["bounce"] = sample2
+            si2 = scene.ray_intersect(ray, mi.RayFlags.All, True, active_next)
+            hit2 = active_next & si2.is_valid()
+            out["position2"] = dr.select(hit2, si2.p, mi.Point3f(0.0))
+            out["normal2"] = dr.select(hit2, si2.sh_frame.n, mi.Normal3f(0.0))
         prev_p = mi.Point3f(si.p)
         prev_n = mi.Normal3f(si.n)
         prev_pdf = mi.Float(bs.pdf)
