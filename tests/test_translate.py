@@ -77,8 +77,13 @@ def test_geom_subsets_split_materials_and_keep_every_triangle(zup):
 def test_texture_resolves_beside_the_stage(zup):
     bitmaps = [b["bsdf"]["base_color"] for b in zup.scene_dict["bsdfs"].values() if b.get("bsdf", {}).get("base_color", {}).get("type") == "bitmap"]
     assert len(bitmaps) == 1
-    assert Path(bitmaps[0]["filename"]) == (DATA / "textures" / "red_top_blue_bottom.png").resolve()
-    assert bitmaps[0]["raw"] is False  # diffuseColor with sourceColorSpace auto: sRGB-decoded
+    # Decoded at translation (through USD's resolver), image row 0 = the top: red on top, blue below.
+    # The PNG holds (230, 20, 20) and (20, 20, 230); sRGB decoding gives 0.79130 and 0.0069954.
+    data = bitmaps[0]["data"]
+    high, low = ((230 / 255 + 0.055) / 1.055) ** 2.4, ((20 / 255 + 0.055) / 1.055) ** 2.4
+    np.testing.assert_allclose(data[0, 0], [high, low, low], rtol=1e-5)
+    np.testing.assert_allclose(data[-1, 0], [low, low, high], rtol=1e-5)
+    assert bitmaps[0]["raw"] is True  # already linear: diffuseColor with sourceColorSpace auto was sRGB-decoded
 
 
 def test_face_varying_normals_and_uvs_unrolled(zup):

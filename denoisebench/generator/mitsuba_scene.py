@@ -19,6 +19,21 @@ def _transform(mi, matrix) -> object:
     return mi.ScalarTransform4f(np.asarray(matrix, dtype=np.float64).tolist())
 
 
+def _mitsuba_values(mi, value):
+    """Plain BSDF data → ``load_dict`` values: texture ``data`` arrays → TensorXf, ``to_uv`` → ScalarTransform3f."""
+    if isinstance(value, dict):
+        out = {}
+        for key, item in value.items():
+            if key == "data" and isinstance(item, np.ndarray):
+                out[key] = mi.TensorXf(np.ascontiguousarray(item, dtype=np.float32))
+            elif key == "to_uv":
+                out[key] = mi.ScalarTransform3f(np.asarray(item, dtype=np.float64).tolist())
+            else:
+                out[key] = _mitsuba_values(mi, item)
+        return out
+    return value
+
+
 def _emitter_object(mi, record: dict):
     return mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": list(record["radiance"])}})
 
@@ -49,12 +64,16 @@ def _emitter_dict(mi, record: dict) -> dict:
     kind = record["type"]
     if kind == "point":
         return {"type": "point", "position": record["position"], "intensity": {"type": "rgb", "value": record["intensity"]}}
+    if kind == "spot":
+        return {"type": "spot", "to_world": _transform(mi, record["to_world"]), "cutoff_angle": record["cutoff_angle"],
+                "beam_width": record["beam_width"], "intensity": {"type": "rgb", "value": record["intensity"]}}
     if kind == "directional":
         return {"type": "directional", "direction": record["direction"], "irradiance": {"type": "rgb", "value": record["irradiance"]}}
     if kind == "envmap":
         rotation = np.eye(4)
         rotation[:3, :3] = np.asarray(record["rotation"])
-        return {"type": "envmap", "filename": record["filename"], "scale": record["scale"], "to_world": _transform(mi, rotation)}
+        image = mi.Bitmap(np.ascontiguousarray(record["data"], dtype=np.float32), mi.Bitmap.PixelFormat.RGB)
+        return {"type": "envmap", "bitmap": image, "scale": record["scale"], "to_world": _transform(mi, rotation)}
     if kind == "constant":
         return {"type": "constant", "radiance": {"type": "rgb", "value": record["radiance"]}}
     raise ValueError(f"unknown emitter record type {kind!r}")
@@ -64,7 +83,7 @@ def scene_objects(translated: TranslatedScene) -> dict:
     """The ``mi.load_dict`` dictionary of a translated scene with Mitsuba objects (no sensor/integrator)."""
     mi = load_mitsuba()
     data = translated.scene_dict
-    bsdfs = {key: mi.load_dict(value) for key, value in data["bsdfs"].items()}
+    bsdfs = {key: mi.load_dict(_mitsuba_values(mi, value)) for key, value in data["bsdfs"].items()}
     black = None
     out: dict = {"type": "scene"}
     for index, record in enumerate(data["shapes"]):

@@ -4,10 +4,12 @@ Mapping (UsdPreviewSurface input → principled parameter):
 
 ==================  ==========================================================================
 diffuseColor        base_color (a UsdUVTexture → ``bitmap``, sRGB-decoded unless ``raw``)
-roughness           roughness (texture: its red channel, raw)
-metallic            metallic (texture: raw)
+roughness           roughness (texture: the connected output's channel, raw)
+metallic            metallic (texture: the connected output's channel, raw)
 ior                 eta (ior ≤ 1 → specular 0: no dielectric reflection)
-opacity             spec_trans = 1 − opacity (a smooth or rough dielectric, not an alpha cut-out)
+opacity             spec_trans = 1 − opacity (a smooth or rough dielectric), unless
+                    opacityThreshold > 0: then a cut-out, Mitsuba ``mask`` with opacity 1 where
+                    opacity ≥ threshold and 0 elsewhere (constant or textured, e.g. ``outputs:a``)
 clearcoat           clearcoat; clearcoatRoughness → clearcoat_gloss = 1 − clearcoatRoughness
 emissiveColor       an ``area`` emitter on the shape with this radiance
 ==================  ==========================================================================
@@ -15,21 +17,23 @@ emissiveColor       an ``area`` emitter on the shape with this radiance
 Opaque materials are wrapped in ``twosided``: USD renders single-sided gprims from both sides in
 practice, while Mitsuba's BSDFs are black from behind. Anything else (normal maps, displacement,
 occlusion, specular workflow, other shading models) is skipped with one warning naming the prim.
+Textures are decoded by :mod:`~denoisebench.generator.usd_textures` (channel choice, colour space,
+``UsdTransform2d``, ``.usdz`` packages, unreadable files → the input's own value and a warning).
 Texture coordinates: USD's ``st`` has v up from the image's bottom; the translator flips v for
-Mitsuba, whose bitmaps put (0, 0) at the top-left.
+Mitsuba, whose bitmaps put (0, 0) at the top-left. The primvar a material's textures read
+(``varname``) is :attr:`MaterialInfo.uv_primvar`; the mesh reader takes its coordinates from it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
-
 import numpy as np
 
 from denoisebench.generator.usd_stage import check_finite
+from denoisebench.generator.usd_textures import read_texture
 
 DEFAULT_GREY = (0.18, 0.18, 0.18)
-_SKIPPED_INPUTS = ("normal", "displacement", "occlusion", "opacityThreshold")
+_SKIPPED_INPUTS = ("normal", "displacement", "occlusion")
 
 
 @dataclass
@@ -44,6 +48,8 @@ class MaterialInfo:
     textured: bool = False
     source: str = ""
     texture_files: list[str] = field(default_factory=list)
+    uv_primvar: str | None = None  # the primvar the textures read (``varname``); None: st, else uv
+    cutout: bool = False  # an alpha mask (opacityThreshold)
 
 
 def default_material(display_color=None) -> MaterialInfo:
@@ -73,33 +79,6 @@ def _shader_id(shader) -> str:
     return str(shader.GetIdAttr().Get() or "") if shader else ""
 
 
-def _texture_dict(texture_shader, raw_default: bool, warnings: list[str], owner: str):
-    """A UsdUVTexture → Mitsuba ``bitmap`` dict, or None (with a warning) when unusable."""
-    path = str(texture_shader.GetPath())
-    file_input = texture_shader.GetInput("file")
-    asset = file_input.Get() if file_input else None
-    if asset is None:
-        warnings.append(f"{path}: UsdUVTexture without inputs:file; texture skipped on {owner}")
-        return None
-    resolved = asset.resolvedPath or ""
-    if not resolved or not Path(resolved).is_file():
-        warnings.append(f"{path}: texture file '{asset.path}' not found; texture skipped on {owner}")
-        return None
-    color_space_input = texture_shader.GetInput("sourceColorSpace")
-    color_space = str(color_space_input.Get()) if color_space_input and color_space_input.Get() else "auto"
-    raw = raw_default if color_space == "auto" else color_space == "raw"
-    wrap_input = texture_shader.GetInput("wrapS")
-    wrap = str(wrap_input.Get()) if wrap_input and wrap_input.Get() else "repeat"
-    wrap_mode = {"repeat": "repeat", "mirror": "mirror", "clamp": "clamp", "black": "clamp"}.get(wrap, "repeat")
-    for name in ("scale", "bias"):
-        value = texture_shader.GetInput(name)
-        if value and value.Get() is not None:
-            default = (1, 1, 1, 1) if name == "scale" else (0, 0, 0, 0)
-            if tuple(value.Get()) != default:
-                warnings.append(f"{path}: inputs:{name} is not supported; ignored")
-    return {"type": "bitmap", "filename": resolved, "raw": raw, "wrap_mode": wrap_mode, "filter_type": "bilinear"}
-
-
 def translate_material(material, warnings: list[str]) -> MaterialInfo:
     """UsdShade.Material → MaterialInfo (default grey diffuse, with a warning, when unsupported)."""
     path = str(material.GetPath())
@@ -126,7 +105,7 @@ def translate_material(material, warnings: list[str]) -> MaterialInfo:
 
     for name in _SKIPPED_INPUTS:
         shader_input = shader.GetInput(name)
-        if shader_input and (shader_input.HasConnectedSource() or (name != "opacityThreshold" and shader_input.Get() is not None)):
+        if shader_input and (shader_input.HasConnectedSource() or shader_input.Get() is not None):
             warnings.append(f"{path}: inputs:{name} is not supported; skipped")
     use_specular = shader.GetInput("useSpecularWorkflow")
     if use_specular and use_specular.Get():
@@ -138,11 +117,9 @@ def translate_material(material, warnings: list[str]) -> MaterialInfo:
     diffuse, diffuse_texture = value("diffuseColor", DEFAULT_GREY)
     principled["base_color"] = _rgb(np.clip(diffuse, 0, 1))
     if diffuse_texture:
-        bitmap = _texture_dict(diffuse_texture[0], raw_default=False, warnings=warnings, owner=path)
-        if bitmap:
-            principled["base_color"] = bitmap
-            info.textured = True
-            info.texture_files.append(bitmap["filename"])
+        texture = _use_texture(info, diffuse_texture, True, warnings, path)
+        if texture:
+            principled["base_color"] = texture
 
     for name, key, default in (("roughness", "roughness", 0.5), ("metallic", "metallic", 0.0)):
         number, texture = value(name, default)
@@ -150,11 +127,9 @@ def translate_material(material, warnings: list[str]) -> MaterialInfo:
         principled[key] = number
         setattr(info, key, number)
         if texture:
-            bitmap = _texture_dict(texture[0], raw_default=True, warnings=warnings, owner=path)
+            bitmap = _use_texture(info, texture, False, warnings, path)
             if bitmap:
                 principled[key] = bitmap
-                info.textured = True
-                info.texture_files.append(bitmap["filename"])
 
     ior, _ = value("ior", 1.5)
     ior = float(ior)
@@ -163,8 +138,22 @@ def translate_material(material, warnings: list[str]) -> MaterialInfo:
     else:
         principled["specular"] = 0.0
     opacity, opacity_texture = value("opacity", 1.0)
-    if opacity_texture:
-        warnings.append(f"{path}: textured opacity is not supported; constant {float(opacity):g} used")
+    threshold, _ = value("opacityThreshold", 0.0)
+    threshold = float(threshold)
+    mask = None
+    if threshold > 0:
+        # A cut-out: opacity below the threshold is a hole, the rest fully opaque (no dielectric).
+        texture = _use_texture(info, opacity_texture, False, warnings, path) if opacity_texture else None
+        if texture is not None:
+            texture["data"] = (texture["data"] >= threshold).astype(np.float32)
+            texture["filter_type"] = "nearest"  # a binary mask stays binary
+            mask = texture
+        elif float(opacity) < threshold:
+            mask = {"type": "rgb", "value": [0.0, 0.0, 0.0]}
+        info.cutout = mask is not None
+        opacity = 1.0
+    elif opacity_texture:
+        warnings.append(f"{path}: textured opacity without opacityThreshold is not supported; constant {float(opacity):g} used")
     info.opacity = float(np.clip(opacity, 0.0, 1.0))
     if info.opacity < 1.0:
         principled["spec_trans"] = 1.0 - info.opacity
@@ -182,7 +171,25 @@ def translate_material(material, warnings: list[str]) -> MaterialInfo:
         info.emission = emissive
 
     info.bsdf = principled if info.opacity < 1.0 else {"type": "twosided", "bsdf": principled}
+    if mask is not None:
+        info.bsdf = {"type": "mask", "opacity": mask, "bsdf": info.bsdf}
     return info
+
+
+def _use_texture(info: MaterialInfo, connection, want_color: bool, warnings: list[str], owner: str) -> dict | None:
+    """Decode the texture of a ``(shader, output)`` connection; record it on ``info``. None: fallback."""
+    shader, output = connection
+    texture = read_texture(shader, output, want_color, warnings, owner)
+    if texture is None:
+        return None
+    info.textured = True
+    info.texture_files.append(texture.source)
+    if texture.primvar:
+        if info.uv_primvar and info.uv_primvar != texture.primvar:
+            warnings.append(f"{owner}: textures read primvars '{info.uv_primvar}' and '{texture.primvar}'; "
+                            f"'{info.uv_primvar}' is used for all")
+        info.uv_primvar = info.uv_primvar or texture.primvar
+    return texture.bitmap
 
 
 def bound_material(prim, cache: dict, warnings: list[str]) -> MaterialInfo:
