@@ -11,7 +11,7 @@ import pytest
 from denoisebench import metrics as M
 
 ALL = ["mse", "relmse", "smape", "l1", "psnr", "ssim", "flip", "deltae2000", "grad_l1", "hfen",
-       "temporal_l1", "temporal_l1_warped", "tpsnr"]
+       "temporal_l1", "temporal_l1_warped", "temporal_relmse", "tpsnr"]
 
 
 @pytest.fixture
@@ -31,13 +31,36 @@ def test_every_metric_is_registered_with_its_properties():
     assert higher == {"psnr", "ssim", "tpsnr"}
     assert {n for n in ALL if M.get_metric(n).domain == "tonemapped"} == {"psnr", "ssim", "tpsnr"}
     assert M.get_metric("deltae2000").domain == "reinhard"
-    assert M.metric_names("temporal") == ["temporal_l1", "temporal_l1_warped", "tpsnr"]
+    assert M.metric_names("temporal") == ["temporal_l1", "temporal_l1_warped", "temporal_relmse", "tpsnr"]
     assert M.metric_names("gradient") == ["grad_l1", "hfen"]
     assert M.get_metric("relmse").fn is M.relmse and M.get_metric("relmse").map_fn is M.relmse_map
     assert M.get_metric("temporal_l1_warped").requires == ("motion",)
     for n in ALL:
         m = M.get_metric(n)
         assert m.better(m.perfect, m.worst), n
+
+
+def test_every_metric_states_its_aggregation_and_linear_scores_are_never_plain_means():
+    # scale-dependent scores of linear radiance: an arithmetic mean over scenes would let the
+    # brightest scene decide (issue 15: temporal_l1 ranked the noisy input above oidn)
+    scale_dependent = {"mse", "l1", "grad_l1", "hfen", "temporal_l1", "temporal_l1_warped"}
+    for n in ALL:
+        m = M.get_metric(n)
+        assert m.aggregate in ("mean", "geomean", "relative_to_input"), n
+        assert (m.aggregate != "mean") == (n in scale_dependent), n
+    assert {n for n in ALL if M.get_metric(n).floor_fn is not None} == {"mse", "relmse", "temporal_relmse"}
+    with pytest.raises(ValueError, match="aggregate"):
+        M.Metric("x", M.mse, False, "linear", "spatial", math.inf, 0.0, aggregate="median")
+
+
+def test_compute_metrics_reports_floors_with_the_reference_variance(frames):
+    pred, ref, motion = frames
+    var = np.full_like(ref, 1e-4)
+    out = M.compute_metrics(pred, ref, ["mse", "relmse", "temporal_relmse", "ssim"], motion=motion, ref_var=var)
+    assert out["mse"].floor == pytest.approx(1e-4) and out["mse"].corrected == out["mse"].value - 1e-4
+    assert out["ssim"].floor is None and out["ssim"].corrected is None
+    assert out["temporal_relmse"].floor > 0 and out["temporal_relmse"].ref_se > 0
+    assert M.compute_metrics(pred, ref, ["mse"])["mse"].floor is None  # no variance, no floor
 
 
 def test_names_are_case_insensitive_with_aliases():

@@ -9,6 +9,7 @@ else of denoisebench; bad input raises ``ValueError``.
 
 from .compute import MetricResult, compute_metrics
 from .cost import CallCost, CostSummary, measure_call, megapixels, seconds_per_megapixel, summarize_costs, total_seconds
+from .floors import Floor, mse_floor, relmse_floor
 from .gradient import grad_l1, grad_l1_map, hfen, hfen_map
 from .registry import Metric, get_metric, metric_names, register_metric, unregister_metric
 from .spatial import (
@@ -34,6 +35,9 @@ from .temporal import (
     temporal_l1_map,
     temporal_l1_warped,
     temporal_l1_warped_map,
+    temporal_relmse,
+    temporal_relmse_floor,
+    temporal_relmse_map,
     tpsnr,
     warp_previous,
     warped_valid_masks,
@@ -44,11 +48,12 @@ __all__ = [
     "MetricResult", "compute_metrics",
     "CallCost", "CostSummary", "measure_call", "megapixels", "seconds_per_megapixel", "summarize_costs",
     "total_seconds",
+    "Floor", "mse_floor", "relmse_floor",
     "grad_l1", "grad_l1_map", "hfen", "hfen_map",
     "Metric", "get_metric", "metric_names", "register_metric", "unregister_metric",
     "deltae2000", "deltae2000_map", "flip", "flip_map", "l1", "l1_map", "mse", "mse_map", "psnr",
     "relmse", "relmse_map", "smape", "smape_map", "ssim", "ssim_map",
     "disocclusion_mask", "temporal_l1", "temporal_l1_map", "temporal_l1_warped",
-    "temporal_l1_warped_map", "tpsnr", "warp_previous", "warped_valid_masks",
+    "temporal_l1_warped_map", "temporal_relmse", "temporal_relmse_floor", "temporal_relmse_map", "tpsnr", "warp_previous", "warped_valid_masks",
     "tonemap",
 ]

@@ -4,7 +4,10 @@
 T×H×W×3 arrays (or lists of frames) it evaluates them per frame (value = mean over frames,
 ``per_frame`` the list) and the temporal metrics. Each result says how many prediction values
 were non-finite; when any were, ``value`` is the metric's defined worst value (never a mean
-that skipped them).
+that skipped them). Given the reference's variance (``ref_var``), metrics with a ``floor_fn``
+(the MSE family) also carry their reference-noise ``floor``, ``ref_se`` and ``corrected`` value
+(:mod:`.floors`); over a sequence's frames the floor is the mean and ``ref_se`` combines the
+frames' as independent (sqrt of the summed squares over the frame count).
 """
 
 from __future__ import annotations
@@ -40,6 +43,15 @@ class MetricResult:
     per_frame: tuple[float, ...] | None = None
     map: np.ndarray | None = field(default=None, repr=False, compare=False)
     seconds: float = 0.0
+    floor: float | None = None
+    ref_se: float | None = None
+
+    @property
+    def corrected(self) -> float | None:
+        """``value − floor``: an unbiased estimate of the score against the noise-free image."""
+        if self.floor is None:
+            return None
+        return self.value - self.floor
 
     @property
     def worst_value_used(self) -> bool:
@@ -57,6 +69,9 @@ class MetricResult:
             "worst_value_used": self.worst_value_used,
             "per_frame": list(self.per_frame) if self.per_frame is not None else None,
             "seconds": self.seconds,
+            "floor": self.floor,
+            "corrected": self.corrected,
+            "ref_se": self.ref_se,
         }
 
 
@@ -102,12 +117,14 @@ def compute_metrics(
     depth=None,
     masks=None,
     maps: bool = False,
+    ref_var=None,
 ) -> dict[str, MetricResult]:
     """Evaluate ``metrics`` (names; default: every registered one that applies) on pred vs ref.
 
     ``motion``, ``depth``, ``masks``: per-frame buffers for temporal metrics (see
     ``temporal``); each metric receives those it accepts. ``maps=True`` also returns per-pixel
-    maps. Returns ``{name: MetricResult}`` in the order asked. Bad input (shapes, a non-finite
+    maps. ``ref_var``: the reference's per-pixel variance (H×W×3, or T×H×W×3 for a sequence) for
+    the floors. Returns ``{name: MetricResult}`` in the order asked. Bad input (shapes, a non-finite
     reference, a temporal metric on one frame, a missing motion buffer) is a ``ValueError``.
     """
     sequence = _is_sequence(pred)
@@ -138,6 +155,9 @@ def compute_metrics(
                 the_map = m.map_fn(pred_arr, ref_arr)
         if total_bad:
             value = m.worst
+        floor = se = None
+        if ref_var is not None and m.floor_fn is not None:
+            floor, se = _floor(m, pred_arr, ref_arr, ref_var, sequence, context)
         results[m.name] = MetricResult(
             name=m.name,
             value=value,
@@ -148,6 +168,25 @@ def compute_metrics(
             per_frame=per_frame,
             map=the_map,
             seconds=time.perf_counter() - t0,
+            floor=floor,
+            ref_se=se,
         )
     return results
+
+
+def _floor(m: Metric, pred, ref, ref_var, sequence: bool, context: dict) -> tuple[float, float]:
+    if m.temporal:
+        kwargs = {k: context[k] for k in m.accepts if context.get(k) is not None}
+        result = m.floor_fn(pred, ref, ref_var, **kwargs)
+        return float(result[0]), float(result[1])
+    if not sequence:
+        result = m.floor_fn(pred, ref, ref_var)
+        return float(result[0]), float(result[1])
+    ref_var = np.asarray(ref_var, dtype=np.float64)
+    if ref_var.shape[0] != len(ref):
+        raise ValueError(f"ref_var has {ref_var.shape[0]} frames, the reference {len(ref)}")
+    parts = [m.floor_fn(p, r, v) for p, r, v in zip(pred, ref, ref_var)]
+    floors = np.array([float(x[0]) for x in parts])
+    ses = np.array([float(x[1]) for x in parts])
+    return float(floors.mean()), float(np.sqrt(np.sum(np.square(ses))) / len(parts))
 

@@ -4,6 +4,27 @@ A :class:`Metric` pairs the pure function with what a report needs to know about
 Spatial and gradient metrics take ``(pred, ref)`` H×W×3; temporal ones take
 ``(pred_seq, ref_seq, **context)`` with the keywords listed in ``accepts`` (``motion``,
 ``depth``, ``masks``), of which ``requires`` must be given.
+
+Aggregation over scenes (``Metric.aggregate``; DESIGN.md "Metrics")
+--------------------------------------------------------------------
+Scores of linear radiance grow with a scene's brightness: an arithmetic mean over scenes is then
+decided by the brightest scene (measured: ``temporal_l1`` ranked the noisy input above OIDN because
+glossy_fireflies scored 1.07–1.44 and every other scene 0.01–0.18). So every metric states how the
+leaderboard combines its per-scene values:
+
+* ``"mean"``: arithmetic mean. Only for scale-free scores (relMSE, SMAPE, FLIP, SSIM, PSNR, tPSNR,
+  ΔE2000 of tone-mapped colour, ``temporal_relmse``).
+* ``"geomean"``: geometric mean (a brightness factor of a scene multiplies every denoiser's
+  value alike, so it cannot change the ranking). A zero value makes the mean 0.
+* ``"relative_to_input"``: per scene and spp, the value divided by the noisy input's on the same
+  scene, then the geometric mean of those ratios; the noisy input scores 1 (lower is better for
+  an error: 0.2 = a fifth of the input's error left).
+
+A plugin metric states its rule too (default ``"mean"``: state otherwise when the score is
+linear in radiance). ``floor_fn`` (optional): the metric's reference-noise floor
+(:mod:`.floors`), called as ``floor_fn(pred, ref, ref_var)`` (spatial) or
+``floor_fn(pred_seq, ref_seq, ref_var_seq, **context)`` (temporal) and returning a
+:class:`~.floors.Floor`; MSE-family metrics have one.
 """
 
 from __future__ import annotations
@@ -12,12 +33,15 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Literal
 
-from . import gradient, spatial, temporal
+from . import floors, gradient, spatial, temporal
 
-__all__ = ["Metric", "get_metric", "metric_names", "register_metric", "unregister_metric", "ALIASES"]
+__all__ = ["Metric", "AGGREGATES", "get_metric", "metric_names", "register_metric", "unregister_metric", "ALIASES"]
 
 Domain = Literal["linear", "tonemapped", "reinhard"]
 Kind = Literal["spatial", "gradient", "temporal"]
+Aggregate = Literal["mean", "geomean", "relative_to_input"]
+#: The aggregation rules a Metric may state (module docstring).
+AGGREGATES = ("mean", "geomean", "relative_to_input")
 
 
 @dataclass(frozen=True)
@@ -26,7 +50,8 @@ class Metric:
 
     ``domain``: ``"linear"`` (HDR radiance as given), ``"tonemapped"`` (the documented tone map,
     [0, 1)), or ``"reinhard"`` (its linear Reinhard stage, for ΔE2000). ``worst`` is the value a
-    non-finite prediction gets; ``perfect`` the value of prediction == reference.
+    non-finite prediction gets; ``perfect`` the value of prediction == reference. ``aggregate``:
+    how values combine over scenes (module docstring); ``floor_fn``: reference-noise floor.
     """
 
     name: str
@@ -41,6 +66,8 @@ class Metric:
     unit: str = ""
     accepts: tuple[str, ...] = ()
     requires: tuple[str, ...] = ()
+    aggregate: Aggregate = "mean"
+    floor_fn: Callable | None = None
 
     def __post_init__(self) -> None:
         if not self.name or self.name != self.name.lower():
@@ -49,6 +76,10 @@ class Metric:
             raise ValueError(f"unknown metric kind {self.kind!r}")
         if not callable(self.fn):
             raise ValueError(f"metric {self.name!r}: fn is not callable")
+        if self.aggregate not in AGGREGATES:
+            raise ValueError(f"metric {self.name!r}: aggregate must be one of {', '.join(AGGREGATES)}, got {self.aggregate!r}")
+        if self.floor_fn is not None and not callable(self.floor_fn):
+            raise ValueError(f"metric {self.name!r}: floor_fn is not callable")
 
     @property
     def temporal(self) -> bool:
@@ -74,6 +105,9 @@ ALIASES = {
     "flicker": "temporal_l1",
     "temporal_l1_warp": "temporal_l1_warped",
     "t_psnr": "tpsnr",
+    "trelmse": "temporal_relmse",
+    "relmse_temporal": "temporal_relmse",
+    "temporal_rel_mse": "temporal_relmse",
 }
 
 
@@ -112,15 +146,17 @@ def metric_names(kind: str | None = None) -> list[str]:
 def _builtin() -> None:
     inf = math.inf
     s, g, t = spatial, gradient, temporal
+    f = floors
+    rel, geo = "relative_to_input", "geomean"
     for m in (
         Metric("mse", s.mse, False, "linear", "spatial", s.WORST["mse"], 0.0, s.mse_map,
-               "mean squared error"),
+               "mean squared error", aggregate=geo, floor_fn=f.mse_floor),
         Metric("relmse", s.relmse, False, "linear", "spatial", s.WORST["relmse"], 0.0, s.relmse_map,
-               "mean((p-r)^2 / (r^2 + 0.01))"),
+               "mean((p-r)^2 / (r^2 + 0.01))", floor_fn=f.relmse_floor),
         Metric("smape", s.smape, False, "linear", "spatial", s.WORST["smape"], 0.0, s.smape_map,
                "mean(|p-r| / (|p| + |r| + 0.01))"),
         Metric("l1", s.l1, False, "linear", "spatial", s.WORST["l1"], 0.0, s.l1_map,
-               "mean absolute error"),
+               "mean absolute error", aggregate=geo),
         Metric("psnr", s.psnr, True, "tonemapped", "spatial", s.WORST["psnr"], inf, None,
                "PSNR of tone-mapped images, peak 1", "dB"),
         Metric("ssim", s.ssim, True, "tonemapped", "spatial", s.WORST["ssim"], 1.0, s.ssim_map,
@@ -130,15 +166,19 @@ def _builtin() -> None:
         Metric("deltae2000", s.deltae2000, False, "reinhard", "spatial", s.WORST["deltae2000"], 0.0,
                s.deltae2000_map, "CIEDE2000 (colour-science) of Reinhard-mapped linear sRGB"),
         Metric("grad_l1", g.grad_l1, False, "linear", "gradient", g.WORST["grad_l1"], 0.0, g.grad_l1_map,
-               "mean |grad p - grad r| (forward differences)"),
+               "mean |grad p - grad r| (forward differences)", aggregate=rel),
         Metric("hfen", g.hfen, False, "linear", "gradient", g.WORST["hfen"], 0.0, g.hfen_map,
-               "rms(LoG(p) - LoG(r)) / (rms(LoG(r)) + 0.01), LoG sigma 1.5"),
+               "rms(LoG(p) - LoG(r)) / (rms(LoG(r)) + 0.01), LoG sigma 1.5", aggregate=rel),
         Metric("temporal_l1", t.temporal_l1, False, "linear", "temporal", t.WORST["temporal_l1"], 0.0,
-               t.temporal_l1_map, "mean |(p_t - p_t-1) - (r_t - r_t-1)|", accepts=("masks",)),
+               t.temporal_l1_map, "mean |(p_t - p_t-1) - (r_t - r_t-1)|", accepts=("masks",), aggregate=rel),
         Metric("temporal_l1_warped", t.temporal_l1_warped, False, "linear", "temporal",
                t.WORST["temporal_l1_warped"], 0.0, t.temporal_l1_warped_map,
                "temporal_l1 with frame t-1 warped by the motion buffer, disocclusions masked",
-               accepts=("motion", "depth", "masks"), requires=("motion",)),
+               accepts=("motion", "depth", "masks"), requires=("motion",), aggregate=rel),
+        Metric("temporal_relmse", t.temporal_relmse, False, "linear", "temporal", t.WORST["temporal_relmse"], 0.0,
+               t.temporal_relmse_map,
+               "mean((dp - dr)^2 / (m^2 + 0.01)), warped frame differences, m = 3x3 mean |r_t|",
+               accepts=("motion", "depth", "masks"), floor_fn=t.temporal_relmse_floor),
         Metric("tpsnr", t.tpsnr, True, "tonemapped", "temporal", t.WORST["tpsnr"], inf, None,
                "PSNR of tone-mapped frame differences, peak 1", "dB", accepts=("masks",)),
     ):

@@ -5,6 +5,7 @@ metric                   domain      higher is better worst (non-finite predicti
 =======================  ==========  ===============  =============================
 temporal_l1              linear      no               +inf
 temporal_l1_warped       linear      no               +inf
+temporal_relmse          linear      no               +inf
 tpsnr                    tone-mapped yes              20·log10(1/2) ≈ −6.02 dB
 =======================  ==========  ===============  =============================
 
@@ -32,6 +33,21 @@ Notes
      ``masks[t]``.
   A sequence where no pixel survives is a ``ValueError`` (there is nothing to measure).
   Maps are (T−1)×H×W with 0 at masked pixels; :func:`warped_valid_masks` gives the masks.
+* ``temporal_relmse`` (relMSE in spirit, scale-free: a scene 100× brighter scores the same):
+  mean over pairs t, valid pixels and channels of ``(Δp − Δr)² / (m_t² + 0.01)`` with the
+  **warped** frame differences Δp = p_t − W(p_{t−1}), Δr = r_t − W(r_{t−1}) (W: frame t's motion,
+  disocclusions masked exactly as ``temporal_l1_warped``) and m_t the reference's **local
+  magnitude**: the 3×3 box mean of |r_t| per channel (edges replicated). The local mean keeps
+  one bright reference pixel, and the reference's own noise, out of the denominator (its noise
+  variance there is 1/9 of a pixel's). ``motion`` is optional: without it W is the identity,
+  which is right for a static camera only. Pairs whose frames are both bright and flat score
+  like relMSE of the frame difference; the 0.01 is relMSE's.
+* ``temporal_relmse_floor``: its reference-noise floor (see ``floors``). For a perfect
+  prediction Δp − Δr = −(n_t − W(n_{t−1})), of variance V = v_t + W₂(v_{t−1}) where W₂ warps
+  with the **squared** bilinear weights (independent noise per pixel and frame). Floor =
+  mean(V / (m_t² + 0.01)). Frame t's noise enters pairs t and t+1, so the counted values are
+  not independent: the se multiplies the summed variance by 3, a bound for a chain whose
+  neighbours alone correlate (Var ΣX ≤ ΣVar + 2Σ|Cov| ≤ 3ΣVar).
 * ``tpsnr``: PSNR (peak 1) of the tone-mapped frame differences,
   ``10·log10(1 / mean(((T(p_t) − T(p_{t−1})) − (T(r_t) − T(r_{t−1})))²))`` pooled over pairs,
   T the documented tone map. Identical sequences give +inf. Because the tone map is non-linear,
@@ -47,6 +63,7 @@ import math
 
 import numpy as np
 
+from .floors import Floor, as_variance, squared_error_floor
 from .tonemap import tonemap
 from .validation import Checked, as_depth, as_mask, as_motion, check_sequences
 
@@ -60,14 +77,20 @@ __all__ = [
     "temporal_l1_map",
     "temporal_l1_warped",
     "temporal_l1_warped_map",
+    "temporal_relmse",
+    "temporal_relmse_map",
+    "temporal_relmse_floor",
     "tpsnr",
 ]
 
 DEPTH_TOLERANCE = 0.1
+#: The relMSE epsilon (spatial.EPS_RELMSE), also in temporal_relmse's denominator.
+EPS_TEMPORAL_RELMSE = 0.01
 
 WORST: dict[str, float] = {
     "temporal_l1": math.inf,
     "temporal_l1_warped": math.inf,
+    "temporal_relmse": math.inf,
     "tpsnr": 20.0 * math.log10(0.5),
 }
 
@@ -268,6 +291,91 @@ def temporal_l1_warped_map(
         return np.full((n - 1, h, w), WORST["temporal_l1_warped"])
     maps, valid = _pair_maps(c, mask, mot, dep, depth_tolerance)
     return np.where(valid, maps, 0.0)
+
+
+def _bilinear_squared(img: np.ndarray, taps) -> np.ndarray:
+    """Like :func:`_bilinear` with squared weights: the variance of a bilinear mix of independent values."""
+    i0, i1, j0, j1, fy, fx, _ = taps
+    if img.ndim == 3:
+        fx = fx[..., None]
+        fy = fy[..., None]
+    wx0, wx1, wy0, wy1 = np.square(1.0 - fx), np.square(fx), np.square(1.0 - fy), np.square(fy)
+    return (img[i0, j0] * wx0 + img[i0, j1] * wx1) * wy0 + (img[i1, j0] * wx0 + img[i1, j1] * wx1) * wy1
+
+
+def _local_magnitude(ref_frame: np.ndarray) -> np.ndarray:
+    from scipy.ndimage import uniform_filter
+
+    return uniform_filter(np.abs(ref_frame), size=(3, 3, 1), mode="nearest")
+
+
+def _relative_pairs(c: Checked, mask, mot, dep, tol, ref_var=None):
+    """Per-pair (Δp − Δr) (T−1)×H×W×3, denominators m²+0.01, validity (T−1)×H×W, and noise variance V."""
+    e = c.pred.astype(np.float64) - c.ref
+    ref = c.ref.astype(np.float64)
+    n, h, w = e.shape[:3]
+    diff = np.empty((n - 1, h, w, e.shape[3]))
+    denom = np.empty_like(diff)
+    var = None if ref_var is None else np.empty_like(diff)
+    valid = np.ones((n - 1, h, w), dtype=bool)
+    for t in range(1, n):
+        if mot is None:
+            prev = e[t - 1]
+            prev_var = None if ref_var is None else ref_var[t - 1]
+        else:
+            taps = _taps(mot[t].astype(np.float64))
+            prev = _bilinear(e[t - 1], taps)
+            prev_var = None if ref_var is None else _bilinear_squared(ref_var[t - 1], taps)
+            valid[t - 1] = taps[6]
+            if dep is not None:
+                valid[t - 1] &= _depth_ok(taps, dep[t].astype(np.float64), dep[t - 1].astype(np.float64), tol)
+        diff[t - 1] = e[t] - prev
+        denom[t - 1] = np.square(_local_magnitude(ref[t])) + EPS_TEMPORAL_RELMSE
+        if var is not None:
+            var[t - 1] = ref_var[t] + prev_var
+        if mask is not None:
+            valid[t - 1] &= mask[t]
+    return diff, denom, valid, var
+
+
+def _relative_setup(pred_seq, ref_seq, motion, depth, masks, depth_tolerance):
+    c = check_sequences(pred_seq, ref_seq, min_frames=2)
+    mask, mot, dep = _context(c, motion, depth, masks, depth_tolerance)
+    return c, mask, mot, dep
+
+
+def temporal_relmse(
+    pred_seq, ref_seq, motion=None, *, depth=None, masks=None, depth_tolerance: float = DEPTH_TOLERANCE
+) -> float:
+    """Scale-free flicker: mean (Δp − Δr)² / (m² + 0.01) over warped frame differences (module Notes)."""
+    c, mask, mot, dep = _relative_setup(pred_seq, ref_seq, motion, depth, masks, depth_tolerance)
+    if c.nonfinite_count:
+        return WORST["temporal_relmse"]
+    diff, denom, valid, _ = _relative_pairs(c, mask, mot, dep, depth_tolerance)
+    return _pooled((np.square(diff) / denom).mean(axis=-1), valid)
+
+
+def temporal_relmse_map(
+    pred_seq, ref_seq, motion=None, *, depth=None, masks=None, depth_tolerance: float = DEPTH_TOLERANCE
+) -> np.ndarray:
+    """(T−1)×H×W maps of (Δp − Δr)²/(m² + 0.01) (channel mean); 0 at disoccluded or masked pixels."""
+    c, mask, mot, dep = _relative_setup(pred_seq, ref_seq, motion, depth, masks, depth_tolerance)
+    n, h, w = c.pred.shape[:3]
+    if c.nonfinite_count:
+        return np.full((n - 1, h, w), WORST["temporal_relmse"])
+    diff, denom, valid, _ = _relative_pairs(c, mask, mot, dep, depth_tolerance)
+    return np.where(valid, (np.square(diff) / denom).mean(axis=-1), 0.0)
+
+
+def temporal_relmse_floor(
+    pred_seq, ref_seq, ref_var, motion=None, *, depth=None, masks=None, depth_tolerance: float = DEPTH_TOLERANCE
+) -> Floor:
+    """Reference-noise floor and se of :func:`temporal_relmse` from the T reference variance buffers."""
+    c, mask, mot, dep = _relative_setup(pred_seq, ref_seq, motion, depth, masks, depth_tolerance)
+    v = as_variance(ref_var, c.ref.shape)
+    pred = np.where(np.isfinite(c.pred), c.pred, np.nan)
+    diff, denom, valid, var = _relative_pairs(c._replace(pred=pred), mask, mot, dep, depth_tolerance, v)
+    return squared_error_floor(diff, var, denom, valid=valid[..., None], correlation=3.0)
 
 
 def tpsnr(pred_seq, ref_seq, *, masks=None) -> float:
