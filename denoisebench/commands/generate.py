@@ -2,8 +2,18 @@
 
 For every scene: OUT/<scene>/scene.usda (+ textures), OUT/<scene>/sppNNNN/frame_NNNN.exr (noisy
 buffers, features and variances at each --spp), OUT/<scene>/reference/frame_NNNN.exr (reference
-color at --ref-spp), and OUT/dataset.json (config, render plans, splits, per-frame sha256, render
+color and its variance), and OUT/dataset.json (config, render plans, splits, per-frame sha256, render
 seconds, reference quality). Frame i is rendered at the camera's i-th time sample.
+
+References are adaptive: each frame's reference is rendered in rounds (fresh deterministic seeds)
+until its noise floor -- the relMSE a perfect denoiser would score against it, estimated robustly
+against fireflies -- is at most --ref-error, with --ref-spp as the cap; frames that stop at the cap
+are named in a warning. --ref-error 0 renders exactly --ref-spp samples instead. The manifest
+records per frame the spp used, the seconds and the floor reached.
+
+Light transport is complete (unbounded depth, Russian roulette as Mitsuba's path integrator) unless
+--max-depth N restricts it (or the stage's customLayerData denoisebench maxDepth); the manifest
+records the restriction and who asked for it.
 
 Running the same command again resumes where it stopped and gives the same bytes as an
 uninterrupted run; a different config in the same OUT is refused unless --force. The executor is
@@ -29,6 +39,8 @@ EPILOG = """examples:
   generate-dataset --out data/small --families cornell,glossy_fireflies --scenes 2 --frames 4 \\
       --width 128 --height 128 --spp 1,4,16 --ref-spp 1024
   denoisebench generate --out data/mine --usd shots/my_shot.usda --spp 4 --ref-spp 512
+  generate-dataset --out data/clean --families cornell --ref-error 2e-4 --ref-spp 16384
+  generate-dataset --out data/direct --families cornell --max-depth 2 --ref-error 0 --ref-spp 1024
   generate-dataset --out data/big --scenes 20 --executor ray --ray-address auto
 """
 
@@ -54,6 +66,12 @@ def _families(text: str | None, have_usd: bool) -> tuple[str, ...]:
     return names
 
 
+def _defaults() -> tuple[float, int]:
+    from denoisebench.generator.dataset_run import DEFAULT_REF_ERROR, DEFAULT_REF_SPP
+
+    return DEFAULT_REF_ERROR, DEFAULT_REF_SPP
+
+
 def add_arguments(parser) -> None:
     parser.add_argument("--out", required=True, help="dataset folder (created; resumed when it exists)")
     parser.add_argument("--families", default=None,
@@ -63,7 +81,15 @@ def add_arguments(parser) -> None:
     parser.add_argument("--width", type=int, default=128, help="image width in pixels (default 128)")
     parser.add_argument("--height", type=int, default=128, help="image height in pixels (default 128)")
     parser.add_argument("--spp", default="1,4,16", help="noisy sample counts, comma-separated (default 1,4,16)")
-    parser.add_argument("--ref-spp", type=int, default=1024, help="reference samples per pixel (default 1024)")
+    parser.add_argument("--ref-spp", type=int, default=None,
+                        help="cap of reference samples per pixel (default %d); with --ref-error 0: exactly this many"
+                             % _defaults()[1])
+    parser.add_argument("--ref-error", type=float, default=None, metavar="E",
+                        help="render references until their noise floor (a perfect denoiser's relMSE) is <= E "
+                             "(default %g); 0: no adaptation" % _defaults()[0])
+    parser.add_argument("--max-depth", type=int, default=None, metavar="N",
+                        help="restrict path depth (Mitsuba's convention: 2 = direct light only; -1 = unbounded); "
+                             "default: full transport, or the stage's own denoisebench maxDepth")
     parser.add_argument("--samples", action="store_true", help="also write per-sample data (large)")
     parser.add_argument("--seed", type=int, default=0, help="dataset seed: scene seeds, render seeds, splits (default 0)")
     parser.add_argument("--usd", action="append", default=[], metavar="FILE",
@@ -77,6 +103,14 @@ def add_arguments(parser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
+def _ref_error(value: float | None) -> float | None:
+    if value is None:
+        return _defaults()[0]
+    if value != value or value < 0 or value == float("inf"):
+        raise UserInputError(f"--ref-error must be a positive number, or 0 for a fixed --ref-spp (got {value})")
+    return None if value == 0 else float(value)
+
+
 def request_from_args(args):
     from denoisebench.generator.dataset_run import GenerateRequest
 
@@ -88,7 +122,9 @@ def request_from_args(args):
         width=args.width,
         height=args.height,
         spp=_int_list(args.spp),
-        ref_spp=args.ref_spp,
+        ref_spp=_defaults()[1] if args.ref_spp is None else args.ref_spp,
+        ref_error=_ref_error(args.ref_error),
+        max_depth=args.max_depth,
         samples=args.samples,
         seed=args.seed,
         usd=tuple(args.usd),
@@ -107,6 +143,10 @@ def print_summary(summary) -> None:
     if summary.too_noisy:
         print(f"warning: {summary.too_noisy} frame(s) have a reference not 4x less noisy than their inputs "
               f"(reference_too_noisy in dataset.json); raise --ref-spp", file=sys.stderr)
+    if summary.at_cap:
+        shown = ", ".join(summary.at_cap[:12]) + (f" and {len(summary.at_cap) - 12} more" if len(summary.at_cap) > 12 else "")
+        print(f"warning: {len(summary.at_cap)} reference(s) stopped at the --ref-spp cap before reaching --ref-error: "
+              f"{shown} (reference_adaptive in dataset.json)", file=sys.stderr)
     for failure in summary.failures:
         print(f"failed: scene {failure.scene} frame {failure.frame}: {failure.message}", file=sys.stderr)
 

@@ -2,7 +2,9 @@
 
 :func:`generate_dataset` is what ``denoisebench generate`` and the demo run. The dataset config
 (:func:`dataset_config`) is everything that decides the bytes: families, scene count, frames,
-size, spp, reference spp, per-sample data, seed and the user's USD files (path and sha256). The
+size, spp, reference spp (the cap with ``ref_error``), the reference's target floor ``ref_error``,
+the user's transport restriction ``max_depth``, per-sample data, seed and the user's USD files
+(path and sha256). The
 executor is *not* part of it: local and Ray runs give the same bytes, so a run started locally may
 be finished on a cluster. Running again with the same config resumes; another config is refused
 unless ``force`` (:class:`~denoisebench.dataset.writer.DatasetWriter`).
@@ -37,6 +39,10 @@ CONFIG_KIND = "denoisebench.generate"
 #: The reference should have this many times the noisy inputs' largest spp (rel_se falls as 1/sqrt(spp),
 #: and the manifest flags a reference that is not 4× less noisy than its inputs).
 REFERENCE_SPP_FACTOR = 16
+#: Default target of the adaptive reference's noise floor (relMSE of a perfect denoiser against it).
+DEFAULT_REF_ERROR = 1e-3
+#: Default cap of reference samples per pixel when the reference is adaptive.
+DEFAULT_REF_SPP = 4096
 
 
 @dataclass(frozen=True)
@@ -50,11 +56,13 @@ class GenerateRequest:
     width: int = 128
     height: int = 128
     spp: tuple[int, ...] = (1, 4, 16)
-    ref_spp: int = 1024
+    ref_spp: int = DEFAULT_REF_SPP  # the cap when ref_error is set
     samples: bool = False
     seed: int = 0
     usd: tuple[str, ...] = ()
     force: bool = False
+    ref_error: float | None = DEFAULT_REF_ERROR  # None: one reference render at ref_spp
+    max_depth: int | None = None  # the user's transport restriction (None: full transport / stage's own)
 
 
 @dataclass
@@ -68,6 +76,7 @@ class GenerateSummary:
     samples: int = 0  # pixel samples rendered in this run
     wall_seconds: float = 0.0
     too_noisy: int = 0  # frames whose reference is flagged
+    at_cap: list = field(default_factory=list)  # "scene/frame" whose adaptive reference stopped at the cap
     failures: list = field(default_factory=list)
     complete: bool = False
 
@@ -87,6 +96,15 @@ def check_request(request: GenerateRequest) -> None:
         raise UserInputError(f"--spp needs positive sample counts (got {list(request.spp)})")
     if not request.families and not request.usd:
         raise UserInputError("nothing to generate: give --families and/or --usd")
+    if request.ref_error is not None and not (0 < request.ref_error < float("inf")):
+        raise UserInputError(f"--ref-error must be a positive number (got {request.ref_error})")
+    if request.max_depth is not None:
+        from denoisebench.generator.render_plan import check_max_depth
+
+        try:
+            check_max_depth(request.max_depth, "--max-depth")
+        except ValueError as error:
+            raise UserInputError(str(error)) from None
 
 
 def validate_request(request: GenerateRequest) -> None:
@@ -116,6 +134,8 @@ def dataset_config(request: GenerateRequest) -> dict:
         "height": request.height,
         "spp": sorted(set(int(s) for s in request.spp)),
         "ref_spp": request.ref_spp,
+        "ref_error": request.ref_error,
+        "max_depth": request.max_depth,
         "samples": bool(request.samples),
         "seed": request.seed,
         "usd": [{"path": str(Path(p).resolve()), "sha256": _file_sha256(Path(p))} for p in request.usd],
@@ -147,6 +167,8 @@ def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -
         "height": request.height,
         "spp": sorted(set(int(s) for s in request.spp)),
         "ref_spp": request.ref_spp,
+        "ref_error": request.ref_error,
+        "transport": plan.transport_line(),
         "usd": layout.usd_path(spec.name),
         "stage_files": list(spec.stage_files),
         "stage_sha256": scenes_mod.stage_digest(spec.stage_dir, spec.stage_files),
@@ -184,11 +206,17 @@ def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names:
         files = scenes_mod.copy_user_stage(path, folder)
         entries.append(SceneSpec(name, "usd", 0, str(path), str(folder.resolve()), files,
                                  scenes_mod.render_seed(request.seed, name)))
-    options = RenderOptions(per_sample=bool(request.samples))
+    options = RenderOptions(**render_options(request))
     for spec in entries:
         translated = translate_usd(spec.usd_path)
-        writer.add_scene(spec.name, _scene_record(spec, translated, request, make_render_plan(translated.effects, options)))
+        plan = make_render_plan(translated.effects, options, stage_max_depth=translated.max_depth)
+        writer.add_scene(spec.name, _scene_record(spec, translated, request, plan))
     return entries
+
+
+def render_options(request: GenerateRequest) -> dict:
+    """The :class:`~denoisebench.generator.render_plan.RenderOptions` fields a request sets (picklable)."""
+    return {"per_sample": bool(request.samples), "max_depth": request.max_depth}
 
 
 def generate_dataset(request: GenerateRequest, executor, progress: bool = True, log=None) -> GenerateSummary:
@@ -204,11 +232,12 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
     writer = DatasetWriter(request.out, dataset_config(request), render_versions(), force=request.force)
     specs = _prepare_scenes(request, writer, user_names)
     by_name = {spec.name: spec for spec in specs}
-    options = {"per_sample": bool(request.samples)}
+    options = render_options(request)
     jobs = []
     for spec in specs:
         stage_key = writer.manifest["scenes"][spec.name]["stage_sha256"]
-        jobs.extend(missing_jobs(writer, spec.name, stage_key, str(spec.usd_path), spec.render_seed, options))
+        jobs.extend(missing_jobs(writer, spec.name, stage_key, str(spec.usd_path), spec.render_seed, options,
+                                 request.ref_error))
     summary = GenerateSummary(out=Path(request.out), scenes=len(specs))
     total_frames = sum(writer.manifest["scenes"][s.name]["frames"] for s in specs)
     summary.skipped = total_frames - len(jobs)
@@ -234,7 +263,9 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
             bar.update(1)
     finally:
         bar.close()
-    writer.finalize(assign_splits(list(by_name), request.seed), allow_incomplete=bool(summary.failures))
+    # stratified by family: every family of >= 3 scenes lands in train, val and test
+    families = {name: spec.family for name, spec in by_name.items()}
+    writer.finalize(assign_splits(list(by_name), request.seed, families=families), allow_incomplete=bool(summary.failures))
     summary.complete = bool(writer.manifest["complete"])
     summary.too_noisy = sum(
         1
@@ -242,5 +273,11 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
         for record in scene["renders"].get(layout.REFERENCE, {}).values()
         if record.get("reference_too_noisy")
     )
+    summary.at_cap = [
+        f"{name}/{frame}"
+        for name, scene in writer.manifest["scenes"].items()
+        for frame, record in sorted(scene["renders"].get(layout.REFERENCE, {}).items())
+        if (record.get("reference_adaptive") or {}).get("stopped_at_cap")
+    ]
     summary.wall_seconds = time.perf_counter() - started
     return summary

@@ -10,6 +10,12 @@ the renderer's separate random streams (``reference=True``), so they never share
 the seed of every render is the scene's ``render_seed``. The same job gives bit-identical buffers
 in any process, which is what makes resuming and the Ray executor byte-identical to a plain run.
 
+References: with ``ref_error`` (``--ref-error``) a frame's reference is adaptive
+(:mod:`~denoisebench.generator.reference_render`): rounds with fresh, deterministic seeds until its
+estimated noise floor is at most ``ref_error``, with ``ref_spp`` as the cap; the manifest records
+the spp used, the seconds and the floor (``reference_adaptive``). Without it, one render at
+``ref_spp``. Either way the plan comes from the job's options and the stage's own ``maxDepth``.
+
 Notes:
     Render seconds go into the manifest as the time axis of later comparisons, so they must not
     include Dr.Jit's kernel compilation, which happens the first time a process meets a kernel
@@ -55,6 +61,7 @@ class FrameJob:
     height: int
     render_seed: int
     options: dict = field(default_factory=dict)
+    ref_error: float | None = None  # adaptive reference target (None: one render at ref_spp)
 
 
 @dataclass
@@ -64,6 +71,7 @@ class Render:
     samples: dict[str, np.ndarray] | None
     seconds: float  # rendering, without kernel compilation
     compile_seconds: float = 0.0
+    adaptive: dict | None = None  # the adaptive reference's record (reference_render.render_adaptive)
 
 
 @dataclass
@@ -86,7 +94,8 @@ class _LoadedScene:
         from denoisebench.generator.translate import translate_usd
 
         self.translated = translate_usd(usd_path)
-        self.plan = make_render_plan(self.translated.effects, RenderOptions(**options))
+        self.plan = make_render_plan(self.translated.effects, RenderOptions(**options),
+                                     stage_max_depth=self.translated.max_depth)
         self.scene = build_mitsuba_scene(self.translated)
 
 
@@ -118,8 +127,10 @@ def _loaded(job: FrameJob, stage_files: dict[str, bytes] | None) -> _LoadedScene
     return _CACHE[key]
 
 
-def _timed_render(loaded: _LoadedScene, job: FrameJob, spp: int, reference: bool) -> Render:
-    """Render, and split the renderer's seconds into rendering and kernel compilation."""
+def _timed_render(loaded: _LoadedScene, job: FrameJob, spp: int, reference: bool, seed: int | None = None) -> Render:
+    """Render, and split the renderer's seconds into rendering and kernel compilation.
+
+    ``seed``: the sampler seed (default: the job's ``render_seed``; adaptive reference rounds pass their own)."""
     import drjit as dr
 
     from denoisebench.generator.feature_renderer import render_frame
@@ -127,7 +138,8 @@ def _timed_render(loaded: _LoadedScene, job: FrameJob, spp: int, reference: bool
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     dr.kernel_history()  # drains (and so clears) the history of earlier launches
     out = render_frame(loaded.scene, loaded.translated.camera, job.frame, loaded.plan, width=job.width,
-                       height=job.height, spp=spp, seed=job.render_seed, reference=reference)
+                       height=job.height, spp=spp, seed=job.render_seed if seed is None else seed,
+                       reference=reference)
     compile_ms = sum(float(entry.get("backend_time", 0.0)) for entry in dr.kernel_history() if not entry.get("cache_hit"))
     compile_seconds = min(compile_ms / 1000.0, out.seconds)
     return Render(spp, out.buffers, None if reference else out.samples, out.seconds - compile_seconds,
@@ -141,8 +153,23 @@ def render_job(job: FrameJob, stage_files: dict[str, bytes] | None = None) -> Re
     if not 0 <= job.frame < camera.frames:
         raise ValueError(f"scene {job.scene!r} has {camera.frames} frame(s), not frame {job.frame}")
     noisy = [_timed_render(loaded, job, spp, reference=False) for spp in job.spp]
-    reference = _timed_render(loaded, job, job.ref_spp, reference=True) if job.ref_spp else None
+    reference = _render_reference(loaded, job) if job.ref_spp else None
     return RenderedJob(job.scene, job.frame, noisy, reference, np.asarray(camera.poses[job.frame]).tolist())
+
+
+def _render_reference(loaded: _LoadedScene, job: FrameJob) -> Render:
+    """The frame's reference: one render at ``ref_spp``, or adaptive rounds when ``ref_error`` is set."""
+    if job.ref_error is None:
+        return _timed_render(loaded, job, job.ref_spp, reference=True)
+    from denoisebench.generator.reference_render import render_adaptive, round_seed
+
+    def render_round(index: int, round_spp: int):
+        render = _timed_render(loaded, job, round_spp, reference=True,
+                               seed=round_seed(job.render_seed, job.frame, index))
+        return render.buffers, render.seconds, render.compile_seconds
+
+    outcome = render_adaptive(render_round, job.ref_spp, job.ref_error)
+    return Render(outcome.spp, outcome.buffers, None, outcome.seconds, outcome.compile_seconds, outcome.record)
 
 
 def write_rendered(writer, result: RenderedJob) -> int:
@@ -155,14 +182,18 @@ def write_rendered(writer, result: RenderedJob) -> int:
                            seconds=render.seconds, extra=extra(render))
     if result.reference is not None:
         ref = result.reference
+        more = extra(ref)
+        if ref.adaptive is not None:
+            more["reference_adaptive"] = ref.adaptive
         writer.write_reference(
             result.scene, result.frame, ref.buffers["color"], ref.buffers["color_var"], ref.seconds,
-            spp=ref.spp, buffers={k: ref.buffers[k] for k in REFERENCE_EXTRA if k in ref.buffers}, extra=extra(ref),
+            spp=ref.spp, buffers={k: ref.buffers[k] for k in REFERENCE_EXTRA if k in ref.buffers}, extra=more,
         )
     return len(result.noisy) + (result.reference is not None)
 
 
-def missing_jobs(writer, scene: str, stage_key: str, usd_path: str, render_seed: int, options: dict) -> list[FrameJob]:
+def missing_jobs(writer, scene: str, stage_key: str, usd_path: str, render_seed: int, options: dict,
+                 ref_error: float | None = None) -> list[FrameJob]:
     """The jobs still needed for ``scene`` (frames whose every file is intact are skipped)."""
     record = writer.manifest["scenes"][scene]
     jobs = []
@@ -173,6 +204,6 @@ def missing_jobs(writer, scene: str, stage_key: str, usd_path: str, render_seed:
             ref_spp = None
         if spp or ref_spp:
             jobs.append(FrameJob(scene, frame, stage_key, usd_path, spp, ref_spp, record["width"], record["height"],
-                                 render_seed, dict(options)))
+                                 render_seed, dict(options), ref_error))
     return jobs
 

@@ -1,0 +1,187 @@
+"""Adaptive references: render in rounds until the reference's own noise floor is small enough.
+
+A reference is noisy too. Its **noise floor** is the relMSE a perfect denoiser would score against
+it, ``mean(var / (ref² + 0.01))`` over pixels and channels, where ``var`` is the variance of the
+reference's per-pixel mean (the relMSE epsilon of DESIGN.md, "Metrics"). :func:`render_adaptive`
+renders a frame's reference in rounds of equal sample count until the floor estimate is at most
+``ref_error``, or until the next round would pass ``cap`` samples per pixel (``--ref-spp``); such a
+frame is marked ``stopped_at_cap``.
+
+Rounds and seeds:
+    Round ``k`` renders ``round_spp = max(1, cap // MAX_ROUNDS)`` samples with the sampler seed
+    :func:`round_seed` ``(render_seed, frame, k)``: fresh, independent random numbers per round, and
+    the same ones on every run, so a resumed dataset gets the same bytes. The reference uses at most
+    ``MAX_ROUNDS * round_spp <= cap`` samples (the cap rounded down to whole rounds), and at least
+    ``MIN_ROUNDS`` rounds (batch means need several batches).
+
+Robust floor estimate (why not just the sample variance):
+    Fireflies are rare, very bright paths. With them the per-sample variance is unbiased but very
+    skewed: most pixels have not met their firefly yet and under-report, a few report huge values,
+    and the estimate jumps as rounds add samples; stopping at the first estimate below the target
+    then stops early exactly when luck hid the fireflies. Two independent unbiased estimates of the
+    variance of the mean are computed each round, and the floor is the **larger** of them:
+
+    * **batch means**: the rounds' per-pixel means ``m_k`` (K of them, equal sizes) are independent
+      draws of a mean over ``round_spp`` samples; ``Σ_k (m_k − m̄)² / (K (K − 1))`` is the variance of
+      ``m̄`` with no assumption about the per-sample distribution (each round mean is much closer to
+      Gaussian than a single sample is, so its spread is a steadier measure);
+    * **pooled sample variance**: the renderer's per-pixel M2 of all samples, merged over rounds
+      (Chan et al.), divided by ``N (N − 1)``. This is what the reference file stores as
+      ``color_var`` (the report's floor is computed from it).
+
+    Taking the maximum errs towards rendering more. The relMSE denominator uses the current mean.
+    No estimator can see a firefly that has not been sampled: a path whose chance is far below
+    ``1 / (spp · pixels)`` stays invisible to both.
+
+The manifest records per frame (``reference_adaptive``): the target, the spp used, rounds, the
+floor estimate that stopped the loop, the pooled floor, and whether the cap stopped it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+#: relMSE epsilon (DESIGN.md, "Metrics"): relMSE = mean((p − r)² / (r² + 0.01)).
+RELMSE_EPSILON = 0.01
+#: A frame is rendered in at most this many rounds of equal size (``round_spp = cap // MAX_ROUNDS``).
+MAX_ROUNDS = 16
+#: Batch means need a few batches before the floor is trusted.
+MIN_ROUNDS = 4
+#: Buffers merged over rounds (each with its ``_var``), in output order.
+MERGED = ("color", "diffuse", "specular")
+#: Stream id of round seeds (noisy renders use 0, single-pass references 1).
+ROUND_STREAM = 2
+
+
+def round_seed(render_seed: int, frame: int, round_index: int) -> int:
+    """32-bit seed of reference round ``round_index`` of ``frame`` (BLAKE2b of the three and the stream)."""
+    data = struct.pack("<qqqq", int(render_seed), int(frame), int(round_index), ROUND_STREAM)
+    return int.from_bytes(hashlib.blake2b(data, digest_size=4).digest(), "little")
+
+
+def round_schedule(cap: int) -> tuple[int, int]:
+    """``(round_spp, max_rounds)`` for a cap of ``cap`` samples per pixel."""
+    if cap < 1:
+        raise ValueError(f"the reference spp cap must be >= 1 (got {cap})")
+    round_spp = max(1, cap // MAX_ROUNDS)
+    return round_spp, max(1, min(MAX_ROUNDS, cap // round_spp))
+
+
+def floor_of(mean: np.ndarray, var_of_mean: np.ndarray) -> float:
+    """The relMSE a perfect denoiser would score against ``mean``: mean(var / (mean² + 0.01))."""
+    mean = np.asarray(mean, np.float64)
+    return float(np.mean(np.asarray(var_of_mean, np.float64) / (np.square(mean) + RELMSE_EPSILON)))
+
+
+class RoundMerger:
+    """Per-pixel statistics of equal-size rounds: the overall mean, pooled M2, and the batch means' spread."""
+
+    def __init__(self, round_spp: int):
+        self.round_spp = int(round_spp)
+        self.rounds = 0
+        self._sum = {}  # name → Σ_k m_k
+        self._m2 = {}  # name → Σ_k M2_k (within-round)
+        self._sq = {}  # name → Σ_k m_k²
+
+    def add(self, buffers: dict) -> None:
+        """Add one round's buffers (``name`` = mean of the round, ``name_var`` = variance of that mean)."""
+        n = self.round_spp
+        for name in MERGED:
+            if name not in buffers:
+                continue
+            m = np.asarray(buffers[name], np.float64)
+            within = np.asarray(buffers[f"{name}_var"], np.float64) * n * (n - 1)  # the round's M2
+            if name not in self._sum:
+                self._sum[name], self._m2[name], self._sq[name] = np.zeros_like(m), np.zeros_like(m), np.zeros_like(m)
+            self._sum[name] += m
+            self._m2[name] += within
+            self._sq[name] += np.square(m)
+        self.rounds += 1
+
+    @property
+    def spp(self) -> int:
+        return self.rounds * self.round_spp
+
+    def mean(self, name: str = "color") -> np.ndarray:
+        return self._sum[name] / self.rounds
+
+    def pooled_var(self, name: str = "color") -> np.ndarray:
+        """Variance of the overall mean from all samples: (Σ M2_k + n Σ (m_k − m̄)²) / (N (N − 1))."""
+        n, k, total = self.round_spp, self.rounds, self.spp
+        if total < 2:
+            return np.zeros_like(self._sum[name])
+        between = np.maximum(self._sq[name] - np.square(self._sum[name]) / k, 0.0)  # Σ (m_k − m̄)²
+        return (self._m2[name] + n * between) / (total * (total - 1))
+
+    def batch_var(self, name: str = "color") -> np.ndarray:
+        """Variance of the overall mean from the spread of the round means (needs 2 rounds)."""
+        k = self.rounds
+        if k < 2:
+            return np.full_like(self._sum[name], np.inf)
+        between = np.maximum(self._sq[name] - np.square(self._sum[name]) / k, 0.0)
+        return between / (k * (k - 1))
+
+    def floors(self) -> tuple[float, float]:
+        """(robust floor = max of both estimates, pooled floor) of color."""
+        mean = self.mean()
+        pooled = floor_of(mean, self.pooled_var())
+        if self.rounds < 2:  # one batch has no spread: the pooled estimate alone
+            return pooled, pooled
+        return max(pooled, floor_of(mean, self.batch_var())), pooled
+
+    def buffers(self) -> dict:
+        """float32 buffers for the reference file: every merged name with its ``_var`` (pooled)."""
+        out = {}
+        for name in self._sum:
+            out[name] = self.mean(name).astype(np.float32)
+            out[f"{name}_var"] = self.pooled_var(name).astype(np.float32)
+        return out
+
+
+@dataclass
+class AdaptiveOutcome:
+    """What :func:`render_adaptive` returns: merged buffers and the record for the manifest."""
+
+    buffers: dict
+    spp: int
+    seconds: float
+    compile_seconds: float
+    record: dict
+
+
+def render_adaptive(render_round, cap: int, ref_error: float) -> AdaptiveOutcome:
+    """Render rounds with ``render_round(round_index, round_spp) -> (buffers, seconds, compile_seconds)``
+    until the robust floor is <= ``ref_error`` (after at least :data:`MIN_ROUNDS`) or the cap."""
+    if not ref_error > 0:
+        raise ValueError(f"ref_error must be > 0 (got {ref_error})")
+    round_spp, max_rounds = round_schedule(cap)
+    merger = RoundMerger(round_spp)
+    seconds = compile_seconds = 0.0
+    floor = pooled = float("inf")
+    history = []
+    for k in range(max_rounds):
+        buffers, sec, comp = render_round(k, round_spp)
+        merger.add(buffers)
+        seconds += sec
+        compile_seconds += comp
+        floor, pooled = merger.floors()
+        history.append(floor)
+        if merger.rounds >= min(MIN_ROUNDS, max_rounds) and floor <= ref_error:
+            break
+    reached = floor <= ref_error
+    record = {
+        "ref_error": float(ref_error),
+        "spp": merger.spp,
+        "cap": int(cap),
+        "round_spp": round_spp,
+        "rounds": merger.rounds,
+        "floor": floor,
+        "floor_pooled": pooled,
+        "stopped_at_cap": not reached,
+        "seconds": seconds,
+    }
+    return AdaptiveOutcome(merger.buffers(), merger.spp, seconds, compile_seconds, record)
