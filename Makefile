@@ -10,11 +10,13 @@ DEMO_OUT ?= demo_out
 setup: $(STAMP)
 
 # Idempotent: re-runs only when the pins or the package metadata change.
-$(STAMP): requirements.txt pyproject.toml scripts/ensure_llvm.sh
+$(STAMP): requirements.txt requirements-nodeps.txt pyproject.toml scripts/ensure_llvm.sh
 	bash scripts/ensure_llvm.sh
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip setuptools
 	$(PY) -m pip install --quiet -r requirements.txt
+	$(PY) -m pip install --quiet --no-deps -r requirements-nodeps.txt
+	$(PY) -c "import torch; v = torch.__version__.split('+')[0]; assert v == '2.13.0', f'torch {v} replaced 2.13.0'"
 	$(PY) -m pip install --quiet --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 

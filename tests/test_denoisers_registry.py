@@ -121,8 +121,10 @@ def test_plugin_that_fails_to_import_is_a_one_line_load_error(tmp_path):
 def test_constructor_failures_and_non_denoisers_are_load_errors(tmp_path):
     with pytest.raises(DenoiserLoadError, match="unknown cross_bilateral preset"):
         load_denoiser("cross_bilateral", preset="ultra")
-    with pytest.raises(DenoiserLoadError, match="TypeError"):
+    # an option the constructor does not take is bad input (exit 2), not a load failure ("not run")
+    with pytest.raises(registry.UnknownOptionError, match="has no option 'radius'") as caught:
         load_denoiser("identity", radius=3)
+    assert not isinstance(caught.value, DenoiserLoadError)
     plugin = tmp_path / "not_a_denoiser.py"
     plugin.write_text("VALUE = 3\nclass NoDenoise:\n    pass\n")
     with pytest.raises(DenoiserLoadError, match="not a denoiser"):

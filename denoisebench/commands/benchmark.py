@@ -6,6 +6,13 @@ go to a SQLite database (--db) with the dataset's hash, the config and software 
 denoiser is recorded with its error and the run goes on. Rerunning the same command after a kill
 completes what is missing. The report folder (--out) gets index.html (self-contained, works
 offline), report.md, results.json, results.csv and figures/.
+
+Untrusted input is checked before anything is measured: every dataset file's sha256 against the
+manifest (--no-verify skips it, and the run records that), every manifest path confined to the
+dataset folder, --out and --db writable, every --option naming a denoiser that is run and a
+keyword its constructor takes. Plugins (every denoiser that is not a built-in) run in worker
+processes of their own under --time-limit and --memory-limit (see README, "Running untrusted
+plugins").
 """
 
 from __future__ import annotations
@@ -20,6 +27,7 @@ EPILOG = """examples:
   run-benchmark --data out/dataset --out report/
   run-benchmark --data out/dataset --denoisers identity,oidn --spp 1,4 --db results.sqlite
   run-benchmark --data out/dataset --denoiser my_pkg.filters:MyDenoiser --option my_pkg.filters:MyDenoiser:radius=5
+  run-benchmark --data out/dataset --denoiser plugins/slow.py:Slow --time-limit 600 --memory-limit 8192
 """
 
 
@@ -71,12 +79,21 @@ def add_arguments(parser) -> None:
     parser.add_argument("--executor", default="local", choices=("local", "ray"), help="where units run (default local)")
     parser.add_argument("--new-run", action="store_true", help="measure everything again as a new run instead of resuming")
     parser.add_argument("--no-report", action="store_true", help="only measure; write no report")
+    parser.add_argument("--no-verify", action="store_true",
+                        help="skip the sha256 check of the dataset's files before the run (recorded in the run)")
+    from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
+
+    add_isolation_arguments(parser)
 
 
 def run(args) -> int:
     from denoisebench.dataset import open_dataset
+    from denoisebench.denoisers.isolation import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, limits_from_args
     from denoisebench.leaderboard.runner import BenchmarkConfig, run_benchmark
     from denoisebench.leaderboard.store import ResultsStore, utc_now
+    from denoisebench.outputs import check_writable_dir, check_writable_file
+
+    limits = limits_from_args(args)  # bad limits are exit 2 before anything else
 
     # --denoiser alone benchmarks just those plugins; --denoisers defaults to all otherwise
     given = args.denoisers if args.denoisers is not None else ("" if args.denoiser else "all")
@@ -88,7 +105,15 @@ def run(args) -> int:
         metrics=[m.strip() for m in args.metrics.split(",") if m.strip()],
         options=_options(args.option),
         nonce=utc_now() if args.new_run else None,
+        isolation=args.isolation,
+        time_limit=None if limits.time_limit == DEFAULT_TIME_LIMIT else limits.time_limit,
+        memory_limit_mb=None if limits.memory_limit_mb == DEFAULT_MEMORY_LIMIT_MB else limits.memory_limit_mb,
+        verify=not args.no_verify,
     )
+    # outputs first: a run that cannot write its results must not measure for minutes first
+    check_writable_file(args.db, "--db")
+    if not args.no_report:
+        check_writable_dir(args.out, "--out")
     dataset = open_dataset(args.data)
     started = time.perf_counter()
     with ResultsStore(args.db) as store:

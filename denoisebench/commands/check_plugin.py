@@ -6,8 +6,13 @@ outputs checked, failures contained); a case passes when every output is a finit
 array, non-negative, with a robust mean within ×4 of the input's (see
 ``denoisebench.denoisers.hard_cases``).
 
+A plugin (anything but a built-in) runs in a worker process of its own, as in the benchmark, under
+--time-limit and --memory-limit: a plugin that exits, crashes, hangs or bloats fails its cases with
+the reason instead of ending this command, and its inputs are copies it cannot use to change what
+the check compares against.
+
 Exit codes: 0 every case passed, 1 some case failed, 2 the denoiser cannot be found or built
-(or an unknown --case / malformed --option).
+(or an unknown --case / malformed or unknown --option).
 """
 
 from __future__ import annotations
@@ -22,6 +27,7 @@ EPILOG = """examples:
   denoisebench check-plugin rpf --case fireflies --case tiny
   denoisebench check-plugin my_package.denoise:MyDenoiser --option strength=0.5
   denoisebench check-plugin plugins/median.py:Median --json
+  denoisebench check-plugin plugins/slow.py:Slow --time-limit 300 --memory-limit 8192
   denoisebench check-plugin --list
 """
 
@@ -35,6 +41,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--case", action="append", default=None, metavar="NAME", help="run only this case; repeatable")
     parser.add_argument("--json", action="store_true", help="print the results as JSON instead of a table")
     parser.add_argument("--list", action="store_true", help="list the known denoisers and the hard cases, then exit")
+    from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
+
+    add_isolation_arguments(parser)
 
 
 def parse_options(items: list[str]) -> dict:
@@ -86,15 +95,15 @@ def run(args) -> int:
         raise UserInputError("give a denoiser SPEC (or --list)")
     from tqdm import tqdm
 
-    from denoisebench.denoisers import hard_cases
-    from denoisebench.denoisers.registry import load_denoiser
+    from denoisebench.denoisers import hard_cases, isolation
 
+    limits = isolation.limits_from_args(args)
     options = parse_options(args.option)
     try:
         cases = hard_cases.hard_cases(args.case)
     except ValueError as error:
         raise UserInputError(str(error)) from None
-    denoiser = load_denoiser(args.spec, **options)
+    denoiser = isolation.load(args.spec, options, policy=args.isolation, limits=limits)
     label = getattr(denoiser, "name", None) or args.spec
     outcomes = []
     for case in tqdm(cases, desc=f"check {label}", unit="case", file=sys.stderr, leave=False):

@@ -16,13 +16,17 @@ and ``reference_file``, ``reference_spp``, ``reference_seconds``, ``reference_re
 Every problem is a one-line :class:`~denoisebench.dataset.errors.DatasetError` naming the scene,
 frame and file: an unknown scene or spp, a frame with no record (incomplete dataset), a missing or
 corrupt file, NaN/Inf in it, and with ``verify=True`` a sha256 that differs from the manifest.
+
+Manifest paths are untrusted: :meth:`Dataset.path` confines each to the dataset root (relative,
+no ``..`` part, and the resolved path, symlinks followed, inside the resolved root) before any
+file is opened; a path that escapes is a DatasetError naming it.
 """
 
 from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from pathlib import Path
+from pathlib import Path, PurePosixPath, PureWindowsPath
 from typing import Iterable, Iterator
 
 import numpy as np
@@ -153,6 +157,28 @@ class Dataset:
             )
         return record
 
+    # ------------------------------------------------------------------ paths
+
+    def path(self, relative: object, what: str = "manifest path") -> Path:
+        """``root / relative``, refused (DatasetError) unless it stays inside the dataset root.
+
+        ``relative`` must be a non-empty relative POSIX path without ``..`` parts, and the path it
+        names, symlinks resolved, must lie inside the resolved root: an absolute path
+        (``/etc/passwd``), ``../other/frame.exr`` or a symlink pointing out are all refused.
+        """
+        text = relative if isinstance(relative, str) else None
+        if not text or "\0" in text:
+            raise DatasetError(f"{self.root}: {what} {relative!r} in the manifest is not a relative path")
+        posix = PurePosixPath(text)
+        if posix.is_absolute() or PureWindowsPath(text).is_absolute() or PureWindowsPath(text).drive or ".." in posix.parts:
+            raise DatasetError(f"{self.root}: {what} {text!r} in the manifest leaves the dataset folder (refused)")
+        full = self.root / posix
+        root = self.root.resolve()
+        resolved = full.resolve()
+        if resolved != root and root not in resolved.parents:
+            raise DatasetError(f"{self.root}: {what} {text!r} resolves to {resolved}, outside the dataset folder (refused)")
+        return full
+
     # ------------------------------------------------------------------ loading
 
     def reference(self, scene: str, index: int) -> tuple[dict[str, np.ndarray], dict]:
@@ -160,13 +186,11 @@ class Dataset:
         record = self._frame_record(
             scene, layout.REFERENCE, index, "reference", layout.reference_path(scene, index)
         )
-        contents = load_exr(
-            self.root / record["file"],
-            record["sha256"] if self.verify else None,
-            what=f"scene {scene!r} frame {index} reference file",
-        )
+        what = f"scene {scene!r} frame {index} reference file"
+        path = self.path(record.get("file"), what)
+        contents = load_exr(path, record["sha256"] if self.verify else None, what=what)
         if "color" not in contents.buffers:
-            raise DatasetError(f"scene {scene!r} frame {index} reference file {self.root / record['file']} has no color layer")
+            raise DatasetError(f"{what} {path} has no color layer")
         return contents.buffers, record
 
     def frame(
@@ -192,16 +216,17 @@ class Dataset:
             scene, layout.spp_key(spp), index, f"{spp}-spp frame", layout.noisy_path(scene, spp, index)
         )
         what = f"scene {scene!r} frame {index} ({spp} spp) file"
-        contents = load_exr(self.root / record["file"], record["sha256"] if self.verify else None, what=what)
+        path = self.path(record.get("file"), what)
+        contents = load_exr(path, record["sha256"] if self.verify else None, what=what)
         layers = contents.buffers
         if "color" not in layers:
-            raise DatasetError(f"{what} {self.root / record['file']} has no color layer")
+            raise DatasetError(f"{what} {path} has no color layer")
         if buffers is not None:
             wanted = ["color"] + [b for b in buffers if b != "color"]
             absent = [b for b in wanted if b not in layers]
             if absent:
                 raise DatasetError(
-                    f"{what} {self.root / record['file']} has no buffer(s) {', '.join(absent)} "
+                    f"{what} {path} has no buffer(s) {', '.join(absent)} "
                     f"(has {', '.join(sorted(layers))})"
                 )
             layers = {b: layers[b] for b in wanted}
@@ -225,10 +250,11 @@ class Dataset:
         sample_data = None
         if samples and record.get("samples"):
             entry = record["samples"]
+            samples_what = f"scene {scene!r} frame {index} ({spp} spp) samples file"
             sample_data = load_samples_exr(
-                self.root / entry["file"],
+                self.path(entry.get("file"), samples_what),
                 entry["sha256"] if self.verify else None,
-                what=f"scene {scene!r} frame {index} ({spp} spp) samples file",
+                what=samples_what,
             ).samples
             meta["samples_file"] = entry["file"]
         try:
@@ -236,7 +262,7 @@ class Dataset:
                 buffers=layers, spp=spp, scene=scene, index=index, reference=ref_color, samples=sample_data, meta=meta
             )
         except ValueError as exc:
-            raise DatasetError(f"{what} {self.root / record['file']}: {exc}") from None
+            raise DatasetError(f"{what} {path}: {exc}") from None
 
     def frames(self, scene: str, spp: int, **options) -> Iterator[Frame]:
         """Frames 0..N−1 of ``scene`` at ``spp``, loaded one at a time (options as :meth:`frame`)."""

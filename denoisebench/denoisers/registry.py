@@ -27,6 +27,7 @@ from __future__ import annotations
 import importlib
 import importlib.metadata
 import importlib.util
+import inspect
 import sys
 from pathlib import Path
 from typing import Any
@@ -60,6 +61,10 @@ class UnknownDenoiserError(UserInputError):
 
 class DenoiserLoadError(UserInputError):
     """The denoiser was found but failed to import or construct."""
+
+
+class UnknownOptionError(UserInputError):
+    """An option the denoiser's constructor does not take (a typo must not turn into "not run")."""
 
 
 class DenoiserUnavailableError(RuntimeError):
@@ -123,7 +128,30 @@ def _import_target(target: str) -> Any:
     return obj
 
 
+def check_options(obj: Any, spec: str, options: dict[str, Any]) -> None:
+    """UnknownOptionError when ``obj`` (class or factory) takes no keyword named like an option.
+
+    A constructor with ``**kwargs``, or one whose signature cannot be read, accepts anything.
+    """
+    if not options or not callable(obj):
+        return
+    try:
+        parameters = inspect.signature(obj).parameters.values()
+    except (TypeError, ValueError):
+        return
+    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters):
+        return
+    known = [p.name for p in parameters if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)]
+    unknown = [key for key in options if key not in known]
+    if unknown:
+        raise UnknownOptionError(
+            f"denoiser {spec!r} has no option {', '.join(map(repr, unknown))}; it takes {', '.join(known) or 'no options'}"
+        )
+
+
 def _instantiate(obj: Any, spec: str, options: dict[str, Any]) -> Any:
+    if isinstance(obj, type) or not callable(getattr(obj, "denoise", None)):
+        check_options(obj, spec, options)
     if isinstance(obj, type):
         instance = obj(**options)
     elif callable(getattr(obj, "denoise", None)):

@@ -6,8 +6,13 @@ Everything that calls a denoiser (the benchmark, ``check-plugin``, tests) goes t
 * **Inputs.** NaN and ±Inf in every buffer and per-sample array are replaced before the denoiser
   sees them, by the median of the finite values among the element's 3×3 spatial neighbours in the
   same channel (0 when none is finite), and counted per buffer (:attr:`DenoiseResult.sanitized`).
-  The reference image is withheld, and every array is passed as a read-only view, so a denoiser
-  can neither peek at the answer nor corrupt the input of the next one.
+  The reference image is withheld, and so is every ``meta`` entry but :data:`PUBLIC_META` (no
+  reference path, value or layers, no file paths). Every array is passed as a read-only **copy**:
+  a read-only view alone is not enough, as ``setflags(write=True)`` on it (or on its ``base``)
+  succeeds and would reach the next denoiser's input.
+* **Isolation.** An :class:`~.isolation.IsolatedDenoiser` (a plugin in its own worker process)
+  goes through the same steps; its time is the worker's time inside ``denoise()``, and a worker
+  that exits, crashes, runs over its time or memory limit fails the call with that reason.
 * **Needs.** A frame that lacks a buffer the denoiser ``needs`` is a failure without a call.
 * **Timing.** :func:`time.perf_counter` around ``denoise(frame)`` only: sanitising, checking and
   any I/O are outside it.
@@ -28,10 +33,13 @@ import numpy as np
 
 from denoisebench.dataset.frame import Frame, Sequence
 
+from .isolation import IsolatedDenoiser, WorkerFailure
 from .protocol import describe
 
 STATUS_OK = "ok"
 STATUS_FAILED = "failed"
+#: The only ``Frame.meta`` entries a denoiser sees (render cost of its own input; no paths).
+PUBLIC_META = ("seconds", "seconds_per_spp", "rel_se")
 
 
 @dataclass
@@ -103,10 +111,11 @@ def sanitize_array(array: np.ndarray) -> tuple[np.ndarray, int]:
     return out, count
 
 
-def _read_only(array: np.ndarray) -> np.ndarray:
-    view = np.asarray(array).view()
-    view.flags.writeable = False
-    return view
+def _read_only(array: np.ndarray, original: np.ndarray) -> np.ndarray:
+    """A read-only array no other denoiser shares: ``array`` when sanitising already copied it."""
+    copy = np.array(array, copy=True) if array is original else array
+    copy.flags.writeable = False
+    return copy
 
 
 def sanitize_frame(frame: Frame) -> tuple[Frame, dict[str, int]]:
@@ -120,7 +129,7 @@ def sanitize_frame(frame: Frame) -> tuple[Frame, dict[str, int]]:
         clean, count = sanitize_array(array)
         if count:
             counts[name] = count
-        buffers[name] = _read_only(clean)
+        buffers[name] = _read_only(clean, array)
     samples = None
     if frame.samples is not None:
         samples = {}
@@ -128,7 +137,7 @@ def sanitize_frame(frame: Frame) -> tuple[Frame, dict[str, int]]:
             clean, count = sanitize_array(array)
             if count:
                 counts[f"samples.{name}"] = count
-            samples[name] = _read_only(clean)
+            samples[name] = _read_only(clean, array)
     safe = Frame(
         buffers=buffers,
         spp=frame.spp,
@@ -136,7 +145,7 @@ def sanitize_frame(frame: Frame) -> tuple[Frame, dict[str, int]]:
         index=frame.index,
         reference=None,
         samples=samples,
-        meta=dict(frame.meta),
+        meta={key: frame.meta[key] for key in PUBLIC_META if key in frame.meta},
     )
     return safe, counts
 
@@ -177,14 +186,19 @@ def run_frame(denoiser: object, frame: Frame, *, name: str | None = None, keep_o
     if missing:
         result.error = f"frame lacks buffer(s) {', '.join(missing)} that the denoiser needs"
         return result
+    isolated = isinstance(denoiser, IsolatedDenoiser)
     started = time.perf_counter()
     try:
         output = denoiser.denoise(safe)
+    except WorkerFailure as error:  # an isolated call: the reason is already one line
+        result.seconds = denoiser.last_seconds if isolated else time.perf_counter() - started
+        result.error = str(error)
+        return result
     except Exception as error:  # noqa: BLE001 - contained and recorded
         result.seconds = time.perf_counter() - started
         result.error = f"raised {_one_line(error)}"
         return result
-    result.seconds = time.perf_counter() - started
+    result.seconds = denoiser.last_seconds if isolated else time.perf_counter() - started
     reason = check_output(output, frame.height, frame.width)
     if reason is not None:
         result.error = reason
@@ -205,7 +219,7 @@ def run_sequence(
         try:
             reset()
         except Exception as error:  # noqa: BLE001
-            reason = f"reset() raised {_one_line(error)}"
+            reason = str(error) if isinstance(error, WorkerFailure) else f"reset() raised {_one_line(error)}"
             return [DenoiseResult(label, f.scene, f.index, STATUS_FAILED, reason) for f in frames]
     return [run_frame(denoiser, frame, name=label, keep_output=keep_output) for frame in frames]
 

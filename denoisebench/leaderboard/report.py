@@ -190,6 +190,21 @@ def results_json(report: dict) -> dict:
     })
 
 
+#: First characters that make a spreadsheet read a cell as a formula (or that it strips first).
+_FORMULA_STARTS = ("=", "+", "-", "@", "\t", "\r")
+
+
+def csv_cell(value):
+    """``value`` safe for a spreadsheet: a text cell starting with = + - @ tab or CR gets a leading
+    single quote (OWASP's advice against formula injection, e.g. through a plugin's name).
+
+    Numbers are written by the caller as numbers (a negative metric stays a number); only text
+    (names, errors) passes through here."""
+    if isinstance(value, str) and value.startswith(_FORMULA_STARTS):
+        return "'" + value
+    return value
+
+
 def results_csv(report: dict) -> str:
     """One row per frame: ids, status, seconds, then every frame metric."""
     metrics = report["frame_metrics"] + ["flicker"]
@@ -199,7 +214,8 @@ def results_csv(report: dict) -> str:
                      "denoise_seconds", "total_seconds", "sanitized", *metrics])
     for f in report["frames"]:
         values = [f["metrics"].get(m) for m in metrics]
-        writer.writerow([report["run"]["run_id"], f["denoiser"], f["scene"], f["spp"], f["frame"], f["status"], f["error"] or "",
+        writer.writerow([report["run"]["run_id"], csv_cell(f["denoiser"]), csv_cell(f["scene"]), f["spp"], f["frame"],
+                         f["status"], csv_cell(f["error"] or ""),
                          f["render_seconds"], f["denoise_seconds"], f["total_seconds"], f["sanitized"],
                          *("" if v is None else repr(float(v)) for v in values)])
     return buffer.getvalue()

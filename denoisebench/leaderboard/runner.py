@@ -251,11 +251,12 @@ def measure_unit(label: str, denoiser: object | None, sequence, spatial: list[st
 
 
 def split_metrics(names: list[str]) -> tuple[list[str], list[str]]:
-    """(per-frame metric names, temporal metric names) of a metrics option ([] = every registered)."""
-    from denoisebench.metrics import get_metric, metric_names
+    """(per-frame metric names, temporal metric names) of a metrics option: metric or set names
+    (``noisebase``); [] = every registered metric outside the opt-in sets."""
+    from denoisebench.metrics.registry import default_metric_names, expand_metric_names, get_metric
 
     try:
-        chosen = [get_metric(n).name for n in names] if names else metric_names()
+        chosen = expand_metric_names(names) if names else default_metric_names()
     except ValueError as exc:
         raise UserInputError(str(exc)) from None
     for name in REQUIRED_METRICS:

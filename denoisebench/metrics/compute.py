@@ -18,7 +18,7 @@ from typing import Iterable
 
 import numpy as np
 
-from .registry import Metric, get_metric, metric_names
+from .registry import Metric, default_metric_names, expand_metric_names, get_metric
 from .validation import check_pair, check_sequences
 
 __all__ = ["MetricResult", "compute_metrics"]
@@ -88,17 +88,13 @@ def _select(names: Iterable[str] | str | None, sequence: bool, context: dict) ->
     if isinstance(names, str):
         names = [names]
     if names is None:
-        chosen = [get_metric(n) for n in metric_names()]
+        chosen = [get_metric(n) for n in default_metric_names()]  # opt-in sets (noisebase) left out
         chosen = [
             m for m in chosen
             if not m.temporal or (sequence and all(context.get(k) is not None for k in m.requires))
         ]
     else:
-        chosen = []
-        for n in names:
-            m = get_metric(n)
-            if m not in chosen:
-                chosen.append(m)
+        chosen = [get_metric(n) for n in expand_metric_names(names)]  # set names expand
     for m in chosen:
         if m.temporal and not sequence:
             raise ValueError(f"metric {m.name!r} is temporal: it needs sequences (T×H×W×3), not one frame")

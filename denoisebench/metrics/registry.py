@@ -33,11 +33,17 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Literal
 
+from . import colorvideovdp as cv
 from . import floors, gradient, spatial, temporal
+from . import msssim as ms
+from . import noisebase as nb
 
-__all__ = ["Metric", "AGGREGATES", "get_metric", "metric_names", "register_metric", "unregister_metric", "ALIASES"]
+__all__ = [
+    "Metric", "AGGREGATES", "METRIC_SETS", "get_metric", "metric_names", "default_metric_names",
+    "expand_metric_names", "register_metric", "register_metric_set", "unregister_metric", "ALIASES",
+]
 
-Domain = Literal["linear", "tonemapped", "reinhard"]
+Domain = Literal["linear", "tonemapped", "reinhard", "noisebase"]
 Kind = Literal["spatial", "gradient", "temporal"]
 Aggregate = Literal["mean", "geomean", "relative_to_input"]
 #: The aggregation rules a Metric may state (module docstring).
@@ -49,7 +55,8 @@ class Metric:
     """A named metric.
 
     ``domain``: ``"linear"`` (HDR radiance as given), ``"tonemapped"`` (the documented tone map,
-    [0, 1)), or ``"reinhard"`` (its linear Reinhard stage, for ΔE2000). ``worst`` is the value a
+    [0, 1)), ``"reinhard"`` (its linear Reinhard stage, for ΔE2000) or ``"noisebase"`` (Noisebase's
+    8-bit ACES encoding, :mod:`.noisebase`). ``worst`` is the value a
     non-finite prediction gets; ``perfect`` the value of prediction == reference. ``aggregate``:
     how values combine over scenes (module docstring); ``floor_fn``: reference-noise floor.
     """
@@ -143,6 +150,47 @@ def metric_names(kind: str | None = None) -> list[str]:
     return [m.name for m in _REGISTRY.values() if kind is None or m.kind == kind]
 
 
+#: Named sets a metrics option may name besides single metrics (``--metrics noisebase``).
+METRIC_SETS: dict[str, tuple[str, ...]] = {}
+_OPT_IN: set[str] = set()
+
+
+def register_metric_set(name: str, members, *, opt_in: bool = False) -> None:
+    """Name a set of registered metrics. ``opt_in=True``: its members are left out of the
+    default selection ("every registered metric") and run only when asked for, by name or set."""
+    key = str(name).strip().lower()
+    if key in _REGISTRY or key in ALIASES:
+        raise ValueError(f"metric set {name!r} would hide the metric of that name")
+    members = tuple(get_metric(m).name for m in members)
+    METRIC_SETS[key] = members
+    if opt_in:
+        _OPT_IN.update(members)
+
+
+def default_metric_names(kind: str | None = None) -> list[str]:
+    """The default selection: registered metrics (of ``kind``) except the opt-in sets' members."""
+    return [n for n in metric_names(kind) if n not in _OPT_IN]
+
+
+def expand_metric_names(names) -> list[str]:
+    """Canonical metric names of ``names`` (metrics, aliases or set names), duplicates dropped.
+
+    An unknown name is a ``ValueError`` that lists the metrics and the sets.
+    """
+    out: list[str] = []
+    for name in [names] if isinstance(names, str) else names:
+        key = str(name).strip().lower()
+        if key in METRIC_SETS and key not in _REGISTRY:
+            out.extend(METRIC_SETS[key])
+            continue
+        try:
+            out.append(get_metric(key).name)
+        except ValueError:
+            sets = f"; sets: {', '.join(METRIC_SETS)}" if METRIC_SETS else ""
+            raise ValueError(f"unknown metric {name!r}; known: {', '.join(metric_names())}{sets}") from None
+    return list(dict.fromkeys(out))
+
+
 def _builtin() -> None:
     inf = math.inf
     s, g, t = spatial, gradient, temporal
@@ -181,8 +229,26 @@ def _builtin() -> None:
                accepts=("motion", "depth", "masks"), floor_fn=t.temporal_relmse_floor),
         Metric("tpsnr", t.tpsnr, True, "tonemapped", "temporal", t.WORST["tpsnr"], inf, None,
                "PSNR of tone-mapped frame differences, peak 1", "dB", accepts=("masks",)),
+        # Scores comparable with the field (issue 20): msssim.py, colorvideovdp.py, noisebase.py.
+        Metric("msssim", ms.msssim, True, "tonemapped", "spatial", ms.WORST, 1.0, None,
+               "MS-SSIM (pytorch-msssim, win 11, sigma 1.5, data_range 1); fewer scales below 161 px"),
+        Metric("cvvdp", cv.cvvdp, True, "linear", "temporal", cv.WORST, 10.0, None,
+               "ColorVideoVDP (cvvdp) at 30 fps: " + cv.DISPLAY_DESCRIPTION, "JOD"),
+        Metric("nb_psnr", nb.nb_psnr, True, "noisebase", "spatial", nb.WORST["nb_psnr"], inf, None,
+               "Noisebase PSNR: 8-bit ACES (gamma 2.2, truncated) frames, peak 1", "dB"),
+        Metric("nb_ssim", nb.nb_ssim, True, "noisebase", "spatial", nb.WORST["nb_ssim"], 1.0, None,
+               "Noisebase SSIM (pytorch-msssim) of the 8-bit frames' luminance"),
+        Metric("nb_msssim", nb.nb_msssim, True, "noisebase", "spatial", nb.WORST["nb_msssim"], 1.0, None,
+               "Noisebase MS-SSIM (pytorch-msssim) of the 8-bit frames' luminance"),
+        Metric("nb_flip", nb.nb_flip, False, "noisebase", "spatial", nb.WORST["nb_flip"], 0.0, None,
+               "Noisebase LDR-FLIP of the 8-bit frames at 67.02 ppd"),
+        Metric("nb_tpsnr", nb.nb_tpsnr, True, "noisebase", "temporal", nb.WORST["nb_tpsnr"], inf, None,
+               "Noisebase tPSNR: mean over pairs of PSNR of 8-bit frame differences", "dB"),
+        Metric("nb_trmae", nb.nb_trmae, False, "noisebase", "temporal", nb.WORST["nb_trmae"], 0.0, None,
+               "Noisebase tRMAE: mean over pairs of mean(|dp-dr|/(|dr|+0.01))/3 of 8-bit frames"),
     ):
         register_metric(m)
+    register_metric_set("noisebase", nb.NOISEBASE_METRICS, opt_in=True)
 
 
 _builtin()

@@ -1,0 +1,107 @@
+"""The worker process of :mod:`denoisebench.denoisers.isolation`: loads one denoiser and serves calls.
+
+Started as ``python -m denoisebench.denoisers.isolation_worker FD`` where FD is one end of a
+socket pair (a :class:`multiprocessing.connection.Connection`). The parent is trusted, so its
+requests are pickles: ``("load", spec, options, sys_path)``, ``("reset",)``, ``("denoise", frame)``
+and ``("close",)``. The worker is not trusted, so its replies are **never pickles**: one JSON
+header (``send_bytes``), followed, for an array output, by the array's raw bytes. The parent
+rebuilds arrays from a whitelisted dtype and a shape whose size must match the bytes, so nothing a
+plugin does in here can run code in the parent.
+
+Everything a plugin raises, including ``SystemExit`` from ``sys.exit()``, is caught and reported
+as a one-line error; ``os._exit()``, a crash or a signal ends the process, which the parent sees
+as the pipe closing and reports with the exit status.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+
+def _one_line(error: BaseException) -> str:
+    lines = str(error).strip().splitlines()
+    return f"{type(error).__name__}: {lines[0]}" if lines else type(error).__name__
+
+
+def _reply(conn, header: dict, payload: bytes | memoryview | None = None) -> None:
+    header["payload"] = payload is not None
+    conn.send_bytes(json.dumps(header).encode("utf-8"))
+    if payload is not None:
+        conn.send_bytes(payload)
+
+
+def _load(conn, spec: str, options: dict, sys_path: list[str]):
+    from denoisebench.denoisers.protocol import describe
+    from denoisebench.denoisers.registry import load_denoiser
+
+    sys.path[:] = list(sys_path)
+    try:
+        denoiser = load_denoiser(spec, **options)
+        info = describe(denoiser, fallback_name=spec)
+    except BaseException as error:  # noqa: BLE001 - every failure goes back as one line
+        _reply(conn, {"ok": False, "error_type": type(error).__name__, "error": str(error).strip().splitlines()[0] if str(error).strip() else _one_line(error)})
+        return None
+    _reply(conn, {"ok": True, "name": str(info.name), "needs": sorted(str(n) for n in info.needs), "temporal": bool(info.temporal)})
+    return denoiser
+
+
+def _denoise(conn, denoiser, frame) -> None:
+    import numpy as np
+
+    for array in list(frame.buffers.values()) + list((frame.samples or {}).values()):
+        array.flags.writeable = False  # the same contract as in-process; these are this process's copies
+    started = time.perf_counter()
+    try:
+        output = denoiser.denoise(frame)
+    except BaseException as error:  # noqa: BLE001 - SystemExit included: contained and reported
+        _reply(conn, {"ok": False, "error": f"raised {_one_line(error)}", "seconds": time.perf_counter() - started})
+        return
+    seconds = time.perf_counter() - started
+    if not isinstance(output, np.ndarray):
+        _reply(conn, {"ok": True, "seconds": seconds, "kind": "other", "type": type(output).__name__})
+        return
+    if output.dtype.kind not in "fiub" or output.dtype.hasobject:
+        _reply(conn, {"ok": True, "seconds": seconds, "kind": "other", "type": f"ndarray of dtype {output.dtype}"})
+        return
+    plain = np.ascontiguousarray(output)
+    _reply(
+        conn,
+        {"ok": True, "seconds": seconds, "kind": "array", "dtype": plain.dtype.str, "shape": list(plain.shape)},
+        memoryview(plain).cast("B") if plain.size else b"",
+    )
+
+
+def main(fd: int) -> None:
+    from multiprocessing.connection import Connection
+
+    conn = Connection(fd)
+    denoiser = None
+    while True:
+        try:
+            message = conn.recv()
+        except (EOFError, OSError):
+            return  # the parent has gone
+        op = message[0]
+        if op == "close":
+            return
+        if op == "load":
+            denoiser = _load(conn, *message[1:])
+        elif op == "reset":
+            reset = getattr(denoiser, "reset", None)
+            try:
+                if callable(reset):
+                    reset()
+            except BaseException as error:  # noqa: BLE001
+                _reply(conn, {"ok": False, "error": f"reset() raised {_one_line(error)}"})
+                continue
+            _reply(conn, {"ok": True})
+        elif op == "denoise":
+            _denoise(conn, denoiser, message[1])
+        else:
+            _reply(conn, {"ok": False, "error": f"unknown request {op!r}"})
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]))
