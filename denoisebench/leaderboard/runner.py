@@ -19,7 +19,16 @@ Notes
 * **The noisy input** is the color buffer after the harness's NaN/Inf sanitising (what denoisers
   see); its denoise time is 0.
 * A denoiser that cannot be loaded (missing optional dependency, broken plugin) is recorded with
-  its error in ``run_denoisers`` and gets no units; the run goes on.
+  its error in ``run_denoisers`` and gets no units; the run goes on. An unknown name or option
+  (``--option identity:nosuchopt=1``, an option for a spec that is not run) is bad input.
+* **Untrusted plugins** run in worker processes of their own under a time and a memory limit
+  (:mod:`denoisebench.denoisers.isolation`; ``BenchmarkConfig.isolation``, ``time_limit``,
+  ``memory_limit_mb``); a plugin that exits, crashes, hangs or bloats fails its units with the
+  reason and the run goes on.
+* **Untrusted data.** Before the first unit, every file the run reads is checked against the
+  manifest's sha256 (:func:`denoisebench.dataset.verify.verify_files`, with a progress bar);
+  ``verify=False`` (``--no-verify``) skips it and is recorded in the run's config. Manifest paths
+  are confined to the dataset root by the reader either way.
 """
 
 from __future__ import annotations
@@ -61,6 +70,10 @@ class BenchmarkConfig:
     metrics: list[str] = field(default_factory=list)
     options: dict[str, dict] = field(default_factory=dict)
     nonce: str | None = None  # set to force a new run instead of resuming
+    isolation: str = "plugins"  # who runs in a worker process (denoisebench.denoisers.isolation.POLICIES)
+    time_limit: float | None = None  # per-call seconds of an isolated denoiser (None: the default)
+    memory_limit_mb: int | None = None  # worker resident-memory limit (None: the default)
+    verify: bool = True  # check every file's sha256 before the first unit
 
     def as_dict(self) -> dict:
         data = {
@@ -72,7 +85,25 @@ class BenchmarkConfig:
         }
         if self.nonce:
             data["nonce"] = self.nonce
+        # recorded (and part of the run's identity) only when not the default, so that runs made
+        # before these settings existed keep their ids and resume
+        if self.isolation != "plugins":
+            data["isolation"] = self.isolation
+        if self.time_limit is not None:
+            data["time_limit"] = float(self.time_limit)
+        if self.memory_limit_mb is not None:
+            data["memory_limit_mb"] = int(self.memory_limit_mb)
+        if not self.verify:
+            data["verify"] = False
         return data
+
+    def limits(self):
+        from denoisebench.denoisers.isolation import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, Limits
+
+        return Limits(
+            DEFAULT_TIME_LIMIT if self.time_limit is None else float(self.time_limit),
+            DEFAULT_MEMORY_LIMIT_MB if self.memory_limit_mb is None else int(self.memory_limit_mb),
+        )
 
 
 @dataclass
@@ -126,16 +157,23 @@ def resolve_denoiser_specs(specs: Iterable[str]) -> list[str]:
     return out
 
 
-def load_denoisers(specs: list[str], options: dict[str, dict]) -> list[LoadedDenoiser]:
-    """Construct each denoiser. An unknown name is bad input; a load failure is recorded, not raised."""
+def load_denoisers(specs: list[str], options: dict[str, dict], *, isolation: str = "plugins", limits=None) -> list[LoadedDenoiser]:
+    """Construct each denoiser (isolated by ``isolation``). An unknown name or option is bad input;
+    a load failure is recorded, not raised."""
+    from denoisebench.denoisers import isolation as isolation_mod
     from denoisebench.denoisers.protocol import describe
-    from denoisebench.denoisers.registry import DenoiserLoadError, load_denoiser
+    from denoisebench.denoisers.registry import DenoiserLoadError
 
+    unknown = [spec for spec in options if spec not in specs]
+    if unknown:
+        raise UserInputError(
+            f"--option for {', '.join(map(repr, unknown))}, which is not among the denoisers run ({', '.join(specs)})"
+        )
     loaded: list[LoadedDenoiser] = []
     taken = {NOISY}
     for spec in specs:
         try:
-            instance = load_denoiser(spec, **options.get(spec, {}))
+            instance = isolation_mod.load(spec, options.get(spec, {}), policy=isolation, limits=limits)
             info = describe(instance, fallback_name=spec)
             label, needs, temporal, error = info.name, info.needs, info.temporal, None
         except DenoiserLoadError as exc:
@@ -159,7 +197,7 @@ def check_dataset(dataset: Dataset, scenes: list[str], spp: list[int]) -> None:
         for index in range(info.frame_count):
             key = layout.frame_key(index)
             ref = renders.get(layout.REFERENCE, {}).get(key)
-            ref_path = dataset.root / (ref["file"] if ref else layout.reference_path(scene, index))
+            ref_path = dataset.path(ref.get("file") if ref else layout.reference_path(scene, index), "reference file")
             if not info.has_reference or ref is None or not ref_path.is_file():
                 raise DatasetError(
                     f"scene {scene!r} frame {index} has no reference ({ref_path} is "
@@ -167,7 +205,7 @@ def check_dataset(dataset: Dataset, scenes: list[str], spp: list[int]) -> None:
                 )
             for s in spp:
                 record = renders.get(layout.spp_key(s), {}).get(key)
-                path = dataset.root / (record["file"] if record else layout.noisy_path(scene, s, index))
+                path = dataset.path(record.get("file") if record else layout.noisy_path(scene, s, index), "frame file")
                 if record is None or not path.is_file():
                     raise DatasetError(f"scene {scene!r} frame {index} at {s} spp: {path} is missing")
 
@@ -286,7 +324,7 @@ class RunPlan:
         return len(self.labels) * len(self.scenes) * len(self.spp)
 
 
-def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore) -> RunPlan:
+def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, *, progress: bool = False) -> RunPlan:
     """Check the inputs, load the denoisers, create (or find) the run in the store."""
     # "all": every scene, for a dataset made only to be benchmarked (the demo's); a learned model's
     # own training scenes would then be among them, so the report says which split it scored.
@@ -298,12 +336,17 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore) 
         raise UserInputError(f"{dataset.root}: the scenes of split {config.split!r} share no input spp")
     config.spp = spp
     check_dataset(dataset, scenes, spp)
+    if config.verify:
+        from denoisebench.dataset.verify import run_files, verify_files
+
+        wants_samples = True  # cheap to include; a samples file that is listed must be genuine too
+        verify_files(dataset, run_files(dataset, scenes, spp, samples=wants_samples), progress=progress)
     spatial, temporal = split_metrics(config.metrics)
     specs = resolve_denoiser_specs(config.denoisers)
     config.denoisers = specs
     data_hash = dataset_hash(dataset)
     run_id = run_identity(data_hash, config)
-    denoisers = load_denoisers(specs, config.options)
+    denoisers = load_denoisers(specs, config.options, isolation=config.isolation, limits=config.limits())
     created = store.ensure_run(run_id, data_hash, str(dataset.root.resolve()), config.as_dict(), software_versions())
     store.add_denoiser(run_id, NOISY, NOISY, "input", {"color"}, False, None)
     for d in denoisers:
@@ -353,7 +396,7 @@ def run_benchmark(
     """Measure every missing unit of the run ``config`` describes; return its plan (with run_id)."""
     from tqdm import tqdm
 
-    plan = prepare_run(dataset, config, store)
+    plan = prepare_run(dataset, config, store, progress=progress)
     done = len(store.done_units(plan.run_id))
     bar = tqdm(
         total=plan.total_units, initial=min(done, plan.total_units), desc="benchmark: denoisers × sequences",
