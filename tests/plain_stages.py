@@ -137,7 +137,7 @@ def author_every_light(path: str | Path) -> Path:
     _quad(stage, "/Back", [(-3, -1, -2), (3, -1, -2), (3, 3, -2), (-3, 3, -2)], back)
 
     diffuse, _ = _surface(stage, "/Materials/Diffuse", (0.7, 0.3, 0.3), roughness=1.0)
-    rough_metal, _ = _surface(stage, "/Materials/RoughMetal", (0.9, 0.8, 0.6), roughness=0.4, metallic=1.0)
+    rough_metal, _ = _surface(stage, "/Materials/RoughMetal", (0.9, 0.8, 0.6), roughness=0.3, metallic=1.0)
     mirror, _ = _surface(stage, "/Materials/Mirror", (0.95, 0.95, 0.95), roughness=0.0, metallic=1.0)
     glass, _ = _surface(stage, "/Materials/Glass", (1.0, 1.0, 1.0), roughness=0.0, opacity=0.0, ior=1.5)
     _sphere(stage, "/Objects/Diffuse", (-1.5, -0.55, -0.5), 0.45, diffuse)
