@@ -22,7 +22,10 @@ not part of the config: --executor ray gives the same bytes as the local executo
 --usd FILE copies the stage and the files it depends on (which must lie in its folder) into
 OUT/usd_<stem>/ and renders it along its own camera time samples (--frames does not apply to it).
 Every --usd file is checked before anything is written: a missing or malformed stage, or one
-without a camera, refuses the command (one line, exit 2).
+without a camera (give --camera PATH or --auto-camera), without a light (--default-light) or with
+nothing renderable, refuses the command (one line, exit 2). --auto-camera's orbit (over --frames
+frames when the stage has no time range) and --default-light's lights are written into the copied
+OUT/usd_<stem>/scene.usda.
 
 Exit codes: 0 done, 2 bad input (one line, nothing written), 1 some frames failed to render
 (reported; the dataset is left resumable and marked incomplete).
@@ -42,6 +45,7 @@ EPILOG = """examples:
   generate-dataset --out data/clean --families cornell --ref-error 2e-4 --ref-spp 16384
   generate-dataset --out data/direct --families cornell --max-depth 2 --ref-error 0 --ref-spp 1024
   generate-dataset --out data/big --scenes 20 --executor ray --ray-address auto
+  generate-dataset --out data/asset --usd asset.usdz --auto-camera --default-light --frames 8 --spp 4
 """
 
 
@@ -93,7 +97,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--samples", action="store_true", help="also write per-sample data (large)")
     parser.add_argument("--seed", type=int, default=0, help="dataset seed: scene seeds, render seeds, splits (default 0)")
     parser.add_argument("--usd", action="append", default=[], metavar="FILE",
-                        help="render your own USD stage too (repeatable)")
+                        help="render your own USD stage too (repeatable; .usda/.usdc/.usd/.usdz)")
+    parser.add_argument("--camera", default=None, metavar="PATH", help="camera prim of the --usd stages (default: the first)")
+    parser.add_argument("--auto-camera", action="store_true",
+                        help="frame --usd stages with a slow orbiting camera over --frames frames (for stages without one)")
+    parser.add_argument("--default-light", action="store_true",
+                        help="light --usd stages that have no light: a uniform dome plus a key distant light")
     parser.add_argument("--executor", choices=("local", "ray"), default="local",
                         help="local: this process, all cores (default); ray: spread frames over a Ray cluster")
     parser.add_argument("--ray-address", default=None, help="Ray cluster address (default: start a local cluster)")
@@ -128,6 +137,9 @@ def request_from_args(args):
         samples=args.samples,
         seed=args.seed,
         usd=tuple(args.usd),
+        camera=args.camera,
+        auto_camera=args.auto_camera,
+        default_light=args.default_light,
         force=args.force,
     )
 
@@ -157,6 +169,9 @@ def run(args) -> int:
 
     request = request_from_args(args)
     validate_request(request)  # before a Ray cluster is started for nothing
+    from denoisebench.outputs import check_writable_dir
+
+    check_writable_dir(request.out, "--out")  # one line and exit 2, not a traceback after set-up
     if request.ref_spp < REFERENCE_SPP_FACTOR * max(request.spp):
         print(f"warning: --ref-spp {request.ref_spp} is below {REFERENCE_SPP_FACTOR}x the largest --spp "
               f"({max(request.spp)}): references will likely be flagged too noisy", file=sys.stderr)

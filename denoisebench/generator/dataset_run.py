@@ -63,6 +63,13 @@ class GenerateRequest:
     force: bool = False
     ref_error: float | None = DEFAULT_REF_ERROR  # None: one reference render at ref_spp
     max_depth: int | None = None  # the user's transport restriction (None: full transport / stage's own)
+    camera: str | None = None  # --camera PATH for the --usd stages
+    auto_camera: bool = False  # --auto-camera: frame --usd stages with an orbiting camera (usd_additions.py)
+    default_light: bool = False  # --default-light: light --usd stages that have no light
+
+    def stage_options(self) -> dict:
+        """What is written into every copied --usd stage (dataset_scenes.stage_options)."""
+        return scenes_mod.stage_options(self.camera, self.auto_camera, self.default_light, self.frames)
 
 
 @dataclass
@@ -96,6 +103,10 @@ def check_request(request: GenerateRequest) -> None:
         raise UserInputError(f"--spp needs positive sample counts (got {list(request.spp)})")
     if not request.families and not request.usd:
         raise UserInputError("nothing to generate: give --families and/or --usd")
+    from denoisebench.dataset import bounds  # documented upper bounds and a memory estimate, before any allocation
+
+    bounds.check_generate(width=request.width, height=request.height, scenes=request.scenes, frames=request.frames,
+                          spp=request.spp, ref_spp=request.ref_spp, samples=request.samples)
     if request.ref_error is not None and not (0 < request.ref_error < float("inf")):
         raise UserInputError(f"--ref-error must be a positive number (got {request.ref_error})")
     if request.max_depth is not None:
@@ -116,7 +127,7 @@ def validate_request(request: GenerateRequest) -> None:
         for family in request.families:
             get_family(family)  # UnknownFamilyError is a UserInputError
     for path in request.usd:
-        scenes_mod.check_user_stage(path)
+        scenes_mod.check_user_stage(path, request.stage_options())
 
 
 def _file_sha256(path: Path) -> str:
@@ -139,6 +150,9 @@ def dataset_config(request: GenerateRequest) -> dict:
         "samples": bool(request.samples),
         "seed": request.seed,
         "usd": [{"path": str(Path(p).resolve()), "sha256": _file_sha256(Path(p))} for p in request.usd],
+        **({"usd_options": {"camera": request.camera, "auto_camera": request.auto_camera,
+                            "default_light": request.default_light}}
+           if request.camera or request.auto_camera or request.default_light else {}),
     }
 
 
@@ -203,7 +217,7 @@ def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names:
                                  scenes_mod.render_seed(request.seed, name)))
     for path, name in zip(request.usd, user_names):
         folder = writer.scene_dir(name)
-        files = scenes_mod.copy_user_stage(path, folder)
+        files = scenes_mod.copy_user_stage(path, folder, request.stage_options())
         entries.append(SceneSpec(name, "usd", 0, str(path), str(folder.resolve()), files,
                                  scenes_mod.render_seed(request.seed, name)))
     options = RenderOptions(**render_options(request))

@@ -15,6 +15,13 @@ Names and seeds are deterministic:
   so no two scenes share random numbers and a scene's pixels do not depend on which others exist.
 
 Notes:
+    ``--camera``/``--auto-camera``/``--default-light`` (:data:`StageOptions`) are written into the
+    copied ``scene.usda`` (the camera path as ``customLayerData["denoisebench"]["camera"]``, the
+    auto camera and default lights as prims, see usd_additions.py), so the dataset's stage is
+    exactly what was rendered. A ``.usdz`` package is copied whole as ``package.usdz`` and
+    ``scene.usda`` sublayers it, repeating its root layer's upAxis, metersPerUnit, time codes and
+    default prim (sublayers do not carry those).
+
     A user's stage may only depend on files inside its own folder (textures, sublayers,
     references): they are copied at the same relative paths, so the stage's relative asset paths
     still resolve. A dependency outside that folder is refused (one-line error): rewriting asset
@@ -34,7 +41,15 @@ from denoisebench.dataset import layout
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.errors import UserInputError
 
-USD_SUFFIXES = (".usda", ".usdc", ".usd")
+USD_SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
+PACKAGE_NAME = "package.usdz"
+
+
+def stage_options(camera: str | None = None, auto_camera: bool = False, default_light: bool = False,
+                  frames: int = 8) -> dict:
+    """The keywords of ``translate_usd`` that ``generate`` applies to every ``--usd`` stage."""
+    return {"camera_path": camera, "auto_camera": bool(auto_camera), "default_light": bool(default_light),
+            "frames": int(frames)}
 
 
 @dataclass(frozen=True)
@@ -126,6 +141,8 @@ def user_stage_dependencies(path: Path) -> list[tuple[Path, str]]:
     """
     from pxr import UsdUtils
 
+    if path.suffix.lower() == ".usdz":
+        return []  # a package is self-contained; it is copied whole
     root = path.resolve().parent
     layers, assets, _unresolved = UsdUtils.ComputeAllDependencies(str(path))
     out = []
@@ -143,28 +160,77 @@ def user_stage_dependencies(path: Path) -> list[tuple[Path, str]]:
     return sorted(set(out), key=lambda item: item[1])
 
 
-def copy_user_stage(path: str | Path, scene_dir: Path) -> tuple[str, ...]:
-    """Copy a user's stage to ``scene_dir/scene.usda`` (text) with its dependencies; return the files."""
+def _package_wrapper(path: Path) -> str:
+    """Text of a ``scene.usda`` that sublayers ``package.usdz`` and repeats its stage metadata."""
+    from pxr import Sdf
+
+    source = Sdf.Layer.FindOrOpen(str(path))
+    if source is None:
+        raise UserInputError(f"{path}: cannot open USD package")
+    layer = Sdf.Layer.CreateAnonymous(".usda")
+    layer.subLayerPaths.append(f"./{PACKAGE_NAME}")
+    for key in ("upAxis", "metersPerUnit", "startTimeCode", "endTimeCode", "timeCodesPerSecond",
+                "framesPerSecond", "defaultPrim", "customLayerData"):
+        if source.pseudoRoot.HasInfo(key):
+            layer.pseudoRoot.SetInfo(key, source.pseudoRoot.GetInfo(key))
+    return layer.ExportToString()
+
+
+def copy_user_stage(path: str | Path, scene_dir: Path, options: dict | None = None) -> tuple[str, ...]:
+    """Copy a user's stage to ``scene_dir/scene.usda`` (text) with its dependencies; return the files.
+
+    ``options``: :func:`stage_options` to write into the copy (camera choice, auto camera, lights)."""
     from pxr import Sdf
 
     path = Path(path)
     dependencies = user_stage_dependencies(path)
     scene_dir.mkdir(parents=True, exist_ok=True)
-    layer = Sdf.Layer.FindOrOpen(str(path))
-    if layer is None:
-        raise UserInputError(f"{path}: cannot open USD stage")
-    # ExportToString keeps the authored (relative) asset paths; the bytes go through our atomic write.
-    atomic_write_bytes(scene_dir / layout.SCENE_USD, layer.ExportToString().encode("utf-8"))
-    for absolute, relative in dependencies:
-        atomic_write_bytes(scene_dir / relative, absolute.read_bytes())
-    return (layout.SCENE_USD,) + tuple(relative for _, relative in dependencies)
+    if path.suffix.lower() == ".usdz":
+        atomic_write_bytes(scene_dir / PACKAGE_NAME, path.read_bytes())
+        dependencies_out: tuple[str, ...] = (PACKAGE_NAME,)
+        text = _package_wrapper(path)
+    else:
+        layer = Sdf.Layer.FindOrOpen(str(path))
+        if layer is None:
+            raise UserInputError(f"{path}: cannot open USD stage")
+        # ExportToString keeps the authored (relative) asset paths; the bytes go through our atomic write.
+        text = layer.ExportToString()
+        for absolute, relative in dependencies:
+            atomic_write_bytes(scene_dir / relative, absolute.read_bytes())
+        dependencies_out = tuple(relative for _, relative in dependencies)
+    atomic_write_bytes(scene_dir / layout.SCENE_USD, text.encode("utf-8"))
+    if options and (options.get("camera_path") or options.get("auto_camera") or options.get("default_light")):
+        atomic_write_bytes(scene_dir / layout.SCENE_USD, _with_additions(scene_dir / layout.SCENE_USD, options).encode("utf-8"))
+    return (layout.SCENE_USD,) + dependencies_out
 
 
-def check_user_stage(path: str | Path):
+def _with_additions(stage_path: Path, options: dict) -> str:
+    """The copied root layer's text with the camera choice, auto camera and default lights authored into it."""
+    from pxr import Usd
+
+    from denoisebench.generator.translate import apply_additions
+    from denoisebench.scenes.effects import METADATA_KEY
+
+    stage = Usd.Stage.Open(str(stage_path))
+    layer = stage.GetRootLayer()
+    stage.SetEditTarget(layer)
+    camera = apply_additions(stage, options.get("camera_path"), bool(options.get("auto_camera")),
+                             bool(options.get("default_light")), int(options.get("frames", 8)))
+    if camera:
+        data = dict(layer.customLayerData)
+        meta = dict(data.get(METADATA_KEY, {}) or {})
+        meta["camera"] = camera
+        data[METADATA_KEY] = meta
+        layer.customLayerData = data
+    return layer.ExportToString()
+
+
+def check_user_stage(path: str | Path, options: dict | None = None):
     """Open, check and translate a user's stage before anything is written; return the translation.
 
-    A missing or malformed file, a stage without a camera, a ``.usdz`` package or a dependency
-    outside the stage's folder is a UserInputError (one line naming the file).
+    A missing or malformed file, a stage without a camera (unless ``options`` give one), without a
+    light (unless ``default_light``), with nothing renderable, or a dependency outside the stage's
+    folder is a UserInputError (one line naming the file).
     """
     from denoisebench.generator.translate import translate_usd
 
@@ -172,7 +238,7 @@ def check_user_stage(path: str | Path):
     if not path.is_file():
         raise UserInputError(f"{path}: no such USD file")
     if path.suffix.lower() not in USD_SUFFIXES:
-        raise UserInputError(f"{path}: expected a {'/'.join(USD_SUFFIXES)} file (unpack a .usdz first)")
-    translated = translate_usd(path)
+        raise UserInputError(f"{path}: expected a {'/'.join(USD_SUFFIXES)} file")
+    translated = translate_usd(path, **(options or {}), strict=True)
     user_stage_dependencies(path)
     return translated

@@ -55,6 +55,7 @@ from denoisebench.generator.render_integrator import (
     pixel_moments,
     render_moments,
     scene_has_delta_only_bsdf,
+    scene_has_object_motion,
 )
 from denoisebench.generator.render_plan import RenderPlan
 from denoisebench.mitsuba_runtime import load_mitsuba
@@ -313,6 +314,7 @@ def render_frame(
         lobe_split=bool(plan.lobe_split),
         features=bool(features),
         motion=want_motion,
+        object_motion=want_motion and scene_has_object_motion(scene),
         follow_delta_albedo="albedo" in features and scene_has_delta_only_bsdf(mi, scene),
         jitter=_jitter,
     )

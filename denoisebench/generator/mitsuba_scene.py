@@ -1,7 +1,14 @@
 """Build Mitsuba objects from a :class:`TranslatedScene`'s plain data.
 
 Triangle meshes are made with ``mi.Mesh`` and filled through ``mi.traverse`` (no temporary PLY
-files); BSDFs are loaded once each and shared by every shape that uses them. Sensors come from
+files); BSDFs are loaded once each and shared by every shape that uses them.
+
+Moving objects: a scene whose shapes move (:attr:`TranslatedScene.moving`) is built per frame
+(``frame=i``): moving meshes take their frame-``i`` vertices, and *every* mesh gets the vertex
+attribute :data:`PREVIOUS_POSITION` (its world positions one frame earlier; equal to the current
+ones for static meshes and at frame 0). The feature integrator interpolates it at the first hit
+to reproject the point the surface occupied in the previous frame (object motion vectors).
+Analytic spheres never move (moving spheres are tessellated), so they need no attribute. Sensors come from
 :func:`sensor_dict`, built from the camera track at a given frame (Mitsuba's own cameras: used by
 previews and by the tests that compare our renderer with Mitsuba's ``path`` integrator).
 """
@@ -38,13 +45,26 @@ def _emitter_object(mi, record: dict):
     return mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": list(record["radiance"])}})
 
 
-def _build_mesh(mi, record: dict, bsdf, emitter):
+#: Mesh attribute with each vertex's world position in the previous frame (moving scenes only).
+PREVIOUS_POSITION = "vertex_prev_position"
+
+
+def _build_mesh(mi, record: dict, bsdf, emitter, frame: int | None = None):
     props = mi.Properties()
     if bsdf is not None:
         props["bsdf"] = bsdf
     if emitter is not None:
         props["emitter"] = emitter
     positions, faces = record["positions"], record["faces"]
+    normals = record.get("normals")
+    previous = None
+    if frame is not None:
+        previous = positions
+        if "frame_positions" in record:
+            frames = record["frame_positions"]
+            positions, previous = frames[frame], frames[max(frame - 1, 0)]
+            if "frame_normals" in record:
+                normals = record["frame_normals"][frame]
     mesh = mi.Mesh(
         record["name"], len(positions), len(faces), props,
         has_vertex_normals="normals" in record, has_vertex_texcoords="uvs" in record,
@@ -52,11 +72,13 @@ def _build_mesh(mi, record: dict, bsdf, emitter):
     params = mi.traverse(mesh)
     params["vertex_positions"] = mi.Float(positions.reshape(-1))
     params["faces"] = mi.UInt32(faces.reshape(-1))
-    if "normals" in record:
-        params["vertex_normals"] = mi.Float(record["normals"].reshape(-1))
+    if normals is not None:
+        params["vertex_normals"] = mi.Float(np.asarray(normals, dtype=np.float32).reshape(-1))
     if "uvs" in record:
         params["vertex_texcoords"] = mi.Float(record["uvs"].reshape(-1))
     params.update()
+    if previous is not None:
+        mesh.add_attribute(PREVIOUS_POSITION, 3, np.asarray(previous, dtype=np.float32).reshape(-1).tolist())
     return mesh
 
 
@@ -79,12 +101,15 @@ def _emitter_dict(mi, record: dict) -> dict:
     raise ValueError(f"unknown emitter record type {kind!r}")
 
 
-def scene_objects(translated: TranslatedScene) -> dict:
-    """The ``mi.load_dict`` dictionary of a translated scene with Mitsuba objects (no sensor/integrator)."""
+def scene_objects(translated: TranslatedScene, frame: int = 0) -> dict:
+    """The ``mi.load_dict`` dictionary of a translated scene with Mitsuba objects (no sensor/integrator).
+
+    ``frame`` places moving shapes (ignored for static scenes)."""
     mi = load_mitsuba()
     data = translated.scene_dict
     bsdfs = {key: mi.load_dict(_mitsuba_values(mi, value)) for key, value in data["bsdfs"].items()}
     black = None
+    moving = translated.moving
     out: dict = {"type": "scene"}
     for index, record in enumerate(data["shapes"]):
         emitter = _emitter_object(mi, record["emitter"]) if "emitter" in record else None
@@ -100,7 +125,7 @@ def scene_objects(translated: TranslatedScene) -> dict:
                 shape["emitter"] = emitter
             out[key] = shape
         else:
-            out[key] = _build_mesh(mi, record, bsdf, emitter)
+            out[key] = _build_mesh(mi, record, bsdf, emitter, frame if moving else None)
     for index, record in enumerate(data["emitters"]):
         out[f"emitter_{index:03d}"] = _emitter_dict(mi, record)
     return out
@@ -126,10 +151,11 @@ def sensor_dict(camera: CameraTrack, frame: int, width: int, height: int, spp: i
     return sensor
 
 
-def build_mitsuba_scene(translated: TranslatedScene, sensor: dict | None = None, integrator: dict | None = None):
-    """``mi.Scene`` of a translated stage, optionally with a sensor and an integrator."""
+def build_mitsuba_scene(translated: TranslatedScene, sensor: dict | None = None, integrator: dict | None = None,
+                        frame: int = 0):
+    """``mi.Scene`` of a translated stage at ``frame`` (matters for moving scenes), optionally with a sensor and an integrator."""
     mi = load_mitsuba()
-    objects = scene_objects(translated)
+    objects = scene_objects(translated, frame)
     if sensor is not None:
         objects["sensor"] = sensor
     if integrator is not None:

@@ -37,6 +37,10 @@ Features (the first vertex is the camera ray's first intersection):
   throughput of that delta chain times the diffuse reflectance where it ends (0 if it escapes);
 * ``motion``: the first-hit point projected through the pinhole (lens center) of the camera one frame
   earlier than the ray's time, minus its projection at the ray's time (pixels, x right, y down).
+  With ``KernelOptions.object_motion`` (scenes with moving objects) the point projected into the
+  previous frame is where the hit surface point *was* one frame earlier: the mesh attribute
+  ``vertex_prev_position`` (mitsuba_scene.py) interpolated at the hit, exact for rigid and for
+  per-vertex motion alike (both are affine within a triangle); analytic shapes are static.
 
 With ``KernelOptions.second_hit`` (per-sample data only; paths that bounce) a sample also carries
 what Sen & Darabi's random parameter filter analyses: ``light`` (the 2-D random numbers of the
@@ -74,6 +78,7 @@ class KernelOptions:
     jitter: bool = True  # False: every sample at the pixel center (tests compare with Mitsuba's aov)
     # Per-sample data for RPF: the first vertex's light and bounce random numbers and the second hit
     second_hit: bool = False
+    object_motion: bool = False  # meshes carry vertex_prev_position: motion follows moving objects
 
     @property
     def bounded(self) -> bool:
@@ -123,6 +128,23 @@ def _diffuse_part(mi, bsdf, ctx_diffuse, si, wo, val, active):
     if lobes & ~diffuse == 0:
         return mi.Color3f(val)
     return bsdf.eval(ctx_diffuse, si, wo, active)
+
+
+PREVIOUS_POSITION = "vertex_prev_position"  # mitsuba_scene.PREVIOUS_POSITION (no Mitsuba import here)
+
+
+def scene_has_object_motion(scene) -> bool:
+    """True when the scene's meshes carry previous-frame positions (a scene with moving objects)."""
+    return any(shape.is_mesh() and bool(shape.has_attribute(PREVIOUS_POSITION)) for shape in scene.shapes())
+
+
+def _previous_point(shape, si, active):
+    """Where the hit point was one frame earlier (one concrete shape inside :func:`drjit.dispatch`)."""
+    import mitsuba as mi
+
+    if shape.is_mesh() and bool(shape.has_attribute(PREVIOUS_POSITION)):
+        return mi.Point3f(shape.eval_attribute_3(PREVIOUS_POSITION, si, active))
+    return mi.Point3f(si.p)
 
 
 def _first_vertex_bsdf(split, want_features, bsdf, ctx, ctx_diffuse, si, wo, sample1, sample2, active_em, active):
@@ -212,7 +234,11 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             target = dr.select(valid, si.p, ray.d)
             w = dr.select(valid, 1.0, 0.0)
             now_xy, front_now = camera.project(pose, target, w)
-            prev_xy, front_prev = camera.project(prev, target, w)
+            if opts.object_motion:
+                was = dr.dispatch(si.shape, _previous_point, si, valid)
+                prev_xy, front_prev = camera.project(prev, dr.select(valid, was, ray.d), w)
+            else:
+                prev_xy, front_prev = camera.project(prev, target, w)
             keep = front_now & front_prev
             out["motion"] = dr.select(keep, mi.Vector2f(prev_xy - now_xy), mi.Vector2f(0.0))
 

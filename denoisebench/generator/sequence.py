@@ -97,6 +97,17 @@ class _LoadedScene:
         self.plan = make_render_plan(self.translated.effects, RenderOptions(**options),
                                      stage_max_depth=self.translated.max_depth)
         self.scene = build_mitsuba_scene(self.translated)
+        self._frame_scene: tuple = (0, self.scene)
+
+    def scene_at(self, frame: int):
+        """The Mitsuba scene of ``frame``: the one scene, or for moving objects that frame's (the last kept)."""
+        if not self.translated.moving:
+            return self.scene
+        from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
+
+        if self._frame_scene[0] != frame:
+            self._frame_scene = (frame, build_mitsuba_scene(self.translated, frame=frame))
+        return self._frame_scene[1]
 
 
 # One scene per process: jobs arrive grouped by scene, and a Mitsuba scene can be large.
@@ -137,7 +148,7 @@ def _timed_render(loaded: _LoadedScene, job: FrameJob, spp: int, reference: bool
 
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     dr.kernel_history()  # drains (and so clears) the history of earlier launches
-    out = render_frame(loaded.scene, loaded.translated.camera, job.frame, loaded.plan, width=job.width,
+    out = render_frame(loaded.scene_at(job.frame), loaded.translated.camera, job.frame, loaded.plan, width=job.width,
                        height=job.height, spp=spp, seed=job.render_seed if seed is None else seed,
                        reference=reference)
     compile_ms = sum(float(entry.get("backend_time", 0.0)) for entry in dr.kernel_history() if not entry.get("cache_hit"))

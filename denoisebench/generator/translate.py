@@ -5,11 +5,23 @@ lights and the camera, and reads the stage's effects (declared in its metadata, 
 what is in it). The README's "Supported USD subset" section lists what is understood; anything
 else gets one warning naming the prim. A stage that does not open, or has no camera, is a
 :class:`UserInputError` (the CLI exits 2).
+
+User-facing entry points (``scenes check/preview``, ``generate --usd``) translate with
+``strict=True``: a stage with nothing renderable (no supported geometry and no light) or without
+any light is then refused with a one-line hint (``--default-light``) instead of rendering black.
+USD's own diagnostics (unresolved references, unknown schemas, ...) are caught with a
+``UsdUtils.CoalescingDiagnosticDelegate`` while the stage opens and translates, and summarised as
+one warning per prim (``<prim>: USD: <first message> (+N more)``) instead of flooding stderr.
+The camera is ``camera_path``, else the stage metadata's ``camera`` (what ``generate --camera``
+writes into the copied stage), else the first camera; ``auto_camera``/``default_light`` author
+:mod:`~denoisebench.generator.usd_additions`' camera and lights into the stage's session layer.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+
+import re
 
 import numpy as np
 
@@ -29,17 +41,62 @@ _STRUCTURAL = {"", "Xform", "Scope", "Material", "Shader", "NodeGraph", "GeomSub
                "RenderProduct", "RenderVar", "SkelRoot", "Skeleton"}
 
 
-def translate_usd(path: str | Path, camera_path: str | None = None) -> TranslatedScene:
-    """Open and translate a USD file."""
-    stage = open_stage(path)
-    return translate_stage(stage, camera_path=camera_path, source=str(path))
+def translate_usd(path: str | Path, camera_path: str | None = None, *, auto_camera: bool = False,
+                  default_light: bool = False, frames: int = 8, strict: bool = False) -> TranslatedScene:
+    """Open and translate a USD file (see the module docstring for the keyword options)."""
+    from pxr import UsdUtils
+
+    collector = UsdUtils.CoalescingDiagnosticDelegate()
+    try:
+        stage = open_stage(path)
+        if auto_camera or default_light:
+            stage.SetEditTarget(stage.GetSessionLayer())
+            camera_path = apply_additions(stage, camera_path, auto_camera, default_light, frames)
+        translated = translate_stage(stage, camera_path=camera_path, source=str(path), strict=strict)
+    finally:
+        diagnostics = collector.TakeCoalescedDiagnostics()
+        del collector
+    translated.warnings[:0] = summarise_diagnostics(diagnostics)
+    return translated
 
 
-def translate_stage(stage, camera_path: str | None = None, source: str = "") -> TranslatedScene:
+def apply_additions(stage, camera_path: str | None, auto_camera: bool, default_light: bool, frames: int) -> str | None:
+    """Author ``--auto-camera`` / ``--default-light`` into the stage's current edit target; return the camera path."""
+    from denoisebench.generator.usd_additions import add_auto_camera, add_default_lights, stage_has_light
+
+    if auto_camera:
+        if camera_path:
+            raise UserInputError("give --camera or --auto-camera, not both")
+        camera_path = add_auto_camera(stage, frames)
+    if default_light and not stage_has_light(stage):
+        add_default_lights(stage)
+    return camera_path
+
+
+def summarise_diagnostics(diagnostics) -> list[str]:
+    """USD's coalesced diagnostics → one warning per prim (first message, and how many more)."""
+    by_prim: dict[str, list[str]] = {}
+    for coalesced in diagnostics:
+        for item in coalesced.unsharedItems:
+            text = " ".join(str(item.commentary).split())
+            match = re.match(r"In <(/[^>]*)>: (.*)", text)
+            prim, message = (match.group(1), match.group(2)) if match else ("stage", text)
+            message = re.sub(r" \((?:instantiating|composing) stage on stage .*\)$", "", message)
+            by_prim.setdefault(prim, []).append(message[:200])
+    out = []
+    for prim, messages in by_prim.items():
+        more = f" (+{len(messages) - 1} more)" if len(messages) > 1 else ""
+        out.append(f"{prim}: USD: {messages[0]}{more}")
+    return out
+
+
+def translate_stage(stage, camera_path: str | None = None, source: str = "", strict: bool = False) -> TranslatedScene:
     """Translate an open ``Usd.Stage``."""
     from pxr import Usd, UsdGeom, UsdLux
 
     warnings: list[str] = []
+    metadata = dict(stage.GetRootLayer().customLayerData.get(METADATA_KEY, {}) or {})
+    camera_path = camera_path or (str(metadata["camera"]) if metadata.get("camera") else None)
     to_mitsuba = stage_to_mitsuba_matrix(stage)
     frames = frame_range(stage)
     camera_prim = find_camera(stage, camera_path)
@@ -86,33 +143,33 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "") -> 
             emitters.extend(new_emitters)
             continue
         if prim.IsA(UsdGeom.Gprim):
-            if geometry.is_transform_animated(prim):
-                warnings.append(f"{path}: animated transform; geometry is rendered at its first-frame pose")
-            to_world = to_mitsuba @ geometry.local_to_world(prim)
-            if prim.IsA(UsdGeom.Mesh):
-                translated = geometry.read_mesh(prim, to_world, warnings)
-                if translated is None:
-                    continue
-                record, face_ids = translated
-                for part, subset in geometry.subset_records(prim, record, face_ids):
-                    bind(part, bound_material(subset if subset is not None else prim, materials, warnings))
+            if not (prim.IsA(UsdGeom.Mesh) or type_name in geometry.SUPPORTED_PRIMITIVES):
+                warnings.append(f"{path}: prim type {type_name} is not supported; skipped")
                 continue
-            if type_name in geometry.SUPPORTED_PRIMITIVES:
-                record = geometry.read_primitive(prim, to_world, warnings)
-                if record is not None:
-                    bind(record, bound_material(prim, materials, warnings))
-                continue
-            warnings.append(f"{path}: prim type {type_name} is not supported; skipped")
+            moving = len(frames) > 1 and (geometry.is_transform_animated(prim) or geometry.are_points_animated(prim))
+            parts = _gprim_parts(prim, to_mitsuba, frames[0], warnings, materials, analytic=not moving)
+            if moving and parts:
+                _attach_frames(prim, parts, [_gprim_parts(prim, to_mitsuba, t, [], materials, analytic=False)
+                                             for t in frames], warnings)
+            for record, material in parts:
+                bind(record, material)
             continue
         if type_name not in _STRUCTURAL:
             warnings.append(f"{path}: prim type {type_name} is not supported; skipped")
 
+    lit = any("emitter" in s for s in shapes) or bool(emitters)
+    if strict and not any(s.get("bsdf") for s in shapes):
+        # Mitsuba cannot trace a scene without shapes (and lights alone show nothing but a sky).
+        skipped = sorted({w.split(": prim type ")[1].split(" ")[0] for w in warnings if ": prim type " in w})
+        detail = f" (unsupported: {', '.join(skipped)})" if skipped else ""
+        raise UserInputError(f"{source or 'stage'}: nothing renderable: no supported geometry{detail}")
+    if strict and not lit:
+        raise UserInputError(f"{source or 'stage'}: no light in the stage; add one, or pass --default-light "
+                             "(a uniform dome and a key light)")
     if not shapes and not emitters:
         warnings.append("stage has no supported geometry or lights: the image will be black")
-    if not any("emitter" in s for s in shapes) and not emitters:
+    if not lit:
         warnings.append("stage has no light: the image will be black")
-
-    metadata = dict(stage.GetRootLayer().customLayerData.get(METADATA_KEY, {}) or {})
     try:
         declared = validate_effects(list(metadata.get("effects", [])))
     except ValueError as error:
@@ -135,6 +192,45 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "") -> 
         seed=int(metadata["seed"]) if "seed" in metadata else None,
         max_depth=stage_depth,
     )
+
+
+def _gprim_parts(prim, to_mitsuba, time: float, warnings: list[str], materials: dict, analytic: bool):
+    """A gprim at ``time`` → [(shape record, MaterialInfo)] (one per material subset of a mesh)."""
+    from pxr import UsdGeom
+
+    to_world = to_mitsuba @ geometry.local_to_world(prim, time)
+    if prim.IsA(UsdGeom.Mesh):
+        # The material decides which primvar holds the texture coordinates (varname).
+        uv_name = bound_material(prim, materials, warnings).uv_primvar
+        translated = geometry.read_mesh(prim, to_world, warnings, uv_name=uv_name, time=time)
+        if translated is None:
+            return []
+        record, face_ids = translated
+        return [(part, bound_material(subset if subset is not None else prim, materials, warnings))
+                for part, subset in geometry.subset_records(prim, record, face_ids)]
+    record = geometry.read_primitive(prim, to_world, warnings, analytic=analytic)
+    return [] if record is None else [(record, bound_material(prim, materials, warnings))]
+
+
+def _attach_frames(prim, parts, per_frame, warnings: list[str]) -> None:
+    """Give each part of a moving gprim its vertices at every frame (``frame_positions``/``frame_normals``).
+
+    Needs the same triangles at every frame; a changing topology keeps the first frame's pose (warning)."""
+    path = str(prim.GetPath())
+    if any(len(frame_parts) != len(parts) for frame_parts in per_frame):
+        warnings.append(f"{path}: topology changes over time; rendered at its first-frame pose")
+        return
+    for index, (record, _) in enumerate(parts):
+        records = [frame_parts[index][0] for frame_parts in per_frame]
+        if any(r["kind"] != "mesh" or r["positions"].shape != record["positions"].shape
+               or not np.array_equal(r["faces"], record["faces"]) for r in records):
+            warnings.append(f"{path}: topology changes over time; rendered at its first-frame pose")
+            return
+    for index, (record, _) in enumerate(parts):
+        records = [frame_parts[index][0] for frame_parts in per_frame]
+        record["frame_positions"] = np.stack([r["positions"] for r in records])
+        if "normals" in record:
+            record["frame_normals"] = np.stack([r["normals"] for r in records])
 
 
 def scene_bounds(translated: TranslatedScene) -> tuple[np.ndarray, np.ndarray]:

@@ -41,6 +41,12 @@ class TranslatedScene:
     max_depth: int | None = None
 
     @property
+    def moving(self) -> bool:
+        """Some shape moves between frames (its record holds ``frame_positions``: F×N×3 vertices per
+        frame, and ``frame_normals`` when it has normals); build its Mitsuba scene per frame."""
+        return any("frame_positions" in shape for shape in self.scene_dict["shapes"])
+
+    @property
     def effects(self) -> tuple[str, ...]:
         """The effects the render plan must honour: union of declared and inferred."""
         return validate_effects(set(self.effects_declared) | set(self.effects_inferred))

@@ -29,7 +29,8 @@ def find_camera(stage, camera_path: str | None = None):
         return prim
     cameras = [p for p in Usd.PrimRange(stage.GetPseudoRoot()) if p.IsA(UsdGeom.Camera) and p.IsActive()]
     if not cameras:
-        raise UserInputError(f"{stage.GetRootLayer().realPath or 'stage'}: no camera (UsdGeom.Camera) in the stage")
+        raise UserInputError(f"{stage.GetRootLayer().realPath or 'stage'}: no camera (UsdGeom.Camera) in the stage; "
+                             "name one with --camera PATH or frame the stage with --auto-camera")
     return cameras[0]
 
 

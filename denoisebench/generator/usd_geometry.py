@@ -7,8 +7,11 @@
   ``materialBind`` family split the mesh by material.
 * ``Sphere`` stays an analytic sphere when its transform scales uniformly, else it is tessellated;
   ``Cube``, ``Cylinder``, ``Cone`` and ``Plane`` are tessellated.
-* Geometry is static: the transform at the first frame is baked into the vertices. An animated
-  transform gets one warning.
+* Transforms are baked into the vertices. A gprim whose transform (or an ancestor's) or whose
+  ``points`` are time-sampled is read at every frame (the translator stores the per-frame vertices,
+  see translate.py); such a sphere is always tessellated, so that its vertices can move and carry
+  their previous-frame positions for motion vectors. Motion *within* a frame (object motion blur)
+  is not simulated: each frame shows the pose at its time code.
 """
 
 from __future__ import annotations
@@ -106,17 +109,20 @@ def _per_corner(values, interpolation, corner_point, corner_face, corner_index, 
     return source[lookup]
 
 
-def read_mesh(prim, to_world: np.ndarray, warnings: list[str]) -> tuple[dict, np.ndarray] | None:
+def read_mesh(prim, to_world: np.ndarray, warnings: list[str], uv_name: str | None = None,
+              time: float = 0.0) -> tuple[dict, np.ndarray] | None:
     """A UsdGeom.Mesh → (mesh record, source face id per triangle), or None when nothing is left.
 
+    ``uv_name``: the primvar holding texture coordinates (the material's primvar reader
+    ``varname``); without one, ``st`` then ``uv``. ``time``: the time code points are read at.
     GeomSubsets are split off by :func:`subset_records`, which needs the face ids."""
     from pxr import UsdGeom
 
     mesh = UsdGeom.Mesh(prim)
     path = str(prim.GetPath())
-    points = mesh.GetPointsAttr().Get(0)
-    counts = mesh.GetFaceVertexCountsAttr().Get(0)
-    indices = mesh.GetFaceVertexIndicesAttr().Get(0)
+    points = mesh.GetPointsAttr().Get(time)
+    counts = mesh.GetFaceVertexCountsAttr().Get(time)
+    indices = mesh.GetFaceVertexIndicesAttr().Get(time)
     if points is None or counts is None or indices is None or len(points) == 0:
         warnings.append(f"{path}: mesh without points or faces; skipped")
         return None
@@ -133,11 +139,17 @@ def read_mesh(prim, to_world: np.ndarray, warnings: list[str]) -> tuple[dict, np
     # Subdivision surfaces render as their control cage, as most previewers show them.
     normals, normal_interp = _primvar(mesh, "normals", path)
     if normals is None:
-        raw = mesh.GetNormalsAttr().Get(0)
+        raw = mesh.GetNormalsAttr().Get(time)
         if raw is not None and len(raw):
             normals = check_finite(raw, path, "normals")
             normal_interp = str(mesh.GetNormalsInterpolation())
-    uvs, uv_interp = _primvar(mesh, "st", path)
+    uvs, uv_interp = (None, None)
+    if uv_name:
+        uvs, uv_interp = _primvar(mesh, uv_name, path)
+        if uvs is None:
+            warnings.append(f"{path}: texture coordinates primvars:{uv_name} (the material's varname) not found; st used")
+    if uvs is None:
+        uvs, uv_interp = _primvar(mesh, "st", path)
     if uvs is None:
         uvs, uv_interp = _primvar(mesh, "uv", path)
 
@@ -298,8 +310,10 @@ def tessellate_plane(width: float, length: float, axis: str):
     return positions, np.array([[0, 1, 2], [0, 2, 3]]), normals, uvs
 
 
-def read_primitive(prim, to_world: np.ndarray, warnings: list[str]) -> dict | None:
-    """A UsdGeom Sphere/Cube/Cylinder/Cone/Plane → a mesh or analytic sphere record (or None)."""
+def read_primitive(prim, to_world: np.ndarray, warnings: list[str], analytic: bool = True) -> dict | None:
+    """A UsdGeom Sphere/Cube/Cylinder/Cone/Plane → a mesh or analytic sphere record (or None).
+
+    ``analytic=False`` tessellates a sphere even where an analytic one would do (moving spheres)."""
     from pxr import UsdGeom
 
     path = str(prim.GetPath())
@@ -316,7 +330,7 @@ def read_primitive(prim, to_world: np.ndarray, warnings: list[str]) -> dict | No
             warnings.append(f"{path}: sphere radius {radius:g}; skipped")
             return None
         scale = np.linalg.norm(to_world[:3, :3], axis=0)
-        if np.allclose(scale, scale[0], rtol=1e-6):
+        if analytic and np.allclose(scale, scale[0], rtol=1e-6):
             rotation = to_world[:3, :3] / scale[0]
             if np.linalg.det(rotation) > 0:
                 return {"kind": "sphere", "name": path, "center": to_world[:3, 3].tolist(), "radius": radius * float(scale[0])}
@@ -350,6 +364,13 @@ def is_transform_animated(prim) -> bool:
 
     chain = [prim, *_ancestors(prim)]
     return any(p.IsA(UsdGeom.Xformable) and UsdGeom.Xformable(p).TransformMightBeTimeVarying() for p in chain)
+
+
+def are_points_animated(prim) -> bool:
+    """A mesh whose ``points`` hold more than one time sample (deforming geometry)."""
+    from pxr import UsdGeom
+
+    return prim.IsA(UsdGeom.Mesh) and UsdGeom.Mesh(prim).GetPointsAttr().GetNumTimeSamples() > 1
 
 
 def _ancestors(prim):

@@ -23,7 +23,8 @@ Point and spot lights (what Blender and most DCCs export):
   eye sees and no warning is given; a wider angle gets one warning (soft shadows rendered hard).
 
 Zero-area or non-emitting lights are skipped with a warning, as are light types and inputs
-outside this subset (color temperature, light-linking, textures on area lights).
+outside this subset (light-linking, textures on area lights). ``enableColorTemperature`` multiplies
+the color by ``UsdLux.BlackbodyTemperatureAsRgb(colorTemperature)``.
 """
 
 from __future__ import annotations
@@ -64,7 +65,9 @@ def light_radiance(prim, path: str, warnings: list[str]) -> np.ndarray:
     intensity = float(_input(light, "intensity", path, 1.0))
     exposure = float(_input(light, "exposure", path, 0.0))
     if _input(light, "enableColorTemperature", path, False):
-        warnings.append(f"{path}: color temperature is not supported; ignored")
+        # UsdLux's own blackbody table (normalized to luminance 1), as Hydra renderers apply it.
+        kelvin = float(_input(light, "colorTemperature", path, 6500.0))
+        color = color * np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), dtype=np.float64)
     return np.clip(color, 0.0, None) * intensity * 2.0**exposure
 
 
