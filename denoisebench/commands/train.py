@@ -1,10 +1,14 @@
-"""Train a learned denoiser (dpcn, kpcn or rae) on a dataset made by generate-dataset.
+"""Train a learned denoiser (dpcn, kpcn, rae or lbf) on a dataset made by generate-dataset.
 
 Trains on the dataset's train split (random crops, flips and rotations; K-frame windows for the
 recurrent autoencoder), validates on whole frames of its val split, and writes a checkpoint with
 its metadata: model and configuration, dataset config hash, steps, seed, training seconds and the
 validation relMSE next to the noisy input's. The same command with --resume CKPT continues a run
 exactly where it stopped (same seed, same batches).
+
+Options left out take the configuration's recipe (lbf: --loss relmse, the paper's relative MSE),
+then the defaults below. --device auto trains on a CUDA GPU when torch sees one (loader workers
+and pinned memory there), else on the CPU with --threads threads (up to the core count).
 
 --evaluate additionally scores the trained model on the test split against the identity and
 cross_bilateral denoisers (relMSE, mean over frames), as the shipped model cards report.
@@ -23,12 +27,14 @@ from denoisebench.errors import UserInputError
 
 EPILOG = """examples:
   denoisebench train --model kpcn --data data/small --config small --steps 2000 --out kpcn.pt
+  denoisebench train --model lbf --data data/small --steps 600 --lr-schedule cosine --val-every 200 --out lbf.pt
+  denoisebench train --model kpcn --data data/big --config paper --device cuda --batch-size 32 --crop 64
   denoisebench train --model kpcn --data data/small --steps 1000 --resume kpcn.pt --out kpcn.pt
   denoisebench train --model rae --data data/small --steps 0 --resume rae.pt --out rae.pt --evaluate
   denoisebench benchmark ... --denoiser kpcn --option checkpoint=kpcn.pt   # use the result
 """
 
-MODELS = ("dpcn", "kpcn", "rae")
+MODELS = ("dpcn", "kpcn", "rae", "lbf")
 
 
 def _spp(text: str | None):
@@ -57,10 +63,21 @@ def add_arguments(parser) -> None:
     parser.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
     parser.add_argument("--spp", default=None, help="train on these noisy spp only, e.g. 4 (default all)")
     parser.add_argument("--sequence-length", type=int, default=7, help="frames per training window, rae only (default 7)")
-    parser.add_argument("--loss", default="log", choices=("log", "relative"),
-                        help="spatial loss: log = L1 of log(1+x); relative adds |p-r|/(r+0.01) (default log)")
+    parser.add_argument("--loss", default=None, choices=("log", "relative", "relmse", "lobes"),
+                        help="spatial loss: log = L1 of log(1+x); relative adds |p-r|/(r+0.01); relmse = "
+                        "(p-r)^2/(r^2+0.01); lobes = separate diffuse/specular L1 (dpcn/kpcn) "
+                        "(default: the configuration's recipe, else log)")
+    parser.add_argument("--lr-schedule", default="constant", choices=("constant", "cosine", "step"),
+                        help="learning rate over this command's steps: constant, cosine (to lr/100) or "
+                        "step (x0.1 at 1/2 and 3/4) (default constant)")
+    parser.add_argument("--val-every", type=int, default=0,
+                        help="also validate every N steps (recorded in the checkpoint; default 0: only at the end)")
+    parser.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"),
+                        help="auto: CUDA when torch sees a GPU, else CPU (default auto)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="data loader processes (default 0 on the CPU, up to 4 on CUDA)")
     parser.add_argument("--checkpoint-every", type=int, default=100, help="save every N steps (default 100)")
-    parser.add_argument("--threads", type=int, default=1, choices=(1, 2), help="torch threads (default 1)")
+    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads, 1 to the core count (default 1)")
     parser.add_argument("--evaluate", action="store_true", help="also score on the test split against identity and cross_bilateral")
     parser.add_argument("--ship", default=None, metavar="DIR",
                         help="implies --evaluate; write DIR/MODEL_CONFIG.pt (no optimiser state) and its model card DIR/MODEL_CONFIG.md")
@@ -74,6 +91,12 @@ def run(args) -> int:
         raise UserInputError(f"--steps must be >= 0 (got {args.steps})")
     if args.batch_size < 1 or args.crop < 4:
         raise UserInputError("--batch-size must be >= 1 and --crop >= 4")
+    from denoisebench.models.training import max_threads
+
+    if not 1 <= args.threads <= max_threads():
+        raise UserInputError(f"--threads must be between 1 and the core count {max_threads()} (got {args.threads})")
+    if args.val_every < 0 or (args.workers is not None and args.workers < 0):
+        raise UserInputError("--val-every and --workers must be >= 0")
     if not (Path(args.data) / "dataset.json").is_file():
         raise UserInputError(f"{args.data}: not a dataset folder (no dataset.json)")
     from denoisebench.models.training import TrainOptions, train
@@ -94,6 +117,10 @@ def run(args) -> int:
         loss=args.loss,
         checkpoint_every=args.checkpoint_every,
         threads=args.threads,
+        device=args.device,
+        workers=args.workers,
+        lr_schedule=args.lr_schedule,
+        val_every=args.val_every,
         progress=not args.quiet,
     )
     try:
@@ -146,7 +173,9 @@ def evaluate_on_split(checkpoint: str, model: str, data: str, split: str = "test
 
     Sequences go through :func:`~denoisebench.denoisers.runner.run_sequence` (reset, frames in
     order), so the recurrent model is scored as the benchmark scores it. Returns
-    ``{"split", "scenes", "frames", "relmse": {name: value}, "ratio": {peer: ours / peer}}``.
+    ``{"split", "scenes", "frames", "relmse": {name: value}, "ratio": {peer: ours / peer},
+    "relmse_ci95": {name: [lo, hi]}, "ratio_ci95": {peer: [lo, hi]}, "bootstrap": {...}}``: the
+    intervals are 95% percentile bootstraps over scenes (:func:`bootstrap_over_scenes`).
     """
     import numpy as np
     from tqdm import tqdm
@@ -163,10 +192,12 @@ def evaluate_on_split(checkpoint: str, model: str, data: str, split: str = "test
     denoisers = {model: load_denoiser(model, checkpoint=checkpoint, threads=threads)}
     denoisers.update({name: load_denoiser(name) for name in peers})
     scores: dict[str, list[float]] = {name: [] for name in denoisers}
+    frame_scene: list[str] = []
     per_spp: dict[str, dict[int, list[float]]] = {name: {} for name in denoisers}
     jobs = [(scene, spp) for scene in scenes for spp in ds.scene(scene).spp]
     for scene, spp in tqdm(jobs, desc=f"evaluate {split}", disable=not progress):
         sequence = ds.sequence(scene, spp)
+        frame_scene += [scene] * len(sequence)
         for name, denoiser in denoisers.items():
             for frame, result in zip(sequence, run_sequence(denoiser, sequence, name=name)):
                 if not result.ok:
@@ -175,6 +206,7 @@ def evaluate_on_split(checkpoint: str, model: str, data: str, split: str = "test
                 scores[name].append(value)
                 per_spp[name].setdefault(spp, []).append(value)
     means = {name: float(np.mean(values)) for name, values in scores.items()}
+    intervals, ratio_intervals = bootstrap_over_scenes(scores, frame_scene, model, list(peers))
     return {
         "split": split,
         "scenes": scenes,
@@ -182,7 +214,42 @@ def evaluate_on_split(checkpoint: str, model: str, data: str, split: str = "test
         "relmse": means,
         "relmse_by_spp": {name: {str(s): float(np.mean(v)) for s, v in sorted(d.items())} for name, d in per_spp.items()},
         "ratio": {peer: means[model] / means[peer] for peer in peers},
+        "relmse_ci95": intervals,
+        "ratio_ci95": ratio_intervals,
+        "bootstrap": {"resamples": BOOTSTRAP_RESAMPLES, "unit": "scene", "seed": 0},
     }
+
+
+#: Bootstrap resamples of the test scenes for the cards' 95% intervals.
+BOOTSTRAP_RESAMPLES = 2000
+
+
+def bootstrap_over_scenes(scores: dict[str, list[float]], frame_scene: list[str], model: str, peers: list[str],
+                          resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0):
+    """95% percentile intervals of each denoiser's mean score and of ``model``/peer ratios of means.
+
+    Frames of one scene are correlated (same geometry and light), so the resampled unit is the
+    scene: each draw picks len(scenes) scenes with replacement and takes the mean over all their
+    frames, for every denoiser with the same draw (the ratios are paired). Deterministic (seed 0).
+    """
+    import numpy as np
+
+    scenes = sorted(set(frame_scene))
+    index = {scene: i for i, scene in enumerate(scenes)}
+    owner = np.array([index[s] for s in frame_scene])
+    rng = np.random.default_rng(seed)
+    counts = np.stack([np.bincount(rng.integers(0, len(scenes), len(scenes)), minlength=len(scenes))
+                       for _ in range(resamples)])  # resamples × scenes: how often each scene is drawn
+    weights = counts[:, owner].astype(np.float64)  # resamples × frames
+    means = {name: weights @ np.asarray(values, np.float64) / weights.sum(axis=1) for name, values in scores.items()}
+    intervals = {name: [float(v) for v in np.percentile(m, [2.5, 97.5])] for name, m in means.items()}
+    ratios = {}
+    for peer in peers:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = means[model] / means[peer]
+        finite = ratio[np.isfinite(ratio)]
+        ratios[peer] = [float(v) for v in np.percentile(finite, [2.5, 97.5])] if finite.size else None
+    return intervals, ratios
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -44,7 +44,10 @@ reference with a quarter of the input's noise still adds 1/16 of the input's MSE
 Splits (:func:`assign_splits`) are by scene and deterministic: scenes are ordered by
 ``sha256(f"{seed}:{name}")``, so the result depends only on the seed and the set of names (not on
 their order, nor on any library's random generator), and adding a scene never moves the others
-relative to each other.
+relative to each other. Given each scene's family (the generator passes them), the split is
+**stratified**: every family with at least 3 scenes puts at least one scene in each of train, val
+and test; the scenes of smaller families are pooled and split as one group. Splits are written
+into the manifest and read back from it, so datasets made before stratification keep theirs.
 """
 
 from __future__ import annotations
@@ -127,8 +130,15 @@ def _round_half_up(x: float) -> int:
     return int(math.floor(x + 0.5))
 
 
+#: A family with at least this many scenes has one in each split when splits are stratified.
+STRATIFY_MIN_SCENES = 3
+
+
 def assign_splits(
-    scene_names: Iterable[str], seed: int, fractions: tuple[float, float, float] = DEFAULT_FRACTIONS
+    scene_names: Iterable[str],
+    seed: int,
+    fractions: tuple[float, float, float] = DEFAULT_FRACTIONS,
+    families: Mapping[str, str] | None = None,
 ) -> dict[str, list[str]]:
     """Split scenes into train/val/test, deterministically from ``seed``.
 
@@ -137,10 +147,27 @@ def assign_splits(
     least one test scene and one train scene when n ≥ 2. A single scene goes to **test** (the
     harness's first use is benchmarking; training needs several scenes anyway). Rounding is half
     up. Each list is sorted by name.
+
+    ``families`` (scene name → family) stratifies: each family of at least
+    :data:`STRATIFY_MIN_SCENES` scenes is split on its own with val and test at least one scene
+    each (3 scenes: one per split), and the scenes of smaller families (and names missing from
+    ``families``) are pooled and split by the rule above. Without ``families`` (or when no family
+    is that large) the result is exactly the unstratified split.
     """
     names = sorted(set(scene_names))
     if len(fractions) != 3 or any(f < 0 for f in fractions) or not math.isclose(sum(fractions), 1.0, abs_tol=1e-9):
         raise ValueError(f"fractions must be three non-negative numbers summing to 1 (got {fractions})")
+    if families is not None:
+        groups: dict[str, list[str]] = {}
+        for name in names:
+            groups.setdefault(str(families.get(name, "")), []).append(name)
+        large = {family: members for family, members in groups.items() if len(members) >= STRATIFY_MIN_SCENES}
+        if large:
+            pooled = [name for family, members in groups.items() if family not in large for name in members]
+            parts = [assign_splits(pooled, seed, fractions)] + [
+                _stratum(members, seed, fractions) for _, members in sorted(large.items())
+            ]
+            return {split: sorted(name for part in parts for name in part[split]) for split in SPLITS}
     n = len(names)
     if n == 0:
         return {split: [] for split in SPLITS}
@@ -153,6 +180,20 @@ def assign_splits(
     val = order[n_test : n_test + n_val]
     train = order[n_test + n_val :]
     return {"train": sorted(train), "val": sorted(val), "test": sorted(test)}
+
+
+def _stratum(names: list[str], seed: int, fractions: tuple[float, float, float]) -> dict[str, list[str]]:
+    """One family of n ≥ 3 scenes: test and val max(1, round(n·f)), train the rest (≥ 1)."""
+    order = sorted(names, key=lambda name: hashlib.sha256(f"{int(seed)}:{name}".encode()).hexdigest())
+    n = len(order)
+    n_test = max(1, _round_half_up(n * fractions[2]))
+    n_val = max(1, min(_round_half_up(n * fractions[1]), n - 1 - n_test))
+    n_test = min(n_test, n - 1 - n_val)
+    return {
+        "test": sorted(order[:n_test]),
+        "val": sorted(order[n_test : n_test + n_val]),
+        "train": sorted(order[n_test + n_val :]),
+    }
 
 
 # --------------------------------------------------------------------------- quality

@@ -5,7 +5,7 @@ Spec grammar (first match wins):
 ``NAME``
     a built-in (see :data:`BUILTINS`: ``identity``, ``cross_bilateral``, ``cross_bilateral_fast``,
     ``cross_bilateral_high``, ``rpf``, ``nlmeans``, ``oidn``, ``oidn_balanced``, ``oidn_fast``, and the
-    learned ``dpcn``, ``kpcn``, ``rae``), else
+    learned ``dpcn``, ``kpcn``, ``rae``, ``lbf``), else
     an entry point of the group ``denoisebench.denoisers`` (a plugin package declares
     ``[project.entry-points."denoisebench.denoisers"] my_denoiser = "my_pkg:MyDenoiser"``).
     Built-ins win over an entry point of the same name.
@@ -52,6 +52,7 @@ BUILTINS: dict[str, tuple[str, dict[str, Any]]] = {
     "dpcn": ("denoisebench.models.denoisers:DPCN", {}),
     "kpcn": ("denoisebench.models.denoisers:KPCN", {}),
     "rae": ("denoisebench.models.denoisers:RAE", {}),
+    "lbf": ("denoisebench.models.denoisers:LBFDenoiser", {}),
 }
 
 

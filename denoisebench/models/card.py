@@ -3,8 +3,10 @@
 :func:`render_card` formats a checkpoint's metadata and a test-split evaluation (from
 ``denoisebench train --evaluate``) into the card: what the network is, the exact commands that
 made the data and the weights, the dataset config and hash, training time, validation figures,
-and relMSE on held-out scenes against identity and cross_bilateral with the margin stated.
-Pure formatting: no torch, no metrics.
+and relMSE on held-out scenes against identity and cross_bilateral with the margin stated and,
+when the evaluation carries them, 95% bootstrap intervals (scenes resampled). Every stage of a
+multi-stage run (``meta["stages"]``, one per ``denoisebench train`` command) is listed with its own
+steps, learning rate, schedule and loss. Pure formatting: no torch, no metrics.
 """
 
 from __future__ import annotations
@@ -21,6 +23,11 @@ DESCRIPTIONS = {
     "every encoder level and the bottleneck, trained on 7-frame sequences with 0.8·L_s + 0.1·L_g + 0.1·L_t. "
     "Temporal: frames in order, reset() between sequences. With `residual` (the small configuration) the "
     "last layer outputs a correction to the input's own log colour rather than the colour itself.",
+    "lbf": "Learning-based filter after Kalantari, Bako & Sen 2015: a per-pixel multi-layer perceptron reads "
+    "feature statistics (block means and deviations, gradients, mean and median absolute deviations, colour "
+    "variance) and predicts the bandwidths α, β, γ_k of a cross-bilateral filter (screen distance, log colour, "
+    "albedo, normal, depth), which is applied differentiably; trained end to end on the filtered image with "
+    "relative MSE.",
 }
 
 
@@ -51,6 +58,34 @@ def _threads(used: list[int]) -> str:
         n = used[0]
         return f"{words.get(n, n)} CPU thread{'s' if n != 1 else ''}"
     return f"{' and '.join(str(n) for n in used)} CPU threads (see the commands)"
+
+
+def _stage_lines(meta: dict) -> list[str]:
+    """One bullet per training stage (command); a checkpoint from before stages were recorded gets its summary."""
+    stages = meta.get("stages") or []
+    if not stages:
+        return [
+            f"* {meta.get('steps')} steps of batch {meta.get('batch_size')} × {meta.get('crop')}² crops"
+            + f", spp {meta.get('spp')}, Adam lr {meta.get('lr')} (of the last command), seed {meta.get('seed')}, torch {meta.get('torch')}"
+        ]
+    lines = [f"* {meta.get('steps')} steps in {len(stages)} stage(s), seed {meta.get('seed')}, torch {meta.get('torch')}:"]
+    for number, stage in enumerate(stages, 1):
+        lines.append(
+            f"  {number}. steps {stage['from_step']}–{stage['from_step'] + stage['steps']}: batch {stage['batch_size']} × "
+            f"{stage['crop']}² crops, spp {stage['spp']}, Adam lr {stage['lr']} ({stage['lr_schedule']}), "
+            f"loss {stage['loss']}, {stage['device']}, {stage['threads']} thread(s)"
+        )
+    return lines
+
+
+def _interval(evaluation: dict, key: str, name: str) -> str:
+    ci = (evaluation.get(key) or {}).get(name)
+    return f" [95% CI {ci[0]:.5f}–{ci[1]:.5f}]" if ci else ""
+
+
+def _ratio_interval(evaluation: dict, peer: str) -> str:
+    ci = (evaluation.get("ratio_ci95") or {}).get(peer)
+    return f"; ratio's 95% CI {ci[0]:.3f}–{ci[1]:.3f}" if ci else ""
 
 
 def _pct(ours: float, peer: float) -> str:
@@ -97,9 +132,8 @@ def render_card(
         f"* dataset config hash `{meta.get('dataset_hash')}`; config `{meta.get('dataset_config')}`",
         f"* train scenes ({len(meta.get('train_scenes', []))}): {', '.join(meta.get('train_scenes', []))}",
         f"* val scenes: {', '.join(meta.get('val_scenes', [])) or 'none'}; test (held-out) scenes: {', '.join(evaluation['scenes'])}",
-        f"* {meta.get('steps')} steps of batch {meta.get('batch_size')} × {meta.get('crop')}² crops"
-        + (f" × {meta.get('sequence_length')} frames" if model == "rae" else "")
-        + f", spp {meta.get('spp')}, Adam lr {meta.get('lr')}, seed {meta.get('seed')}, torch {meta.get('torch')}",
+        *_stage_lines(meta),
+        *([f"* sequences of {meta.get('sequence_length')} frames"] if model == "rae" else []),
         f"* training time: {meta.get('seconds', 0.0) / 60.0:.1f} min on {_threads(meta.get('threads', [1]))} of a shared 2-core machine"
         + (f" ({meta.get('skipped_steps')} non-finite steps skipped)" if meta.get("skipped_steps") else ""),
         "",
@@ -117,17 +151,21 @@ def render_card(
         "",
         f"## Held-out scenes (test split: {evaluation['frames']} frames per denoiser, every spp)",
         "",
-        "relMSE = mean((p−r)²/(r²+0.01)), linear HDR, mean over frames (`denoisebench.metrics`).",
+        "relMSE = mean((p−r)²/(r²+0.01)), linear HDR, mean over frames (`denoisebench.metrics`)"
+        + ("; intervals: 95% percentile bootstrap over the test scenes (each resampled scene brings all its frames)."
+           if evaluation.get("relmse_ci95") else "."),
         "",
         "| denoiser | relMSE | " + " | ".join(f"spp {s}" for s in evaluation["relmse_by_spp"][model]) + " |",
         "|---|---|" + "---|" * len(evaluation["relmse_by_spp"][model]),
     ]
     for name, value in relmse.items():
         by_spp = evaluation["relmse_by_spp"][name]
-        lines.append(f"| {name} | {value:.5f} | " + " | ".join(f"{v:.5f}" for v in by_spp.values()) + " |")
+        lines.append(f"| {name} | {value:.5f}{_interval(evaluation, 'relmse_ci95', name)} | "
+                     + " | ".join(f"{v:.5f}" for v in by_spp.values()) + " |")
     lines += [""]
     for peer, ratio in evaluation["ratio"].items():
-        lines.append(f"* against {peer}: relMSE {ours:.5f} vs {relmse[peer]:.5f}, ratio {ratio:.3f} ({_pct(ours, relmse[peer])})")
+        lines.append(f"* against {peer}: relMSE {ours:.5f} vs {relmse[peer]:.5f}, ratio {ratio:.3f} ({_pct(ours, relmse[peer])})"
+                     + _ratio_interval(evaluation, peer))
     lines += [
         "",
         "## Limits",

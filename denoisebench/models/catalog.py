@@ -1,17 +1,19 @@
 """The learned models by name: how to build each, its configurations, what it reads and trains on.
 
-``dpcn`` and ``kpcn`` (:mod:`.pcn`) are spatial and train on single-frame crops; ``rae``
-(:mod:`.rae`) is temporal and trains on K-frame crop sequences.
+``dpcn`` and ``kpcn`` (:mod:`.pcn`) and ``lbf`` (:mod:`.lbf`, the MLP-driven cross-bilateral
+filter) are spatial and train on single-frame crops; ``rae`` (:mod:`.rae`) is temporal and trains
+on K-frame crop sequences. ``recipes`` holds each configuration's training defaults (what
+``denoisebench train`` uses for an option not given on the command line).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 from torch import nn
 
-from . import pcn, rae
+from . import lbf, pcn, rae
 from .features import OPTIONAL_BUFFERS
 
 
@@ -25,12 +27,19 @@ class ModelSpec:
     targets: tuple[str, ...]
     #: Buffers a training item carries when the dataset has them (features.py fills the rest with zeros).
     buffers: tuple[str, ...]
+    #: Training defaults per configuration name (``loss``, ``crop``, ...); see training.TrainOptions.
+    recipes: dict[str, dict] = field(default_factory=dict)
 
 
 MODELS: dict[str, ModelSpec] = {
     "dpcn": ModelSpec("dpcn", pcn.make_dpcn, pcn.DPCN_CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS),
     "kpcn": ModelSpec("kpcn", pcn.make_kpcn, pcn.KPCN_CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS),
     "rae": ModelSpec("rae", rae.make_rae, rae.CONFIGS, True, ("color",), ("albedo", "normal", "depth", "roughness")),
+    # The paper's loss, relative MSE of the filtered image, in every configuration.
+    "lbf": ModelSpec(
+        "lbf", lbf.make_lbf, lbf.CONFIGS, False, ("color",), ("color_var", "albedo", "normal", "depth"),
+        recipes={"small": {"loss": "relmse"}, "paper": {"loss": "relmse"}},
+    ),
 }
 
 

@@ -1,4 +1,4 @@
-"""The learned models as Denoisers (built-ins ``dpcn``, ``kpcn``, ``rae``).
+"""The learned models as Denoisers (built-ins ``dpcn``, ``kpcn``, ``rae``, ``lbf``).
 
 Each loads the shipped small weights (``denoisebench/models/weights/<name>_small.pt``, see the
 model card beside it) unless given ``checkpoint=PATH`` (``--option checkpoint=PATH`` on the
@@ -130,3 +130,16 @@ class RAE(LearnedDenoiser):
 
     def reset(self) -> None:
         self.model.reset()
+
+
+class LBFDenoiser(LearnedDenoiser):
+    """The MLP-predicted cross-bilateral filter (Kalantari et al. 2015); spatial, whole frames.
+
+    The filter runs as shifted views with two accumulators, so a whole frame needs only a few
+    image-sized buffers: no tiling.
+    """
+
+    name = "lbf"
+    model_name = "lbf"
+    needs = frozenset({"color", "albedo", "normal", "depth"})
+

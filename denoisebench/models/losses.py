@@ -9,7 +9,8 @@
 * :func:`rae_sequence_loss`: Chaitanya et al.'s 0.8·L_s + 0.1·L_g + 0.1·L_t over a K-frame
   sequence with rising per-frame weights (:func:`frame_weights`).
 * :func:`pcn_loss`: L1 on the combined colour plus L1 on each branch's log output against the
-  reference lobes (Bako et al. train each branch on its own lobe).
+  reference lobes; ``lobes`` drops the colour term (Bako et al. train each branch on its own lobe).
+* :func:`relmse_loss`: relative MSE of linear radiance, LBF's training loss (Kalantari et al.).
 * :func:`relmse`: the validation figure, mean((p−r)²/(r²+0.01)) as DESIGN.md defines it (linear).
 
 Notes
@@ -52,7 +53,7 @@ _LOG_KERNEL = log_kernel()
 def laplacian_of_gaussian(x: torch.Tensor) -> torch.Tensor:
     """Per-channel LoG response of N×C×H×W ``x`` (same size, replicate padding)."""
     channels = x.shape[1]
-    kernel = _LOG_KERNEL.to(x.dtype).expand(channels, 1, *_LOG_KERNEL.shape)
+    kernel = _LOG_KERNEL.to(x).expand(channels, 1, *_LOG_KERNEL.shape)  # x's dtype and device
     pad = _LOG_KERNEL.shape[-1] // 2
     padded = F.pad(x, (pad, pad, pad, pad), mode="replicate")
     return F.conv2d(padded, kernel, groups=channels)
@@ -68,10 +69,19 @@ def relative_l1(pred: torch.Tensor, ref: torch.Tensor) -> torch.Tensor:
     return ((pred - ref).abs() / (ref.abs() + RELMSE_EPS)).mean()
 
 
-#: Spatial loss by name (``--loss``): "log" compares log(1 + x); "relative" adds :func:`relative_l1`.
+def relmse_loss(pred: torch.Tensor, ref: torch.Tensor) -> torch.Tensor:
+    """mean((p − r)² / (r² + 0.01)), linear: the relative MSE Kalantari et al. train LBF with."""
+    pred, ref = safe(pred), safe(ref)
+    return ((pred - ref) ** 2 / (ref * ref + RELMSE_EPS)).mean()
+
+
+#: Spatial loss by name (``--loss``): "log" compares log(1 + x); "relative" adds :func:`relative_l1`;
+#: "relmse" is :func:`relmse_loss` (LBF's). PCN's "lobes" (the paper's separate diffuse/specular L1)
+#: is handled by :func:`pcn_loss`.
 SPATIAL = {
     "log": spatial_l1,
     "relative": lambda pred, ref: spatial_l1(pred, ref) + relative_l1(pred, ref),
+    "relmse": relmse_loss,
 }
 
 
@@ -114,7 +124,18 @@ def rae_sequence_loss(preds: list[torch.Tensor], refs: list[torch.Tensor], kind:
 
 
 def pcn_loss(out: dict[str, torch.Tensor], batch: dict[str, torch.Tensor], kind: str = "log") -> dict[str, torch.Tensor]:
-    """Spatial loss (SPATIAL[kind]) on colour, plus log L1 on each branch against its reference lobe when the batch has it."""
+    """Spatial loss (SPATIAL[kind]) on colour, plus log L1 on each branch against its reference lobe when the batch has it.
+
+    ``kind="lobes"`` is Bako et al.'s recipe: only the two branch losses (L1 of log(1 + x) of each
+    lobe; the branches have separate weights, so the sum trains each on its own lobe), no colour
+    term. A batch without reference lobes falls back to the log L1 of the colour.
+    """
+    if kind == "lobes":
+        if "reference_diffuse" in batch and "reference_specular" in batch:
+            diffuse = spatial_l1(out["diffuse"], batch["reference_diffuse"])
+            specular = spatial_l1(out["specular"], batch["reference_specular"])
+            return {"diffuse": diffuse, "specular": specular, "loss": diffuse + specular}
+        kind = "log"
     color = SPATIAL[kind](out["color"], batch["reference"])
     total = color
     parts = {"color": color}

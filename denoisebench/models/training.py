@@ -22,11 +22,23 @@ Notes
   metric's definition exactly.
 * The checkpoint written during training carries the optimiser state (for ``--resume``);
   :func:`strip_for_shipping` drops it.
+* Device (``--device``): ``auto`` takes CUDA when ``torch.cuda.is_available()``, else the CPU.
+  On CUDA the loader uses ``workers`` processes and pinned memory so the GPU is not starved; the
+  batches and their crops are the same on any device and any worker count (each item's crop
+  comes from its own ``(seed, epoch, item)`` generator), though CUDA kernels are not bit-exact
+  with the CPU's. Threads are capped at the machine's core count.
+* Learning-rate schedule (``lr_schedule``): ``constant``, ``cosine`` (from ``lr`` down to
+  ``lr/100`` over this command's steps) or ``step`` (×0.1 at half and three quarters of them).
+  The schedule spans one command: a resumed run is a new stage with its own schedule, and every
+  stage is recorded in ``meta["stages"]`` (the model card lists them).
+* ``loss`` None takes the configuration's recipe (catalog ``recipes``), else ``log``. ``lobes``
+  (DPCN/KPCN) is the paper's separate L1 per branch, no combined-colour term.
 """
 
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -57,11 +69,14 @@ class TrainOptions:
     lr: float = 1e-3
     spp: list[int] | None = None  # None: every noisy spp of the dataset
     sequence_length: int = 7
-    loss: str = "log"  # losses.SPATIAL: "log" or "relative"
+    loss: str | None = None  # losses.SPATIAL name or "lobes"; None: the configuration's recipe, else "log"
     val_every: int = 0  # 0: validate once, at the end
     val_frames: int = 8  # per val scene and spp
     checkpoint_every: int = 100
     threads: int = 1
+    device: str = "auto"  # auto | cpu | cuda
+    workers: int | None = None  # loader processes; None: 0 on the CPU, min(4, cores) on CUDA
+    lr_schedule: str = "constant"  # constant | cosine | step
     progress: bool = True
     extra: dict = field(default_factory=dict)
 
@@ -94,6 +109,58 @@ def _batches(length: int, batch_size: int, seed: int, epoch: int) -> list[list[i
     return [order[i * batch_size : (i + 1) * batch_size] for i in range(count)]
 
 
+LR_SCHEDULES = ("constant", "cosine", "step")
+
+
+def resolve_device(name: str) -> torch.device:
+    """``auto`` → CUDA when torch sees a GPU, else CPU; ``cuda`` without one is a UserInputError."""
+    if name not in ("auto", "cpu", "cuda"):
+        raise UserInputError(f"--device must be auto, cpu or cuda (got {name!r})")
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cuda" and not torch.cuda.is_available():
+        raise UserInputError("--device cuda: torch sees no CUDA device (this torch build or machine has none)")
+    return torch.device(name)
+
+
+def max_threads() -> int:
+    """CPU cores this process may use (affinity-aware where the OS says)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def lr_factor(schedule: str, done: int, steps: int) -> float:
+    """Multiplier of the base rate after ``done`` of this command's ``steps`` (see the module Notes)."""
+    if schedule == "constant" or steps <= 0:
+        return 1.0
+    progress = min(max(done / steps, 0.0), 1.0)
+    if schedule == "cosine":
+        floor = 0.01
+        return floor + (1.0 - floor) * 0.5 * (1.0 + math.cos(math.pi * progress))
+    if schedule == "step":
+        return 1.0 if progress < 0.5 else 0.1 if progress < 0.75 else 0.01
+    raise UserInputError(f"unknown learning-rate schedule {schedule!r}; schedules: {', '.join(LR_SCHEDULES)}")
+
+
+def resolve_loss(spec, config, loss: str | None) -> str:
+    """The loss a run uses: the one asked for, else the configuration's recipe, else ``log``."""
+    if loss is None:
+        recipe = spec.recipes.get(config, {}) if isinstance(config, str) else {}
+        loss = recipe.get("loss", "log")
+    allowed = set(SPATIAL) | ({"lobes"} if spec.name in ("dpcn", "kpcn") else set())
+    if loss not in allowed:
+        raise UserInputError(f"unknown loss {loss!r} for {spec.name}; losses: {', '.join(sorted(allowed))}")
+    return loss
+
+
+def _to_device(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str, torch.Tensor]:
+    if device.type == "cpu":
+        return batch
+    return {name: value.to(device, non_blocking=True) for name, value in batch.items()}
+
+
 def _loss(model, spec, batch: dict[str, torch.Tensor], kind: str = "log") -> dict[str, torch.Tensor]:
     if not spec.temporal:
         return pcn_loss(model(batch), batch, kind)
@@ -113,6 +180,7 @@ def validate(model, spec, ds: Dataset, scenes: list[str], spp: list[int], max_fr
     """Mean relMSE of the model and of the noisy input over whole val frames (empty dict: no val scenes)."""
     if not scenes:
         return {}
+    device = next(model.parameters()).device
     model.eval()
     ours, noisy, count = [], [], 0
     for scene in scenes:
@@ -122,7 +190,7 @@ def validate(model, spec, ds: Dataset, scenes: list[str], spp: list[int], max_fr
             frames = min(ds.scene(scene).frame_count, max_frames)
             for index in range(frames):
                 frame = ds.frame(scene, s, index, reference=True, samples=False)
-                out = model(frame_tensors(frame))["color"]
+                out = model(_to_device(frame_tensors(frame), device))["color"].cpu()
                 ref = torch.from_numpy(np.moveaxis(frame.reference, -1, 0).copy())[None]
                 ours.append(relmse(out, ref))
                 noisy.append(relmse(frame_tensors(frame, ("color",))["color"], ref))
@@ -162,9 +230,11 @@ def train(options: TrainOptions) -> dict:
     spec = get_spec(options.model)
     if options.steps < 0:
         raise UserInputError(f"--steps must be >= 0 (got {options.steps})")
-    if options.loss not in SPATIAL:
-        raise UserInputError(f"unknown loss {options.loss!r}; losses: {', '.join(SPATIAL)}")
-    threads = max(1, min(int(options.threads), 2))
+    loss_kind = resolve_loss(spec, options.config, options.loss)
+    if options.lr_schedule not in LR_SCHEDULES:
+        raise UserInputError(f"unknown learning-rate schedule {options.lr_schedule!r}; schedules: {', '.join(LR_SCHEDULES)}")
+    device = resolve_device(options.device)
+    threads = max(1, min(int(options.threads), max_threads()))
     torch.set_num_threads(threads)
     ds = open_dataset(options.data)
     train_scenes, val_scenes = ds.split("train"), ds.split("val")
@@ -177,7 +247,7 @@ def train(options: TrainOptions) -> dict:
 
     config = model_config(spec.name, options.config)
     torch.manual_seed(options.seed)
-    model = build_model(spec.name, config)
+    model = build_model(spec.name, config).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
     meta = {"steps": 0, "seconds": 0.0, "skipped_steps": 0, "history": []}
     if options.resume:
@@ -186,12 +256,12 @@ def train(options: TrainOptions) -> dict:
             raise UserInputError(f"{options.resume}: trained with config {payload['config']}, not {config}")
         if "optimizer" not in payload:
             raise UserInputError(f"{options.resume}: has no optimiser state (shipped weights cannot be resumed)")
-        model = model_from_checkpoint(payload)
+        model = model_from_checkpoint(payload).to(device)
         optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
         optimizer.load_state_dict(payload["optimizer"])
         for group in optimizer.param_groups:  # load_state_dict restored the old rate; --lr wins
             group["lr"] = options.lr
-        kept = ("steps", "seconds", "skipped_steps", "history", "commands", "threads")
+        kept = ("steps", "seconds", "skipped_steps", "history", "commands", "threads", "stages", "validation_history", "devices")
         meta.update({k: payload["meta"][k] for k in kept if k in payload["meta"]})
 
     dataset, crop, frames = _make_dataset(spec, ds, train_scenes, spp, options, buffers, targets)
@@ -211,7 +281,8 @@ def train(options: TrainOptions) -> dict:
             "sequence_length": frames,
             "batch_size": options.batch_size,
             "lr": options.lr,
-            "loss": options.loss,
+            "loss": loss_kind,
+            "lr_schedule": options.lr_schedule,
             "buffers": list(buffers),
             "targets": list(targets),
             "torch": str(torch.__version__),
@@ -230,8 +301,16 @@ def train(options: TrainOptions) -> dict:
     meta.setdefault("commands", []).append(command_line(options, str(out)))
     # Every torch thread count the training ran with (the card's training time depends on it).
     meta["threads"] = sorted(set(meta.get("threads", [])) | {threads})
+    meta["devices"] = sorted(set(meta.get("devices", [])) | {device.type})
+    # One record per command (stage) of a multi-stage run: what the card lists.
+    meta.setdefault("stages", []).append(
+        {"steps": int(options.steps), "from_step": int(meta["steps"]), "lr": options.lr, "lr_schedule": options.lr_schedule,
+         "loss": loss_kind, "batch_size": options.batch_size, "crop": crop, "spp": spp, "device": device.type,
+         "threads": threads}
+    )
     start_step, total = int(meta["steps"]), int(meta["steps"]) + int(options.steps)
     per_epoch = len(_batches(len(dataset), options.batch_size, options.seed, 0))
+    workers = options.workers if options.workers is not None else (min(4, max_threads()) if device.type == "cuda" else 0)
     model.train()
     started = time.perf_counter()
     bar = tqdm(total=options.steps, desc=f"train {spec.name}", unit="step", disable=not options.progress)
@@ -252,9 +331,13 @@ def train(options: TrainOptions) -> dict:
             epoch, offset = divmod(step, per_epoch)
             dataset.set_epoch(epoch)
             batches = _batches(len(dataset), options.batch_size, options.seed, epoch)[offset:]
-            loader = torch.utils.data.DataLoader(dataset, batch_sampler=batches, num_workers=0)
+            loader = torch.utils.data.DataLoader(
+                dataset, batch_sampler=batches, num_workers=workers, pin_memory=device.type == "cuda"
+            )
             for batch in loader:
-                parts = _loss(model, spec, batch, options.loss)
+                for group in optimizer.param_groups:
+                    group["lr"] = options.lr * lr_factor(options.lr_schedule, step - start_step, options.steps)
+                parts = _loss(model, spec, _to_device(batch, device), loss_kind)
                 loss = parts["loss"]
                 optimizer.zero_grad(set_to_none=True)
                 if torch.isfinite(loss):
@@ -311,8 +394,14 @@ def command_line(options: TrainOptions, out: str) -> str:
         parts += ["--spp", ",".join(str(s) for s in options.spp)]
     if get_spec(options.model).temporal:
         parts += ["--sequence-length", str(options.sequence_length)]
-    if options.loss != "log":
+    if options.loss is not None and options.loss != "log":
         parts += ["--loss", options.loss]
+    if options.lr_schedule != "constant":
+        parts += ["--lr-schedule", options.lr_schedule]
+    if options.val_every:
+        parts += ["--val-every", str(options.val_every)]
     if int(options.threads) != 1:
         parts += ["--threads", str(options.threads)]
+    if options.device != "auto":
+        parts += ["--device", options.device]
     return shlex.join(parts)
