@@ -14,6 +14,7 @@ from denoisebench.scenes.families import (
     glass_env,
     glossy_fireflies,
     motion_blur,
+    moving_objects,
     outdoor_sun,
     texture_checker,
     thin_geometry,
@@ -65,5 +66,10 @@ ALL: tuple[SceneFamily, ...] = (
         "outdoor_sun", ("glossy", "textures", "environment"),
         "Glossy metal sculptures on a textured meadow under a distant sun and a sky dome.",
         "Y", 1.0, "handheld orbit", outdoor_sun.build,
+    ),
+    SceneFamily(
+        "moving_objects", ("textures", "area_lights"),
+        "A box slides and turns behind pillars, a ball rolls in front, a box spins (object motion; near-still camera).",
+        "Y", 1.0, "slow push-in", moving_objects.build,
     ),
 )
