@@ -32,11 +32,13 @@ The mapping from our data to what the model sees (it needs absolute photometric 
    noise over time, so static noise scores *lower* than dynamic noise of the same σ; the model's
    temporal channels need ≥ 250 ms of video, and cvvdp pads the start by replicating frame 0.
 
-Measured with this mapping on a 64×64 textured static reference, 8 frames at 30 fps
-(``tests/test_metrics_cvvdp.py`` holds the predictions): brightness alternating ±15 % frame to
-frame → 6.7 JOD while the same +15 % held static → 10.0 (the model's contrast constancy ignores a
-steady global gain); Gaussian noise σ = 0.03 → 9.93, σ = 0.1 → 9.40 (dynamic) and 9.13 (the same
-σ static).
+Measured with this mapping on a textured static reference (mean 0.5, key → ≈ 230 cd/m² per
+unit), 8 frames of 32² or 64² at 30 fps (``tests/test_metrics_cvvdp.py`` holds the predictions):
+brightness alternating ±15 % frame to frame → 5.2 JOD while the same +15 % held static → 10.0
+(the model's contrast constancy ignores a steady global gain); Gaussian noise σ = 0.03 → 9.9,
+σ = 0.1 → 9.2–9.3 (new noise every frame) and 9.1 (the same noise in every frame). With a plain
+×100 cd/m² scale instead of the key the flicker case scored 6.7: brighter display, more
+visible flicker.
 
 Runs offline on the CPU (the model's data ship in the package). Cost: ≈ 1.3 s for 8 frames of
 128² on one core (``bench/metrics_speed.py`` measures seconds per megapixel-frame).

@@ -49,11 +49,12 @@ def msssim_scales(height: int, width: int, win_size: int = WIN_SIZE) -> int:
     return n
 
 
-def ms_ssim_tensor(x, y, data_range: float = 1.0):
+def ms_ssim_tensor(x, y, data_range: float = 1.0, scales: int | None = None):
     """MS-SSIM of N×C×H×W float tensors with the scale count of :func:`msssim_scales` (a tensor).
 
     Five scales call ``pytorch_msssim.ms_ssim`` itself; fewer reuse the library's per-scale
-    ``_ssim`` and window, and combine them exactly as ``ms_ssim`` does.
+    ``_ssim`` and window, and combine them exactly as ``ms_ssim`` does. ``scales`` forces our
+    loop with that many scales (at most what the size allows; tests compare it with the library).
     """
     import torch
     import torch.nn.functional as F
@@ -61,10 +62,15 @@ def ms_ssim_tensor(x, y, data_range: float = 1.0):
     from pytorch_msssim.ssim import _fspecial_gauss_1d, _ssim
 
     n = msssim_scales(x.shape[-2], x.shape[-1])
-    if n == len(WEIGHTS):
+    if scales is not None:
+        if not 1 <= scales <= n:
+            raise ValueError(f"{x.shape[-2]}×{x.shape[-1]} px allows 1..{n} scales, asked {scales}")
+        n = scales
+    elif n == len(WEIGHTS):
         return ms_ssim(x, y, data_range=data_range, win_size=WIN_SIZE, win_sigma=WIN_SIGMA)
     weights = x.new_tensor(WEIGHTS[:n])
-    weights = weights / weights.sum()
+    if n < len(WEIGHTS):  # the standard five sum to 1.0001; kept as the library has them
+        weights = weights / weights.sum()
     win = _fspecial_gauss_1d(WIN_SIZE, WIN_SIGMA).repeat([x.shape[1], 1, 1, 1])
     mcs = []
     for i in range(n):
