@@ -24,16 +24,19 @@ from .runner import NOISY, BenchmarkConfig, RunPlan, measure_group, pending_grou
 from .store import ResultsStore, UnitRecord
 
 
-def _measure_remote(root: str, plan: RunPlan, options: dict, scene: str, spp: int, labels: list[str]) -> list[UnitRecord]:
+def _measure_remote(
+    root: str, plan: RunPlan, options: dict, scene: str, spp: int, labels: list[str], isolation: str = "plugins", limits=None
+) -> list[UnitRecord]:
     from denoisebench.dataset import open_dataset
-    from denoisebench.denoisers.registry import load_denoiser
+    from denoisebench.denoisers import isolation as isolation_mod
 
     instances: dict[str, object] = {}
     errors: dict[str, str] = {}
     for d in plan.denoisers:
         if d.label in labels and d.label != NOISY:
             try:
-                instances[d.label] = load_denoiser(d.spec, **options.get(d.spec, {}))
+                # plugins in worker processes of their own here too (a Ray task is no sandbox)
+                instances[d.label] = isolation_mod.load(d.spec, options.get(d.spec, {}), policy=isolation, limits=limits)
             except Exception as exc:  # noqa: BLE001 - recorded as the units' failure
                 errors[d.label] = f"load in worker: {exc}"
     units = list(measure_group(open_dataset(root), plan, scene, spp, [l for l in labels if l not in errors], instances))
@@ -58,7 +61,7 @@ def run_ray(
     task = ray.remote(_measure_remote)
     root = str(dataset.root.resolve())
     pending = [
-        task.remote(root, light, config.options, scene, spp, labels)
+        task.remote(root, light, config.options, scene, spp, labels, config.isolation, config.limits())
         for scene, spp, labels in pending_groups(plan, store.done_units(plan.run_id))
     ]
     while pending:

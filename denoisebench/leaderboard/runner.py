@@ -188,8 +188,11 @@ def load_denoisers(specs: list[str], options: dict[str, dict], *, isolation: str
 
 def check_dataset(dataset: Dataset, scenes: list[str], spp: list[int]) -> None:
     """Every frame the run needs has a manifest record and a file, and a reference: else one line."""
+    from denoisebench.dataset.bounds import check_scene_record
+
     for scene in scenes:
         info = dataset.scene(scene)
+        check_scene_record(scene, info.record)  # a forged size or frame count is refused before any loop
         renders = info.record.get("renders", {})
         missing_spp = [s for s in spp if s not in info.spp]
         if missing_spp:
