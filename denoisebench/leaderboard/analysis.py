@@ -1,12 +1,18 @@
 """Numbers a report is made of, computed from one run in the results store (no drawing, no HTML).
 
-* :func:`summary_table`: per denoiser and input spp, the mean of every metric with a bootstrap 95 %
-  interval over **scenes** (frames of one scene are not independent samples), and seconds per frame.
+* :func:`summary_table`: per denoiser and input spp, every metric aggregated over scenes by its
+  rule (:mod:`.aggregate`: scale-free scores by mean, linear ones relative to the noisy input or by
+  geometric mean) with a bootstrap 95 % interval over **scenes** (frames of one scene are not
+  independent samples) that includes the reference's uncertainty; MSE-family metrics also carry
+  their reference-noise floor and the floor-corrected value; and seconds per frame.
+* :func:`indistinguishable_pairs`: pairs of denoisers whose scores differ by less than the
+  reference's noise can resolve ("not distinguishable at this reference quality").
 * :func:`accuracy_time`: per denoiser and spp, mean error (relMSE, FLIP) against mean total seconds
   per frame (render at that spp + denoise); the noisy inputs as the "just render more samples"
   curve; the Pareto front; and the reading in words (:func:`readings`).
 * :func:`effect_breakdown`: per denoiser and scene effect, the share of the input's error left.
-* :func:`flicker_series`: per denoiser, the per-frame flicker averaged over scenes.
+* :func:`flicker_series`: per denoiser, the per-frame flicker (a scale-free temporal metric of frame
+  t against t−1) averaged over scenes, at one spp.
 
 Notes
 -----
@@ -27,16 +33,14 @@ Notes
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .runner import NOISY
+from . import aggregate as agg
+from .aggregate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401 (re-exported)
+from .runner import FLICKER_METRICS, FLICKER_PREFIX, NOISY
 
-#: Bootstrap resamples and seed (fixed: the same run gives the same report).
-BOOTSTRAP_RESAMPLES = 2000
-BOOTSTRAP_SEED = 0
 ERROR_METRICS = ("relmse", "flip")
 #: Assumed slope of log(error) vs log(spp) when only one input spp was measured.
 DEFAULT_SLOPE = {"relmse": -1.0, "mse": -1.0, "flip": -0.5}
@@ -46,30 +50,26 @@ def _finite(values) -> list[float]:
     return [float(v) for v in values if v is not None and math.isfinite(v)]
 
 
-def bootstrap_interval(values) -> tuple[float | None, float | None]:
-    """Percentile bootstrap 95 % interval of the mean (scipy.stats.bootstrap); None with < 2 values."""
-    from scipy.stats import bootstrap
-
-    data = np.asarray(_finite(values), dtype=np.float64)
-    if data.size < 2:
-        return None, None
-    if np.all(data == data[0]):
-        return float(data[0]), float(data[0])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # few scenes: scipy warns that the distribution is degenerate
-        result = bootstrap(
-            (data,), np.mean, n_resamples=BOOTSTRAP_RESAMPLES, method="percentile",
-            rng=np.random.default_rng(BOOTSTRAP_SEED),
-        )
-    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+def bootstrap_interval(values, ses=None) -> tuple[float | None, float | None]:
+    """Percentile bootstrap 95 % interval of the mean; ``ses`` widen it by the reference's noise."""
+    values = list(values)
+    keep = [i for i, v in enumerate(values) if v is not None and math.isfinite(v)]
+    return agg.bootstrap_mean([float(values[i]) for i in keep], None if ses is None else [ses[i] for i in keep])
 
 
 @dataclass
 class Cell:
+    """A metric aggregated over scenes. ``mean`` is the aggregate under ``rule`` (the name is kept
+    from when every rule was the mean); ``floor``/``corrected``: reference-noise floor and
+    ``mean − floor`` aggregated by the same rule (MSE-family metrics with a reference variance)."""
+
     mean: float | None
     low: float | None
     high: float | None
     scenes: int
+    rule: str = "mean"
+    floor: float | None = None
+    corrected: float | None = None
 
 
 @dataclass
@@ -98,7 +98,7 @@ class RunData:
         self.labels = [d["label"] for d in self.denoisers if not d["load_error"]]
         self.spp = sorted({u["spp"] for u in self.units})
         self.scenes = sorted({u["scene"] for u in self.units})
-        self.frame_metric_names = sorted({m for f in self.frames for m in f["metrics"]} - {"flicker"})
+        self.frame_metric_names = sorted({m for f in self.frames for m in f["metrics"] if not m.startswith("flicker")})
         self.sequence_metric_names = sorted({s["metric"] for s in self.sequences})
 
     def ok_frames(self, label: str, spp: int, scene: str | None = None) -> list[dict]:
@@ -116,6 +116,37 @@ class RunData:
         values = _finite(values)
         return float(np.mean(values)) if values else None
 
+    def scene_floor(self, label: str, spp: int, scene: str, metric: str) -> tuple[float | None, float | None]:
+        """(floor, ref_se) of a metric on one scene: frames' mean floor, se of the frames' mean."""
+        if metric in self.sequence_metric_names and metric not in self.frame_metric_names:
+            rows = [s for s in self.sequences if (s["denoiser"], s["spp"], s["scene"], s["metric"]) == (label, spp, scene, metric)]
+            floors, ses = _finite(r.get("floor") for r in rows), _finite(r.get("ref_se") for r in rows)
+        else:
+            frames = self.ok_frames(label, spp, scene)
+            floors = _finite(f.get("floors", {}).get(metric) for f in frames)
+            ses = _finite(f.get("ref_se", {}).get(metric) for f in frames)
+            if len(floors) != len(frames):
+                floors = []
+            ses = ses if len(ses) == len(frames) else []
+        floor = float(np.mean(floors)) if floors else None
+        se = float(math.sqrt(sum(x * x for x in ses)) / len(ses)) if ses else None
+        return floor, se
+
+    def per_scene(self, label: str, spp: int, metric: str, scenes=None) -> tuple[dict, dict, dict]:
+        """({scene: value}, {scene: floor}, {scene: ref_se}) over ``scenes`` (default: every scene)."""
+        values, floors, ses = {}, {}, {}
+        for scene in self.scenes if scenes is None else scenes:
+            value = self.scene_mean(label, spp, scene, metric)
+            if value is None:
+                continue
+            values[scene] = value
+            floor, se = self.scene_floor(label, spp, scene, metric)
+            if floor is not None:
+                floors[scene] = floor
+            if se is not None:
+                ses[scene] = se
+        return values, floors, ses
+
     def unit_ok(self, label: str, spp: int, scene: str) -> bool:
         return any(u["status"] == "ok" for u in self.units if (u["denoiser"], u["spp"], u["scene"]) == (label, spp, scene))
 
@@ -130,9 +161,7 @@ def summary_table(data: RunData) -> list[SummaryRow]:
             ok_scenes = [u["scene"] for u in units if u["status"] == "ok"]
             cells = {}
             for metric in data.frame_metric_names + data.sequence_metric_names:
-                per_scene = _finite(data.scene_mean(label, spp, s, metric) for s in ok_scenes)
-                low, high = bootstrap_interval(per_scene)
-                cells[metric] = Cell(float(np.mean(per_scene)) if per_scene else None, low, high, len(per_scene))
+                cells[metric] = metric_cell(data, label, spp, metric, ok_scenes)
             frames = [f for s in ok_scenes for f in data.ok_frames(label, spp, s)]
             mean = lambda key: float(np.mean(_finite(f[key] for f in frames))) if _finite(f[key] for f in frames) else None  # noqa: E731
             rows.append(SummaryRow(
@@ -140,6 +169,69 @@ def summary_table(data: RunData) -> list[SummaryRow]:
                 sum(u["status"] != "ok" for u in units), sorted({u["error"] for u in units if u["error"]}),
             ))
     return rows
+
+
+def metric_cell(data: RunData, label: str, spp: int, metric: str, scenes: list[str]) -> Cell:
+    """One metric of one denoiser at one spp, aggregated over ``scenes`` by the metric's rule."""
+    rule = agg.rule_of(metric)
+    mine, floors, ses = data.per_scene(label, spp, metric, scenes)
+    noisy = data.per_scene(NOISY, spp, metric, scenes)[0] if rule == "relative_to_input" else None
+    value, low, high, count = agg.aggregate(rule, mine, noisy, ses)
+    floor = corrected = None
+    if floors and len(floors) == len(mine) and value is not None:
+        noisy_floors = None
+        if rule == "relative_to_input":  # the floor relative to the input's own score
+            noisy_floors = noisy
+        floor = agg.aggregate(rule, floors, noisy_floors)[0]
+        corrected_values = {s: mine[s] - floors[s] for s in mine}
+        if rule == "mean" or all(v > 0 for v in corrected_values.values()):
+            corrected = agg.aggregate(rule, corrected_values, noisy)[0]
+    return Cell(value, low, high, count, rule, floor, corrected)
+
+
+@dataclass
+class Indistinguishable:
+    """Two denoisers whose aggregated scores differ by less than the reference can resolve."""
+
+    spp: int
+    metric: str
+    a: str
+    b: str
+    difference: float  # a − b on the rule's scale (score units for mean; log ratio otherwise)
+    resolution: float  # 95 % half-width the reference's noise allows
+
+
+def indistinguishable_pairs(data: RunData, summary: list[SummaryRow]) -> list[Indistinguishable]:
+    """Pairs (noisy input included) whose difference lies within the reference's uncertainty.
+
+    For every metric with stored reference se (the MSE family) and every spp; per-scene values over
+    the scenes both measured (:func:`.aggregate.reference_resolution`, conservative).
+    """
+    found = []
+    metrics = [m for m in data.frame_metric_names + data.sequence_metric_names
+               if any(c.metrics.get(m) is not None and c.metrics[m].floor is not None for c in summary)]
+    for spp in data.spp:
+        rows = [r for r in summary if r.spp == spp and r.failed_units == 0]
+        for metric in metrics:
+            rule = agg.rule_of(metric)
+            per = {r.denoiser: data.per_scene(r.denoiser, spp, metric) for r in rows}
+            labels = [r.denoiser for r in rows if per[r.denoiser][0]]
+            for i, a in enumerate(labels):
+                for b in labels[i + 1:]:
+                    (va, _, sa), (vb, _, sb) = per[a], per[b]
+                    resolution = agg.reference_resolution(rule, va, sa, vb, sb)
+                    if resolution is None:
+                        continue
+                    common = [s for s in va if s in vb]
+                    if rule == "mean":
+                        diff = float(np.mean([va[s] - vb[s] for s in common]))
+                    elif all(va[s] > 0 and vb[s] > 0 for s in common):
+                        diff = float(np.mean([math.log(va[s] / vb[s]) for s in common]))
+                    else:
+                        continue
+                    if abs(diff) <= resolution:
+                        found.append(Indistinguishable(spp, metric, a, b, diff, resolution))
+    return found
 
 
 # --------------------------------------------------------------------------------------------------
@@ -329,13 +421,26 @@ def effect_breakdown(data: RunData, scene_effects: dict[str, list[str]], metric:
     return {"metric": metric, "effects": effects, "table": table}
 
 
-def flicker_series(data: RunData, spp: int) -> dict[str, list[float | None]]:
-    """{denoiser: [mean flicker of frame 1, 2, ...] over scenes} at ``spp`` (frame 0 has none)."""
+def flicker_metrics(data: RunData) -> list[str]:
+    """The per-frame flicker metrics a run stored: FLICKER_METRICS, or ``temporal_l1`` of old runs."""
+    stored = {m for f in data.frames for m in f["metrics"] if m.startswith("flicker")}
+    names = [m for m in FLICKER_METRICS if FLICKER_PREFIX + m in stored]
+    if not names and "flicker" in stored:
+        names = ["temporal_l1"]  # runs before issue 15: "flicker" was temporal_l1 (linear: not averaged in a figure)
+    return names
+
+
+def flicker_series(data: RunData, spp: int, metric: str = FLICKER_METRICS[0]) -> dict[str, list[float | None]]:
+    """{denoiser: [mean ``metric`` flicker of frame 1, 2, ...] over scenes} at ``spp`` (frame 0 has none).
+
+    The mean over scenes is arithmetic: only for scale-free metrics (the flicker ones are).
+    """
+    key = "flicker" if metric == "temporal_l1" else FLICKER_PREFIX + metric
     series = {}
     for label in data.labels:
         by_frame: dict[int, list[float]] = {}
         for f in data.ok_frames(label, spp):
-            value = f["metrics"].get("flicker")
+            value = f["metrics"].get(key)
             if value is not None and math.isfinite(value):
                 by_frame.setdefault(f["frame"], []).append(value)
         if by_frame:

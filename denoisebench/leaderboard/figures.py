@@ -100,21 +100,46 @@ def accuracy_time_figure(panels: list[AccuracyTime], palette: dict[str, str]) ->
     return _save(fig)
 
 
-def flicker_figure(series: dict[str, list[float | None]], spp: int, palette: dict[str, str]) -> tuple[bytes, str]:
-    """Per-frame flicker (temporal_l1 of frame t against t−1), mean over scenes."""
+#: Axis labels of the per-frame flicker metrics.
+FLICKER_LABELS = {
+    "temporal_relmse": "temporal relMSE (lower is better)",
+    "tpsnr": "tPSNR dB (higher is better)",
+    "temporal_l1": "temporal_l1, linear (lower is better)",
+}
+
+
+def flicker_figure(series: dict[str, dict[int, dict[str, list[float | None]]]], palette: dict[str, str]) -> tuple[bytes, str]:
+    """Per-frame flicker (frame t against t−1, mean over scenes): one column per input spp, one row
+    per metric (``series``: {metric: {spp: {denoiser: values of frames 1, 2, ...}}})."""
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(7, 3.4))
-    for label, values in series.items():
-        xs = [i + 1 for i, v in enumerate(values) if v is not None]
-        ys = [v for v in values if v is not None]
-        ax.plot(xs, ys, "-o", ms=3, color=palette.get(label), lw=2 if label == NOISY else 1, label=label)
-    ax.set_xlabel("frame")
-    ax.xaxis.get_major_locator().set_params(integer=True)
-    ax.set_ylabel("flicker: mean |Δpred − Δref|")
-    ax.set_title(f"temporal flicker per frame at {spp} spp (mean over scenes)")
-    if any(v for values in series.values() for v in values if v):
-        ax.set_yscale("log")
-    ax.grid(True, alpha=0.25)
-    ax.legend(fontsize=7, ncol=2, frameon=False)
-    fig.tight_layout()
+    metrics = list(series)
+    spps = sorted({spp for by_spp in series.values() for spp in by_spp})
+    fig, axes = plt.subplots(len(metrics), len(spps), figsize=(4.6 * len(spps), 3.0 * len(metrics)), squeeze=False)
+    for row, metric in enumerate(metrics):
+        for col, spp in enumerate(spps):
+            ax = axes[row][col]
+            lines = series[metric].get(spp, {})
+            for label, values in lines.items():
+                xs = [i + 1 for i, v in enumerate(values) if v is not None]
+                ys = [v for v in values if v is not None]
+                ax.plot(xs, ys, "-o", ms=3, color=palette.get(label), lw=2 if label == NOISY else 1, label=label)
+            ax.xaxis.get_major_locator().set_params(integer=True)
+            if metric != "tpsnr" and any(v for values in lines.values() for v in values if v):
+                ax.set_yscale("log")
+            ax.grid(True, alpha=0.25)
+            if row == 0:
+                ax.set_title(f"{spp} spp")
+            if row == len(metrics) - 1:
+                ax.set_xlabel("frame (against the one before)")
+            if col == 0:
+                ax.set_ylabel(FLICKER_LABELS.get(metric, metric), fontsize=8)
+    handles, labels = [], []
+    for ax in axes.flat:
+        for h, l in zip(*ax.get_legend_handles_labels()):
+            if l not in labels:
+                handles.append(h)
+                labels.append(l)
+    fig.suptitle("temporal flicker per frame (mean over scenes)", fontsize=10)
+    fig.legend(handles, labels, loc="lower center", ncol=min(6, max(1, len(labels))), fontsize=7, frameon=False)
+    fig.tight_layout(rect=(0, 0.06 + 0.03 * (len(labels) // 6), 1, 0.97))
     return _save(fig)

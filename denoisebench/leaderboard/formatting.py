@@ -7,11 +7,15 @@ import math
 from .runner import NOISY
 
 #: Metrics shown in the summary tables, in this order.
-LEAD_METRICS = ("relmse", "flip", "ssim", "psnr", "smape", "deltae2000", "grad_l1", "hfen", "temporal_l1", "temporal_l1_warped", "tpsnr")
+LEAD_METRICS = ("relmse", "flip", "ssim", "psnr", "smape", "deltae2000", "grad_l1", "hfen", "temporal_relmse", "tpsnr",
+                "temporal_l1", "temporal_l1_warped")
 
 
-#: Left out of the summary tables to keep them readable (still in results.json/csv).
-HIDDEN_IN_TABLES = ("smape", "grad_l1", "temporal_l1_warped")
+#: Left out of the summary tables to keep them readable (still in results.json/csv; the temporal
+#: ones are in the flicker table).
+HIDDEN_IN_TABLES = ("smape", "grad_l1", "temporal_l1", "temporal_l1_warped")
+#: How a heading names an aggregation rule other than the mean (see leaderboard.aggregate).
+RULE_NOTE = {"geomean": "geo. mean", "relative_to_input": "× input"}
 
 
 def num(value, digits: int = 3) -> str:
@@ -30,26 +34,75 @@ def cell_text(cell) -> str:
 
 
 def metric_heading(name: str) -> str:
+    """``name ↓`` (or ↑), with the aggregation rule when it is not the mean: ``hfen ↓ (× input)``."""
     from denoisebench.metrics import get_metric
 
     try:
-        return f"{name} {'↑' if get_metric(name).higher_is_better else '↓'}"
+        metric = get_metric(name)
     except ValueError:
         return name
+    note = RULE_NOTE.get(metric.aggregate)
+    return f"{name} {'↑' if metric.higher_is_better else '↓'}" + (f" ({note})" if note else "")
+
+
+def _has_floor(rows, metric: str) -> bool:
+    return any(r.metrics.get(metric) is not None and r.metrics[metric].floor is not None for r in rows)
+
+
+def _metric_columns(rows, metrics: list[str]) -> tuple[list[str], list]:
+    """Headings and cell makers: each metric, and for those with a floor its floor and corrected value."""
+    header, makers = [], []
+    for m in metrics:
+        header.append(metric_heading(m))
+        makers.append(lambda r, m=m: cell_text(r.metrics.get(m)))
+        if _has_floor(rows, m):
+            header += [f"{m} floor", f"{m} − floor"]
+            makers.append(lambda r, m=m: num(r.metrics[m].floor) if r.metrics.get(m) else "—")
+            makers.append(lambda r, m=m: num(r.metrics[m].corrected) if r.metrics.get(m) else "—")
+    return header, makers
 
 
 def summary_rows(report: dict, spp: int) -> tuple[list[str], list[list[str]]]:
     """(header, rows) of the summary table at ``spp``: noisy first, then by relMSE."""
     # the tables show the lead metrics; results.json/results.csv hold every one
     metrics = [m for m in LEAD_METRICS if m in report["frame_metrics"] + report["sequence_metrics"] and m not in HIDDEN_IN_TABLES]
-    header = ["denoiser", *(metric_heading(m) for m in metrics), "denoise s/frame", "total s/frame", "frames"]
     rows = [r for r in report["summary"] if r.spp == spp]
+    headings, makers = _metric_columns(rows, metrics)
+    header = ["denoiser", *headings, "denoise s/frame", "total s/frame", "frames"]
     key = lambda r: (r.denoiser != NOISY, r.metrics.get("relmse").mean if r.metrics.get("relmse") and r.metrics["relmse"].mean is not None else math.inf)  # noqa: E731
     body = []
     for r in sorted(rows, key=key):
         name = r.denoiser + (f" ({r.failed_units} failed)" if r.failed_units else "")
-        body.append([name, *(cell_text(r.metrics.get(m)) for m in metrics), num(r.denoise_seconds), num(r.total_seconds), str(r.frames)])
+        body.append([name, *(make(r) for make in makers), num(r.denoise_seconds), num(r.total_seconds), str(r.frames)])
     return header, body
+
+
+def flicker_rows(report: dict, spp: int) -> tuple[list[str], list[list[str]]]:
+    """(header, rows) of the flicker table at ``spp``: every temporal metric of the run, scale-free first
+    (report["temporal_metrics"]), each aggregated by its rule; noisy first, then by the lead metric."""
+    metrics = report.get("temporal_metrics") or report["sequence_metrics"]
+    rows = [r for r in report["summary"] if r.spp == spp]
+    headings, makers = _metric_columns(rows, metrics)
+    lead = metrics[0] if metrics else None
+    sign = -1.0 if lead == "tpsnr" else 1.0
+
+    def key(r):
+        cell = r.metrics.get(lead) if lead else None
+        return (r.denoiser != NOISY, sign * cell.mean if cell is not None and cell.mean is not None else math.inf)
+
+    return ["denoiser", *headings], [[r.denoiser, *(make(r) for make in makers)] for r in sorted(rows, key=key)]
+
+
+def indistinguishable_lines(report: dict) -> list[str]:
+    """One sentence per pair of denoisers the reference cannot tell apart (analysis.indistinguishable_pairs)."""
+    from .aggregate import rule_of
+
+    lines = []
+    for p in report.get("indistinguishable", []):
+        scale = "" if rule_of(p.metric) == "mean" else " in log ratio"
+        lines.append(f"{p.spp} spp, {p.metric}: {p.a} and {p.b} are not distinguishable at this reference quality "
+                     f"(difference {num(p.difference)}{scale}; the reference resolves ±{num(p.resolution)}).")
+    return lines
 
 
 def effect_rows(report: dict) -> tuple[list[str], list[list[str]], dict[str, str]]:

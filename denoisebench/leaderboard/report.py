@@ -13,6 +13,13 @@ Notes
   version of each file or the new one, never a torn file.
 * **Comparison frame.** Images compare the last frame of each test sequence (a temporal denoiser
   has seen the frames before it) at the lowest input spp, where denoisers differ most.
+* **Flicker.** The figure has one panel per input spp and one row per per-frame flicker metric
+  (``temporal_relmse`` and tPSNR, both scale-free, so their mean over scenes is meaningful); the
+  table lists every temporal metric the run measured, the scale-free ones first, each aggregated
+  by its rule. Frame strips (:mod:`.strips`) show one crop of consecutive frames per denoiser.
+* **Floors.** results.json, results.csv and the tables give each MSE-family score's
+  reference-noise floor and its floor-corrected value (``score − floor``, an unbiased estimate of
+  the score against the noise-free image; :mod:`denoisebench.metrics.floors`).
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ import numpy as np
 from denoisebench.dataset import Dataset
 from denoisebench.dataset.atomic import atomic_write_bytes
 
-from . import analysis, figures, images
+from . import analysis, figures, images, strips
 from .runner import NOISY
 from .store import ResultsStore
 
@@ -58,16 +65,38 @@ def _scene_effects(dataset: Dataset, scenes: list[str]) -> dict[str, list[str]]:
     return effects
 
 
+def _transport(plan: dict) -> str:
+    """The plan's light transport in words: full, or the restriction and who asked for it."""
+    depth = plan.get("max_depth", -1)
+    if depth == -1:
+        return "full transport"
+    who = {"user": "--max-depth", "stage": "stage metadata"}.get(plan.get("max_depth_source"), "an older plan rule")
+    return f"max_depth {depth} ({who})"
+
+
 def _reference_info(dataset: Dataset, scenes: list[str]) -> dict:
-    seconds, spps = [], set()
+    """Reference seconds and spp, the light transport of every scene's plan (``transport``: one line,
+    naming restricted scenes), and the adaptive references' spp used and worst floor reached."""
+    seconds, spps, used, floors, restricted = [], set(), [], [], {}
     for scene in scenes:
         info = dataset.scene(scene)
         for record in info.record.get("renders", {}).get("reference", {}).values():
             if record.get("seconds") is not None:
                 seconds.append(float(record["seconds"]))
+            adaptive = record.get("reference_adaptive") or {}
+            if adaptive:
+                used.append(int(adaptive["spp"]))
+                floors.append(float(adaptive["floor"]))
         if info.ref_spp:
             spps.add(int(info.ref_spp))
-    return {"seconds": float(np.mean(seconds)) if seconds else None, "spp": max(spps) if spps else None}
+        transport = _transport(info.record.get("plan") or {})
+        if transport != "full transport":
+            restricted[scene] = transport
+    line = "full transport" if not restricted else "restricted transport: " + "; ".join(
+        f"{scene} {what}" for scene, what in sorted(restricted.items()))
+    return {"seconds": float(np.mean(seconds)) if seconds else None, "spp": max(spps) if spps else None,
+            "transport": line, "restricted": restricted,
+            "spp_used": [min(used), max(used)] if used else None, "floor_max": max(floors) if floors else None}
 
 
 def _comparisons(store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: int) -> list[dict]:
@@ -113,6 +142,62 @@ def _comparisons(store: ResultsStore, data: analysis.RunData, dataset: Dataset, 
     return out
 
 
+#: Temporal metrics the flicker table leads with (scale-free); the others follow, linear ones last.
+FLICKER_LEAD = ("temporal_relmse", "tpsnr")
+
+
+def temporal_metric_order(names: list[str]) -> list[str]:
+    """The flicker table's columns: FLICKER_LEAD, then other mean-aggregated (scale-free) metrics,
+    then the rest (linear diagnostics such as temporal_l1), each group in name order."""
+    from .aggregate import rule_of
+
+    lead = [m for m in FLICKER_LEAD if m in names]
+    rest = sorted(m for m in names if m not in lead)
+    return lead + [m for m in rest if rule_of(m) == "mean"] + [m for m in rest if rule_of(m) != "mean"]
+
+
+def _flicker(data: analysis.RunData) -> dict:
+    """{spp: [...], metrics: [...], series: {metric: {spp: {label: [per-frame means]}}}}."""
+    metrics = analysis.flicker_metrics(data)
+    series: dict[str, dict[int, dict]] = {}
+    for metric in metrics:
+        for spp in data.spp:
+            found = analysis.flicker_series(data, spp, metric)
+            if found:
+                series.setdefault(metric, {})[spp] = found
+    return {"spp": list(data.spp), "metrics": [m for m in metrics if m in series], "series": series}
+
+
+def _strips(store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: int) -> list[dict]:
+    """Per scene: the noisy input's, each denoiser's and the reference's strip of one crop at ``spp``."""
+    out = []
+    for scene in data.scenes:
+        found = [(label, store.strip(data.run_id, label, scene, spp)) for label in data.labels]
+        found = [(label, strip) for label, strip in found if strip is not None]
+        if not found:
+            continue
+        first = found[0][1]
+        top, left, side, count = first["top"], first["left"], first["side"], len(first["crops"])
+        same = [(label, st) for label, st in found if (st["top"], st["left"], st["side"], st["first_frame"]) ==
+                (top, left, side, first["first_frame"])]
+        refs = np.stack([
+            dataset.frame(scene, spp, first["first_frame"] + i, samples=False, buffers=["color"]).reference[top : top + side, left : left + side]
+            for i in range(count)
+        ])
+        scale = max(1, 96 // side)
+        entries = []
+        for label, crops in [(label, st["crops"]) for label, st in same] + [("reference", refs)]:
+            entries.append({
+                "label": label,
+                "kind": "input" if label == NOISY else ("reference" if label == "reference" else "denoiser"),
+                "strip": images.data_uri(strips.strip_png(crops, scale)),
+                "animation": images.data_uri(strips.strip_apng(crops, scale)),
+            })
+        out.append({"scene": scene, "spp": spp, "first_frame": first["first_frame"], "frames": count,
+                    "window": {"top": top, "left": left, "side": side}, "entries": entries})
+    return out
+
+
 def build_report(store: ResultsStore, run_id: str, dataset: Dataset, denoisers: dict[str, object] | None = None) -> dict:
     """Everything the report shows, as plain data (figures as PNG/SVG, images as data URIs)."""
     from .stability import stability_table
@@ -125,10 +210,9 @@ def build_report(store: ResultsStore, run_id: str, dataset: Dataset, denoisers: 
     figure_files = {}
     if any(p.points for p in panels):
         figure_files["accuracy_time"] = figures.accuracy_time_figure(panels, palette)
-    flicker_spp = data.spp[0] if data.spp else None
-    flicker = analysis.flicker_series(data, flicker_spp) if flicker_spp is not None else {}
-    if flicker:
-        figure_files["flicker"] = figures.flicker_figure(flicker, flicker_spp, palette)
+    flicker = _flicker(data)
+    if flicker["series"]:
+        figure_files["flicker"] = figures.flicker_figure(flicker["series"], palette)
     scene_effects = _scene_effects(dataset, data.scenes)
     failures = [
         {"denoiser": u["denoiser"], "scene": u["scene"], "spp": u["spp"], "error": u["error"]}
@@ -147,7 +231,10 @@ def build_report(store: ResultsStore, run_id: str, dataset: Dataset, denoisers: 
         "accuracy": panels,
         "readings": {p.metric: analysis.readings(p) for p in panels},
         "effects": analysis.effect_breakdown(data, scene_effects),
-        "flicker": {"spp": flicker_spp, "series": flicker},
+        "flicker": flicker,
+        "temporal_metrics": temporal_metric_order(data.sequence_metric_names),
+        "indistinguishable": analysis.indistinguishable_pairs(data, summary),
+        "strips": _strips(store, data, dataset, data.spp[0]) if data.spp else [],
         "failures": failures,
         "comparisons": _comparisons(store, data, dataset, data.spp[0]) if data.spp else [],
         "stability": stability_table(denoisers) if denoisers else None,
@@ -171,7 +258,9 @@ def results_json(report: dict) -> dict:
             {"denoiser": r.denoiser, "spp": r.spp, "frames": r.frames, "failed_units": r.failed_units, "errors": r.errors,
              "denoise_seconds_per_frame": r.denoise_seconds, "total_seconds_per_frame": r.total_seconds,
              "render_seconds_per_frame": r.render_seconds,
-             "metrics": {m: {"mean": c.mean, "ci95": [c.low, c.high], "scenes": c.scenes} for m, c in r.metrics.items()}}
+             "metrics": {m: {"mean": c.mean, "ci95": [c.low, c.high], "scenes": c.scenes, "aggregate": c.rule,
+                             **({"floor": c.floor, "corrected": c.corrected} if c.floor is not None else {})}
+                         for m, c in r.metrics.items()}}
             for r in report["summary"]
         ],
         "accuracy_time": [
@@ -183,6 +272,7 @@ def results_json(report: dict) -> dict:
         "readings": report["readings"],
         "effects": report["effects"],
         "flicker": report["flicker"],
+        "not_distinguishable": [vars(p) for p in report["indistinguishable"]],
         "failures": report["failures"],
         "stability": report["stability"],
         "frames": report["frames"],
@@ -206,14 +296,21 @@ def csv_cell(value):
 
 
 def results_csv(report: dict) -> str:
-    """One row per frame: ids, status, seconds, then every frame metric."""
-    metrics = report["frame_metrics"] + ["flicker"]
+    """One row per frame: ids, status, seconds, then every frame metric, the floor and corrected value
+    (``<metric>_floor``, ``<metric>_corrected``) of those that have a floor, and the per-frame flicker."""
+    flicker = sorted({m for f in report["frames"] for m in f["metrics"] if m.startswith("flicker")})
+    floored = [m for m in report["frame_metrics"] if any(m in f.get("floors", {}) for f in report["frames"])]
+    metrics = report["frame_metrics"] + flicker
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(["run_id", "denoiser", "scene", "spp", "frame", "status", "error", "render_seconds",
-                     "denoise_seconds", "total_seconds", "sanitized", *metrics])
+                     "denoise_seconds", "total_seconds", "sanitized", *metrics,
+                     *(f"{m}_{part}" for m in floored for part in ("floor", "corrected"))])
     for f in report["frames"]:
         values = [f["metrics"].get(m) for m in metrics]
+        for m in floored:
+            value, floor = f["metrics"].get(m), f.get("floors", {}).get(m)
+            values += [floor, None if value is None or floor is None else value - floor]
         writer.writerow([report["run"]["run_id"], csv_cell(f["denoiser"]), csv_cell(f["scene"]), f["spp"], f["frame"],
                          f["status"], csv_cell(f["error"] or ""),
                          f["render_seconds"], f["denoise_seconds"], f["total_seconds"], f["sanitized"],

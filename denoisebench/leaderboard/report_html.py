@@ -137,12 +137,22 @@ def _accuracy(report: dict) -> str:
 
 
 def _results(report: dict) -> str:
-    parts = ['<p class="note">Mean over scenes, with a bootstrap 95&nbsp;% interval over scenes in brackets when there '
-             "are at least two; \u2193 lower is better, \u2191 higher is better. Seconds are per frame.</p>"]
+    parts = ['<p class="note">Scores combined over scenes by each metric\'s rule: scale-free scores by their mean; '
+             "linear-radiance ones (marked) by the geometric mean, or per scene relative to the noisy input (\u00d7 input: "
+             "the geometric-mean share of the input's score left), so that no single bright scene decides. A bootstrap "
+             "95&nbsp;% interval over scenes, which includes the reference's own uncertainty, is in brackets when there "
+             "are at least two scenes; \u2193 lower is better, \u2191 higher is better. Seconds are per frame. "
+             "<b>floor</b>: the score a perfect denoiser would get against this noisy reference (from its variance "
+             "buffer); <b>\u2212 floor</b>: the score corrected for it, an unbiased estimate of the error against the "
+             "noise-free image.</p>"]
     for spp in report["spp"]:
         header, rows = fmt.summary_rows(report, spp)
         classes = ["input" if r[0] == "noisy" else "" for r in rows]
         parts.append(f"<h3>{spp} spp</h3>" + _table(header, rows, classes))
+    lines = fmt.indistinguishable_lines(report)
+    if lines:
+        parts.append("<h3>Not distinguishable at this reference quality</h3><ul class=\"readings\">"
+                     + "".join(f"<li>{e(line)}</li>" for line in lines) + "</ul>")
     return "".join(parts)
 
 
@@ -162,15 +172,40 @@ def _effects(report: dict) -> str:
     return note + _table(header, rows, cell_classes=worst_cell)
 
 
+def _strip_section(report: dict) -> str:
+    if not report.get("strips"):
+        return ""
+    parts = ['<h3>Frame strips</h3><p class="note">One crop (where the noisy input flickers most) of the first frames '
+             "of each sequence at the lowest input spp, frames left to right, and the same frames looping in place; "
+             "tone-mapped like the metrics. Flicker is a change from frame to frame that the reference's row does not "
+             "have.</p>"]
+    for strip in report["strips"]:
+        w = strip["window"]
+        parts.append(f'<h3>{e(strip["scene"])} \u2014 frames {strip["first_frame"]}\u2013{strip["first_frame"] + strip["frames"] - 1}, '
+                     f'{strip["spp"]} spp, crop at ({w["left"]}, {w["top"]}), {w["side"]} px</h3>')
+        rows = "".join(
+            f'<div class="tile {e(entry["kind"])}" style="display:flex;gap:8px;align-items:center;text-align:left">'
+            f'<img alt="animated crop of {e(entry["label"])}" src="{entry["animation"]}">'
+            f'<img alt="frames of {e(entry["label"])}" src="{entry["strip"]}"><div>{e(entry["label"])}</div></div>'
+            for entry in strip["entries"]
+        )
+        parts.append(f'<div style="display:flex;flex-direction:column;gap:4px">{rows}</div>')
+    return "".join(parts)
+
+
 def _flicker(report: dict) -> str:
     if not report["flicker"]["series"]:
-        return '<p class="note">Sequences of one frame: no flicker to measure.</p>'
-    rows = []
-    for r in report["summary"]:
-        if r.spp == report["flicker"]["spp"]:
-            rows.append([r.denoiser, *(fmt.cell_text(r.metrics.get(m)) for m in report["sequence_metrics"])])
-    return (_figure(report, "flicker", "flicker per frame")
-            + _table(["denoiser", *(fmt.metric_heading(m) for m in report["sequence_metrics"])], rows))
+        return '<p class="note">Sequences of one frame: no flicker to measure.</p>' + _strip_section(report)
+    parts = [_figure(report, "flicker", "flicker per frame, one panel per input spp"),
+             '<p class="note">Temporal relMSE: the squared difference of the warped frame differences (motion '
+             "buffer, disocclusions masked) over the reference's local magnitude squared plus 0.01, scale-free like "
+             "relMSE; tPSNR: PSNR of the tone-mapped frame differences. Both lead; other temporal metrics follow, and "
+             "the linear temporal_l1 scores, kept as diagnostics, are shown relative to the noisy input.</p>"]
+    for spp in report["spp"]:
+        header, rows = fmt.flicker_rows(report, spp)
+        classes = ["input" if r[0] == "noisy" else "" for r in rows]
+        parts.append(f"<h3>{spp} spp</h3>" + _table(header, rows, classes))
+    return "".join(parts) + _strip_section(report)
 
 
 def _tile(entry: dict, element_id: str) -> str:
@@ -238,7 +273,7 @@ def render_html(report: dict) -> str:
     run = report["run"]
     meta = (f"run {e(run['run_id'])} \u00b7 dataset {e(run['dataset_hash'][:12])} ({e(run['dataset_path'])}) \u00b7 split "
             f"{e(run['config'].get('split'))} \u00b7 {len(report['scenes'])} scene(s) \u00b7 input spp "
-            f"{e(', '.join(map(str, report['spp'])))} \u00b7 reference {e(report['reference']['spp'])} spp \u00b7 started "
+            f"{e(', '.join(map(str, report['spp'])))} \u00b7 reference {e(report['reference']['spp'])} spp ({e(report['reference'].get('transport', 'full transport'))}) \u00b7 started "
             f"{e(run['created_at'])}, finished {e(run['finished_at'] or 'not yet (partial results)')}")
     versions = ", ".join(f"{k} {v}" for k, v in sorted(run["versions"].items()))
     sections = [

@@ -33,7 +33,7 @@ def render_markdown(report: dict) -> str:
         "",
         f"Run `{run['run_id']}` on dataset `{run['dataset_hash'][:12]}` ({md(run['dataset_path'])}), split "
         f"{md(run['config'].get('split'))}: {len(report['scenes'])} scene(s), input spp {', '.join(map(str, report['spp']))}, "
-        f"reference {report['reference']['spp']} spp. Started {run['created_at']}, finished {run['finished_at'] or 'not yet (partial)'}.",
+        f"reference {report['reference']['spp']} spp ({report['reference'].get('transport', 'full transport')}). Started {run['created_at']}, finished {run['finished_at'] or 'not yet (partial)'}.",
         "",
         "## Accuracy against time",
         "",
@@ -49,10 +49,18 @@ def render_markdown(report: dict) -> str:
     for panel in report["accuracy"]:
         for hidden in panel.hidden:
             lines.append(f"- not drawn: {md(hidden)}")
-    lines += ["## Results", "", "Mean over scenes with a bootstrap 95 % interval over scenes (↓ lower is better, ↑ higher).", ""]
+    lines += ["## Results", "",
+              "Scores combined over scenes by each metric's rule (scale-free ones by their mean; linear ones by the "
+              "geometric mean or relative to the noisy input, as marked), with a bootstrap 95 % interval over scenes "
+              "that includes the reference's uncertainty (↓ lower is better, ↑ higher). *floor*: the score of a perfect "
+              "denoiser against this noisy reference; *− floor*: the score corrected for it (unbiased against the "
+              "noise-free image).", ""]
     for spp in report["spp"]:
         header, rows = fmt.summary_rows(report, spp)
         lines += [f"### {spp} spp", ""] + _table(header, rows)
+    pairs = fmt.indistinguishable_lines(report)
+    if pairs:
+        lines += ["### Not distinguishable at this reference quality", ""] + [f"- {md(p)}" for p in pairs] + [""]
     header, rows, worst = fmt.effect_rows(report)
     lines += ["## Per-effect breakdown", "",
               f"Share of the noisy input's {report['effects']['metric']} left after denoising (geometric mean over the scenes "
@@ -64,7 +72,14 @@ def render_markdown(report: dict) -> str:
         lines += ["The scenes declare no effects.", ""]
     lines += ["## Temporal flicker", ""]
     if report["flicker"]["series"]:
-        lines += ["![flicker per frame](figures/flicker.png)", ""]
+        lines += ["![flicker per frame](figures/flicker.png)", "",
+                  "Temporal relMSE (warped frame differences over the reference's local magnitude, scale-free) and "
+                  "tPSNR lead; linear temporal scores follow relative to the noisy input.", ""]
+        for spp in report["spp"]:
+            header, rows = fmt.flicker_rows(report, spp)
+            lines += [f"### {spp} spp", ""] + _table(header, rows)
+        if report.get("strips"):
+            lines += ["Frame strips of one crop per denoiser are in index.html.", ""]
     else:
         lines += ["Sequences of one frame: no flicker to measure.", ""]
     lines += ["## Image comparisons", "", "Open index.html for the images, zoomed crops and the interactive compare.", ""]

@@ -49,10 +49,13 @@ from denoisebench.errors import UserInputError
 from .store import FrameRecord, ResultsStore, UnitRecord
 
 NOISY = "noisy"
-#: Metrics the report leads with; always computed.
-REQUIRED_METRICS = ("relmse", "flip")
-#: Per-frame flicker: temporal_l1 of frames (t−1, t), stored as a frame metric of frame t.
-FLICKER_METRIC = "temporal_l1"
+#: Metrics the report leads with; always computed (temporal ones on sequences of ≥ 2 frames).
+REQUIRED_METRICS = ("relmse", "flip", "temporal_relmse", "tpsnr")
+#: Per-frame flicker: these temporal metrics of frames (t−1, t), stored as frame metrics
+#: ``flicker.<name>`` of frame t (scale-free ones: the flicker figure averages them over scenes).
+#: Runs before issue 15 stored temporal_l1 as ``flicker``.
+FLICKER_METRICS = ("temporal_relmse", "tpsnr")
+FLICKER_PREFIX = "flicker."
 #: Distributions whose versions a run records (those installed).
 VERSIONED = (
     "denoisebench", "numpy", "scipy", "scikit-image", "colour-science", "flip-evaluator", "OpenEXR",
@@ -217,30 +220,48 @@ def check_dataset(dataset: Dataset, scenes: list[str], spp: list[int]) -> None:
 # one unit
 
 
-def _frame_metrics(pred: np.ndarray, ref: np.ndarray, names: list[str]) -> dict[str, float]:
+def _split_results(results) -> tuple[dict[str, float], dict[str, float], dict[str, float]]:
+    """(values, floors, ref_se) of compute_metrics results; floors only where the metric has one."""
+    values = {name: r.value for name, r in results.items()}
+    floors = {name: r.floor for name, r in results.items() if r.floor is not None}
+    ses = {name: r.ref_se for name, r in results.items() if r.ref_se is not None}
+    return values, floors, ses
+
+
+def _frame_metrics(pred: np.ndarray, ref: np.ndarray, names: list[str], ref_var=None):
     from denoisebench.metrics import compute_metrics
 
-    return {name: result.value for name, result in compute_metrics(pred, ref, names).items()}
+    return _split_results(compute_metrics(pred, ref, names, ref_var=ref_var))
 
 
-def _sequence_metrics(outputs, refs, motion, names: list[str]) -> dict[str, float]:
+def _sequence_metrics(outputs, refs, motion, names: list[str], ref_vars=None):
     from denoisebench.metrics import compute_metrics, get_metric
 
     usable = [n for n in names if "motion" not in get_metric(n).requires or motion is not None]
     if len(outputs) < 2 or not usable:
-        return {}
-    results = compute_metrics(np.stack(outputs), np.stack(refs), usable, motion=motion)
-    return {name: result.value for name, result in results.items()}
+        return {}, {}, {}
+    ref_var = None if ref_vars is None else np.stack(ref_vars)
+    return _split_results(compute_metrics(np.stack(outputs), np.stack(refs), usable, motion=motion, ref_var=ref_var))
 
 
-def _flicker(outputs, refs) -> list[float]:
-    """temporal_l1 of each consecutive pair: the flicker of frame t against frame t−1."""
+def _flicker(outputs, refs, motion=None) -> list[dict[str, float]]:
+    """FLICKER_METRICS of each consecutive pair: the flicker of frame t against frame t−1."""
     from denoisebench.metrics import compute_metrics
 
-    return [
-        compute_metrics(np.stack(outputs[t - 1 : t + 1]), np.stack(refs[t - 1 : t + 1]), [FLICKER_METRIC])[FLICKER_METRIC].value
-        for t in range(1, len(outputs))
-    ]
+    out = []
+    for t in range(1, len(outputs)):
+        pair_motion = None if motion is None else motion[t - 1 : t + 1]
+        results = compute_metrics(np.stack(outputs[t - 1 : t + 1]), np.stack(refs[t - 1 : t + 1]), list(FLICKER_METRICS), motion=pair_motion)
+        out.append({FLICKER_PREFIX + name: r.value for name, r in results.items()})
+    return out
+
+
+def _reference_variance(frame) -> np.ndarray | None:
+    """The reference's per-pixel variance of the mean (``color_var`` of the reference file), or None."""
+    var = frame.meta.get("reference_buffers", {}).get("color_var") if isinstance(frame.meta, dict) else None
+    if var is None or frame.reference is None or np.shape(var)[:2] != frame.reference.shape[:2]:
+        return None
+    return np.asarray(var, dtype=np.float32)
 
 
 def measure_unit(label: str, denoiser: object | None, sequence, spatial: list[str], temporal: list[str]) -> UnitRecord:
@@ -266,7 +287,7 @@ def measure_unit(label: str, denoiser: object | None, sequence, spatial: list[st
         record = FrameRecord(frame.index, "ok" if ok else "failed", error, render, seconds, total, sanitized)
         if ok:
             try:
-                record.metrics = _frame_metrics(output, frame.reference, spatial)
+                record.metrics, record.floors, record.ref_se = _frame_metrics(output, frame.reference, spatial, _reference_variance(frame))
             except ValueError as exc:  # a metric refusing this output is the denoiser's failure
                 record.status, record.error, ok = "failed", f"metrics: {exc}", False
         if ok:
@@ -279,11 +300,18 @@ def measure_unit(label: str, denoiser: object | None, sequence, spatial: list[st
         return unit
     refs = [f.reference for f in frames]
     motion = np.stack([f.buffers["motion"] for f in frames]) if all(f.has("motion") for f in frames) else None
-    unit.sequence_metrics = _sequence_metrics(outputs, refs, motion, temporal)
+    ref_vars = [_reference_variance(f) for f in frames]
+    ref_vars = None if any(v is None for v in ref_vars) else ref_vars
+    unit.sequence_metrics, unit.sequence_floors, unit.sequence_ref_se = _sequence_metrics(outputs, refs, motion, temporal, ref_vars)
     if len(outputs) > 1:
-        for record, value in zip(records[1:], _flicker(outputs, refs)):
-            record.metrics["flicker"] = value
+        for record, values in zip(records[1:], _flicker(outputs, refs, motion)):
+            record.metrics.update(values)
     unit.image_frame, unit.image = frames[-1].index, outputs[-1]
+    if len(outputs) > 1:
+        from .strips import cut
+
+        first, unit.strip_window, unit.strip = cut(outputs, [f.color for f in frames], refs, motion)
+        unit.strip_first = frames[first].index
     return unit
 
 

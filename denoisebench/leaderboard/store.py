@@ -6,9 +6,11 @@ Tables (schema version :data:`SCHEMA_VERSION`, kept in ``schema_version``):
 ``run_denoisers``   the denoisers of a run: label, spec, needs, temporal, load error (if any)
 ``units``           one denoiser on one sequence (scene) at one input spp: status, error, seconds
 ``frames``          one row per frame of a unit: status, error, render/denoise/total seconds
-``frame_metrics``   metric values per frame (spatial, gradient, and per-frame flicker)
-``sequence_metrics``  temporal metric values per unit
+``frame_metrics``   metric values per frame (spatial, gradient, and per-frame flicker), with the
+                    reference-noise ``floor`` and ``ref_se`` of MSE-family metrics (else NULL)
+``sequence_metrics``  temporal metric values per unit (same ``floor``/``ref_se`` columns)
 ``images``          the denoised last frame of each unit (zlib-compressed float32), for reports
+``strips``          a crop of the unit's first frames (:mod:`.strips`, zlib-compressed float32)
 
 Notes
 -----
@@ -20,6 +22,11 @@ Notes
   upgrade, and the busy timeout makes the second wait instead of failing. Two processes running the
   same run compute the same unit at worst twice: the second finds the row inside its transaction
   and writes nothing (:meth:`ResultsStore.write_unit` returns False).
+* **Schema versions.** Version 2 added ``floor`` and ``ref_se`` to ``frame_metrics`` and
+  ``sequence_metrics`` and the ``strips`` table (:mod:`denoisebench.metrics.floors`). A version-1 database opened for
+  writing is migrated in place (``ALTER TABLE ... ADD COLUMN``, one transaction; its old rows get
+  NULL floors); opened read-only it is read as it is, every floor None. A newer version than this
+  code knows is refused.
 * The WAL journal mode is a property of the database file; network file systems do not support it
   (SQLite's documentation): keep the database on a local disk.
 """
@@ -40,7 +47,9 @@ import numpy as np
 
 from denoisebench.errors import UserInputError
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: Versions this code reads (older ones are migrated when opened for writing).
+READABLE_VERSIONS = (1, 2)
 #: Seconds a writer waits for another's transaction before giving up.
 BUSY_TIMEOUT_S = 120.0
 
@@ -101,6 +110,8 @@ CREATE TABLE IF NOT EXISTS frame_metrics (
     frame INTEGER NOT NULL,
     metric TEXT NOT NULL,
     value REAL,
+    floor REAL,
+    ref_se REAL,
     PRIMARY KEY (run_id, denoiser, scene, spp, frame, metric)
 );
 CREATE TABLE IF NOT EXISTS sequence_metrics (
@@ -110,6 +121,8 @@ CREATE TABLE IF NOT EXISTS sequence_metrics (
     spp INTEGER NOT NULL,
     metric TEXT NOT NULL,
     value REAL,
+    floor REAL,
+    ref_se REAL,
     PRIMARY KEY (run_id, denoiser, scene, spp, metric)
 );
 CREATE TABLE IF NOT EXISTS images (
@@ -123,9 +136,22 @@ CREATE TABLE IF NOT EXISTS images (
     data BLOB NOT NULL,
     PRIMARY KEY (run_id, denoiser, scene, spp)
 );
+CREATE TABLE IF NOT EXISTS strips (
+    run_id TEXT NOT NULL,
+    denoiser TEXT NOT NULL,
+    scene TEXT NOT NULL,
+    spp INTEGER NOT NULL,
+    first_frame INTEGER NOT NULL,
+    frames INTEGER NOT NULL,
+    top INTEGER NOT NULL,
+    left_px INTEGER NOT NULL,
+    side INTEGER NOT NULL,
+    data BLOB NOT NULL,
+    PRIMARY KEY (run_id, denoiser, scene, spp)
+);
 """
 
-_UNIT_TABLES = ("frames", "frame_metrics", "sequence_metrics", "images")
+_UNIT_TABLES = ("frames", "frame_metrics", "sequence_metrics", "images", "strips")
 
 
 def utc_now() -> str:
@@ -144,6 +170,8 @@ class FrameRecord:
     total_seconds: float | None
     sanitized: int = 0
     metrics: dict[str, float] = field(default_factory=dict)
+    floors: dict[str, float] = field(default_factory=dict)  # reference-noise floor per MSE-family metric
+    ref_se: dict[str, float] = field(default_factory=dict)  # the score's standard error from the reference's noise
 
 
 @dataclass
@@ -157,8 +185,13 @@ class UnitRecord:
     error: str | None
     frames: list[FrameRecord]
     sequence_metrics: dict[str, float] = field(default_factory=dict)
+    sequence_floors: dict[str, float] = field(default_factory=dict)
+    sequence_ref_se: dict[str, float] = field(default_factory=dict)
     image_frame: int | None = None
     image: np.ndarray | None = None  # H×W×3 float32: the denoised frame ``image_frame``
+    strip_first: int | None = None  # first frame of the strip
+    strip_window: tuple[int, int, int] | None = None  # (top, left, side) of its crop
+    strip: np.ndarray | None = None  # F×side×side×3 float32 crops of consecutive outputs
 
     @property
     def denoise_seconds(self) -> float | None:
@@ -216,17 +249,27 @@ class ResultsStore:
                 self.conn.execute(statement)
             if self.conn.execute("SELECT COUNT(*) FROM schema_version").fetchone()[0] == 0:
                 self.conn.execute("INSERT INTO schema_version (version) VALUES (?)", (SCHEMA_VERSION,))
+            version = self.conn.execute("SELECT MAX(version) FROM schema_version").fetchone()[0]
+            if version == 1:  # 1 → 2: floors (CREATE TABLE IF NOT EXISTS left the old tables as they were)
+                for table in ("frame_metrics", "sequence_metrics"):
+                    have = {row[1] for row in self.conn.execute(f"PRAGMA table_info({table})")}
+                    for column in ("floor", "ref_se"):
+                        if column not in have:
+                            self.conn.execute(f"ALTER TABLE {table} ADD COLUMN {column} REAL")
+                self.conn.execute("UPDATE schema_version SET version = 2")
 
     def _check_version(self) -> None:
         try:
             row = self.conn.execute("SELECT MAX(version) FROM schema_version").fetchone()
         except sqlite3.OperationalError:
             raise UserInputError(f"{self.path} is not a denoisebench results database (no schema_version table)") from None
-        if row is None or row[0] != SCHEMA_VERSION:
+        if row is None or row[0] not in READABLE_VERSIONS:
             raise UserInputError(
                 f"{self.path} has results schema version {row[0] if row else None}; "
-                f"this denoisebench reads version {SCHEMA_VERSION}"
+                f"this denoisebench reads versions {', '.join(map(str, READABLE_VERSIONS))}"
             )
+        self.version = int(row[0])
+        self._floor_columns = "floor, ref_se" if self.version >= 2 else "NULL, NULL"
 
     @contextmanager
     def transaction(self) -> Iterator[sqlite3.Connection]:
@@ -330,18 +373,29 @@ class ResultsStore:
                      _finite_or_none(f.denoise_seconds), _finite_or_none(f.total_seconds), int(f.sanitized)),
                 )
                 conn.executemany(
-                    "INSERT INTO frame_metrics (run_id, denoiser, scene, spp, frame, metric, value) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                    [(*key, f.frame, name, _finite_or_none(value)) for name, value in f.metrics.items()],
+                    "INSERT INTO frame_metrics (run_id, denoiser, scene, spp, frame, metric, value, floor, ref_se) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    [(*key, f.frame, name, _finite_or_none(value), _finite_or_none(f.floors.get(name)),
+                      _finite_or_none(f.ref_se.get(name))) for name, value in f.metrics.items()],
                 )
             conn.executemany(
-                "INSERT INTO sequence_metrics (run_id, denoiser, scene, spp, metric, value) VALUES (?, ?, ?, ?, ?, ?)",
-                [(*key, name, _finite_or_none(value)) for name, value in unit.sequence_metrics.items()],
+                "INSERT INTO sequence_metrics (run_id, denoiser, scene, spp, metric, value, floor, ref_se) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                [(*key, name, _finite_or_none(value), _finite_or_none(unit.sequence_floors.get(name)),
+                  _finite_or_none(unit.sequence_ref_se.get(name))) for name, value in unit.sequence_metrics.items()],
             )
             if unit.image is not None and unit.image_frame is not None:
                 height, width = unit.image.shape[:2]
                 conn.execute(
                     "INSERT INTO images (run_id, denoiser, scene, spp, frame, height, width, data) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
                     (*key, int(unit.image_frame), height, width, encode_image(unit.image)),
+                )
+            if unit.strip is not None and unit.strip_window is not None:
+                top, left, side = unit.strip_window
+                conn.execute(
+                    "INSERT INTO strips (run_id, denoiser, scene, spp, first_frame, frames, top, left_px, side, data) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                    (*key, int(unit.strip_first or 0), len(unit.strip), int(top), int(left), int(side),
+                     zlib.compress(np.ascontiguousarray(unit.strip, dtype="<f4").tobytes(), 6)),
                 )
             conn.execute(
                 "INSERT INTO units (run_id, denoiser, scene, spp, status, error, frames, frames_ok, denoise_seconds, "
@@ -363,28 +417,35 @@ class ResultsStore:
         return [dict(zip(keys, r)) for r in rows]
 
     def frames(self, run_id: str) -> list[dict]:
-        """Every frame row of ``run_id`` with its metrics as ``metrics: {name: value}``."""
+        """Every frame row of ``run_id`` with its metrics as ``metrics: {name: value}``, and
+        ``floors``/``ref_se`` ``{name: value}`` for the metrics that have them."""
         keys = ("denoiser", "scene", "spp", "frame", "status", "error", "render_seconds", "denoise_seconds", "total_seconds", "sanitized")
         rows = {
-            tuple(r[:4]): dict(zip(keys, r), metrics={})
+            tuple(r[:4]): dict(zip(keys, r), metrics={}, floors={}, ref_se={})
             for r in self.conn.execute(
                 f"SELECT {', '.join(keys)} FROM frames WHERE run_id = ? ORDER BY denoiser, scene, spp, frame", (run_id,)
             )
         }
-        for denoiser, scene, spp, frame, metric, value in self.conn.execute(
-            "SELECT denoiser, scene, spp, frame, metric, value FROM frame_metrics WHERE run_id = ?", (run_id,)
+        for denoiser, scene, spp, frame, metric, value, floor, se in self.conn.execute(
+            f"SELECT denoiser, scene, spp, frame, metric, value, {self._floor_columns} FROM frame_metrics WHERE run_id = ?", (run_id,)
         ):
             row = rows.get((denoiser, scene, spp, frame))
             if row is not None:
                 row["metrics"][metric] = value
+                if floor is not None:
+                    row["floors"][metric] = floor
+                if se is not None:
+                    row["ref_se"][metric] = se
         return list(rows.values())
 
     def sequence_metrics(self, run_id: str) -> list[dict]:
+        """Temporal metric rows: denoiser, scene, spp, metric, value, floor, ref_se (None without)."""
         rows = self.conn.execute(
-            "SELECT denoiser, scene, spp, metric, value FROM sequence_metrics WHERE run_id = ? ORDER BY denoiser, scene, spp, metric",
+            f"SELECT denoiser, scene, spp, metric, value, {self._floor_columns} FROM sequence_metrics WHERE run_id = ? "
+            "ORDER BY denoiser, scene, spp, metric",
             (run_id,),
         )
-        return [dict(zip(("denoiser", "scene", "spp", "metric", "value"), r)) for r in rows]
+        return [dict(zip(("denoiser", "scene", "spp", "metric", "value", "floor", "ref_se"), r)) for r in rows]
 
     def image(self, run_id: str, denoiser: str, scene: str, spp: int) -> tuple[int, np.ndarray] | None:
         """(frame index, H×W×3 float32) of the stored output of a unit, or None."""
@@ -396,10 +457,24 @@ class ResultsStore:
             return None
         return int(row[0]), decode_image(row[3], row[1], row[2])
 
+    def strip(self, run_id: str, denoiser: str, scene: str, spp: int) -> dict | None:
+        """The unit's strip: {first_frame, top, left, side, crops F×side×side×3}, or None (none, or a v1 database)."""
+        if self.version < 2:
+            return None
+        row = self.conn.execute(
+            "SELECT first_frame, frames, top, left_px, side, data FROM strips WHERE run_id = ? AND denoiser = ? AND scene = ? AND spp = ?",
+            (run_id, denoiser, scene, int(spp)),
+        ).fetchone()
+        if row is None:
+            return None
+        first, count, top, left, side, blob = row
+        crops = np.frombuffer(zlib.decompress(blob), dtype="<f4").reshape(count, side, side, 3).astype(np.float32)
+        return {"first_frame": int(first), "top": int(top), "left": int(left), "side": int(side), "crops": crops}
+
     def integrity_problems(self) -> list[str]:
         """SQLite's integrity check plus ours: every frame row belongs to a unit row and vice versa."""
         problems = [r[0] for r in self.conn.execute("PRAGMA integrity_check") if r[0] != "ok"]
-        for table in _UNIT_TABLES:
+        for table in _UNIT_TABLES if self.version >= 2 else _UNIT_TABLES[:4]:
             orphans = self.conn.execute(
                 f"SELECT COUNT(*) FROM {table} t WHERE NOT EXISTS (SELECT 1 FROM units u WHERE u.run_id = t.run_id "
                 "AND u.denoiser = t.denoiser AND u.scene = t.scene AND u.spp = t.spp)"

@@ -2,8 +2,11 @@
 
 Each denoiser's entry comes from the newest run that measured it at that spp (a rerun with newer
 code replaces the older number); the run id and its date are shown, so numbers from different runs
-are never silently mixed. The value is the mean over every frame of every scene (temporal metrics:
-over sequences); failed units count as failed, not as missing, and rank last.
+are never silently mixed. The value combines the scenes by the metric's aggregation rule
+(:mod:`.aggregate`: per scene the mean over its frames, or the sequence's temporal value; then the
+mean, the geometric mean, or the geometric mean of the ratio to the same run's noisy input), so a
+bright scene never decides a linear score; failed units count as failed, not as missing, and rank
+last.
 
 Notes
 -----
@@ -20,6 +23,8 @@ from dataclasses import dataclass
 
 from denoisebench.errors import UserInputError
 
+from .aggregate import aggregate
+from .runner import NOISY
 from .store import ResultsStore
 
 
@@ -54,12 +59,23 @@ def pick_dataset(store: ResultsStore, dataset: str | None) -> str:
     return matches.pop()
 
 
+def _per_scene(m, label: str, ok_frames: list[dict], sequences: list[dict]) -> dict[str, float]:
+    """{scene: value} of one denoiser: its sequence value (temporal) or the mean over its frames."""
+    if m.temporal:
+        return {s["scene"]: s["value"] for s in sequences if s["denoiser"] == label and s["metric"] == m.name and s["value"] is not None}
+    by_scene: dict[str, list] = {}
+    for f in ok_frames:
+        if f["denoiser"] == label:
+            by_scene.setdefault(f["scene"], []).append(f["metrics"].get(m.name))
+    return {scene: v for scene, values in by_scene.items() if (v := _mean(values)) is not None}
+
+
 def leaderboard(store: ResultsStore, metric: str = "relmse", spp: int | None = None, dataset: str | None = None):
     """(metric object, spp, dataset hash, entries ranked best first)."""
     from denoisebench.metrics import get_metric
 
     try:
-        m = get_metric(metric) if metric != "flicker" else get_metric("temporal_l1")
+        m = get_metric(metric)
     except ValueError as exc:
         raise UserInputError(str(exc)) from None
     data_hash = pick_dataset(store, dataset)
@@ -79,15 +95,14 @@ def leaderboard(store: ResultsStore, metric: str = "relmse", spp: int | None = N
         labels = {u["denoiser"] for u in units} - set(entries)
         if not labels:
             continue
-        frames = [f for f in store.frames(run_id) if f["spp"] == spp and f["denoiser"] in labels]
-        sequences = [s for s in store.sequence_metrics(run_id) if s["spp"] == spp and s["denoiser"] in labels]
+        frames = [f for f in store.frames(run_id) if f["spp"] == spp and f["denoiser"] in labels | {NOISY}]
+        sequences = [s for s in store.sequence_metrics(run_id) if s["spp"] == spp and s["denoiser"] in labels | {NOISY}]
+        ok_frames = [f for f in frames if f["status"] == "ok"]
+        noisy = _per_scene(m, NOISY, ok_frames, sequences) if m.aggregate == "relative_to_input" else None
         for label in sorted(labels):
             mine = [f for f in frames if f["denoiser"] == label]
             ok = [f for f in mine if f["status"] == "ok"]
-            if m.temporal:
-                value = _mean(s["value"] for s in sequences if s["denoiser"] == label and s["metric"] == m.name)
-            else:
-                value = _mean(f["metrics"].get(m.name) for f in ok)
+            value = aggregate(m.aggregate, _per_scene(m, label, ok_frames, sequences), noisy)[0]
             failed = sum(1 for u in units if u["denoiser"] == label and u["status"] != "ok")
             if value is None and not failed:  # this run did not compute the metric: look further back
                 unmeasured.setdefault(label, Entry(label, None, len(ok), 0, None, None, run_id, run["created_at"]))
@@ -113,6 +128,10 @@ def _fmt(value: float | None, digits: int = 4) -> str:
 def format_leaderboard(metric, spp: int, data_hash: str, entries: list[Entry]) -> str:
     """A plain-text table for the terminal."""
     arrow = "higher is better" if metric.higher_is_better else "lower is better"
+    if metric.aggregate == "relative_to_input":
+        arrow += "; per scene relative to the noisy input, geometric mean over scenes"
+    elif metric.aggregate == "geomean":
+        arrow += "; geometric mean over scenes"
     header = ["#", "denoiser", metric.name, "s/frame denoise", "s/frame total", "frames", "run", "date"]
     rows = []
     for rank, e in enumerate(entries, 1):

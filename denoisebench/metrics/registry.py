@@ -109,7 +109,7 @@ ALIASES = {
     "de2000": "deltae2000",
     "ciede2000": "deltae2000",
     "gradient_l1": "grad_l1",
-    "flicker": "temporal_l1",
+    "flicker": "temporal_relmse",  # the lead flicker score (scale-free); temporal_l1 is a linear diagnostic
     "temporal_l1_warp": "temporal_l1_warped",
     "t_psnr": "tpsnr",
     "trelmse": "temporal_relmse",
