@@ -122,7 +122,7 @@ def test_render_adaptive_stops_at_the_target_or_the_cap_and_names_it():
 
 def test_round_schedule_and_seeds():
     assert round_schedule(4096) == (4096 // MAX_ROUNDS, MAX_ROUNDS)
-    assert round_schedule(1000) == (62, MAX_ROUNDS)  # the cap rounded down to whole rounds: 992
+    assert round_schedule(1000) == (15, MAX_ROUNDS)  # the cap rounded down to whole rounds: 960
     assert round_schedule(5) == (1, 5)
     with pytest.raises(ValueError):
         round_schedule(0)

@@ -35,7 +35,7 @@ pytestmark = pytest.mark.slow
 
 SIZE = 24
 BLOCK = 4
-OURS_SPP = 256  # 16 rounds of 16 (the adaptive reference's schedule at this cap)
+OURS_SPP = 256  # 64 rounds of 4 (the adaptive reference's schedule at this cap)
 REPLICAS, REPLICA_SPP = 16, 16
 
 

@@ -48,7 +48,7 @@ import numpy as np
 #: relMSE epsilon (DESIGN.md, "Metrics"): relMSE = mean((p − r)² / (r² + 0.01)).
 RELMSE_EPSILON = 0.01
 #: A frame is rendered in at most this many rounds of equal size (``round_spp = cap // MAX_ROUNDS``).
-MAX_ROUNDS = 16
+MAX_ROUNDS = 64
 #: Batch means need a few batches before the floor is trusted.
 MIN_ROUNDS = 4
 #: Buffers merged over rounds (each with its ``_var``), in output order.
