@@ -19,8 +19,27 @@ EPILOG = """examples:
   denoisebench scenes list
   denoisebench scenes make glossy_fireflies --seed 7 --out scenes/fireflies_7 --frames 8
   denoisebench scenes preview scenes/fireflies_7/scene.usda --out fireflies.png --frame 3
+  denoisebench scenes preview my_shot.usda --out direct_only.png --max-depth 2
   denoisebench scenes check my_shot.usda
+  denoisebench scenes preview asset.usdz --auto-camera --default-light --out asset.png
+  denoisebench scenes check shot.usda --camera /World/Cameras/Close
 """
+
+
+def _add_stage_options(parser) -> None:
+    parser.add_argument("--camera", default=None, metavar="PATH", help="camera prim to render (default: the first camera)")
+    parser.add_argument("--auto-camera", action="store_true",
+                        help="frame the stage's bounds with a slow orbiting camera (for stages without a camera)")
+    parser.add_argument("--default-light", action="store_true",
+                        help="light a stage that has no light: a uniform dome plus a key distant light")
+
+
+def translate_options(args, frames: int = 8) -> dict:
+    """Keywords of ``translate_usd`` from --camera/--auto-camera/--default-light (strict: refuse black stages)."""
+    if args.camera and args.auto_camera:
+        raise UserInputError("give --camera or --auto-camera, not both")
+    return {"camera_path": args.camera, "auto_camera": bool(args.auto_camera),
+            "default_light": bool(args.default_light), "frames": frames, "strict": True}
 
 
 def add_arguments(parser) -> None:
@@ -33,14 +52,19 @@ def add_arguments(parser) -> None:
     make.add_argument("--frames", type=int, default=8, help="frames in the camera animation (default 8)")
     make.add_argument("--out", required=True, help="output folder: gets scene.usda and textures/")
     preview = actions.add_parser("preview", help="render a quick tone-mapped PNG of a stage")
-    preview.add_argument("usd", help="a .usda/.usdc/.usd file")
+    preview.add_argument("usd", help="a .usda/.usdc/.usd/.usdz file")
     preview.add_argument("--out", required=True, help="PNG to write")
     preview.add_argument("--frame", type=int, default=0, help="frame index (default 0)")
     preview.add_argument("--width", type=int, default=256)
     preview.add_argument("--height", type=int, default=256)
     preview.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
+    preview.add_argument("--max-depth", type=int, default=None, metavar="N",
+                         help="restrict path depth (Mitsuba's convention: 2 = direct light only; -1 = unbounded); "
+                              "default: full transport, or the stage's own denoisebench maxDepth")
+    _add_stage_options(preview)
     check = actions.add_parser("check", help="translate a stage; print effects, render plan and warnings")
-    check.add_argument("usd", help="a .usda/.usdc/.usd file")
+    check.add_argument("usd", help="a .usda/.usdc/.usd/.usdz file")
+    _add_stage_options(check)
 
 
 def run(args) -> int:
@@ -89,8 +113,9 @@ def _preview(args) -> int:
 
     if args.width < 1 or args.height < 1 or args.spp < 1:
         raise UserInputError("--width, --height and --spp must be positive")
-    image, translated = render_preview(args.usd, frame=args.frame, width=args.width, height=args.height, spp=args.spp)
-    _report_warnings(translated)
+    image, translated = render_preview(args.usd, frame=args.frame, width=args.width, height=args.height, spp=args.spp,
+                                       max_depth=args.max_depth, translate_options=translate_options(args),
+                                       before_render=_report_warnings)
     print(write_png(tone_map_preview(image), args.out))
     return 0
 
@@ -99,9 +124,9 @@ def _check(args) -> int:
     from denoisebench.generator.render_plan import make_render_plan
     from denoisebench.generator.translate import translate_usd
 
-    translated = translate_usd(args.usd)
+    translated = translate_usd(args.usd, **translate_options(args))
     _report_warnings(translated)
-    plan = make_render_plan(translated.effects)
+    plan = make_render_plan(translated.effects, stage_max_depth=translated.max_depth)
     print(json.dumps({
         "family": translated.family or None,
         "frames": translated.camera.frames,

@@ -17,7 +17,7 @@ import numpy as np
 
 from denoisebench.errors import UserInputError
 from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
-from denoisebench.generator.render_plan import make_render_plan
+from denoisebench.generator.render_plan import RenderOptions, make_render_plan
 from denoisebench.generator.translate import translate_usd
 
 
@@ -34,15 +34,27 @@ def tone_map_preview(image: np.ndarray) -> np.ndarray:
 
 
 def render_preview(usd_path: str | Path, frame: int = 0, width: int = 256, height: int = 256, spp: int = 64,
-                   seed: int = 0) -> tuple[np.ndarray, "object"]:
-    """(linear HDR image H×W×3, translated scene) of ``usd_path`` at ``frame``."""
-    translated = translate_usd(usd_path)
+                   seed: int = 0, max_depth: int | None = None, translate_options: dict | None = None,
+                   before_render=None) -> tuple[np.ndarray, "object"]:
+    """(linear HDR image H×W×3, translated scene) of ``usd_path`` at ``frame``.
+
+    ``max_depth``: the user's transport restriction (None: the stage's own, else full transport).
+    ``translate_options``: keywords of :func:`translate_usd` (camera, auto camera, default light).
+    ``before_render(translated)`` is called before rendering starts (the CLI prints the warnings
+    there, so that they are seen even when rendering fails)."""
+    try:
+        options = RenderOptions(max_depth=max_depth)
+    except ValueError as error:
+        raise UserInputError(f"--max-depth: {error}") from None
+    translated = translate_usd(usd_path, **(translate_options or {}))
+    if before_render is not None:
+        before_render(translated)
     if not 0 <= frame < translated.camera.frames:
         raise UserInputError(f"--frame {frame} is out of range: the stage has {translated.camera.frames} frame(s)")
     from denoisebench.generator.feature_renderer import render_frame
 
-    plan = make_render_plan(translated.effects)
-    scene = build_mitsuba_scene(translated)
+    plan = make_render_plan(translated.effects, options, stage_max_depth=translated.max_depth)
+    scene = build_mitsuba_scene(translated, frame=frame)
     rendered = render_frame(scene, translated.camera, frame, plan, width=width, height=height, spp=spp,
                             seed=seed, reference=True)
     return rendered.buffers["color"], translated

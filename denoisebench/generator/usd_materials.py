@@ -95,7 +95,11 @@ def translate_material(material, warnings: list[str]) -> MaterialInfo:
         source, output = _connected_shader(shader_input)
         if source is not None:
             if _shader_id(source) == "UsdUVTexture":
-                return default, (source, output)
+                # The input's own authored value is the fallback when the texture cannot be used.
+                got = shader_input.Get()
+                if got is not None:
+                    check_finite(got, str(shader.GetPath()), f"inputs:{name}")
+                return (default if got is None else got), (source, output)
             warnings.append(f"{path}: inputs:{name} is driven by '{_shader_id(source)}'; its value is used")
         got = shader_input.Get()
         if got is None:
