@@ -127,3 +127,14 @@ def test_stage_metadata_max_depth_is_read(tmp_path):
     assert translate_usd(stage_with({"maxDepth": 3})).max_depth == 3
     with pytest.raises(UserInputError, match="maxDepth"):
         translate_usd(stage_with({"maxDepth": 0}))
+
+
+def test_report_names_restricted_transport_and_who_asked():
+    """The benchmark report's transport line reads the manifest plan (issue 14: reports show restrictions)."""
+    from denoisebench.leaderboard.report import _transport
+
+    assert _transport(make_render_plan(["glossy"]).to_dict()) == "full transport"
+    assert _transport(make_render_plan([], RenderOptions(max_depth=2)).to_dict()) == "max_depth 2 (--max-depth)"
+    assert _transport(make_render_plan([], stage_max_depth=3).to_dict()) == "max_depth 3 (stage metadata)"
+    # A manifest written before plans recorded who asked.
+    assert _transport({"max_depth": 8}) == "max_depth 8 (an older plan rule)"
