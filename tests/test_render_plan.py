@@ -138,3 +138,23 @@ def test_report_names_restricted_transport_and_who_asked():
     assert _transport(make_render_plan([], stage_max_depth=3).to_dict()) == "max_depth 3 (stage metadata)"
     # A manifest written before plans recorded who asked.
     assert _transport({"max_depth": 8}) == "max_depth 8 (an older plan rule)"
+
+
+@pytest.mark.slow
+def test_preview_max_depth_restricts_transport_and_bad_values_are_user_errors(tmp_path, capsys):
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from plain_stages import author_plain_box
+
+    from denoisebench.cli import main
+    from denoisebench.generator.preview import render_preview
+
+    box = author_plain_box(tmp_path / "box.usda")
+    full, _ = render_preview(box, width=16, height=16, spp=64)
+    direct, _ = render_preview(box, width=16, height=16, spp=64, max_depth=2)
+    assert direct.mean() < 0.85 * full.mean()  # the box's indirect light is a large share of it
+    assert main(["scenes", "preview", str(box), "--out", str(tmp_path / "p.png"), "--max-depth", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("error:") and len(err.splitlines()) == 1 and "max-depth" in err
