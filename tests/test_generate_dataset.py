@@ -270,3 +270,25 @@ def test_per_sample_data_matches_the_pixel_means(tmp_path):
     assert "lens" not in frame.samples and "time" not in frame.samples  # no depth of field, no motion blur
     assert ((frame.samples["pixel"] >= 0) & (frame.samples["pixel"] < 1)).all()
     np.testing.assert_allclose(frame.samples["color"].mean(axis=0), frame.color, rtol=1e-5, atol=1e-6)
+
+
+def test_adaptive_reference_stops_at_target_or_names_capped_frames(tmp_path, capsys):
+    """A loose --ref-error stops after the fewest rounds with the floor recorded; an unreachable one
+    runs to the --ref-spp cap and the warning names every such frame."""
+    from denoisebench.generator.reference_render import MIN_ROUNDS, round_schedule
+
+    base = ["--families", "cornell", "--frames", "2", "--width", str(WIDTH), "--height", str(HEIGHT),
+            "--spp", "1", "--seed", "5", "--quiet"]
+    assert main(["generate", "--out", str(tmp_path / "loose"), *base, "--ref-spp", "64", "--ref-error", "10"]) == 0
+    assert "cap" not in capsys.readouterr().err
+    round_spp, _ = round_schedule(64)
+    for record in open_dataset(tmp_path / "loose").scene("cornell_005").record["renders"][layout.REFERENCE].values():
+        adaptive = record["reference_adaptive"]
+        assert record["spp"] == adaptive["spp"] == MIN_ROUNDS * round_spp and adaptive["rounds"] == MIN_ROUNDS
+        assert adaptive["floor"] <= 10 and not adaptive["stopped_at_cap"] and adaptive["floor_pooled"] <= adaptive["floor"]
+    assert main(["generate", "--out", str(tmp_path / "tight"), *base, "--ref-spp", "16", "--ref-error", "1e-9"]) == 0
+    err = capsys.readouterr().err
+    assert "2 reference(s) stopped at the --ref-spp cap" in err and "cornell_005/0000, cornell_005/0001" in err
+    manifest = json.loads((tmp_path / "tight" / layout.MANIFEST_NAME).read_text())
+    assert manifest["config"]["ref_error"] == 1e-9 and manifest["scenes"]["cornell_005"]["plan"]["max_depth"] == -1
+    assert manifest["scenes"]["cornell_005"]["transport"].startswith("full transport")

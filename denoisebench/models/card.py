@@ -45,6 +45,10 @@ def generate_command(config: dict, out: str) -> str:
         parts += ["--spp", ",".join(str(s) for s in config["spp"])]
     if "ref_spp" in config:
         parts += ["--ref-spp", str(config["ref_spp"])]
+    if "ref_error" in config:  # None: a fixed --ref-spp reference
+        parts += ["--ref-error", "0" if config["ref_error"] is None else f"{config['ref_error']:g}"]
+    if config.get("max_depth") is not None:
+        parts += ["--max-depth", str(config["max_depth"])]
     if config.get("samples"):
         parts.append("--samples")
     parts += ["--seed", str(config.get("seed", 0))]
