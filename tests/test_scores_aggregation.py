@@ -196,3 +196,9 @@ def test_strips_cut_the_same_crop_for_every_unit_and_show_consecutive_frames(mea
     assert png.size == (strips.STRIP_FRAMES * (2 * a["side"] + 2) - 2, 2 * a["side"])
     animated = Image.open(io.BytesIO(strips.strip_apng(a["crops"], scale=2)))
     assert getattr(animated, "n_frames", 1) == strips.STRIP_FRAMES
+
+
+def test_the_demo_renders_sequences_long_enough_to_flicker():
+    from denoisebench.commands.demo import DEMO_FRAMES
+
+    assert DEMO_FRAMES >= 8  # issue 15: three frames gave two frame differences, two points per line
