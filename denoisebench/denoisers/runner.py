@@ -14,6 +14,8 @@ Everything that calls a denoiser (the benchmark, ``check-plugin``, tests) goes t
   goes through the same steps; its time is the worker's time inside ``denoise()``, and a worker
   that exits, crashes, runs over its time or memory limit fails the call with that reason.
 * **Needs.** A frame that lacks a buffer the denoiser ``needs`` is a failure without a call.
+  Per-sample data (large: S×H×W×C per buffer) goes only to a denoiser whose ``needs`` holds
+  ``"samples"``; buffers all go (features are used when present).
 * **Timing.** :func:`time.perf_counter` around ``denoise(frame)`` only: sanitising, checking and
   any I/O are outside it.
 * **Outputs.** Must be a numpy array of shape H×W×3, dtype float32, every value finite. Anything
@@ -118,10 +120,10 @@ def _read_only(array: np.ndarray, original: np.ndarray) -> np.ndarray:
     return copy
 
 
-def sanitize_frame(frame: Frame) -> tuple[Frame, dict[str, int]]:
+def sanitize_frame(frame: Frame, *, samples: bool = True) -> tuple[Frame, dict[str, int]]:
     """A copy of ``frame`` for a denoiser: finite, read-only, without the reference; and the counts.
 
-    Per-sample arrays are counted as ``samples.<name>``.
+    Per-sample arrays are counted as ``samples.<name>``; ``samples=False`` leaves them out.
     """
     counts: dict[str, int] = {}
     buffers = {}
@@ -130,21 +132,21 @@ def sanitize_frame(frame: Frame) -> tuple[Frame, dict[str, int]]:
         if count:
             counts[name] = count
         buffers[name] = _read_only(clean, array)
-    samples = None
-    if frame.samples is not None:
-        samples = {}
+    kept = None
+    if samples and frame.samples is not None:
+        kept = {}
         for name, array in frame.samples.items():
             clean, count = sanitize_array(array)
             if count:
                 counts[f"samples.{name}"] = count
-            samples[name] = _read_only(clean, array)
+            kept[name] = _read_only(clean, array)
     safe = Frame(
         buffers=buffers,
         spp=frame.spp,
         scene=frame.scene,
         index=frame.index,
         reference=None,
-        samples=samples,
+        samples=kept,
         meta={key: frame.meta[key] for key in PUBLIC_META if key in frame.meta},
     )
     return safe, counts
@@ -180,7 +182,7 @@ def run_frame(denoiser: object, frame: Frame, *, name: str | None = None, keep_o
         label = name or info.name
     except Exception as error:  # noqa: BLE001
         return DenoiseResult(name or repr(denoiser), frame.scene, frame.index, STATUS_FAILED, _one_line(error))
-    safe, counts = sanitize_frame(frame)
+    safe, counts = sanitize_frame(frame, samples="samples" in info.needs)
     result = DenoiseResult(label, frame.scene, frame.index, STATUS_FAILED, sanitized=counts)
     missing = sorted(need for need in info.needs if not frame.has(need))
     if missing:
