@@ -206,3 +206,73 @@ def test_without_large_families_the_split_is_unchanged():
     families = {n: n.split("_")[0] for n in names}
     for seed in range(4):
         assert assign_splits(names, seed, families=families) == assign_splits(names, seed)
+
+
+# ------------------------------------------------------------------------------------------ RAE paper recipe
+
+
+def _pinhole(h=20, w=30, seed=0):
+    """A pinhole view of random depths: (position 1×3×H×W, depth 1×1×H×W, rows right/down/forward)."""
+    g = torch.Generator().manual_seed(seed)
+    q = torch.linalg.qr(torch.randn(3, 3, generator=g, dtype=torch.float64))[0]
+    if torch.det(q) < 0:
+        q[:, 0] *= -1
+    origin = torch.tensor([1.0, -2.0, 30.0], dtype=torch.float64)
+    t = math.tan(math.radians(25))
+    ys, xs = torch.meshgrid(torch.arange(h) + 0.5, torch.arange(w) + 0.5, indexing="ij")
+    u, v = (xs - w / 2) / (w / 2) * t, (ys - h / 2) / (w / 2) * t
+    z = 2.0 + 3.0 * torch.rand(h, w, generator=g, dtype=torch.float64)
+    rays = u[None] * q[0, :, None, None] + v[None] * q[1, :, None, None] + q[2, :, None, None]
+    position = origin[:, None, None] + z[None] * rays
+    z[0, :5] = 0.0  # misses: depth and position 0
+    position[:, 0, :5] = 0.0
+    return position[None].float(), z[None, None].float(), q.float()
+
+
+def test_camera_axes_are_recovered_from_position_and_depth_also_on_flipped_crops():
+    from denoisebench.models.features import camera_axes
+
+    position, depth, axes = _pinhole()
+    torch.testing.assert_close(camera_axes(position, depth)[0], axes, atol=1e-4, rtol=0)
+    crop = camera_axes(position[..., 3:15, 4:20].flip(-1), depth[..., 3:15, 4:20].flip(-1))[0]
+    torch.testing.assert_close(crop, torch.stack([-axes[0], axes[1], axes[2]]), atol=1e-4, rtol=0)  # x follows the flip
+    assert float(camera_axes(torch.zeros(1, 3, 4, 4), torch.zeros(1, 1, 4, 4)).abs().max()) == 0.0  # all misses
+
+
+def test_rae_paper_configuration_has_seven_inputs_view_normals_and_demodulation():
+    from denoisebench.models.features import view_normals
+
+    net = build_model("rae", "paper")
+    assert net.encoders[0][0].in_channels == 7 and net.demodulate and net.view_normals
+    position, depth, axes = _pinhole(seed=1)
+    normal = torch.nn.functional.normalize(torch.randn(1, 3, 20, 30), dim=1)
+    vn = view_normals({"position": position, "depth": depth, "normal": normal}, normal)
+    torch.testing.assert_close(vn, torch.einsum("kc,nchw->nkhw", axes[:2], normal), atol=1e-4, rtol=0)
+
+
+def test_play_backward_reverses_about_half_the_windows(data):
+    from denoisebench.dataset.torch_dataset import SequenceCropDataset
+
+    forward = SequenceCropDataset(data, "train", 2, frames=2, crop=8, seed=3)
+    both = SequenceCropDataset(data, "train", 2, frames=2, crop=8, seed=3, play_backward=True)
+    reversed_count = 0
+    for epoch in range(6):
+        forward.set_epoch(epoch)
+        both.set_epoch(epoch)
+        for i in range(len(forward)):
+            a, b = forward[i]["color"], both[i]["color"]
+            if torch.equal(a, b):
+                continue
+            torch.testing.assert_close(b, a.flip(0), rtol=0, atol=0)  # same crop, frames reversed
+            reversed_count += 1
+    total = 6 * len(forward)
+    assert 0.2 * total <= reversed_count <= 0.8 * total
+
+
+def test_rae_paper_recipe_trains_with_its_crop_cap_and_backward_play(data, tmp_path):
+    out = tmp_path / "rae.pt"
+    assert main(["train", "--model", "rae", "--data", str(data), "--config", "paper", "--steps", "1", "--out", str(out),
+                 "--batch-size", "1", "--quiet"]) == 0
+    meta = load_checkpoint(out)["meta"]
+    assert meta["crop"] == 16  # the recipe's 128 px, capped by the 16 px scenes
+    assert meta["play_backward"] is True and "--crop" not in meta["commands"][0]

@@ -19,6 +19,7 @@ of another model), 1 internal failure.
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 from pathlib import Path
@@ -59,7 +60,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--resume", default=None, metavar="CKPT", help="continue from this checkpoint")
     parser.add_argument("--seed", type=int, default=0, help="initialisation and batch-order seed (default 0)")
     parser.add_argument("--batch-size", type=int, default=8, help="crops per step (default 8)")
-    parser.add_argument("--crop", type=int, default=32, help="crop side in pixels (default 32)")
+    parser.add_argument("--crop", type=int, default=None,
+                        help="crop side in pixels, capped by the smallest train scene (default: the recipe's, "
+                        "rae paper 128; else 32)")
+    parser.add_argument("--play-backward", action=argparse.BooleanOptionalAction, default=None,
+                        help="rae: play each training window backwards half the time (default: on in the paper "
+                        "configuration, off otherwise)")
     parser.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
     parser.add_argument("--spp", default=None, help="train on these noisy spp only, e.g. 4 (default all)")
     parser.add_argument("--sequence-length", type=int, default=7, help="frames per training window, rae only (default 7)")
@@ -89,7 +95,7 @@ def run(args) -> int:
 
     if args.steps < 0:
         raise UserInputError(f"--steps must be >= 0 (got {args.steps})")
-    if args.batch_size < 1 or args.crop < 4:
+    if args.batch_size < 1 or (args.crop is not None and args.crop < 4):
         raise UserInputError("--batch-size must be >= 1 and --crop >= 4")
     from denoisebench.models.training import max_threads
 
@@ -114,6 +120,7 @@ def run(args) -> int:
         lr=args.lr,
         spp=_spp(args.spp),
         sequence_length=args.sequence_length,
+        play_backward=args.play_backward,
         loss=args.loss,
         checkpoint_every=args.checkpoint_every,
         threads=args.threads,

@@ -177,6 +177,11 @@ class CropDataset(_CropBase):
 class SequenceCropDataset(_CropBase):
     """Windows of ``frames`` (K) consecutive frames with one crop and one augmentation: K×C×h×w.
 
+    ``play_backward``: each window is played in reverse with probability 1/2 (drawn from the
+    item's generator), as Chaitanya et al. train. A reversed window's ``motion`` buffer still
+    points to the frame *before* in render order, so it is not valid for reversed play (the
+    recurrent autoencoder does not read it).
+
     Windows start every ``stride`` frames; a scene with fewer than K frames gives none (an error
     when no scene has enough). Other arguments as :class:`CropDataset`.
     """
@@ -194,8 +199,10 @@ class SequenceCropDataset(_CropBase):
         seed: int = 0,
         stride: int = 1,
         cache_size: int | None = None,
+        play_backward: bool = False,
     ):
         self.frames = int(frames)
+        self.play_backward = bool(play_backward)
         if self.frames < 1:
             raise ValueError(f"frames must be >= 1 (got {frames})")
         super().__init__(
@@ -222,4 +229,8 @@ class SequenceCropDataset(_CropBase):
         rows, cols = self._window(rng, *window[0]["color"].shape[:2])
         transform = random_transform(rng) if self.augment else IDENTITY
         stacked = {name: np.stack([f[name][rows, cols] for f in window]) for name in window[0]}
-        return {name: _chw(a) for name, a in transform_buffers(stacked, transform).items()}
+        items = transform_buffers(stacked, transform)
+        # drawn after the crop and augmentation, so forward-only runs keep their crops
+        if self.play_backward and rng.random() < 0.5:
+            items = {name: a[::-1] for name, a in items.items()}
+        return {name: _chw(a) for name, a in items.items()}

@@ -32,9 +32,16 @@ class ModelSpec:
 
 
 MODELS: dict[str, ModelSpec] = {
-    "dpcn": ModelSpec("dpcn", pcn.make_dpcn, pcn.DPCN_CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS),
-    "kpcn": ModelSpec("kpcn", pcn.make_kpcn, pcn.KPCN_CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS),
-    "rae": ModelSpec("rae", rae.make_rae, rae.CONFIGS, True, ("color",), ("albedo", "normal", "depth", "roughness")),
+    # The paper's recipe: each branch trained on its own lobe with L1, no combined-colour loss.
+    "dpcn": ModelSpec("dpcn", pcn.make_dpcn, pcn.DPCN_CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS,
+                      recipes={"paper": {"loss": "lobes"}}),
+    "kpcn": ModelSpec("kpcn", pcn.make_kpcn, pcn.KPCN_CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS,
+                      recipes={"paper": {"loss": "lobes"}}),
+    # The paper's recipe: 128 px crops (where the scenes are that large), windows played both ways.
+    "rae": ModelSpec(
+        "rae", rae.make_rae, rae.CONFIGS, True, ("color",), ("albedo", "normal", "depth", "roughness", "position"),
+        recipes={"paper": {"crop": 128, "play_backward": True}},
+    ),
     # The paper's loss, relative MSE of the filtered image, in every configuration.
     "lbf": ModelSpec(
         "lbf", lbf.make_lbf, lbf.CONFIGS, False, ("color",), ("color_var", "albedo", "normal", "depth"),

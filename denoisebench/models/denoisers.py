@@ -127,6 +127,8 @@ class RAE(LearnedDenoiser):
         super().__init__(checkpoint, threads)
         if self.model.demodulate:
             self.needs = self.needs | {"albedo"}
+        if self.model.view_normals:  # the camera's axes come from the position buffer
+            self.needs = self.needs | {"position"}
 
     def reset(self) -> None:
         self.model.reset()

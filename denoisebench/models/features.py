@@ -236,19 +236,78 @@ def pcn_inputs(buffers: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
 
 #: Input channels of the recurrent autoencoder: colour (3), normal (3), depth (1), roughness (1).
 RAE_INPUT_CHANNELS = 8
+#: With view-space normals (Chaitanya et al.'s 7 inputs): colour (3), normal x/y in view space (2), depth, roughness.
+RAE_VIEW_INPUT_CHANNELS = 7
 
 
-def rae_inputs(buffers: dict[str, torch.Tensor], demodulate: bool) -> tuple[torch.Tensor, torch.Tensor]:
-    """(network input N×8×H×W, albedo factor or ones): log colour (demodulated if asked), normal, depth, roughness."""
+def camera_axes(position: torch.Tensor, depth: torch.Tensor, ridge: float = 1e-6) -> torch.Tensor:
+    """Per image, the camera's right, down and forward unit vectors in world space: N×3×3 (rows).
+
+    Found from the buffers alone (no camera record needed, crops and flips included): linear
+    camera-space depth is z = f·P − f·O for every hit P, so a least-squares fit of z on [P, 1]
+    gives the forward axis f; and a pinhole maps a hit to pixel x with x·z an affine function of
+    P, so fitting x·z (and y·z) on [P, 1] gives a vector whose part orthogonal to f is the right
+    (down) axis, whatever the field of view and wherever the crop lies in the frame. Misses
+    (depth 0) are left out. An image with fewer than 4 hits or coplanar hits (one flat wall) has
+    no unique fit: the ridge term then keeps the solve finite and an axis that comes out zero
+    stays zero, so its view-space normal channels are 0 (as for a miss). Pixel y grows downward.
+    """
+    n, _, h, w = position.shape
+    p = safe(position).double().flatten(2).transpose(1, 2)  # N×HW×3
+    z = safe(depth).double().flatten(1)  # N×HW
+    hit = (z > 0).double()
+    count = hit.sum(dim=1).clamp_min(1.0)
+    mean = (p * hit[..., None]).sum(dim=1) / count[:, None]
+    centred = (p - mean[:, None]) * hit[..., None]
+    scale = torch.sqrt((centred**2).sum(dim=(1, 2)) / count).clamp_min(1e-12)  # one scalar per image
+    x = torch.cat([centred / scale[:, None, None], hit[..., None]], dim=2)  # N×HW×4, misses all zero
+    gram = x.transpose(1, 2) @ x + ridge * torch.eye(4, dtype=x.dtype)
+    ys, xs = torch.meshgrid(torch.arange(h, dtype=x.dtype), torch.arange(w, dtype=x.dtype), indexing="ij")
+    targets = torch.stack([z, xs.flatten()[None] * z, ys.flatten()[None] * z], dim=2) * hit[..., None]  # N×HW×3
+    solution = torch.linalg.solve(gram, x.transpose(1, 2) @ targets)[:, :3]  # N×3(coeff)×3(target)
+    forward = F.normalize(solution[..., 0], dim=1, eps=1e-12)
+    right = solution[..., 1] - (solution[..., 1] * forward).sum(dim=1, keepdim=True) * forward
+    right = F.normalize(right, dim=1, eps=1e-12)
+    down = solution[..., 2] - (solution[..., 2] * forward).sum(dim=1, keepdim=True) * forward
+    down = down - (down * right).sum(dim=1, keepdim=True) * right
+    down = F.normalize(down, dim=1, eps=1e-12)
+    axes = torch.stack([right, down, forward], dim=1)
+    enough = (hit.sum(dim=1) >= 4).view(n, 1, 1)
+    return torch.where(enough & torch.isfinite(axes), axes, torch.zeros_like(axes)).float()
+
+
+def view_normals(buffers: dict[str, torch.Tensor], like: torch.Tensor) -> torch.Tensor:
+    """N×2×H×W: the shading normal's right and down components in the camera's frame (:func:`camera_axes`).
+
+    Zeros when the frame has no position or depth buffer, and at misses (normal 0 there).
+    """
+    if "position" not in buffers or "depth" not in buffers:
+        return like.new_zeros(like.shape[0], 2, *like.shape[2:])
+    axes = camera_axes(buffers["position"], buffers["depth"])[:, :2]  # N×2×3
+    normal = _get(buffers, "normal", 3, like).clamp(-1.0, 1.0)
+    return torch.einsum("nkc,nchw->nkhw", axes, normal)
+
+
+def rae_inputs(
+    buffers: dict[str, torch.Tensor], demodulate: bool, view_space: bool = False
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """(network input, albedo factor or ones): log colour (demodulated if asked), normal, depth, roughness.
+
+    N×8×H×W with the world-space normal (3); N×7×H×W with ``view_space`` (the paper's inputs: the
+    normal's two view-space components, :func:`view_normals`).
+    """
     color = safe(buffers["color"]).clamp(0.0, COLOR_MAX)
     factor = albedo_factor(buffers, color) if demodulate else torch.ones_like(color)
-    normal = _get(buffers, "normal", 3, color).clamp(-1.0, 1.0)
+    if view_space:
+        normal = view_normals(buffers, color)
+    else:
+        normal = _get(buffers, "normal", 3, color).clamp(-1.0, 1.0)
     depth = torch.log1p(_get(buffers, "depth", 1, color).clamp(0.0, COLOR_MAX))
     roughness = _get(buffers, "roughness", 1, color).clamp(0.0, 1.0)
     return torch.cat([torch.log1p(color / factor), normal, depth, roughness], dim=1), factor
 
 
-def frame_tensors(frame, names=("color",) + OPTIONAL_BUFFERS) -> dict[str, torch.Tensor]:
+def frame_tensors(frame, names=("color",) + OPTIONAL_BUFFERS + ("position",)) -> dict[str, torch.Tensor]:
     """The frame's buffers among ``names`` as 1×C×H×W float32 tensors (copies: frames are read-only)."""
     out = {}
     for name in names:

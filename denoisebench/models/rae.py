@@ -10,6 +10,10 @@ RGB) (optionally demodulated by albedo + ε), normal, log(1 + depth), roughness
 input was demodulated. With ``residual`` (the shipped small configuration) the last convolution
 adds a correction to the input's own log colour instead of painting the colour from scratch.
 
+With ``view_normals`` (the paper configuration) the normal enters as its two view-space
+components (:func:`~denoisebench.models.features.view_normals`: the camera's axes are fitted from
+the position and depth buffers), giving the paper's 7 inputs.
+
 Hidden state: ``self.hidden`` holds each level's previous output; :meth:`reset` clears it (zeros
 for the next frame). Call it between sequences; a frame of another size resets it too.
 
@@ -34,11 +38,13 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .features import RAE_INPUT_CHANNELS, from_log, normalize_radiance, rae_inputs
+from .features import RAE_INPUT_CHANNELS, RAE_VIEW_INPUT_CHANNELS, from_log, normalize_radiance, rae_inputs
 
 CONFIGS = {
-    # The paper's encoder widths (32, 43, 57, 76, 101) and a 144-channel bottleneck.
-    "paper": {"levels": [32, 43, 57, 76, 101], "bottleneck": 144, "demodulate": False},
+    # The paper's encoder widths (32, 43, 57, 76, 101), a 144-channel bottleneck, its 7 inputs
+    # (view-space normals) and untextured (albedo-demodulated) colour. Its training recipe
+    # (catalog): 128 px crops where the data allows, windows played forward and backward.
+    "paper": {"levels": [32, 43, 57, 76, 101], "bottleneck": 144, "demodulate": True, "view_normals": True},
     # Residual: the direct form, same data and recipe, scored 0.087 relMSE on the held-out scenes
     # (painting unseen colours wrong, see Notes); the residual one 0.0317, 48% below
     # cross_bilateral (model card). Not demodulated: the direct form with it scored worse (0.101).
@@ -66,16 +72,20 @@ class RecurrentBlock(nn.Module):
 class RecurrentAutoencoder(nn.Module):
     """U-Net with a recurrent block at every encoder level and at the bottleneck."""
 
-    def __init__(self, levels: list[int], bottleneck: int, demodulate: bool = False, residual: bool = False):
+    def __init__(
+        self, levels: list[int], bottleneck: int, demodulate: bool = False, residual: bool = False,
+        view_normals: bool = False,
+    ):
         super().__init__()
         if not levels:
             raise ValueError("the autoencoder needs at least one level")
         self.demodulate = bool(demodulate)
         self.residual = bool(residual)
+        self.view_normals = bool(view_normals)
         self.levels = list(levels)
         self.encoders = nn.ModuleList()
         self.recurrent = nn.ModuleList()
-        width = RAE_INPUT_CHANNELS
+        width = RAE_VIEW_INPUT_CHANNELS if self.view_normals else RAE_INPUT_CHANNELS
         for channels in self.levels:
             self.encoders.append(_conv(width, channels))
             self.recurrent.append(RecurrentBlock(channels))
@@ -102,7 +112,7 @@ class RecurrentAutoencoder(nn.Module):
 
     def forward(self, buffers: dict[str, torch.Tensor], detach_hidden: bool = False) -> dict[str, torch.Tensor]:
         buffers, scale = normalize_radiance(buffers)
-        x, factor = rae_inputs(buffers, self.demodulate)
+        x, factor = rae_inputs(buffers, self.demodulate, self.view_normals)
         input_log_color = x[:, :3]  # rae_inputs puts log(1 + colour / factor) first
         height, width = x.shape[-2:]
         multiple = 2 ** len(self.levels)
@@ -131,5 +141,7 @@ class RecurrentAutoencoder(nn.Module):
         return {"color": from_log(log_color) * factor * scale, "log_color": log_color}
 
 
-def make_rae(levels: list[int], bottleneck: int, demodulate: bool = False, residual: bool = False) -> RecurrentAutoencoder:
-    return RecurrentAutoencoder(levels, bottleneck, demodulate, residual)
+def make_rae(
+    levels: list[int], bottleneck: int, demodulate: bool = False, residual: bool = False, view_normals: bool = False
+) -> RecurrentAutoencoder:
+    return RecurrentAutoencoder(levels, bottleneck, demodulate, residual, view_normals)

@@ -65,7 +65,7 @@ class TrainOptions:
     resume: str | None = None
     seed: int = 0
     batch_size: int = 8
-    crop: int = 32
+    crop: int | None = None  # None: the configuration's recipe, else 32
     lr: float = 1e-3
     spp: list[int] | None = None  # None: every noisy spp of the dataset
     sequence_length: int = 7
@@ -77,6 +77,7 @@ class TrainOptions:
     device: str = "auto"  # auto | cpu | cuda
     workers: int | None = None  # loader processes; None: 0 on the CPU, min(4, cores) on CUDA
     lr_schedule: str = "constant"  # constant | cosine | step
+    play_backward: bool | None = None  # temporal models: windows reversed half the time; None: recipe
     progress: bool = True
     extra: dict = field(default_factory=dict)
 
@@ -209,15 +210,26 @@ def validate(model, spec, ds: Dataset, scenes: list[str], spp: list[int], max_fr
     }
 
 
+def recipe_value(spec, config, key: str, given, default):
+    """``given`` unless None, else the configuration's recipe value for ``key``, else ``default``."""
+    if given is not None:
+        return given
+    recipe = spec.recipes.get(config, {}) if isinstance(config, str) else {}
+    return recipe.get(key, default)
+
+
 def _make_dataset(spec, ds, scenes, spp, options, buffers, targets):
     from denoisebench.dataset.torch_dataset import CropDataset, SequenceCropDataset
 
     smallest = min(min(ds.scene(s).height, ds.scene(s).width) for s in scenes)
-    crop = min(options.crop, smallest)
+    # "where the data allows": a recipe's 128 px crop shrinks to the smallest train scene
+    crop = min(int(recipe_value(spec, options.config, "crop", options.crop, 32)), smallest)
     if spec.temporal:
         frames = min(options.sequence_length, min(ds.scene(s).frame_count for s in scenes))
+        backward = bool(recipe_value(spec, options.config, "play_backward", options.play_backward, False))
         dataset = SequenceCropDataset(
-            ds, scenes, spp, frames=frames, crop=crop, buffers=buffers, targets=targets, seed=options.seed
+            ds, scenes, spp, frames=frames, crop=crop, buffers=buffers, targets=targets, seed=options.seed,
+            play_backward=backward,
         )
         return dataset, crop, frames
     return CropDataset(ds, scenes, spp, crop=crop, buffers=buffers, targets=targets, seed=options.seed), crop, 1
@@ -278,6 +290,7 @@ def train(options: TrainOptions) -> dict:
             "val_scenes": val_scenes,
             "spp": spp,
             "crop": crop,
+            "play_backward": bool(getattr(dataset, "play_backward", False)),
             "sequence_length": frames,
             "batch_size": options.batch_size,
             "lr": options.lr,
@@ -294,7 +307,7 @@ def train(options: TrainOptions) -> dict:
             model=spec.name, data=options.data, config=payload.get("config_name") or options.config,
             steps=int(meta["steps"]), seed=int(payload["meta"].get("seed", 0)),
             batch_size=int(payload["meta"].get("batch_size", options.batch_size)),
-            crop=int(payload["meta"].get("crop", options.crop)), lr=float(payload["meta"].get("lr", options.lr)),
+            crop=int(payload["meta"].get("crop", crop)), lr=float(payload["meta"].get("lr", options.lr)),
             sequence_length=int(payload["meta"].get("sequence_length", options.sequence_length)),
         )
         meta["commands"] = [command_line(earlier, str(options.resume))]
@@ -388,8 +401,12 @@ def command_line(options: TrainOptions, out: str) -> str:
              "--config", str(options.config), "--steps", str(options.steps), "--out", out]
     if options.resume:
         parts += ["--resume", str(options.resume)]
-    parts += ["--seed", str(options.seed), "--batch-size", str(options.batch_size), "--crop", str(options.crop),
-              "--lr", str(options.lr)]
+    parts += ["--seed", str(options.seed), "--batch-size", str(options.batch_size)]
+    if options.crop is not None:
+        parts += ["--crop", str(options.crop)]
+    parts += ["--lr", str(options.lr)]
+    if options.play_backward is not None:
+        parts.append("--play-backward" if options.play_backward else "--no-play-backward")
     if options.spp:
         parts += ["--spp", ",".join(str(s) for s in options.spp)]
     if get_spec(options.model).temporal:
