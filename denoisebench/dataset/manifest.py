@@ -301,10 +301,3 @@ def manifest_without_timings(manifest: Mapping | str | os.PathLike) -> dict:
         manifest = load_manifest(manifest)
     return _strip(copy.deepcopy(dict(manifest)))
 
-
-def __getattr__(name: str):  # DatasetWriter lives in .writer (it needs this module)
-    if name == "DatasetWriter":
-        from .writer import DatasetWriter
-
-        return DatasetWriter
-    raise AttributeError(name)
