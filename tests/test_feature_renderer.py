@@ -104,7 +104,7 @@ def test_color_is_unbiased_against_mitsuba_path(mi, family_scene, family, spp):
 
     if family == "cornell":
         # The same statistics catch a biased renderer: paths cut at depth 2 (direct light only)
-        # against Mitsuba at the plan's depth 8 lose the indirect light.
+        # against Mitsuba at the plan's depth (unbounded) lose the indirect light.
         short = make_render_plan(translated.effects, RenderOptions(max_depth=2))
         biased = render_frame(scene, translated.camera, 1, short, width=SIZE, height=SIZE, spp=spp, seed=7,
                               reference=True)
