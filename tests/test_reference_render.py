@@ -116,6 +116,8 @@ def test_render_adaptive_stops_at_the_target_or_the_cap_and_names_it():
     hard = render_adaptive(make_round(1.0), cap=256, ref_error=1e-4)
     assert hard.record["stopped_at_cap"] and hard.spp == 256 and hard.record["rounds"] == MAX_ROUNDS
     assert hard.record["floor"] > 1e-4
+    single = render_adaptive(make_round(1.0), cap=1, ref_error=1.0)  # 1 spp: no variance, no floor
+    assert single.spp == 1 and single.record["floor"] is None and single.record["stopped_at_cap"]
     with pytest.raises(ValueError, match="ref_error"):
         render_adaptive(make_round(1.0), cap=256, ref_error=0.0)
 

@@ -170,9 +170,11 @@ def render_adaptive(render_round, cap: int, ref_error: float) -> AdaptiveOutcome
         compile_seconds += comp
         floor, pooled = merger.floors()
         history.append(floor)
-        if merger.rounds >= min(MIN_ROUNDS, max_rounds) and floor <= ref_error:
+        if merger.rounds >= min(MIN_ROUNDS, max_rounds) and merger.spp > 1 and floor <= ref_error:
             break
-    reached = floor <= ref_error
+    if merger.spp < 2:  # one sample per pixel: no variance to estimate, so no floor (None in the record)
+        floor = pooled = None
+    reached = floor is not None and floor <= ref_error
     record = {
         "ref_error": float(ref_error),
         "spp": merger.spp,

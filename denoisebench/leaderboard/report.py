@@ -86,7 +86,8 @@ def _reference_info(dataset: Dataset, scenes: list[str]) -> dict:
             adaptive = record.get("reference_adaptive") or {}
             if adaptive:
                 used.append(int(adaptive["spp"]))
-                floors.append(float(adaptive["floor"]))
+                if adaptive.get("floor") is not None:  # None: a 1-spp reference has no variance estimate
+                    floors.append(float(adaptive["floor"]))
         if info.ref_spp:
             spps.add(int(info.ref_spp))
         transport = _transport(info.record.get("plan") or {})
