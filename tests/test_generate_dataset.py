@@ -286,6 +286,11 @@ def test_adaptive_reference_stops_at_target_or_names_capped_frames(tmp_path, cap
         adaptive = record["reference_adaptive"]
         assert record["spp"] == adaptive["spp"] == MIN_ROUNDS * round_spp and adaptive["rounds"] == MIN_ROUNDS
         assert adaptive["floor"] <= 10 and not adaptive["stopped_at_cap"] and adaptive["floor_pooled"] <= adaptive["floor"]
+    from denoisebench.leaderboard.report import _reference_info
+
+    loose = open_dataset(tmp_path / "loose")
+    described = _reference_info(loose, loose.scenes)["description"]  # the report's reference line
+    assert described.startswith(f"adaptive {MIN_ROUNDS * round_spp} spp (cap 64), noise floor") and "full transport" in described
     assert main(["generate", "--out", str(tmp_path / "tight"), *base, "--ref-spp", "16", "--ref-error", "1e-9"]) == 0
     err = capsys.readouterr().err
     assert "2 reference(s) stopped at the --ref-spp cap" in err and "cornell_005/0000, cornell_005/0001" in err

@@ -95,8 +95,16 @@ def _reference_info(dataset: Dataset, scenes: list[str]) -> dict:
             restricted[scene] = transport
     line = "full transport" if not restricted else "restricted transport: " + "; ".join(
         f"{scene} {what}" for scene, what in sorted(restricted.items()))
-    return {"seconds": float(np.mean(seconds)) if seconds else None, "spp": max(spps) if spps else None,
-            "transport": line, "restricted": restricted,
+    spp = max(spps) if spps else None
+    if used:
+        low, high = min(used), max(used)
+        words = f"adaptive {low}\u2013{high} spp (cap {spp})" if low != high else f"adaptive {low} spp (cap {spp})"
+        if floors:
+            words += f", noise floor \u2264 {max(floors):.2g}"
+    else:
+        words = f"{spp} spp"
+    return {"seconds": float(np.mean(seconds)) if seconds else None, "spp": spp,
+            "transport": line, "restricted": restricted, "description": f"{words}, {line}",
             "spp_used": [min(used), max(used)] if used else None, "floor_max": max(floors) if floors else None}
 
 

@@ -273,7 +273,7 @@ def render_html(report: dict) -> str:
     run = report["run"]
     meta = (f"run {e(run['run_id'])} \u00b7 dataset {e(run['dataset_hash'][:12])} ({e(run['dataset_path'])}) \u00b7 split "
             f"{e(run['config'].get('split'))} \u00b7 {len(report['scenes'])} scene(s) \u00b7 input spp "
-            f"{e(', '.join(map(str, report['spp'])))} \u00b7 reference {e(report['reference']['spp'])} spp ({e(report['reference'].get('transport', 'full transport'))}) \u00b7 started "
+            f"{e(', '.join(map(str, report['spp'])))} \u00b7 reference {e(report['reference'].get('description', str(report['reference']['spp']) + ' spp'))} \u00b7 started "
             f"{e(run['created_at'])}, finished {e(run['finished_at'] or 'not yet (partial results)')}")
     versions = ", ".join(f"{k} {v}" for k, v in sorted(run["versions"].items()))
     sections = [

@@ -33,7 +33,7 @@ def render_markdown(report: dict) -> str:
         "",
         f"Run `{run['run_id']}` on dataset `{run['dataset_hash'][:12]}` ({md(run['dataset_path'])}), split "
         f"{md(run['config'].get('split'))}: {len(report['scenes'])} scene(s), input spp {', '.join(map(str, report['spp']))}, "
-        f"reference {report['reference']['spp']} spp ({report['reference'].get('transport', 'full transport')}). Started {run['created_at']}, finished {run['finished_at'] or 'not yet (partial)'}.",
+        f"reference {report['reference'].get('description', str(report['reference']['spp']) + ' spp')}. Started {run['created_at']}, finished {run['finished_at'] or 'not yet (partial)'}.",
         "",
         "## Accuracy against time",
         "",
