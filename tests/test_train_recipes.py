@@ -276,3 +276,36 @@ def test_rae_paper_recipe_trains_with_its_crop_cap_and_backward_play(data, tmp_p
     meta = load_checkpoint(out)["meta"]
     assert meta["crop"] == 16  # the recipe's 128 px, capped by the 16 px scenes
     assert meta["play_backward"] is True and "--crop" not in meta["commands"][0]
+
+
+def test_rae_sequence_exposure_is_held_until_reset_and_skips_black_frames():
+    torch.manual_seed(0)
+    net = build_model("rae", {"levels": [4, 6], "bottleneck": 8, "sequence_exposure": True, "residual": True}).eval()
+    g = torch.Generator().manual_seed(1)
+    frame = {"color": torch.rand(1, 3, 8, 8, generator=g)}
+    black = {"color": torch.zeros(1, 3, 8, 8)}
+    with torch.no_grad():
+        net.reset()
+        net(black)
+        assert float(net._exposure) == 0.0
+        net(frame)  # the first lit frame sets it
+        first = float(net._exposure)
+        assert first > 0
+        net({"color": 10.0 * frame["color"]})  # a brighter frame does not move it
+        assert float(net._exposure) == first
+        net.reset()
+        net({"color": 10.0 * frame["color"]})
+        assert float(net._exposure) == pytest.approx(10.0 * first, rel=1e-5)
+
+
+def test_log_depth_var_follows_the_depth_transform():
+    from denoisebench.models.features import feature_stack
+
+    depth = torch.full((1, 1, 4, 4), 9.0)
+    buffers = {"depth": depth, "depth_var": torch.full((1, 1, 4, 4), 2.0)}
+    like = torch.zeros(1, 3, 4, 4)
+    raw = feature_stack(buffers, like)[:, -1]
+    logged = feature_stack(buffers, like, log_depth_var=True)[:, -1]
+    torch.testing.assert_close(raw, torch.log1p(torch.full((1, 4, 4), 2.0)))
+    torch.testing.assert_close(logged, torch.log1p(torch.full((1, 4, 4), 2.0 / 100.0)))  # var / (1 + d)²
+    assert pcn.DPCN_CONFIGS["small"]["log_depth_var"] and not build_model("kpcn", {**pcn.SMALL_CONFIG, "log_depth_var": False}).log_depth_var

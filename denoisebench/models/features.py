@@ -158,15 +158,23 @@ def _variance_channel(var: torch.Tensor) -> torch.Tensor:
     return torch.log1p(safe(var).clamp_min(0.0).mean(dim=1, keepdim=True))
 
 
-def feature_stack(buffers: dict[str, torch.Tensor], like: torch.Tensor) -> torch.Tensor:
-    """Auxiliary features with their gradients and variances: N×24×H×W (albedo, normal, log depth; x and y gradients; 3 variances)."""
+def feature_stack(buffers: dict[str, torch.Tensor], like: torch.Tensor, log_depth_var: bool = False) -> torch.Tensor:
+    """Auxiliary features with their gradients and variances: N×24×H×W (albedo, normal, log depth; x and y gradients; 3 variances).
+
+    ``log_depth_var``: carry ``depth_var`` through the depth's log(1 + d) by the delta method
+    (Var ≈ var / (1 + d)²), as the colour variances are. Off for checkpoints made before (their
+    weights saw the raw variance; the configuration records the choice).
+    """
     albedo = _get(buffers, "albedo", 3, like).clamp(0.0, 1.0)
+    raw_depth = _get(buffers, "depth", 1, like).clamp(0.0, COLOR_MAX)
     normal = _get(buffers, "normal", 3, like).clamp(-1.0, 1.0)
-    depth = torch.log1p(_get(buffers, "depth", 1, like).clamp(0.0, COLOR_MAX))
+    depth = torch.log1p(raw_depth)
     aux = torch.cat([albedo, normal, depth], dim=1)
     variances = [
         _variance_channel(_get(buffers, f"{name}_var", _CHANNELS[name], like)) for name in ("albedo", "normal", "depth")
     ]
+    if log_depth_var:
+        variances[2] = _variance_channel(_get(buffers, "depth_var", 1, like).clamp_min(0.0) / (1.0 + raw_depth) ** 2)
     return torch.cat([aux, gradients(aux)] + variances, dim=1)
 
 
@@ -205,7 +213,7 @@ def albedo_factor(buffers: dict[str, torch.Tensor], like: torch.Tensor) -> torch
     return torch.where(dark, torch.ones_like(albedo), albedo + ALBEDO_EPS)
 
 
-def pcn_inputs(buffers: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+def pcn_inputs(buffers: dict[str, torch.Tensor], log_depth_var: bool = False) -> dict[str, torch.Tensor]:
     """Both branches' inputs for DPCN/KPCN.
 
     Returns ``diffuse_in``/``specular_in`` (N×PCN_INPUT_CHANNELS×H×W), ``diffuse_lin`` (demodulated
@@ -219,7 +227,7 @@ def pcn_inputs(buffers: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     # Delta method: Var[log(1 + X / a)] ≈ Var[X] / (a (1 + X / a))² = Var[X] / (a + X)².
     diffuse_var_log = diffuse_var / (factor + diffuse) ** 2
     specular_var_log = specular_var / (1.0 + specular) ** 2
-    features = feature_stack(buffers, diffuse)
+    features = feature_stack(buffers, diffuse, log_depth_var)
     diffuse_in = torch.cat([diffuse_log, gradients(diffuse_log), _variance_channel(diffuse_var_log), features], dim=1)
     specular_in = torch.cat(
         [specular_log, gradients(specular_log), _variance_channel(specular_var_log), features], dim=1

@@ -42,7 +42,7 @@ from .features import PCN_INPUT_CHANNELS, from_log, normalize_radiance, pcn_inpu
 LOGIT_MAX = 50.0
 
 #: Bako et al.'s branch: 9 layers of 100 channels, 5×5, Xavier-initialised; 21×21 kernels for KPCN.
-PAPER_CONFIG = {"layers": 9, "channels": 100, "kernel": 5, "kernel_size": 21, "init": "xavier"}
+PAPER_CONFIG = {"layers": 9, "channels": 100, "kernel": 5, "kernel_size": 21, "init": "xavier", "log_depth_var": True}
 
 # DPCN and KPCN share every configuration (depth, width, receptive field, initialisation), so the
 # lecture's comparison (KPCN converges faster) compares the output form alone
@@ -53,7 +53,7 @@ PAPER_CONFIG = {"layers": 9, "channels": 100, "kernel": 5, "kernel_size": 21, "i
 # checkpoint records that shape, so it still loads and scores as before.
 # Torch's default initialisation in the small configuration (the shipped kpcn_small.pt's; on
 # the unit tests' toy batch Xavier's larger start made KPCN's first steps at lr 5e-3 overshoot).
-SMALL_CONFIG = {"layers": 6, "channels": 24, "kernel": 5, "kernel_size": 21, "head_kernel": 1}
+SMALL_CONFIG = {"layers": 6, "channels": 24, "kernel": 5, "kernel_size": 21, "head_kernel": 1, "log_depth_var": True}
 
 DPCN_CONFIGS = {"paper": dict(PAPER_CONFIG), "small": dict(SMALL_CONFIG)}
 KPCN_CONFIGS = {"paper": dict(PAPER_CONFIG), "small": dict(SMALL_CONFIG)}
@@ -165,9 +165,11 @@ class PCN(nn.Module):
 
     def __init__(
         self, mode: str, layers: int, channels: int, kernel: int, kernel_size: int = 21, head_kernel: int | None = None,
-        init: str = "default",
+        init: str = "default", log_depth_var: bool = False,
     ):
         super().__init__()
+        #: depth_var through log(1 + d) like the depth itself (features.feature_stack); False in old checkpoints
+        self.log_depth_var = bool(log_depth_var)
         if mode not in ("direct", "kernel"):
             raise ValueError(f"mode must be 'direct' or 'kernel', not {mode!r}")
         if kernel_size % 2 != 1:
@@ -203,7 +205,7 @@ class PCN(nn.Module):
 
     def forward(self, buffers: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
         buffers, scale = normalize_radiance(buffers)
-        prepared = pcn_inputs(buffers)
+        prepared = pcn_inputs(buffers, self.log_depth_var)
         factor = prepared["albedo_factor"]
         if self.mode == "direct":
             diffuse_log, kd = self._branch(self.diffuse, prepared["diffuse_in"], prepared["diffuse_log"])
@@ -221,10 +223,10 @@ class PCN(nn.Module):
 
 
 def make_dpcn(layers: int, channels: int, kernel: int, kernel_size: int = 21, head_kernel: int | None = None,
-              init: str = "default") -> PCN:
-    return PCN("direct", layers, channels, kernel, kernel_size, head_kernel, init)
+              init: str = "default", log_depth_var: bool = False) -> PCN:
+    return PCN("direct", layers, channels, kernel, kernel_size, head_kernel, init, log_depth_var)
 
 
 def make_kpcn(layers: int, channels: int, kernel: int, kernel_size: int = 21, head_kernel: int | None = None,
-              init: str = "default") -> PCN:
-    return PCN("kernel", layers, channels, kernel, kernel_size, head_kernel, init)
+              init: str = "default", log_depth_var: bool = False) -> PCN:
+    return PCN("kernel", layers, channels, kernel, kernel_size, head_kernel, init, log_depth_var)

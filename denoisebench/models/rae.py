@@ -38,13 +38,16 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .features import RAE_INPUT_CHANNELS, RAE_VIEW_INPUT_CHANNELS, from_log, normalize_radiance, rae_inputs
+from .features import RAE_INPUT_CHANNELS, RAE_VIEW_INPUT_CHANNELS, exposure, from_log, normalize_radiance, rae_inputs
 
 CONFIGS = {
     # The paper's encoder widths (32, 43, 57, 76, 101), a 144-channel bottleneck, its 7 inputs
     # (view-space normals) and untextured (albedo-demodulated) colour. Its training recipe
     # (catalog): 128 px crops where the data allows, windows played forward and backward.
-    "paper": {"levels": [32, 43, 57, 76, 101], "bottleneck": 144, "demodulate": True, "view_normals": True},
+    # sequence_exposure: one exposure per sequence (its first lit frame's), so the normalisation
+    # itself cannot flicker; the shipped small weights keep per-frame exposure (their config).
+    "paper": {"levels": [32, 43, 57, 76, 101], "bottleneck": 144, "demodulate": True, "view_normals": True,
+              "sequence_exposure": True},
     # Residual: the direct form, same data and recipe, scored 0.087 relMSE on the held-out scenes
     # (painting unseen colours wrong, see Notes); the residual one 0.0317, 48% below
     # cross_bilateral (model card). Not demodulated: the direct form with it scored worse (0.101).
@@ -74,11 +77,12 @@ class RecurrentAutoencoder(nn.Module):
 
     def __init__(
         self, levels: list[int], bottleneck: int, demodulate: bool = False, residual: bool = False,
-        view_normals: bool = False,
+        view_normals: bool = False, sequence_exposure: bool = False,
     ):
         super().__init__()
         if not levels:
             raise ValueError("the autoencoder needs at least one level")
+        self.sequence_exposure = bool(sequence_exposure)
         self.demodulate = bool(demodulate)
         self.residual = bool(residual)
         self.view_normals = bool(view_normals)
@@ -105,12 +109,28 @@ class RecurrentAutoencoder(nn.Module):
             else:  # radiance is normalised to mean 1 (features.normalize_radiance): start at log(1 + 1), not at black
                 self.output.bias.fill_(math.log(2.0))
         self.hidden: list[torch.Tensor] | None = None
+        self._exposure: torch.Tensor | None = None
+        self._exposure_key: tuple | None = None
 
     def reset(self) -> None:
         """Forget the previous frame (call between sequences)."""
         self.hidden = None
+        self._exposure = None
+
+    def _sequence_exposure(self, color: torch.Tensor) -> torch.Tensor:
+        """The exposure of the sequence's first frame with light (per batch element), kept until reset."""
+        current = exposure(color)
+        key = (tuple(color.shape), str(color.device))
+        if self._exposure is None or self.hidden is None or self._exposure_key != key:
+            kept = current
+        else:
+            kept = torch.where(self._exposure > 0, self._exposure, current)
+        self._exposure, self._exposure_key = kept.detach(), key
+        return kept
 
     def forward(self, buffers: dict[str, torch.Tensor], detach_hidden: bool = False) -> dict[str, torch.Tensor]:
+        if self.sequence_exposure and "exposure" not in buffers:
+            buffers = {**buffers, "exposure": self._sequence_exposure(buffers["color"])}
         buffers, scale = normalize_radiance(buffers)
         x, factor = rae_inputs(buffers, self.demodulate, self.view_normals)
         input_log_color = x[:, :3]  # rae_inputs puts log(1 + colour / factor) first
@@ -142,6 +162,7 @@ class RecurrentAutoencoder(nn.Module):
 
 
 def make_rae(
-    levels: list[int], bottleneck: int, demodulate: bool = False, residual: bool = False, view_normals: bool = False
+    levels: list[int], bottleneck: int, demodulate: bool = False, residual: bool = False, view_normals: bool = False,
+    sequence_exposure: bool = False,
 ) -> RecurrentAutoencoder:
-    return RecurrentAutoencoder(levels, bottleneck, demodulate, residual, view_normals)
+    return RecurrentAutoencoder(levels, bottleneck, demodulate, residual, view_normals, sequence_exposure)
