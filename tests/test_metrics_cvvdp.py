@@ -51,7 +51,9 @@ def test_more_noise_scores_lower_and_static_noise_lower_than_dynamic(ref):
 
 
 def test_identical_is_ten_nan_is_worst_and_scale_invariant(ref):
+    threads = torch.get_num_threads()
     assert cvvdp(ref, ref) == pytest.approx(10.0, abs=1e-4)
+    assert torch.get_num_threads() == threads  # one thread inside the call, restored after
     rng = np.random.default_rng(1)
     pred = np.clip(ref + 0.1 * rng.standard_normal(ref.shape), 0, None).astype(np.float32)
     # exposure comes from the reference: the same scene 7x brighter scores the same

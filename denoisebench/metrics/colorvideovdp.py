@@ -40,8 +40,9 @@ brightness alternating ±15 % frame to frame → 5.2 JOD while the same +15 % he
 ×100 cd/m² scale instead of the key the flicker case scored 6.7: brighter display, more
 visible flicker.
 
-Runs offline on the CPU (the model's data ship in the package). Cost: ≈ 1.3 s for 8 frames of
-128² on one core (``bench/metrics_speed.py`` measures seconds per megapixel-frame).
+Runs offline on the CPU (the model's data ship in the package), on one torch thread
+(:mod:`.torch_threads`: 25× less CPU than two threads here). The model pads a short sequence to its temporal filters' support, so 3 frames cost
+nearly what 8 do. ``bench/field_metrics_speed.py`` measures seconds per megapixel-frame.
 
 Installing: ``cvvdp`` 0.5.7 imports ``torchvision``; the registry's torchvision 0.28.0 (the one
 built for torch 2.13.0) is a CUDA build whose compiled operators cannot load into the CPU torch,
@@ -61,6 +62,7 @@ import warnings
 
 import numpy as np
 
+from .torch_threads import one_torch_thread
 from .validation import check_sequences
 
 __all__ = [
@@ -161,7 +163,7 @@ def cvvdp(pred_seq, ref_seq, *, fps: float = FPS) -> float:
     test = torch.from_numpy(np.clip(c.pred * k, 0.0, cap).astype(np.float32))
     ref = torch.from_numpy(np.clip(c.ref * k, 0.0, cap).astype(np.float32))
     model = _model()
-    with warnings.catch_warnings(), torch.no_grad():
+    with one_torch_thread(), warnings.catch_warnings(), torch.no_grad():
         warnings.simplefilter("ignore")
         jod, _stats = model.predict(test, ref, dim_order="FHWC", frames_per_second=float(fps))
     return float(jod)

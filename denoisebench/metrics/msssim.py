@@ -28,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from .tonemap import tonemap
+from .torch_threads import one_torch_thread
 from .validation import check_pair
 
 __all__ = ["WEIGHTS", "WIN_SIZE", "WIN_SIGMA", "WORST", "msssim", "msssim_scales", "ms_ssim_tensor"]
@@ -98,5 +99,5 @@ def msssim(pred, ref) -> float:
         return WORST
     import torch
 
-    with torch.no_grad():
+    with one_torch_thread(), torch.no_grad():
         return float(ms_ssim_tensor(_nchw(tonemap(c.pred)), _nchw(tonemap(c.ref))))

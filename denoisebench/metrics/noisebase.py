@@ -47,6 +47,7 @@ import math
 import numpy as np
 
 from .msssim import ms_ssim_tensor
+from .torch_threads import one_torch_thread
 from .validation import check_pair, check_sequences
 
 __all__ = [
@@ -141,7 +142,7 @@ def nb_ssim(pred, ref) -> float:
     import torch
     from pytorch_msssim import ssim
 
-    with torch.no_grad():
+    with one_torch_thread(), torch.no_grad():
         return float(ssim(_gray_tensor(nb_luminance(nb_encode(c.pred))),
                           _gray_tensor(nb_luminance(nb_encode(c.ref))), data_range=1.0))
 
@@ -155,7 +156,7 @@ def nb_msssim(pred, ref) -> float:
         return WORST["nb_msssim"]
     import torch
 
-    with torch.no_grad():
+    with one_torch_thread(), torch.no_grad():
         return float(ms_ssim_tensor(_gray_tensor(nb_luminance(nb_encode(c.pred))),
                                     _gray_tensor(nb_luminance(nb_encode(c.ref)))))
 
