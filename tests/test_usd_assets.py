@@ -518,3 +518,26 @@ def test_motion_vectors_reproject_a_moving_object_under_a_static_camera(tmp_path
     error_static = np.abs(first["albedo"][ys, xs] - second["albedo"][ys, xs]).mean(-1)[same_surface]
     assert same_surface.sum() > 50
     assert np.median(error_warped) < 0.02 and error_warped.mean() < 0.25 * error_static.mean()
+
+
+def test_time_sampled_points_deform_the_mesh(tmp_path):
+    path = tmp_path / "deform.usda"
+    stage = new_stage(path, frames=3)
+    add_camera(stage)
+    UsdLux.DomeLight.Define(stage, "/Dome")
+    mesh = add_quad(stage, "/Flag")
+    points = mesh.GetPointsAttr()
+    for frame in range(3):
+        points.Set([(-1, -1, 0), (1, -1, 0.3 * frame), (1, 1, 0.3 * frame), (-1, 1, 0)], frame)
+    stage.GetRootLayer().Save()
+    (flag,) = translate_usd(path).scene_dict["shapes"]
+    np.testing.assert_allclose(flag["frame_positions"][:, 1, 2], [0.0, 0.3, 0.6], atol=1e-6)
+
+
+def test_generate_refuses_a_bare_stage_naming_the_options(tmp_path):
+    path = lit_box_stage(tmp_path / "bare.usda", camera=False, light=False)
+    result = run_cli("generate", "--out", tmp_path / "out", "--usd", path, "--spp", 1, "--ref-spp", 4)
+    assert result.returncode == 2 and "Traceback" not in result.stderr and "--auto-camera" in result.stderr
+    result = run_cli("generate", "--out", tmp_path / "out", "--usd", path, "--auto-camera", "--spp", 1, "--ref-spp", 4)
+    assert result.returncode == 2 and "--default-light" in result.stderr
+    assert not (tmp_path / "out").exists()
