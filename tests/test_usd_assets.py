@@ -541,3 +541,20 @@ def test_generate_refuses_a_bare_stage_naming_the_options(tmp_path):
     result = run_cli("generate", "--out", tmp_path / "out", "--usd", path, "--auto-camera", "--spp", 1, "--ref-spp", 4)
     assert result.returncode == 2 and "--default-light" in result.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_what_mitsuba_refuses_is_skipped_with_a_warning_never_a_crash(tmp_path):
+    from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
+
+    translated = translate_usd(lit_box_stage(tmp_path / "s.usda"))
+    (key,) = translated.scene_dict["bsdfs"]
+    translated.scene_dict["bsdfs"][key] = {"type": "no_such_bsdf_plugin"}
+    translated.scene_dict["emitters"].append({"type": "envmap", "data": np.zeros((0, 0, 3), np.float32), "scale": 1.0,
+                                              "rotation": np.eye(3).tolist(), "prim": "/BrokenDome"})
+    scene = build_mitsuba_scene(translated)
+    assert len(scene.shapes()) == 1 and len(scene.emitters()) == 1
+    assert any(w.startswith(f"{key}: Mitsuba refuses the material") for w in translated.warnings)
+    assert any(w.startswith("/BrokenDome: Mitsuba cannot build this light") for w in translated.warnings)
+    translated.scene_dict["shapes"].clear()
+    with pytest.raises(UserInputError, match="nothing renderable"):
+        build_mitsuba_scene(translated)

@@ -8,7 +8,11 @@ Moving objects: a scene whose shapes move (:attr:`TranslatedScene.moving`) is bu
 attribute :data:`PREVIOUS_POSITION` (its world positions one frame earlier; equal to the current
 ones for static meshes and at frame 0). The feature integrator interpolates it at the first hit
 to reproject the point the surface occupied in the previous frame (object motion vectors).
-Analytic spheres never move (moving spheres are tessellated), so they need no attribute. Sensors come from
+Analytic spheres never move (moving spheres are tessellated), so they need no attribute.
+
+A material, mesh or light that Mitsuba refuses is never a crash: the material becomes grey
+diffuse, the mesh or light is skipped, each with one line added to ``translated.warnings``; a
+scene left without any shape, or one ``load_dict`` still refuses, is a one-line UserInputError. Sensors come from
 :func:`sensor_dict`, built from the camera track at a given frame (Mitsuba's own cameras: used by
 previews and by the tests that compare our renderer with Mitsuba's ``path`` integrator).
 """
@@ -17,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from denoisebench.errors import UserInputError
 from denoisebench.generator.camera_track import CameraTrack
 from denoisebench.generator.translated_scene import TranslatedScene
 from denoisebench.mitsuba_runtime import load_mitsuba
@@ -32,6 +37,8 @@ def _mitsuba_values(mi, value):
         out = {}
         for key, item in value.items():
             if key == "data" and isinstance(item, np.ndarray):
+                if item.ndim != 3 or min(item.shape) < 1:
+                    raise ValueError(f"texture of shape {item.shape}")
                 out[key] = mi.TensorXf(np.ascontiguousarray(item, dtype=np.float32))
             elif key == "to_uv":
                 out[key] = mi.ScalarTransform3f(np.asarray(item, dtype=np.float64).tolist())
@@ -94,7 +101,10 @@ def _emitter_dict(mi, record: dict) -> dict:
     if kind == "envmap":
         rotation = np.eye(4)
         rotation[:3, :3] = np.asarray(record["rotation"])
-        image = mi.Bitmap(np.ascontiguousarray(record["data"], dtype=np.float32), mi.Bitmap.PixelFormat.RGB)
+        data = np.asarray(record["data"], dtype=np.float32)
+        if data.ndim != 3 or data.shape[2] != 3 or data.shape[0] < 1 or data.shape[1] < 1:
+            raise ValueError(f"environment image of shape {data.shape}")  # mi.Bitmap segfaults on an empty one
+        image = mi.Bitmap(np.ascontiguousarray(data), mi.Bitmap.PixelFormat.RGB)
         return {"type": "envmap", "bitmap": image, "scale": record["scale"], "to_world": _transform(mi, rotation)}
     if kind == "constant":
         return {"type": "constant", "radiance": {"type": "rgb", "value": record["radiance"]}}
@@ -107,7 +117,18 @@ def scene_objects(translated: TranslatedScene, frame: int = 0) -> dict:
     ``frame`` places moving shapes (ignored for static scenes)."""
     mi = load_mitsuba()
     data = translated.scene_dict
-    bsdfs = {key: mi.load_dict(_mitsuba_values(mi, value)) for key, value in data["bsdfs"].items()}
+
+    def skipped(line: str) -> None:
+        if line not in translated.warnings:
+            translated.warnings.append(line)
+
+    bsdfs = {}
+    for key, value in data["bsdfs"].items():
+        try:
+            bsdfs[key] = mi.load_dict(_mitsuba_values(mi, value))
+        except Exception as error:  # a material Mitsuba refuses: grey, never a crash
+            skipped(f"{key}: Mitsuba refuses the material ({_short(error)}); grey diffuse used")
+            bsdfs[key] = mi.load_dict({"type": "diffuse"})
     black = None
     moving = translated.moving
     out: dict = {"type": "scene"}
@@ -125,10 +146,20 @@ def scene_objects(translated: TranslatedScene, frame: int = 0) -> dict:
                 shape["emitter"] = emitter
             out[key] = shape
         else:
-            out[key] = _build_mesh(mi, record, bsdf, emitter, frame if moving else None)
+            try:
+                out[key] = _build_mesh(mi, record, bsdf, emitter, frame if moving else None)
+            except Exception as error:  # a prim that breaks Mitsuba is skipped with its warning
+                skipped(f"{record['name']}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
     for index, record in enumerate(data["emitters"]):
-        out[f"emitter_{index:03d}"] = _emitter_dict(mi, record)
+        try:
+            out[f"emitter_{index:03d}"] = mi.load_dict(_emitter_dict(mi, record))
+        except Exception as error:
+            skipped(f"{record.get('prim', 'light')}: Mitsuba cannot build this light ({_short(error)}); skipped")
     return out
+
+
+def _short(error: Exception) -> str:
+    return " ".join(str(error).split())[:160]
 
 
 def sensor_dict(camera: CameraTrack, frame: int, width: int, height: int, spp: int, seed: int = 0,
@@ -160,4 +191,9 @@ def build_mitsuba_scene(translated: TranslatedScene, sensor: dict | None = None,
         objects["sensor"] = sensor
     if integrator is not None:
         objects["integrator"] = integrator
-    return mi.load_dict(objects)
+    if not any(key.startswith("shape_") for key in objects):
+        raise UserInputError(f"{translated.source or 'stage'}: nothing renderable: no shape that Mitsuba can build")
+    try:
+        return mi.load_dict(objects)
+    except Exception as error:
+        raise UserInputError(f"{translated.source or 'stage'}: Mitsuba cannot build the scene ({_short(error)})") from None

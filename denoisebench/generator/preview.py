@@ -47,14 +47,16 @@ def render_preview(usd_path: str | Path, frame: int = 0, width: int = 256, heigh
     except ValueError as error:
         raise UserInputError(f"--max-depth: {error}") from None
     translated = translate_usd(usd_path, **(translate_options or {}))
-    if before_render is not None:
-        before_render(translated)
     if not 0 <= frame < translated.camera.frames:
         raise UserInputError(f"--frame {frame} is out of range: the stage has {translated.camera.frames} frame(s)")
     from denoisebench.generator.feature_renderer import render_frame
 
     plan = make_render_plan(translated.effects, options, stage_max_depth=translated.max_depth)
-    scene = build_mitsuba_scene(translated, frame=frame)
+    try:
+        scene = build_mitsuba_scene(translated, frame=frame)  # may add warnings (prims Mitsuba refuses)
+    finally:
+        if before_render is not None:
+            before_render(translated)
     rendered = render_frame(scene, translated.camera, frame, plan, width=width, height=height, spp=spp,
                             seed=seed, reference=True)
     return rendered.buffers["color"], translated

@@ -133,6 +133,8 @@ def _decode(data: bytes, suffix: str) -> np.ndarray:
     array = np.array(converted, dtype=np.float32)
     if array.ndim == 2:
         array = array[..., None]
+    if array.ndim != 3 or min(array.shape) < 1:
+        raise ValueError(f"decoded to an empty image {array.shape}")
     if not np.all(np.isfinite(array)):
         array = np.nan_to_num(array, nan=0.0, posinf=0.0, neginf=0.0)
     return array
