@@ -316,7 +316,9 @@ def test_packed_channels_varname_and_fallback_on_unreadable_textures(tmp_path):
         base = bsdfs[records[name]["bsdf"]]["bsdf"]["base_color"]
         assert base == {"type": "rgb", "value": pytest.approx([0.1, 0.2, 0.3])}  # the input's own value
         assert sum(f"/Looks/{name[1:]}/Texture" in w for w in translated.warnings) == 1
-    # Whatever the decoder makes of a CMYK JPEG, translation and rendering do not crash.
+    # A CMYK JPEG (Mitsuba's reader: "Unsupported number of components"): a warning, the default grey.
+    assert sum("/Looks/Cmyk/Texture" in w and "cannot be read" in w for w in translated.warnings) == 1
+    assert bsdfs[records["/Cmyk"]["bsdf"]]["bsdf"]["base_color"]["type"] == "rgb"
     from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
 
     build_mitsuba_scene(translated)
