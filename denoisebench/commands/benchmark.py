@@ -28,6 +28,7 @@ EPILOG = """examples:
   run-benchmark --data out/dataset --denoisers identity,oidn --spp 1,4 --db results.sqlite
   run-benchmark --data out/dataset --denoiser my_pkg.filters:MyDenoiser --option my_pkg.filters:MyDenoiser:radius=5
   run-benchmark --data out/dataset --denoiser plugins/slow.py:Slow --time-limit 600 --memory-limit 8192
+  run-benchmark --data out/dataset --metrics noisebase,cvvdp   # Noisebase's table beside ColorVideoVDP
 """
 
 
@@ -73,7 +74,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--spp", default=None, help="input spp to benchmark, e.g. 1,4,16 (default: every spp of the split)")
     parser.add_argument("--split", default="test", choices=("train", "val", "test", "all"),
                         help="dataset split, or all for every scene of a benchmark-only dataset (default test)")
-    parser.add_argument("--metrics", default="", help="comma-separated metrics (default every registered; relmse and flip always)")
+    parser.add_argument("--metrics", default="",
+                        help="comma-separated metrics or metric sets (noisebase: Noisebase's definitions, "
+                             "nb_*); default every registered metric outside the sets; relmse and flip always")
     parser.add_argument("--out", default="report", help="report folder (default report)")
     parser.add_argument("--db", default="benchmark.sqlite", help="results database (default benchmark.sqlite)")
     parser.add_argument("--executor", default="local", choices=("local", "ray"), help="where units run (default local)")

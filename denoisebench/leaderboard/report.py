@@ -15,8 +15,8 @@ Notes
   has seen the frames before it) at the lowest input spp, where denoisers differ most.
 * **Flicker.** The figure has one panel per input spp and one row per per-frame flicker metric
   (``temporal_relmse`` and tPSNR, both scale-free, so their mean over scenes is meaningful); the
-  table lists every temporal metric the run measured, the scale-free ones first, each aggregated
-  by its rule. Frame strips (:mod:`.strips`) show one crop of consecutive frames per denoiser.
+  table lists every temporal metric the run measured, the scale-free ones first (ColorVideoVDP's
+  ``cvvdp`` in JOD beside ``temporal_relmse``), each aggregated by its rule. Frame strips (:mod:`.strips`) show one crop of consecutive frames per denoiser.
 * **Floors.** results.json, results.csv and the tables give each MSE-family score's
   reference-noise floor and its floor-corrected value (``score − floor``, an unbiased estimate of
   the score against the noise-free image; :mod:`denoisebench.metrics.floors`).
@@ -151,8 +151,9 @@ def _comparisons(store: ResultsStore, data: analysis.RunData, dataset: Dataset, 
     return out
 
 
-#: Temporal metrics the flicker table leads with (scale-free); the others follow, linear ones last.
-FLICKER_LEAD = ("temporal_relmse", "tpsnr")
+#: Temporal metrics the flicker table leads with (scale-free; cvvdp is ColorVideoVDP's JOD, how visible
+#: the flicker is to a viewer); the others follow, linear ones last.
+FLICKER_LEAD = ("temporal_relmse", "cvvdp", "tpsnr")
 
 
 def temporal_metric_order(names: list[str]) -> list[str]:

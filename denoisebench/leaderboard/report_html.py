@@ -199,7 +199,9 @@ def _flicker(report: dict) -> str:
     parts = [_figure(report, "flicker", "flicker per frame, one panel per input spp"),
              '<p class="note">Temporal relMSE: the squared difference of the warped frame differences (motion '
              "buffer, disocclusions masked) over the reference's local magnitude squared plus 0.01, scale-free like "
-             "relMSE; tPSNR: PSNR of the tone-mapped frame differences. Both lead; other temporal metrics follow, and "
+             "relMSE; cvvdp: ColorVideoVDP's prediction, in JOD (10 = no visible difference), of how visible the "
+             "differences and flicker are on a 4K HDR monitor at 30 fps, the reference's typical surface shown at "
+             "100 cd/m²; tPSNR: PSNR of the tone-mapped frame differences. These lead; other temporal metrics follow, and "
              "the linear temporal_l1 scores, kept as diagnostics, are shown relative to the noisy input.</p>"]
     for spp in report["spp"]:
         header, rows = fmt.flicker_rows(report, spp)

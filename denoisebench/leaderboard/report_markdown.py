@@ -73,7 +73,8 @@ def render_markdown(report: dict) -> str:
     lines += ["## Temporal flicker", ""]
     if report["flicker"]["series"]:
         lines += ["![flicker per frame](figures/flicker.png)", "",
-                  "Temporal relMSE (warped frame differences over the reference's local magnitude, scale-free) and "
+                  "Temporal relMSE (warped frame differences over the reference's local magnitude, scale-free), "
+                  "cvvdp (ColorVideoVDP, JOD: 10 = no visible difference, how visible the flicker is) and "
                   "tPSNR lead; linear temporal scores follow relative to the noisy input.", ""]
         for spp in report["spp"]:
             header, rows = fmt.flicker_rows(report, spp)
