@@ -206,11 +206,14 @@ def copy_user_stage(path: str | Path, scene_dir: Path, options: dict | None = No
 
 def _with_additions(stage_path: Path, options: dict) -> str:
     """The copied root layer's text with the camera choice, auto camera and default lights authored into it."""
-    from pxr import Usd
+    from pxr import Sdf, Usd
 
     from denoisebench.generator.translate import apply_additions
     from denoisebench.scenes.effects import METADATA_KEY
 
+    cached = Sdf.Layer.Find(str(stage_path))
+    if cached is not None:
+        cached.Reload(force=True)  # USD keeps open layers by path: read the bytes just written
     stage = Usd.Stage.Open(str(stage_path))
     layer = stage.GetRootLayer()
     stage.SetEditTarget(layer)
