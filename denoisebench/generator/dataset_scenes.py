@@ -144,7 +144,11 @@ def user_stage_dependencies(path: Path) -> list[tuple[Path, str]]:
     if path.suffix.lower() == ".usdz":
         return []  # a package is self-contained; it is copied whole
     root = path.resolve().parent
+    # USD's own messages about unresolved assets are caught here: the translator reports them once per prim.
+    quiet = UsdUtils.CoalescingDiagnosticDelegate()
     layers, assets, _unresolved = UsdUtils.ComputeAllDependencies(str(path))
+    quiet.TakeCoalescedDiagnostics()
+    del quiet
     out = []
     for layer_or_asset in [layer.realPath for layer in layers[1:]] + list(assets):
         absolute = Path(layer_or_asset).resolve()
