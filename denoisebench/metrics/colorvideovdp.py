@@ -41,8 +41,9 @@ brightness alternating ±15 % frame to frame → 5.2 JOD while the same +15 % he
 visible flicker.
 
 Runs offline on the CPU (the model's data ship in the package), on one torch thread
-(:mod:`.torch_threads`: 25× less CPU than two threads here). The model pads a short sequence to its temporal filters' support, so 3 frames cost
-nearly what 8 do. ``bench/field_metrics_speed.py`` measures seconds per megapixel-frame.
+(:mod:`.torch_threads`: 20× less CPU than two threads here). ``bench/field_metrics_speed.py``
+measures seconds per megapixel-frame: ≈ 3–4 s at 128² on one busy core (0.16 s for a 3-frame
+128² sequence, 0.40 s for 8 frames; the first call adds ≈ 5 s to import and load the model).
 
 Installing: ``cvvdp`` 0.5.7 imports ``torchvision``; the registry's torchvision 0.28.0 (the one
 built for torch 2.13.0) is a CUDA build whose compiled operators cannot load into the CPU torch,
