@@ -373,9 +373,12 @@ def test_transform2d_shifts_the_texture_and_alpha_cutouts_open_holes(tmp_path):
     translated = translate_usd(path)
     cut_bsdf = translated.scene_dict["bsdfs"][[r for r in translated.scene_dict["shapes"] if r["name"] == "/Cut"][0]["bsdf"]]
     assert cut_bsdf["type"] == "mask" and set(np.unique(cut_bsdf["opacity"]["data"])) == {0.0, 1.0}
-    color = _albedo(translated)["color"]
+    buffers = _albedo(translated)
+    color, position = buffers["color"], buffers["position"]
     np.testing.assert_allclose(color[8, 2], [0, 1, 0], atol=1e-4)  # through the hole: the wall's emission
     assert color[8, 13].max() < 1e-4  # the opaque half faces the camera unlit (the wall lights its back)
+    # Features describe what the camera sees: the wall through the hole, the quad where it is opaque.
+    assert position[8, 2, 2] == pytest.approx(-2.0, abs=1e-3) and position[8, 13, 2] == pytest.approx(0.0, abs=1e-3)
 
 
 def test_textures_inside_a_usdz_package_are_read_through_the_resolver(tmp_path):

@@ -55,7 +55,9 @@ from denoisebench.generator.render_integrator import (
     pixel_moments,
     render_moments,
     scene_has_delta_only_bsdf,
+    scene_has_null_bsdf,
     scene_has_object_motion,
+    NULL_SKIPS,
 )
 from denoisebench.generator.render_plan import RenderPlan
 from denoisebench.mitsuba_runtime import load_mitsuba
@@ -315,6 +317,7 @@ def render_frame(
         features=bool(features),
         motion=want_motion,
         object_motion=want_motion and scene_has_object_motion(scene),
+        null_skips=NULL_SKIPS if scene_has_null_bsdf(mi, scene) else 0,
         follow_delta_albedo="albedo" in features and scene_has_delta_only_bsdf(mi, scene),
         jitter=_jitter,
     )

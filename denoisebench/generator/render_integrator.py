@@ -35,6 +35,8 @@ Features (the first vertex is the camera ray's first intersection):
   diffuse lobe, the BSDF sample weight: a one-sample estimate of the directional albedo); when the camera ray first
   meets delta surfaces (mirror, glass) the path is followed through them and the albedo is the
   throughput of that delta chain times the diffuse reflectance where it ends (0 if it escapes);
+* the first hit skips up to :data:`NULL_SKIPS` fully transparent cut-out points (opacity masks):
+  features, motion and the first vertex belong to the surface seen through the hole;
 * ``motion``: the first-hit point projected through the pinhole (lens center) of the camera one frame
   earlier than the ray's time, minus its projection at the ray's time (pixels, x right, y down).
   With ``KernelOptions.object_motion`` (scenes with moving objects) the point projected into the
@@ -79,6 +81,7 @@ class KernelOptions:
     # Per-sample data for RPF: the first vertex's light and bounce random numbers and the second hit
     second_hit: bool = False
     object_motion: bool = False  # meshes carry vertex_prev_position: motion follows moving objects
+    null_skips: int = 0  # cut-outs (mask BSDFs): fully transparent surfaces the camera ray passes before its first vertex
 
     @property
     def bounded(self) -> bool:
@@ -131,6 +134,15 @@ def _diffuse_part(mi, bsdf, ctx_diffuse, si, wo, val, active):
 
 
 PREVIOUS_POSITION = "vertex_prev_position"  # mitsuba_scene.PREVIOUS_POSITION (no Mitsuba import here)
+
+
+#: Fully transparent cut-out layers a camera ray passes through before its first vertex (scenes with masks).
+NULL_SKIPS = 4
+
+
+def scene_has_null_bsdf(mi, scene) -> bool:
+    """True when some shape's BSDF has a null (pass-through) lobe: an opacity mask (cut-out)."""
+    return any(shape.bsdf() is not None and mi.has_flag(shape.bsdf().flags(), mi.BSDFFlags.Null) for shape in scene.shapes())
 
 
 def scene_has_object_motion(scene) -> bool:
@@ -218,6 +230,13 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
 
     # ---------------------------------------------------------- first vertex
     si = scene.ray_intersect(ray, mi.RayFlags.All, True)
+    for _ in range(opts.null_skips):
+        # Cut-outs: pass straight through points whose BSDF is fully transparent (mask opacity 0), so
+        # that the first vertex, its features and its motion are what the camera sees. Unbiased: there
+        # the BSDF is a null lobe of weight 1 and evaluates to 0 for light sampling.
+        clear = si.is_valid() & (dr.min(si.bsdf(ray).eval_null_transmission(si, si.is_valid())) >= 1.0)
+        ray = mi.Ray3f(dr.select(clear, si.spawn_ray(ray.d).o, ray.o), ray.d, ray.maxt, ray.time, ray.wavelengths)
+        si = dr.select(clear, scene.ray_intersect(ray, mi.RayFlags.All, True, clear), si)
     valid = si.is_valid()
     emitted = si.emitter(scene).eval(si)  # environment on a miss; MIS weight 1 at the camera vertex
     diffuse = mi.Color3f(emitted)
