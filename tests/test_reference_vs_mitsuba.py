@@ -78,11 +78,15 @@ def z_scores(mean_a, var_a, mean_b, var_b):
     """z of a − b for the image mean (per channel) and every block mean (per channel); inputs are
     per-pixel means and variances of those means (independent pixels)."""
     n = BLOCK * BLOCK
-    blocks = (block_means(mean_a) - block_means(mean_b)) / np.sqrt(
-        (block_means(var_a) + block_means(var_b)) / n + 1e-20)
+    # Float rounding (1e-6 relative) stands in for the variance where both have none (a constant sky).
+    a_blocks, b_blocks = block_means(mean_a), block_means(mean_b)
+    blocks = (a_blocks - b_blocks) / np.sqrt(
+        (block_means(var_a) + block_means(var_b)) / n + np.square(1e-6 * (np.abs(a_blocks) + np.abs(b_blocks))) + 1e-20)
     pixels = mean_a[..., 0].size
-    image = (mean_a.mean(axis=(0, 1)) - mean_b.mean(axis=(0, 1))) / np.sqrt(
-        (var_a.sum(axis=(0, 1)) + var_b.sum(axis=(0, 1))) / pixels ** 2 + 1e-30)
+    a_image, b_image = mean_a.mean(axis=(0, 1)), mean_b.mean(axis=(0, 1))
+    image = (a_image - b_image) / np.sqrt(
+        (var_a.sum(axis=(0, 1)) + var_b.sum(axis=(0, 1))) / pixels ** 2 + np.square(1e-6 * (np.abs(a_image) + np.abs(b_image)))
+        + 1e-30)
     return image, blocks
 
 
