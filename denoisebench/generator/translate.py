@@ -136,7 +136,9 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
         path = str(prim.GetPath())
         if prim.HasAPI(UsdLux.LightAPI) or type_name.endswith("Light"):
             light_kinds.append(type_name)
-            new_shapes, new_emitters = read_light(prim, to_mitsuba @ geometry.local_to_world(prim), warnings)
+            if len(frames) > 1 and geometry.is_transform_animated(prim):
+                warnings.append(f"{path}: animated light; rendered at its first-frame pose")
+            new_shapes, new_emitters = read_light(prim, to_mitsuba @ geometry.local_to_world(prim, frames[0]), warnings)
             for record in new_shapes:
                 record["bsdf"] = None
                 shapes.append(record)
