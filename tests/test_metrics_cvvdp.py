@@ -92,3 +92,30 @@ def test_install_keeps_torch_and_pins_what_make_setup_installs():
     makefile = (ROOT / "Makefile").read_text()
     assert "--no-deps -r requirements-nodeps.txt" in makefile
     assert re.search(r"^\$\(STAMP\):.*requirements-nodeps\.txt", makefile, re.M)
+
+
+def test_hard_cases_are_finite_and_quiet(caplog):
+    black = np.zeros((3, 16, 16, 3), np.float32)
+    firefly = black.copy()
+    firefly[1, 5, 5] = 1e4
+    rng = np.random.default_rng(2)
+    ref = rng.random((3, 16, 16, 3)).astype(np.float32)
+    huge = ref.copy()
+    huge[0, 0, 0] = 3e38  # near float32's maximum: scaled in float64, then capped
+    with caplog.at_level("WARNING"):
+        assert cvvdp(black, black) == pytest.approx(10.0, abs=1e-4)
+        values = [cvvdp(firefly, black), cvvdp(huge, ref), cvvdp(ref - 0.5, ref)]
+    assert all(math.isfinite(v) and v < 10.0 for v in values)
+    assert not [r for r in caplog.records if r.levelname == "WARNING"]
+
+
+def test_torchvision_compiled_ops_still_fail_loudly():
+    from denoisebench.metrics.colorvideovdp import load_pycvvdp
+
+    load_pycvvdp()
+    import torchvision
+
+    if torchvision.extension._has_ops():
+        pytest.skip("torchvision's compiled operators load here: nothing was declared")
+    with pytest.raises(RuntimeError):
+        torchvision.ops.nms(torch.zeros(1, 4), torch.zeros(1), 0.5)

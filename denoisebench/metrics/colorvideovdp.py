@@ -56,10 +56,12 @@ fail loudly. Where torchvision's operators load, nothing is declared.
 
 from __future__ import annotations
 
+import logging
 import math
 import sys
 import threading
 import warnings
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -159,12 +161,26 @@ def cvvdp(pred_seq, ref_seq, *, fps: float = FPS) -> float:
     import torch
 
     k = exposure_from_reference(c.ref)
-    # float32 is what the model computes in; 1500 cd/m² clipping makes larger values moot.
+    # Scaled in float64 (float32 radiance near its maximum times k would overflow), then capped:
+    # the model computes in float32 and the display clips at 1500 cd/m² anyway.
     cap = 1e30
-    test = torch.from_numpy(np.clip(c.pred * k, 0.0, cap).astype(np.float32))
-    ref = torch.from_numpy(np.clip(c.ref * k, 0.0, cap).astype(np.float32))
+    test = torch.from_numpy(np.clip(c.pred.astype(np.float64) * k, 0.0, cap).astype(np.float32))
+    ref = torch.from_numpy(np.clip(c.ref.astype(np.float64) * k, 0.0, cap).astype(np.float32))
     model = _model()
-    with one_torch_thread(), warnings.catch_warnings(), torch.no_grad():
-        warnings.simplefilter("ignore")
+    with one_torch_thread(), _quiet(), torch.no_grad():
         jod, _stats = model.predict(test, ref, dim_order="FHWC", frames_per_second=float(fps))
     return float(jod)
+
+
+@contextmanager
+def _quiet():
+    """Silence pycvvdp's root-logger warnings (e.g. "mean color value is less than 1" for a dark
+    scene, which our exposure already handles) and Python warnings during a call; restore after."""
+    previous = logging.root.manager.disable
+    logging.disable(max(previous, logging.WARNING))
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            yield
+    finally:
+        logging.disable(previous)
