@@ -110,3 +110,16 @@ def test_metric_set_is_opt_in_and_selected_by_name():
     assert temporal[:2] == ["nb_tpsnr", "nb_trmae"]  # then the always-computed ones
     with pytest.raises(ValueError, match="sets: noisebase"):
         expand_metric_names(["noisebase2"])
+
+
+def test_msssim_at_their_size_is_pytorch_msssim_on_the_hand_luminance():
+    import torch
+    from pytorch_msssim import ms_ssim
+
+    pred, ref = _scene(t=1, size=176)  # ≥ 161 px: the library's five scales, as on their 1920×1024 frames
+
+    def lum(a):
+        return torch.from_numpy(_hand_lum(_hand_encode(a)).astype(np.float32)[None, None])
+
+    expected = float(ms_ssim(lum(pred[0]), lum(ref[0]), data_range=1.0))
+    assert nb.nb_msssim(pred[0], ref[0]) == pytest.approx(expected, abs=1e-5)
