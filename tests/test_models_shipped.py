@@ -17,7 +17,7 @@ from denoisebench.denoisers.synthetic import synthetic_frame, synthetic_sequence
 from denoisebench.models.checkpoint import load_checkpoint
 from denoisebench.models.denoisers import WEIGHTS_DIR, shipped_weights
 
-MODELS = ("dpcn", "kpcn", "rae")
+MODELS = ("dpcn", "kpcn", "rae", "lbf")
 torch.set_num_threads(1)
 
 
@@ -37,7 +37,9 @@ def test_weights_are_small_safe_and_documented(name):
 
 #: (model, peer) pairs whose shipped small weights do not (yet) beat the peer on the held-out
 #: scenes: the issue asks for a win; strict xfail turns green into a failure once they do.
-NOT_YET_BEATEN: set[tuple[str, str]] = set()
+#: lbf: the MLP-driven cross-bilateral filter, 1200 CPU steps on 27 scenes of 64 px, scores 24%
+#: above the hand-tuned cross_bilateral on the held-out scenes (ratio CI 0.79–2.25: not resolved).
+NOT_YET_BEATEN: set[tuple[str, str]] = {("lbf", "cross_bilateral")}
 
 
 @pytest.mark.parametrize(

@@ -269,8 +269,10 @@ def camera_axes(position: torch.Tensor, depth: torch.Tensor, ridge: float = 1e-6
     centred = (p - mean[:, None]) * hit[..., None]
     scale = torch.sqrt((centred**2).sum(dim=(1, 2)) / count).clamp_min(1e-12)  # one scalar per image
     x = torch.cat([centred / scale[:, None, None], hit[..., None]], dim=2)  # N×HW×4, misses all zero
-    gram = x.transpose(1, 2) @ x + ridge * torch.eye(4, dtype=x.dtype)
-    ys, xs = torch.meshgrid(torch.arange(h, dtype=x.dtype), torch.arange(w, dtype=x.dtype), indexing="ij")
+    gram = x.transpose(1, 2) @ x + ridge * torch.eye(4, dtype=x.dtype, device=x.device)
+    ys, xs = torch.meshgrid(
+        torch.arange(h, dtype=x.dtype, device=x.device), torch.arange(w, dtype=x.dtype, device=x.device), indexing="ij"
+    )
     targets = torch.stack([z, xs.flatten()[None] * z, ys.flatten()[None] * z], dim=2) * hit[..., None]  # N×HW×3
     solution = torch.linalg.solve(gram, x.transpose(1, 2) @ targets)[:, :3]  # N×3(coeff)×3(target)
     forward = F.normalize(solution[..., 0], dim=1, eps=1e-12)
