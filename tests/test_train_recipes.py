@@ -309,3 +309,11 @@ def test_log_depth_var_follows_the_depth_transform():
     torch.testing.assert_close(raw, torch.log1p(torch.full((1, 4, 4), 2.0)))
     torch.testing.assert_close(logged, torch.log1p(torch.full((1, 4, 4), 2.0 / 100.0)))  # var / (1 + d)²
     assert pcn.DPCN_CONFIGS["small"]["log_depth_var"] and not build_model("kpcn", {**pcn.SMALL_CONFIG, "log_depth_var": False}).log_depth_var
+
+
+def test_peers_option_checks_its_names(data, tmp_path, capsys):
+    out = tmp_path / "x.pt"
+    capsys.readouterr()
+    assert main(["train", "--model", "lbf", "--data", str(data), "--steps", "0", "--out", str(out), "--evaluate",
+                 "--peers", "lbf", *SMALL]) == 2
+    assert "--peers" in capsys.readouterr().err

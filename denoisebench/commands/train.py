@@ -84,7 +84,10 @@ def add_arguments(parser) -> None:
                         help="data loader processes (default 0 on the CPU, up to 4 on CUDA)")
     parser.add_argument("--checkpoint-every", type=int, default=100, help="save every N steps (default 100)")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads, 1 to the core count (default 1)")
-    parser.add_argument("--evaluate", action="store_true", help="also score on the test split against identity and cross_bilateral")
+    parser.add_argument("--evaluate", action="store_true", help="also score on the test split against the --peers")
+    parser.add_argument("--peers", default="identity,cross_bilateral",
+                        help="denoisers --evaluate/--ship compare against, comma-separated (default identity,cross_bilateral; "
+                        "e.g. add oidn)")
     parser.add_argument("--ship", default=None, metavar="DIR",
                         help="implies --evaluate; write DIR/MODEL_CONFIG.pt (no optimiser state) and its model card DIR/MODEL_CONFIG.md")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -103,6 +106,9 @@ def run(args) -> int:
         raise UserInputError(f"--threads must be between 1 and the core count {max_threads()} (got {args.threads})")
     if args.val_every < 0 or (args.workers is not None and args.workers < 0):
         raise UserInputError("--val-every and --workers must be >= 0")
+    peers = tuple(name.strip() for name in args.peers.split(",") if name.strip())
+    if not peers or args.model in peers:
+        raise UserInputError(f"--peers must name at least one other denoiser (got {args.peers!r})")
     if not (Path(args.data) / "dataset.json").is_file():
         raise UserInputError(f"{args.data}: not a dataset folder (no dataset.json)")
     from denoisebench.models.training import TrainOptions, train
@@ -146,7 +152,7 @@ def run(args) -> int:
     print(summary)
     if args.evaluate or args.ship:
         table = evaluate_on_split(meta["checkpoint"], args.model, args.data, split="test", threads=args.threads,
-                                  progress=not args.quiet)
+                                  peers=peers, progress=not args.quiet)
         print(json.dumps(table, indent=2))
         if args.ship:
             print(ship(meta["checkpoint"], args, table))

@@ -128,8 +128,9 @@ def render_card(
         *train_commands,
         "```",
         "",
-        "The last command, run with `--ship denoisebench/models/weights` added, also scored the test split "
-        "and wrote these weights (without optimiser state) and this card."
+        "The last command, run with `--ship denoisebench/models/weights`"
+        + ("" if list(evaluation["ratio"]) == ["identity", "cross_bilateral"] else f" `--peers {','.join(evaluation['ratio'])}`")
+        + " added, also scored the test split and wrote these weights (without optimiser state) and this card."
         + (" It adds no steps (`--steps 0`): it validates and ships the checkpoint the command before it wrote."
            if train_commands and " --steps 0 " in f"{train_commands[-1]} " else ""),
         "",
