@@ -1,4 +1,4 @@
-"""Classical baselines against peers and invariants: cross-bilateral, RPF, non-local means, OIDN."""
+"""Classical baselines against peers and invariants: cross-bilateral, non-local means, OIDN (RPF: test_baselines_rpf.py)."""
 
 from __future__ import annotations
 
@@ -10,10 +10,8 @@ from denoisebench.baselines import cross_bilateral as cb
 from denoisebench.baselines.identity import Identity
 from denoisebench.baselines.nlmeans import NLMeans
 from denoisebench.baselines.oidn import OIDN, clamp_isolated
-from denoisebench.baselines.rpf import RPFSettings, _Histograms, rpf_filter, scaled_boxes
 from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.registry import load_denoiser
-from denoisebench.denoisers.runner import run_frame
 from denoisebench.denoisers.synthetic import synthetic_frame
 from denoisebench.metrics.spatial import relmse
 
@@ -155,96 +153,6 @@ def test_cross_bilateral_rejects_bad_options():
         cb.CrossBilateral(features=["curvature"])
     with pytest.raises(ValueError):
         cb.CrossBilateral(radius=-1)
-
-
-# ----------------------------------------------------------------------------------- RPF
-
-
-def test_mutual_information_matches_a_histogram2d_peer():
-    rng = np.random.default_rng(4)
-    n, m, bins = 3, 200, 6
-    x = rng.integers(0, bins, (n, m))
-    y = np.where(rng.random((n, m)) < 0.7, x, rng.integers(0, bins, (n, m)))  # dependent on x
-    z = rng.integers(0, bins, (n, m))  # independent
-    q = np.stack([x, y, z], axis=-1)
-    mask = np.ones((n, m), bool)
-    mask[1, :50] = False  # clustered-out samples do not count
-    hist = _Histograms(q, mask, bins)
-    got = hist.mutual_information(np.array([0, 0]), np.array([1, 2]))
-    for i in range(n):
-        keep = mask[i]
-        for row, other in enumerate((y, z)):
-            joint, _, _ = np.histogram2d(x[i, keep], other[i, keep], bins=bins, range=[[0, bins], [0, bins]])
-            p = joint / joint.sum()
-            pa, pb = p.sum(1), p.sum(0)
-            nz = p > 0
-            plug_in = np.sum(p[nz] * np.log(p[nz] / np.outer(pa, pb)[nz]))
-            k_ab, k_a, k_b = np.count_nonzero(p), np.count_nonzero(pa), np.count_nonzero(pb)
-            peer = max(plug_in + ((k_a - 1) + (k_b - 1) - (k_ab - 1)) / (2 * keep.sum()), 0.0)
-            assert got[row, i] == pytest.approx(peer, abs=1e-9)
-    assert np.all(got[0] > 0.3) and np.all(got[1] < 0.05)
-
-
-def test_rpf_output_is_a_convex_combination_and_deterministic(frame):
-    image, weights = rpf_filter(frame.samples)
-    again, _ = rpf_filter(frame.samples)
-    np.testing.assert_array_equal(image, again)
-    colors = frame.samples["color"]
-    assert image.dtype == np.float32 and image.shape == frame.color.shape
-    assert np.all(image >= colors.min(axis=(0, 1, 2)) - 1e-6) and np.all(image <= colors.max(axis=(0, 1, 2)) + 1e-4)
-    assert len(weights.beta) == len(weights.boxes) == len(scaled_boxes(frame.height, frame.width))
-    assert all(np.all((a >= 0) & (a <= 1)) for a in weights.alpha)
-    assert relmse(image, frame.reference) < 0.5 * relmse(frame.color, frame.reference)
-
-
-def test_rpf_same_bytes_on_one_thread_and_several(monkeypatch):
-    """Each (pass, chunk of rows) has its own generator: threads change nothing."""
-    import denoisebench.baselines.rpf as rpf_module
-
-    frame = synthetic_frame("shapes", 24, 20, 3, seed=5)
-    monkeypatch.setattr(rpf_module, "_CHUNK_PAIRS", 20_000)  # several chunks per pass
-    monkeypatch.setattr(rpf_module, "_workers", lambda: 1)
-    one, _ = rpf_filter(frame.samples)
-    monkeypatch.setattr(rpf_module, "_workers", lambda: 3)
-    three, _ = rpf_filter(frame.samples)
-    assert np.array_equal(one, three)
-
-
-def test_rpf_constant_colour_stays_constant():
-    frame = synthetic_frame("shapes", 12, 10, 3, seed=8)
-    samples = dict(frame.samples)
-    samples["color"] = np.full_like(samples["color"], 0.37)
-    image, _ = rpf_filter(samples)
-    np.testing.assert_allclose(image, 0.37, rtol=1e-5)
-
-
-def test_rpf_feature_weights_drop_with_the_lens_on_synthetic_depth_of_field():
-    frame = synthetic_frame("depth_of_field", 32, 32, 4, seed=2)
-    decoupled = dict(frame.samples)
-    decoupled["lens"] = np.random.default_rng(1).random(frame.samples["lens"].shape).astype(np.float32)
-    _, coupled = rpf_filter(frame.samples)
-    _, reference = rpf_filter(decoupled)
-    spread = frame.samples["albedo"].std(axis=0).mean(axis=-1)
-    mask = spread > np.percentile(spread, 75)
-    for feature in ("position", "albedo"):
-        ours = np.mean([b[feature][mask].mean() for b in coupled.beta])
-        theirs = np.mean([b[feature][mask].mean() for b in reference.beta])
-        assert ours < 0.9 * theirs, feature
-
-
-def test_rpf_needs_samples_and_checks_options():
-    frame = synthetic_frame("shapes", 8, 8, 2, samples=False)
-    result = run_frame(load_denoiser("rpf"), frame)
-    assert not result.ok and "samples" in result.error
-    with pytest.raises(ValueError):
-        RPFSettings(bins=1)
-    with pytest.raises(TypeError):
-        load_denoiser("rpf").__class__(radius=3)
-
-
-@pytest.mark.parametrize("size, expected", [((512, 512), [55, 35, 17, 7]), ((64, 48), [29, 19, 9, 5]), ((3, 3), [3])])
-def test_scaled_boxes(size, expected):
-    assert scaled_boxes(*size) == expected
 
 
 # ----------------------------------------------------------------------------------- NL-means, OIDN

@@ -1,64 +1,66 @@
 """Random Parameter Filtering (Sen & Darabi 2012, "On filtering the noise from the random parameters
-in Monte Carlo rendering"), vectorised in numpy over per-sample data.
+in Monte Carlo rendering"), vectorised: numpy histograms for the statistics, torch for the filter.
 
-Per pass t (box sizes shrinking: the paper's 55 → 35 → 17 → 7 pixels, scaled down for images under
-128 px), for every pixel P:
+Per pass t = 0..3 with box size b (the paper's 55, 35, 17, 7 pixels; scaled down for images under
+128 px, see :func:`scaled_boxes`), for every pixel P with its S samples:
 
-1. **Gather** P's own S samples plus ``M − S`` samples drawn from the b×b box around P
-   (mirrored at the image border). Each sample is a vector of colour c (3), scene features f
-   (``features``: world position, normal, albedo by default), screen position p (pixel index +
-   sub-pixel offset) and the random parameters r the render plan has (lens u,v with depth of
-   field, time with motion blur).
-2. **Normalise** every channel by the neighbourhood's mean and standard deviation.
-3. **Cluster** (the paper's pre-process): only neighbours whose every feature lies within
-   3·max(σ_P, 0.3) of the mean of P's own samples (normalised units) enter the statistics, so
-   they describe the surface P sees.
-4. **Dependencies.** Mutual information from joint histograms (``bins`` equal bins over ±3
-   standard deviations, Miller–Madow bias correction): D^r_k = Σ_l MI(x_k; r_l), D^p_k =
-   Σ_l MI(x_k; p_l) for each colour and feature channel x_k, D^c_{f,k} = Σ_l MI(f_k; c_l), and
-   the colour's total D_c = Σ_k (D^r_{c,k} + D^p_{c,k} + D^f_{c,k}).
-5. **Weights.** W^r_k = D^r_k / (D^r_k + D^p_k + ε) (how much x_k depends on the random
-   parameters rather than on screen position);
-   α_k = max(1 − (1 + 0.1t)·W^r_{c,k}, 0) for colour, β_k = W^c_{f,k}·max(1 − (1 + 0.1t)·W^r_{f,k}, 0)
-   for features with W^c_{f,k} = D^c_{f,k} / D_c. A feature that varies with the lens (a defocused
-   edge) or with time (motion) gets a small β: it says nothing reliable about the surface at P.
-6. **Filter.** For each of P's samples i, over the gathered samples j (the lecture's formula)::
+1. **Gather** (the paper's Algorithm 2) the neighbourhood N: P's own S samples plus draws of
+   (pixel, sample) at Gaussian offsets of σ = b/4 pixels around P, kept inside the b×b box
+   (mirrored at the image border) and never P itself, b²·S/2 samples in all. Each sample is a
+   vector of colour c (3), scene features f (``features``: first-hit world position, normal and
+   albedo, second-hit position and normal, where the data has them), screen position p (pixel +
+   sub-pixel offset) and the random parameters r the data holds: lens (u, v, as the disk point the
+   renderer made of them), time, and the first vertex's light-sample and bounce-direction random
+   numbers (``light``, ``bounce``).
+2. **Cluster**: a drawn sample j joins N only if every clustering feature k (first-hit normal and
+   albedo) satisfies |f_jk − m_k| ≤ max(3σ_k, 0.1), with m and σ the mean and standard deviation
+   of P's own samples (the paper's rule). Clustering **gates both the statistics and the filter**:
+   a sample from another surface has zero weight.
+3. **Normalise** every channel by the mean and standard deviation of N.
+4. **Dependencies** (Algorithm 3) by mutual information from joint histograms over N (``bins``
+   equal bins over ±3 standard deviations, Miller–Madow bias correction): for every colour and
+   feature channel x_k, D^r_k = Σ_l MI(x_k; r_l), D^p_k = Σ_l MI(x_k; p_l); for every feature,
+   D^c_{f,k} = Σ_l MI(f_k; c_l). Then W^r_k = D^r_k / (D^r_k + D^p_k) for each channel;
+   for the colour as a whole D^r_c = Σ_k D^r_{c,k}, D^p_c = Σ_k D^p_{c,k}, D^f_c = Σ_k D^c_{f,k},
+   W^r_c = D^r_c / (D^r_c + D^p_c) and W^c_{f,k} = D^c_{f,k} / (D^r_c + D^p_c + D^f_c).
+5. **Weights**: α_k = max(1 − 2(1 + 0.1t)·W^r_{c,k}, 0) for colour channels,
+   β_k = W^c_{f,k}·max(1 − (1 + 0.1t)·W^r_{f,k}, 0) for feature channels: a feature that the colour
+   depends on counts, one that depends on the random parameters (a defocused or moving edge, a
+   second hit that follows the bounce) does not.
+6. **Filter** (Algorithm 4), for each of P's samples i over the samples j of N::
 
        w_ij = exp(−|p_i − p_j|² / 2σ_p²) · exp(−Σ_k α_k (c̄_ik − c̄_jk)² / 2σ_c²) · exp(−Σ_k β_k (f̄_ik − f̄_jk)² / 2σ_f²)
 
-   with σ_p = b/4 pixels, σ_c² = σ_c0² / (1 − W^r_c)² and σ_f² = σ_f0² / (1 − W^r_c)² (W^r_c the
-   mean over colour channels). The paper uses one σ² = 0.02 for both; here the colour gets its own,
-   wider σ_c0² = 0.5 (``sigma2_color``; σ_f0² = 0.01, ``sigma2_feature``), because our colour's
-   α stays larger than the paper's (see the first note) and a tight colour term keeps the noise.
-   Chosen on rendered 32 px, 4 spp frames, where relMSE goes (noisy → RPF): cornell 0.140 → 0.053,
-   depth_of_field 0.614 → 0.056, dim_room 3.48 → 0.106, texture_checker 0.171 → 0.097,
-   glossy_fireflies 0.132 → 0.104, thin_geometry 0.074 → 0.034 (with σ_c0² = 2 cornell got worse
-   than its input, 0.21: noisy ceiling pixels pulled in the light's samples).
-   Sample i's new colour is Σ_j w_ij c_j / Σ_j w_ij; the next pass filters these colours; the pixel
-   is the mean of its samples' colours. Every output is a convex combination of input samples:
-   finite and non-negative.
+   with σ_p = b/4 pixels, σ_c² = σ_f² = σ² / (1 − W^r_c)² and σ² = 8σ_8²/S, σ_8² = 0.02 (the
+   paper's value at 8 spp). Sample i's new colour is Σ_j w_ij c_j / Σ_j w_ij; the next pass
+   filters these colours; the pixel is the mean of its samples'. Every output is a convex
+   combination of input samples (w_ii = 1 > 0): finite and non-negative.
 
-Notes:
-    * Our renderer stores the random parameters pixel, lens and time, but not the random numbers
-      that choose the path's bounces, on which most of the colour's noise depends (the paper
-      has them). Their share is estimated instead: the within-pixel part of the neighbourhood's
-      colour variance (E_i[Var_P c] / Var_neighbourhood c, in [0, 1]) is variance that screen
-      position cannot explain. W^r_{c,k} = 1 − (1 − W_MI)(1 − W_var) combines both. At 1 spp
-      the within-pixel variance is unknown (0) and only MI counts.
-    * The lens parameter is stored as the square sample (u, v); statistics use the disk point the
-      renderer made of it (:mod:`~denoisebench.denoisers.lens_sampling`). A hit point moves
-      linearly with the disk point but non-monotonically with (u, v) one at a time, and MI summed
-      over single coordinates barely sees that dependence.
-    * Samples are drawn as in the paper: Gaussian offsets (σ = b/4) around P, inside the box.
-    * Histogram MI from ~100 samples is biased upwards by about (K_a − 1)(K_b − 1)/2N nats;
-      without the Miller–Madow correction two independent channels would look dependent and
-      every W would drift towards 1/2.
-    * ``max_samples`` (M) bounds the work: the paper draws b²S/2 samples, which at b = 55 is far
-      more than a numpy implementation can afford per pixel. Draws use a fixed seed, one
-      generator per (pass, chunk of rows): the filter is deterministic, and the chunks of a pass
-      run on several threads (numpy releases the GIL; 1.7× on 2 cores) with the same bytes as on one.
-    * Per-pixel α and β of every pass are kept in :attr:`RandomParameterFilter.last_weights`
-      (β averaged over each feature's channels) for inspection and tests.
+Deviations (each with its reason; tests/test_baselines_classic.py shows what they cost):
+    * **Sample counts are capped** (``max_samples`` for the filter, ``stat_samples`` for the
+      statistics; the paper's b²S/2 is 6050 at b = 55, S = 4). Filtering is a Monte Carlo estimate
+      of a weighted mean over the box; more draws lower its variance, not its expectation, and
+      past ~100 draws the result barely moves (the test doubles both caps and compares).
+    * **Statistics on a coarser grid** for the large boxes: α, β and W^r_c are computed at every
+      ``stride``-th pixel (stride = max(1, round(b / ``stat_stride_divisor``)): 7 px at b = 55, 1 at
+      b = 7 with the default divisor 8) and every pixel takes the nearest grid point's. The
+      statistics describe a neighbourhood of σ = b/4 pixels, which a grid of b/8 resolves; the
+      clustering that keeps edges is still done per pixel in the filter. 1/stride² of the cost.
+    * **Clustering features** are the first-hit normal and albedo only. World position varies along
+      every surface by an amount set by the scene's scale, so the paper's absolute tolerance 0.1
+      would cut a plane into slivers in a large scene and miss nothing in a small one; second hits
+      vary with the bounce by design. Both still enter the statistics and the feature term.
+    * Without ``light``/``bounce`` data (older datasets, 1-D effects only) the colour's dependence
+      on the path's own random numbers is estimated from the within-pixel share of its variance
+      (E_P[Var_P c] / Var_N c): W^r_{c,k} = 1 − (1 − W_MI)(1 − W_var). At 1 spp that share is
+      unknown and only MI counts.
+    * The lens parameter enters the statistics as the disk point (a defocused hit moves linearly
+      with it, non-monotonically with u or v alone, and MI over single coordinates would miss it).
+    * Draws are deterministic: one generator per (seed, pass, stage, chunk of pixels), so any
+      number of threads gives the same bytes.
+
+Per-pixel α (mean over colour channels), β (mean over each feature's channels) and W^r of every pass
+are kept in :attr:`RandomParameterFilter.last_weights` for inspection and tests.
 """
 
 from __future__ import annotations
@@ -68,6 +70,7 @@ from dataclasses import dataclass, field
 from typing import Mapping, Sequence
 
 import numpy as np
+import torch
 
 from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.lens_sampling import square_to_disk_concentric
@@ -75,13 +78,17 @@ from denoisebench.denoisers.protocol import DenoiserBase
 
 from .threads import available_threads
 
-DEFAULT_FEATURES = ("position", "normal", "albedo")
+DEFAULT_FEATURES = ("position", "normal", "albedo", "position2", "normal2")
+CLUSTER_FEATURES = ("normal", "albedo")
 PAPER_BOXES = (55, 35, 17, 7)  # at the paper's image size
 PAPER_SIZE = 128  # boxes keep their paper size from 128 px up: the noise per pixel does not shrink with the image
-RANDOM_PARAMETERS = ("lens", "time")
+RANDOM_PARAMETERS = ("lens", "time", "light", "bounce")
+PATH_RANDOM_PARAMETERS = ("light", "bounce")  # the path's own random numbers (else: the variance heuristic)
+SIGMA8_SQUARED = 0.02  # the paper's σ² at 8 spp; σ² = 8 σ_8² / S
+CLUSTER_TOLERANCE = 0.1
 _EPS = 1e-10
-_CHUNK_PAIRS = 3_000_000  # sample pairs (own × gathered) per pixel chunk: bounds memory
-_PAIR_GROUP_CELLS = 4_000_000  # samples × channel pairs counted by one bincount
+_STAT_CELLS = 500_000  # gathered samples × channels of one statistics chunk: bounds memory (one-hot codes: × bins)
+_FILTER_PAIRS = 200_000  # sample pairs (own × gathered) of one filter chunk
 
 
 @dataclass
@@ -91,7 +98,8 @@ class RPFWeights:
     boxes: list[int] = field(default_factory=list)
     alpha: list[np.ndarray] = field(default_factory=list)  # mean α over colour channels
     beta: list[dict[str, np.ndarray]] = field(default_factory=list)  # feature -> mean β over its channels
-    w_random: list[dict[str, np.ndarray]] = field(default_factory=list)  # channel group -> W^r
+    w_random: list[dict[str, np.ndarray]] = field(default_factory=list)  # "color" (W^r_c) and feature -> W^r
+    cluster: list[np.ndarray] = field(default_factory=list)  # share of drawn samples the clustering kept
 
 
 def scaled_boxes(height: int, width: int, boxes: Sequence[int] = PAPER_BOXES) -> list[int]:
@@ -109,7 +117,7 @@ def scaled_boxes(height: int, width: int, boxes: Sequence[int] = PAPER_BOXES) ->
 
 
 def _workers() -> int:
-    """Threads for the pixel chunks of a pass (patched in tests)."""
+    """Threads for the statistics chunks of a pass (patched in tests)."""
     return available_threads()
 
 
@@ -119,53 +127,39 @@ def _mirror(index: np.ndarray, size: int) -> np.ndarray:
     return np.clip(index, 0, size - 1)
 
 
-class _Histograms:
-    """Mutual information between channels of n neighbourhoods of m quantised samples each.
+def mutual_information(quantised: torch.Tensor, mask: torch.Tensor, bins: int, a: Sequence[int],
+                       b: Sequence[int]) -> torch.Tensor:
+    """n×A×B: MI (nats) between channel a[i] and channel b[j] in each of n neighbourhoods.
 
-    Entropies use H = log N − Σ_b c_b log c_b / N with a lookup table of c log c (counts are
-    integers ≤ m); samples outside the cluster mask are counted in one extra bin that is dropped.
-    Histograms of many channel pairs are counted by one ``bincount`` (Python overhead per pair
-    would otherwise dominate).
+    ``quantised`` (n×M×D integers in [0, bins)) holds each neighbourhood's samples, ``mask`` (n×M
+    bool) which of them count (the cluster). Every joint histogram of the A×B channel pairs comes out
+    of one batched matmul of one-hot codes (n×(A·bins)×(B·bins) counts); entropies are
+    H = log N − Σ c log c / N. Histogram MI from ~100 samples is biased upwards by about
+    (K_a − 1)(K_b − 1)/2N nats, so the Miller–Madow correction (K − 1)/2N is added to each of the
+    three entropies (K: non-empty bins); without it two independent channels would look dependent.
     """
+    n, m = quantised.shape[:2]
 
-    def __init__(self, quantised: np.ndarray, mask: np.ndarray, bins: int):
-        n, m, _ = quantised.shape
-        self.n, self.bins = n, bins
-        self.q = np.ascontiguousarray(np.moveaxis(quantised, 2, 0), dtype=np.int32)  # D×n×m
-        self.outside = ~mask
-        self.total = np.maximum(mask.sum(axis=1).astype(np.float64), 1.0)
-        self.c_log_c = np.zeros(m + 1)
-        self.c_log_c[1:] = np.arange(1, m + 1) * np.log(np.arange(1, m + 1))
-        self.marginals = self._entropies(self.q, bins)  # (H, K) per channel, each D×n
+    def one_hot(columns: Sequence[int]) -> torch.Tensor:  # n×M×(len·bins) float32
+        offsets = torch.arange(len(columns), dtype=torch.int64) * bins
+        codes = torch.zeros((n, m, len(columns) * bins), dtype=torch.float32)
+        return codes.scatter_(2, quantised[:, :, list(columns)].long() + offsets, 1.0)
 
-    def _entropies(self, index: np.ndarray, cells: int) -> tuple[np.ndarray, np.ndarray]:
-        """Entropy (nats) and non-empty bins of the P×n histograms that ``index`` (P×n×m cells) fills."""
-        groups = index.shape[0]
-        # int32 halves the memory traffic (a group indexes ≤ _PAIR_GROUP_CELLS / m · bins² cells)
-        flat = index + (np.arange(groups * self.n, dtype=np.int32).reshape(groups, self.n, 1) * np.int32(cells))
-        flat[:, self.outside] = groups * self.n * cells  # the dump bin
-        counts = np.bincount(flat.ravel(), minlength=groups * self.n * cells + 1)[:-1].reshape(groups, self.n, cells)
-        entropy = np.log(self.total) - self.c_log_c[counts].sum(axis=2) / self.total
-        return entropy, np.count_nonzero(counts, axis=2)
+    codes_a = one_hot(a).mul_(mask.to(torch.float32).unsqueeze(-1))  # samples outside the cluster: no code
+    joint = torch.bmm(codes_a.transpose(1, 2), one_hot(b)).view(n, len(a), bins, len(b), bins)
+    total = mask.sum(1).clamp_min(1).to(torch.float32)  # n
+    count_a = joint[:, :, :, 0, :].sum(-1)  # every sample has one bin of each channel
+    count_b = joint[:, 0].sum(1)
 
-    def mutual_information(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """P×n: MI(channel a[i]; channel b[i]) in every neighbourhood."""
-        h_ab, k_ab = self._entropies(self.q[a] * self.bins + self.q[b], self.bins * self.bins)
-        h, k = self.marginals
-        # Miller–Madow: H ≈ H_plugin + (K − 1)/2N for each of the three entropies
-        bias = ((k[a] - 1) + (k[b] - 1) - (k_ab - 1)) / (2.0 * self.total)
-        return np.maximum(h[a] + h[b] - h_ab + bias, 0.0)
+    def entropy(counts: torch.Tensor, dims: tuple[int, ...]):
+        shape = (n,) + (1,) * (counts.dim() - 1 - len(dims))
+        plug_in = total.log().view(shape) - torch.xlogy(counts, counts).sum(dims) / total.view(shape)
+        return plug_in + ((counts > 0).sum(dims) - 1).to(torch.float32) / (2.0 * total.view(shape))
 
-    def dependency(self, channels: Sequence[int], on: Sequence[int]) -> np.ndarray:
-        """n×len(channels): Σ over ``on`` of MI(channel; o)."""
-        out = np.zeros((self.n, len(channels)))
-        if not channels or not on:
-            return out
-        a = np.repeat(np.asarray(channels, dtype=np.intp), len(on))
-        b = np.tile(np.asarray(on, dtype=np.intp), len(channels))
-        step = max(1, _PAIR_GROUP_CELLS // max(1, self.q[0].size))
-        mi = np.concatenate([self.mutual_information(a[i : i + step], b[i : i + step]) for i in range(0, a.size, step)])
-        return mi.reshape(len(channels), len(on), self.n).sum(axis=1).T
+    h_a = entropy(count_a, (2,))  # n×A
+    h_b = entropy(count_b, (2,))  # n×B
+    h_ab = entropy(joint, (2, 4))  # n×A×B
+    return (h_a.unsqueeze(2) + h_b.unsqueeze(1) - h_ab).clamp_(min=0.0)
 
 
 @dataclass
@@ -175,9 +169,14 @@ class _Layout:
     color: slice
     features: slice
     feature_groups: dict[str, slice]
+    cluster: slice  # columns of the clustering features (empty: no clustering)
     position: slice
     random: slice
     random_groups: dict[str, slice]
+
+    @property
+    def path_randoms(self) -> bool:
+        return any(name in self.random_groups for name in PATH_RANDOM_PARAMETERS)
 
 
 def _sample_table(samples: Mapping[str, np.ndarray], features: Sequence[str]) -> tuple[np.ndarray, _Layout]:
@@ -187,13 +186,16 @@ def _sample_table(samples: Mapping[str, np.ndarray], features: Sequence[str]) ->
     parts = [color]
     groups: dict[str, slice] = {}
     column = 3
-    for name in features:
+    ordered = [f for f in CLUSTER_FEATURES if f in features] + [f for f in features if f not in CLUSTER_FEATURES]
+    for name in ordered:
         if name in samples:
             array = np.asarray(samples[name], np.float32)
             parts.append(array)
             groups[name] = slice(column, column + array.shape[-1])
             column += array.shape[-1]
     feature_slice = slice(3, column)
+    cluster_stop = max([groups[name].stop for name in CLUSTER_FEATURES if name in groups], default=3)
+    cluster = slice(3, cluster_stop)  # the clustering features lead the feature columns
     ys, xs = np.meshgrid(np.arange(h, dtype=np.float32), np.arange(w, dtype=np.float32), indexing="ij")
     offset = np.asarray(samples["pixel"], np.float32) if "pixel" in samples else np.full((s, h, w, 2), 0.5, np.float32)
     parts.append(np.stack([xs, ys], axis=-1)[None] + offset)
@@ -208,9 +210,10 @@ def _sample_table(samples: Mapping[str, np.ndarray], features: Sequence[str]) ->
             parts.append(array)
             random_groups[name] = slice(column, column + array.shape[-1])
             column += array.shape[-1]
-    layout = _Layout(slice(0, 3), feature_slice, groups, position, slice(position.stop, column), random_groups)
+    layout = _Layout(slice(0, 3), feature_slice, groups, cluster, position, slice(position.stop, column), random_groups)
     table = np.concatenate(parts, axis=-1)
-    # features can hold huge values (1e6 positions): keep squares finite in float32
+    # features can hold huge values (1e6 positions) or NaN: keep squares finite in float32
+    np.nan_to_num(table, copy=False, nan=0.0, posinf=1e15, neginf=-1e15)
     np.clip(table, -1e15, 1e15, out=table)
     return np.ascontiguousarray(table), layout
 
@@ -219,94 +222,157 @@ def _columns(block: slice) -> list[int]:
     return list(range(block.start, block.stop))
 
 
-def _filter_chunk(
-    table: np.ndarray,
-    layout: _Layout,
-    rows: slice,
-    box: int,
-    pass_index: int,
-    rng: np.random.Generator,
-    *,
-    max_samples: int,
-    bins: int,
-    sigma2_color: float,
-    sigma2_feature: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """One pass over the pixels of ``rows``: (new sample colours S×n×3, α n, β n×F, W^r n×F+3)."""
-    spp, height, width, dims = table.shape
-    ys, xs = np.meshgrid(np.arange(rows.start, rows.stop), np.arange(width), indexing="ij")
-    ys, xs = ys.ravel(), xs.ravel()
-    n = ys.size
+_PATTERNS = 256  # offset patterns drawn per pass and stage; each pixel uses one at random
+
+
+def _pattern_pool(rng: np.random.Generator, spp: int, box: int, total: int, height: int, width: int):
+    """(dy, dx, sample) offsets, each P×(total − S) ints: Gaussian (σ = b/4) pixel offsets inside the
+    box, never (0, 0), and a uniform sample index; ``None`` when there is nothing to draw."""
     radius = box // 2
-    extra = max(0, min(max_samples, box * box * spp) - spp)
-    own_s = np.broadcast_to(np.arange(spp), (n, spp))
-    # the paper's draw: Gaussian offsets of σ = b/4 pixels, kept inside the box
-    offsets = np.clip(np.rint(rng.normal(0.0, box / 4.0, (2, n, extra))), -radius, radius).astype(np.int64)
-    gy = np.concatenate([np.broadcast_to(ys[:, None], (n, spp)), _mirror(ys[:, None] + offsets[0], height)], 1)
-    gx = np.concatenate([np.broadcast_to(xs[:, None], (n, spp)), _mirror(xs[:, None] + offsets[1], width)], 1)
-    gs = np.concatenate([own_s, rng.integers(0, spp, (n, extra))], 1)
-    gathered = table[gs, gy, gx]  # n×M×D float32
-    m = gathered.shape[1]
+    extra = total - spp
+    if extra <= 0 or radius == 0 or height * width == 1:
+        return None
+    dy, dx = np.clip(np.rint(rng.normal(0.0, box / 4.0, (2, _PATTERNS, extra))), -radius, radius).astype(np.int64)
+    zero = (dy == 0) & (dx == 0)
+    step = np.where(rng.random(zero.shape) < 0.5, -1, 1)
+    if width > 1:
+        dx = np.where(zero, step, dx)
+    else:
+        dy = np.where(zero, step, dy)
+    return dy, dx, rng.integers(0, spp, (_PATTERNS, extra))
 
-    # 2. normalise by the neighbourhood; a constant channel becomes 0 everywhere
-    mean = gathered.mean(axis=1, keepdims=True)
-    std = gathered.std(axis=1, keepdims=True)
+
+def _draw(rng: np.random.Generator, pool, ys: np.ndarray, xs: np.ndarray, spp: int, height: int, width: int) -> np.ndarray:
+    """n×M flat sample indices ((s·H + y)·W + x): P's own S samples first, then the draws of a
+    pattern of ``pool`` picked at random per pixel, mirrored at the border, never P itself."""
+    own = (np.arange(spp)[None, :] * height + ys[:, None]) * width + xs[:, None]
+    if pool is None:
+        return own
+    dy, dx, ds = pool
+    pick = rng.integers(0, dy.shape[0], ys.size)
+    gy = _mirror(ys[:, None] + dy[pick], height)
+    gx = _mirror(xs[:, None] + dx[pick], width)
+    # a mirror back onto P (at the border): step to an adjacent pixel instead
+    same = (gy == ys[:, None]) & (gx == xs[:, None])
+    if same.any():
+        if width > 1:
+            gx = np.where(same, np.where(xs[:, None] > 0, xs[:, None] - 1, xs[:, None] + 1), gx)
+        else:
+            gy = np.where(same, np.where(ys[:, None] > 0, ys[:, None] - 1, ys[:, None] + 1), gy)
+    return np.concatenate([own, (ds[pick] * height + gy) * width + gx], axis=1)
+
+
+def _cluster_mask(gathered, spp: int, cluster: slice, xp=np):
+    """n×M bool: the paper's clustering (|f − m_P| ≤ max(3σ_P, 0.1) for every clustering feature)."""
+    n, m = gathered.shape[:2]
+    if cluster.stop <= cluster.start:
+        return xp.ones((n, m), dtype=bool)
+    f = gathered[:, :, cluster]
+    own = f[:, :spp]
+    mean = own.mean(1, keepdims=True) if xp is np else own.mean(1, keepdim=True)
+    if xp is np:
+        limit = np.maximum(3.0 * own.std(1, keepdims=True), CLUSTER_TOLERANCE)
+        inside = (np.abs(f - mean) <= limit).all(-1)
+    else:
+        limit = (3.0 * own.std(1, keepdim=True, unbiased=False)).clamp_(min=CLUSTER_TOLERANCE)
+        inside = ((f - mean).abs_() <= limit).all(-1)
+    inside[:, :spp] = True
+    return inside
+
+
+def _normalise(gathered: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Channels minus their mean over the cluster, over its standard deviation (constant → 0)."""
+    w = mask[:, :, None].astype(np.float32)
+    count = np.maximum(w.sum(1, keepdims=True), 1.0)
+    mean = (gathered * w).sum(1, keepdims=True) / count
+    centred = gathered - mean
+    std = np.sqrt((centred * centred * w).sum(1, keepdims=True) / count)
     inv = np.where(std > 1e-12 + 1e-6 * np.abs(mean), 1.0 / np.maximum(std, 1e-30), 0.0).astype(np.float32)
-    normal = (gathered - mean) * inv
-    own = normal[:, :spp]
+    return centred * inv
 
-    # 3. cluster: neighbours on the surface P sees (features within 3 max(σ_P, 0.3) of P's mean)
-    feat = layout.features
-    own_mean = own[:, :, feat].mean(axis=1, keepdims=True)
-    own_std = own[:, :, feat].std(axis=1, keepdims=True)
-    inside = np.abs(normal[:, :, feat] - own_mean) <= 3.0 * np.maximum(own_std, 0.3)
-    mask = inside.all(axis=2) if inside.shape[2] else np.ones((n, m), bool)
-    mask[:, :spp] = True
 
-    # 4. dependencies from histograms over ±3 standard deviations
-    quantised = np.clip(np.floor((normal + 3.0) * (bins / 6.0)), 0, bins - 1).astype(np.int32)
-    histograms = _Histograms(quantised, mask, bins)
+def _statistics(flat: np.ndarray, layout: _Layout, ys: np.ndarray, xs: np.ndarray, shape, pool,
+                pass_index: int, bins: int, rng: np.random.Generator):
+    """α (n×3), β (n×F), W^r_c (n), per-feature-channel W^r (n×F), kept share (n) at pixels (ys, xs)."""
+    spp, height, width = shape
+    index = _draw(rng, pool, ys, xs, spp, height, width)
+    gathered = flat[index]  # n×M×D
+    mask = _cluster_mask(gathered, spp, layout.cluster)
+    normal = _normalise(gathered, mask)
+    quantised = np.clip(np.floor((normal + 3.0) * (bins / 6.0)), 0, bins - 1).astype(np.uint8)
     color_cols, feature_cols = _columns(layout.color), _columns(layout.features)
     p_cols, r_cols = _columns(layout.position), _columns(layout.random)
     x_cols = color_cols + feature_cols
-    d_r = histograms.dependency(x_cols, r_cols)
-    d_p = histograms.dependency(x_cols, p_cols)
+    with torch.no_grad():
+        mi = mutual_information(torch.from_numpy(quantised), torch.from_numpy(mask), bins, x_cols,
+                                r_cols + p_cols + color_cols).double().numpy()  # n×X×(R + 2 + 3)
+    nr = len(r_cols)
+    d_r = mi[:, :, :nr].sum(2)
+    d_p = mi[:, :, nr : nr + 2].sum(2)
+    d_cf = mi[:, 3:, nr + 2 :].sum(2)  # n×F: features against the colour channels
     w_r = d_r / (d_r + d_p + _EPS)
-    d_cf = histograms.dependency(feature_cols, color_cols)  # n×F
-    d_c = (d_r[:, :3] + d_p[:, :3]).sum(axis=1) + d_cf.sum(axis=1)
-
-    # the bounce random numbers we do not have: the within-pixel share of the colour's variance
-    if spp > 1:
-        within = np.clip(own[:, :, color_cols].var(axis=1), 0.0, 1.0)
+    d_rc, d_pc, d_fc = d_r[:, :3].sum(1), d_p[:, :3].sum(1), d_cf.sum(1)
+    w_rc = d_rc / (d_rc + d_pc + _EPS)
+    if not layout.path_randoms and spp > 1:
+        # no path random numbers in the data: the within-pixel share of the colour's variance
+        own = normal[:, :spp][:, :, color_cols]
+        within = np.clip(own.var(axis=1), 0.0, 1.0)
         w_r[:, :3] = 1.0 - (1.0 - w_r[:, :3]) * (1.0 - within)
+        w_rc = 1.0 - (1.0 - w_rc) * (1.0 - within.mean(1))
     growth = 1.0 + 0.1 * pass_index
-    alpha = np.maximum(1.0 - growth * w_r[:, :3], 0.0)
-    beta = d_cf / (d_c[:, None] + _EPS) * np.maximum(1.0 - growth * w_r[:, 3:], 0.0)
-    w_rc = np.clip(w_r[:, :3].mean(axis=1), 0.0, 0.99)
-    shrink = (1.0 - w_rc) ** 2  # σ² / (1 − W^r_c)²: a colour that is mostly noise widens both terms
+    alpha = np.maximum(1.0 - 2.0 * growth * w_r[:, :3], 0.0)
+    w_cf = d_cf / (d_rc + d_pc + d_fc + _EPS)[:, None]
+    beta = w_cf * np.maximum(1.0 - growth * w_r[:, 3:], 0.0)
+    kept = mask[:, spp:].mean(1) if mask.shape[1] > spp else np.ones(ys.size)
+    return alpha, beta, w_rc, w_r[:, 3:], kept
 
-    # 6. the cross-bilateral filter over samples: Σ_d k_d (o_d − g_d)², expanded into one matmul
-    scale = np.zeros((n, dims), np.float32)
-    scale[:, layout.color] = alpha * (shrink / (2.0 * sigma2_color))[:, None]
-    scale[:, layout.features] = beta * (shrink / (2.0 * sigma2_feature))[:, None]
-    pos_cols = layout.position
-    raw_own = gathered[:, :spp, pos_cols]
-    raw_all = gathered[:, :, pos_cols]
-    sigma_p2 = (box / 4.0) ** 2
-    spatial = ((raw_own[:, :, None, :] - raw_all[:, None, :, :]) ** 2).sum(-1) / (2.0 * sigma_p2)
-    weighted_own = own * scale[:, None, :]
-    energy = (
-        (weighted_own * own).sum(-1)[:, :, None]
-        + ((normal * normal) * scale[:, None, :]).sum(-1)[:, None, :]
-        - 2.0 * np.einsum("nsd,nmd->nsm", weighted_own, normal, optimize=True)
-    )
-    np.maximum(energy, 0.0, out=energy)
-    weights = np.exp(-(energy + spatial))
-    colors = gathered[:, :, layout.color]
-    filtered = np.einsum("nsm,nmc->snc", weights, colors, optimize=True) / weights.sum(-1).T[:, :, None]
 
-    w_summary = np.concatenate([w_r[:, :3].mean(axis=1, keepdims=True), w_r[:, 3:]], axis=1)
-    return filtered, alpha.mean(axis=1), beta, w_summary
+def _filter(flat_t: torch.Tensor, layout: _Layout, ys: np.ndarray, xs: np.ndarray, shape, box: int, pool,
+            scale: torch.Tensor, rng: np.random.Generator) -> torch.Tensor:
+    """S×n×3: one pass's new colours of the samples of pixels (ys, xs); ``scale`` (n×K, K = colour and
+    feature columns) holds α/2σ_c² on colour columns and β/2σ_f² on feature columns.
+
+    Normalising a channel (minus the cluster's mean, over its standard deviation σ) only scales its
+    differences, (ō − ḡ)² = (o − g)²/σ², so the filter folds 1/σ² into ``scale`` instead of
+    normalising every sample; values are centred on the mean of P's own samples, so that the expanded
+    square Σ k o² + Σ k g² − 2 Σ k o g does not cancel (world positions can be large).
+    """
+    spp, height, width = shape
+    index = torch.from_numpy(_draw(rng, pool, ys, xs, spp, height, width))
+    n, m = index.shape
+    gathered = torch.index_select(flat_t, 0, index.view(-1)).view(n, m, -1)  # colour, features, screen position
+    kcols = layout.features.stop  # colour and features: the range terms
+    z = gathered - gathered[:, :spp].mean(1, keepdim=True)
+    cl = layout.cluster
+    if cl.stop > cl.start:  # the paper's clustering, gating statistics and weights alike
+        own = z[:, :spp, cl]
+        limit = (3.0 * own.std(1, keepdim=True, unbiased=False)).clamp_(min=CLUSTER_TOLERANCE)
+        mask = (z[:, :, cl].abs() <= limit).all(-1)
+        mask[:, :spp] = True
+        mask = mask.to(z.dtype)
+    else:
+        mask = torch.ones((n, m), dtype=z.dtype)
+    # the cluster's variance of every range channel, from masked sums of z and z² (one matmul)
+    values = z[:, :, :kcols]
+    weights_row = mask.unsqueeze(1)
+    count = mask.sum(1, keepdim=True)
+    mean = torch.bmm(weights_row, values).squeeze(1) / count
+    var = (torch.bmm(weights_row, values.square()).squeeze(1) / count - mean * mean).clamp_(min=0.0)
+    level = (gathered[:, :1, :kcols].squeeze(1).abs() + mean.abs()) ** 2
+    inv_var = torch.where(var > 1e-24 + 1e-12 * level, 1.0 / var.clamp_min(1e-30), torch.zeros_like(var))
+    k = torch.cat([scale * inv_var, torch.full((n, 2), 1.0 / (2.0 * (box / 4.0) ** 2))], dim=1)
+    k = k.unsqueeze(1)  # n×1×(K + 2)
+    own = z[:, :spp]
+    own_k = own * k
+    # Σ_k k (o − g)² = Σ k o² + Σ k g² − 2 Σ k o g: one batched matmul for the cross term
+    energy = torch.baddbmm((z * z * k).sum(-1).unsqueeze(1), own_k, z.transpose(1, 2), alpha=-2.0)
+    energy += (own_k * own).sum(-1, keepdim=True)
+    # capped at 80: exp(−80) ≈ 2e−35 is still a normal float (denormals are ~50x slower), and
+    # beside w_ii = 1 a weight that small is nothing
+    energy.clamp_(min=0.0, max=80.0).neg_().exp_()
+    energy *= mask.unsqueeze(1)  # n×S×M weights, w_ii = 1
+    filtered = torch.bmm(energy, gathered[:, :, layout.color]) / energy.sum(-1, keepdim=True)
+    return filtered.transpose(0, 1)
 
 
 @dataclass(frozen=True)
@@ -315,70 +381,124 @@ class RPFSettings:
 
     features: tuple[str, ...] = DEFAULT_FEATURES
     boxes: tuple[int, ...] | None = None  # None: scaled_boxes() of the image
-    max_samples: int = 96
+    max_samples: int = 128  # cap of the paper's b²S/2 samples per pixel in the filter
+    stat_samples: int = 128  # the same cap for the statistics
+    stat_stride_divisor: float = 4.0  # statistics every max(2, round(b / this)) pixels (0: every pixel)
     bins: int = 6
-    sigma2_color: float = 0.5
-    sigma2_feature: float = 0.01
+    sigma8_squared: float = SIGMA8_SQUARED
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if self.max_samples < 1 or self.bins < 2 or not (self.sigma2_color > 0 and self.sigma2_feature > 0):
-            raise ValueError("max_samples must be >= 1, bins >= 2 and sigma2_color, sigma2_feature > 0")
+        if self.max_samples < 1 or self.stat_samples < 2 or self.bins < 2 or not self.sigma8_squared > 0:
+            raise ValueError("max_samples must be >= 1, stat_samples >= 2, bins >= 2 and sigma8_squared > 0")
+        if self.stat_stride_divisor < 0:
+            raise ValueError("stat_stride_divisor must be >= 0")
         if self.boxes is not None and any(int(b) < 1 for b in self.boxes):
             raise ValueError("box sizes must be >= 1")
         object.__setattr__(self, "features", tuple(self.features))
         if self.boxes is not None:
             object.__setattr__(self, "boxes", tuple(int(b) for b in self.boxes))
 
+    def stride(self, box: int) -> int:
+        return 1 if self.stat_stride_divisor == 0 else max(2, int(round(box / self.stat_stride_divisor)))
+
+
+def _grid(size: int, stride: int) -> np.ndarray:
+    """Statistics rows (or columns): every ``stride``-th pixel, centred in its cell."""
+    return np.arange(min(stride // 2, size - 1), size, stride)
+
+
+def _nearest(size: int, grid: np.ndarray) -> np.ndarray:
+    """For every pixel, the index of its nearest grid point."""
+    position = np.arange(size)
+    upper = np.clip(np.searchsorted(grid, position), 0, grid.size - 1)
+    lower = np.clip(upper - 1, 0, grid.size - 1)
+    return np.where(np.abs(grid[lower] - position) <= np.abs(grid[upper] - position), lower, upper)
+
+
+def _map_chunks(function, count: int, workers: int) -> list:
+    if workers > 1 and count > 1:
+        with ThreadPoolExecutor(min(workers, count)) as pool:
+            return list(pool.map(function, range(count)))
+    return [function(k) for k in range(count)]
+
 
 def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSettings()) -> tuple[np.ndarray, RPFWeights]:
     """Filter per-sample data (name → S×H×W×C, needs ``color``); returns (H×W×3 float32, weights)."""
-    features, boxes, max_samples, bins = settings.features, settings.boxes, settings.max_samples, settings.bins
-    sigma2_color, sigma2_feature = settings.sigma2_color, settings.sigma2_feature
-    table, layout = _sample_table(samples, features)
+    table, layout = _sample_table(samples, settings.features)
     spp, height, width, dims = table.shape
-    boxes = list(boxes) if boxes is not None else scaled_boxes(height, width)
+    shape = (spp, height, width)
+    boxes = list(settings.boxes) if settings.boxes is not None else scaled_boxes(height, width)
     weights = RPFWeights()
-    for t, box in enumerate(boxes):
-        m = max(spp, min(max_samples, box * box * spp))
-        rows_per_chunk = max(1, _CHUNK_PAIRS // max(1, width * spp * m))
-        new_color = np.empty((spp, height, width, 3), np.float32)
-        alpha = np.empty((height, width), np.float32)
-        n_feat = layout.features.stop - layout.features.start
-        beta = np.empty((height, width, n_feat), np.float32)
-        w_r = np.empty((height, width, 1 + n_feat), np.float32)
-        chunks = [slice(y0, min(height, y0 + rows_per_chunk)) for y0 in range(0, height, rows_per_chunk)]
-        # one generator per chunk, from (seed, pass, chunk): the same draws on any number of threads
-        seeds = np.random.SeedSequence([settings.seed, t]).spawn(len(chunks))
+    n_feat = layout.features.stop - layout.features.start
+    sigma2 = 8.0 * settings.sigma8_squared / spp
+    threads = torch.get_num_threads()
+    torch.set_num_threads(_workers())
+    try:
+        for t, box in enumerate(boxes):
+            paper = max(spp, box * box * spp // 2)
+            flat = table.reshape(-1, dims)
 
-        def run(k: int):
-            return _filter_chunk(
-                table, layout, chunks[k], box, t, np.random.default_rng(seeds[k]),
-                max_samples=max_samples, bins=bins, sigma2_color=sigma2_color, sigma2_feature=sigma2_feature,
-            )
+            # statistics on a grid, in chunks of grid rows on threads (numpy releases the GIL)
+            stride = settings.stride(box)
+            gy, gx = _grid(height, stride), _grid(width, stride)
+            stat_total = min(paper, max(settings.stat_samples, spp))
+            rows_per_chunk = max(1, _STAT_CELLS // max(1, gx.size * stat_total * dims))
+            chunks = [gy[i : i + rows_per_chunk] for i in range(0, gy.size, rows_per_chunk)]
+            seeds = np.random.SeedSequence([settings.seed, t, 2]).spawn(len(chunks))
 
-        workers = min(_workers(), len(chunks))
-        if workers > 1:
-            with ThreadPoolExecutor(workers) as pool:
-                results = list(pool.map(run, range(len(chunks))))
-        else:
-            results = [run(k) for k in range(len(chunks))]
-        for rows, (filtered, a, b, wr) in zip(chunks, results):
-            count = rows.stop - rows.start
-            new_color[:, rows] = filtered.reshape(spp, count, width, 3)
-            alpha[rows] = a.reshape(count, width)
-            beta[rows] = b.reshape(count, width, n_feat)
-            w_r[rows] = wr.reshape(count, width, 1 + n_feat)
-        table[..., layout.color] = new_color
-        offset = layout.features.start
-        weights.boxes.append(box)
-        weights.alpha.append(alpha)
-        weights.beta.append(
-            {name: beta[..., s.start - offset : s.stop - offset].mean(-1) for name, s in layout.feature_groups.items()}
-        )
-        groups = {"color": w_r[..., 0]}
-        groups.update({name: w_r[..., 1 + s.start - offset : 1 + s.stop - offset].mean(-1) for name, s in layout.feature_groups.items()})
-        weights.w_random.append(groups)
+            stat_pool = _pattern_pool(np.random.default_rng([settings.seed, t, 0]), spp, box, stat_total, height, width)
+
+            def stats(k: int):
+                ys, xs = np.meshgrid(chunks[k], gx, indexing="ij")
+                return _statistics(flat, layout, ys.ravel(), xs.ravel(), shape, stat_pool, t, settings.bins,
+                                   np.random.default_rng(seeds[k]))
+
+            torch.set_num_threads(1)  # threads run chunks here, not inside torch's operations
+            parts = _map_chunks(stats, len(chunks), _workers())
+            torch.set_num_threads(_workers())
+            alpha, beta, w_rc, w_rf, kept = (np.concatenate([p[i] for p in parts]) for i in range(5))
+            pick = (_nearest(height, gy)[:, None] * gx.size + _nearest(width, gx)[None, :]).ravel()
+            alpha, beta, w_rc, w_rf, kept = alpha[pick], beta[pick], w_rc[pick], w_rf[pick], kept[pick]
+
+            # the filter, every pixel, in chunks of rows (torch threads inside)
+            shrink = (1.0 - np.clip(w_rc, 0.0, 0.99)) ** 2 / (2.0 * sigma2)  # 1 / 2σ_c² = (1 − W^r_c)² / 2σ²
+            scale = np.zeros((height * width, layout.features.stop), np.float32)
+            scale[:, layout.color] = alpha * shrink[:, None]
+            scale[:, layout.features] = beta * shrink[:, None]
+            filter_total = min(paper, max(settings.max_samples, spp))
+            rows = max(1, _FILTER_PAIRS // max(1, width * spp * filter_total))
+            filter_pool = _pattern_pool(np.random.default_rng([settings.seed, t, 1]), spp, box, filter_total, height, width)
+            columns = np.r_[0 : layout.features.stop, layout.position.start : layout.position.stop]
+            flat_t = torch.from_numpy(np.ascontiguousarray(flat[:, columns]))
+            scale_t = torch.from_numpy(scale)
+            new_color = np.empty((spp, height, width, 3), np.float32)
+            filter_seeds = np.random.SeedSequence([settings.seed, t, 3]).spawn(-(-height // rows))
+            with torch.no_grad():
+                for k, y0 in enumerate(range(0, height, rows)):
+                    y1 = min(height, y0 + rows)
+                    ys, xs = np.meshgrid(np.arange(y0, y1), np.arange(width), indexing="ij")
+                    out = _filter(flat_t, layout, ys.ravel(), xs.ravel(), shape, box, filter_pool,
+                                  scale_t[y0 * width : y1 * width], np.random.default_rng(filter_seeds[k]))
+                    new_color[:, y0:y1] = out.numpy().reshape(spp, y1 - y0, width, 3)
+            table[..., layout.color] = new_color
+
+            offset = layout.features.start
+            weights.boxes.append(box)
+            weights.alpha.append(alpha.mean(1).reshape(height, width).astype(np.float32))
+            weights.beta.append({
+                name: beta[:, s.start - offset : s.stop - offset].mean(-1).reshape(height, width).astype(np.float32)
+                for name, s in layout.feature_groups.items()
+            })
+            groups = {"color": w_rc.reshape(height, width).astype(np.float32)}
+            groups.update({
+                name: w_rf[:, s.start - offset : s.stop - offset].mean(-1).reshape(height, width).astype(np.float32)
+                for name, s in layout.feature_groups.items()
+            })
+            weights.w_random.append(groups)
+            weights.cluster.append(kept.reshape(height, width).astype(np.float32))
+    finally:
+        torch.set_num_threads(threads)
     image = table[..., layout.color].mean(axis=0)
     return np.maximum(image, 0.0).astype(np.float32), weights
 

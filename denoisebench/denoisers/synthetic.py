@@ -4,7 +4,8 @@ A tiny analytic "renderer" of a layered 2.5-D scene (a tilted back plane plus di
 at different depths, optionally textured, glossy, defocused or moving) that produces everything a
 rendered :class:`~denoisebench.dataset.frame.Frame` carries: per-pixel means and variances of
 color, diffuse, specular and the features, per-sample data with the random parameters ``pixel``
-(always), ``lens`` (depth of field only) and ``time`` (motion blur only), and a reference.
+(always), ``lens`` (depth of field only), ``time`` (motion blur only) and ``bounce`` (the uniform
+numbers behind the noise factors below: U = CDF of g_d, V = CDF of g_s), and a reference.
 
 Noise model (known variance): each sample's diffuse radiance is the clean value at the sample's
 position times g_d ~ Gamma(k_d, 1/k_d) (mean 1, variance 1/k_d, shared by the three channels, as
@@ -25,6 +26,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import gamma as gamma_distribution
 
 from denoisebench.dataset.frame import Frame, Sequence
 
@@ -280,6 +282,12 @@ def render(
             sample_data["lens"] = lens.astype(np.float32)
         if motion:
             sample_data["time"] = time.astype(np.float32)
+        # the uniform numbers that drew the noise (g = Gamma quantile of u), as a renderer's bounce
+        # random numbers drive its path noise: U the diffuse factor's, V the specular factor's
+        sample_data["bounce"] = np.concatenate(
+            [gamma_distribution.cdf(g_d, scene.diffuse_shape, scale=1.0 / scene.diffuse_shape),
+             gamma_distribution.cdf(g_s, scene.specular_shape, scale=1.0 / scene.specular_shape)], axis=-1
+        ).astype(np.float32)
 
     # ---- reference: noise-free integrand over rotated Halton points
     n_ref = max(int(reference_samples), 1)
