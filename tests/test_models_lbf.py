@@ -166,3 +166,16 @@ def test_train_lbf_uses_the_relmse_recipe(tmp_path):
     meta = load_checkpoint(out, expect_model="lbf")["meta"]
     assert meta["loss"] == "relmse" and meta["steps"] == 3 and meta["stages"][0]["loss"] == "relmse"
     assert 0.0 < meta["validation"]["relmse"] < float("inf")
+
+
+def test_var_median_variant_is_finite_and_uses_the_median_variance():
+    torch.manual_seed(0)
+    plain = build_model("lbf", {"radius": 2, "hidden": [4], "blocks": [3]}).eval()
+    torch.manual_seed(0)
+    median = build_model("lbf", {"radius": 2, "hidden": [4], "blocks": [3], "var_median": True}).eval()
+    b = batch(n=1, h=9, w=9, seed=12)
+    b["color_var"][:, :, 4, 4] = 1e6  # one wild variance estimate: the median ignores it
+    with torch.no_grad():
+        out_plain, out_median = plain(b)["color"], median(b)["color"]
+    assert torch.isfinite(out_median).all()
+    assert not torch.equal(out_plain, out_median)
