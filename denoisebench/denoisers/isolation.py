@@ -22,8 +22,9 @@ What isolation gives
   :data:`DEFAULT_MEMORY_LIMIT_MB`): the parent reads the worker's RSS from ``/proc`` every
   :data:`POLL_SECONDS` while it waits and kills it when over. Address space that is reserved but
   not touched does not count; a very fast allocation may overshoot by what it touches in one poll.
-* **Copies.** The frame is pickled into the worker, so no buffer there shares memory with the
-  harness: making an input writable and changing it reaches nothing outside the worker.
+* **Copies.** The frame reaches the worker through a shared memory file (:mod:`.shared_frames`;
+  pickled through the pipe where ``memfd_create`` is missing) and the worker copies it into arrays
+  of its own: making an input writable and changing it reaches nothing outside the worker.
 * **No reference.** The harness hands over the frame after :func:`~.runner.sanitize_frame`, which
   withholds the reference image and every ``reference*`` and file-path entry of ``meta``.
 * **Replies are not unpickled.** The worker answers with a JSON header and raw array bytes
@@ -53,6 +54,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from . import shared_frames
 
 #: Seconds one call (load, reset or denoise) of an isolated denoiser may take.
 DEFAULT_TIME_LIMIT = 120.0
@@ -139,6 +142,12 @@ class IsolatedDenoiser:
         self._conn = None
         self._disabled: str | None = None  # reason, after a time-limit kill
         self._broken: str | None = None  # reason, after the worker died; cleared by reset()
+        self._channel = None
+        if shared_frames.available():
+            try:
+                self._channel = shared_frames.FrameChannel()
+            except OSError:  # e.g. a kernel without memfd support: frames go pickled
+                self._channel = None
         info = self._start()
         self.name: str = info["name"]
         self.needs: frozenset[str] = frozenset(info["needs"])
@@ -150,10 +159,15 @@ class IsolatedDenoiser:
         from multiprocessing import Pipe
 
         ours, theirs = Pipe(duplex=True)
+        command = [sys.executable, "-m", "denoisebench.denoisers.isolation_worker", str(theirs.fileno())]
+        fds = (theirs.fileno(),)
+        if self._channel is not None:
+            command.append(str(self._channel.fd))
+            fds += (self._channel.fd,)
         try:
             self._proc = subprocess.Popen(
-                [sys.executable, "-m", "denoisebench.denoisers.isolation_worker", str(theirs.fileno())],
-                pass_fds=(theirs.fileno(),),
+                command,
+                pass_fds=fds,
                 stdin=subprocess.DEVNULL,
                 stdout=sys.__stderr__.fileno() if sys.__stderr__ is not None else subprocess.DEVNULL,
                 close_fds=True,
@@ -282,21 +296,33 @@ class IsolatedDenoiser:
         self.last_seconds = None
         started = time.perf_counter()
         max_bytes = frame.height * frame.width * 3 * 8
-        header, payload = self._call(("denoise", frame), "denoise()", max_bytes)
+        descriptor = None
+        if self._channel is not None:
+            self._ready()
+            descriptor = self._channel.pack(frame, max_bytes)
+            message = ("denoise_shm", descriptor)
+        else:
+            message = ("denoise", frame)
+        header, payload = self._call(message, "denoise()", max_bytes)
         self.calls += 1
         self.last_seconds = float(header["seconds"]) if isinstance(header.get("seconds"), (int, float)) else None
         if not header.get("ok"):
             self.overhead_seconds += time.perf_counter() - started - (self.last_seconds or 0.0)
             raise WorkerFailure(str(header.get("error", "denoise() failed")))
-        output = _rebuild(header, payload)
+        output = _rebuild(header, payload, self._channel if header.get("in_shm") and descriptor else None, descriptor)
         self.overhead_seconds += time.perf_counter() - started - (self.last_seconds or 0.0)
         return output
+
+    def __del__(self) -> None:
+        channel = getattr(self, "_channel", None)
+        if channel is not None:
+            channel.close()
 
     def __repr__(self) -> str:
         return f"IsolatedDenoiser({self.spec!r}, name={getattr(self, 'name', '?')!r})"
 
 
-def _rebuild(header: dict, payload: bytes | None):
+def _rebuild(header: dict, payload: bytes | None, channel=None, descriptor=None):
     if header.get("kind") != "array":
         # a stand-in whose type name is what the plugin returned: the output check names it
         return type(str(header.get("type", "object"))[:80], (), {})()
@@ -308,6 +334,11 @@ def _rebuild(header: dict, payload: bytes | None):
     if dtype.kind not in _ARRAY_KINDS or dtype.hasobject or any(n < 0 for n in shape) or len(shape) > 8:
         raise WorkerFailure(f"output of dtype {dtype} and shape {shape} refused")
     expected = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+    if channel is not None:
+        output = channel.read_output(descriptor, dtype, shape)
+        if output is None:
+            raise WorkerFailure(f"returned shape {shape} ({dtype}), which does not fit the harness's size bound")
+        return output
     if payload is None or len(payload) != expected:
         raise WorkerFailure(f"returned shape {shape} ({dtype}), which does not fit the harness's size bound")
     return np.frombuffer(payload, dtype=dtype).reshape(shape).copy()

@@ -1,9 +1,10 @@
 """The worker process of :mod:`denoisebench.denoisers.isolation`: loads one denoiser and serves calls.
 
-Started as ``python -m denoisebench.denoisers.isolation_worker FD`` where FD is one end of a
-socket pair (a :class:`multiprocessing.connection.Connection`). The parent is trusted, so its
-requests are pickles: ``("load", spec, options, sys_path)``, ``("reset",)``, ``("denoise", frame)``
-and ``("close",)``. The worker is not trusted, so its replies are **never pickles**: one JSON
+Started as ``python -m denoisebench.denoisers.isolation_worker FD [MEMFD]`` where FD is one end
+of a socket pair (a :class:`multiprocessing.connection.Connection`) and MEMFD, where given, the
+parent's shared memory file (:mod:`.shared_frames`). The parent is trusted, so its requests are
+pickles: ``("load", spec, options, sys_path)``, ``("reset",)``, ``("denoise", frame)`` (the frame
+pickled), ``("denoise_shm", descriptor)`` (the frame in the shared file) and ``("close",)``. The worker is not trusted, so its replies are **never pickles**: one JSON
 header (``send_bytes``), followed, for an array output, by the array's raw bytes. The parent
 rebuilds arrays from a whitelisted dtype and a shape whose size must match the bytes, so nothing a
 plugin does in here can run code in the parent.
@@ -47,7 +48,7 @@ def _load(conn, spec: str, options: dict, sys_path: list[str]):
     return denoiser
 
 
-def _denoise(conn, denoiser, frame) -> None:
+def _denoise(conn, denoiser, frame, view=None, descriptor=None) -> None:
     import numpy as np
 
     for array in list(frame.buffers.values()) + list((frame.samples or {}).values()):
@@ -66,6 +67,10 @@ def _denoise(conn, denoiser, frame) -> None:
         _reply(conn, {"ok": True, "seconds": seconds, "kind": "other", "type": f"ndarray of dtype {output.dtype}"})
         return
     plain = np.ascontiguousarray(output)
+    header = {"ok": True, "seconds": seconds, "kind": "array", "dtype": plain.dtype.str, "shape": list(plain.shape)}
+    if view is not None and view.write_output(descriptor, plain):
+        _reply(conn, {**header, "in_shm": True})
+        return
     _reply(
         conn,
         {"ok": True, "seconds": seconds, "kind": "array", "dtype": plain.dtype.str, "shape": list(plain.shape)},
@@ -73,10 +78,15 @@ def _denoise(conn, denoiser, frame) -> None:
     )
 
 
-def main(fd: int) -> None:
+def main(fd: int, memfd: int | None = None) -> None:
     from multiprocessing.connection import Connection
 
     conn = Connection(fd)
+    view = None
+    if memfd is not None:
+        from denoisebench.denoisers.shared_frames import WorkerView
+
+        view = WorkerView(memfd)
     denoiser = None
     while True:
         try:
@@ -99,9 +109,11 @@ def main(fd: int) -> None:
             _reply(conn, {"ok": True})
         elif op == "denoise":
             _denoise(conn, denoiser, message[1])
+        elif op == "denoise_shm" and view is not None:
+            _denoise(conn, denoiser, view.unpack(message[1]), view, message[1])
         else:
             _reply(conn, {"ok": False, "error": f"unknown request {op!r}"})
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]))
+    main(int(sys.argv[1]), int(sys.argv[2]) if len(sys.argv) > 2 else None)
