@@ -296,3 +296,24 @@ def test_unknown_option_or_spec_is_exit_2(dataset, tmp_path, argv, fragment, cap
     assert code == 2 and err[-1].startswith("error: ") and fragment in err[-1], err
     assert cli.main(["check-plugin", "identity", "--option", "nosuchopt=1"]) == 2
     assert "has no option" in capsys.readouterr().err
+
+
+def test_pickled_pipe_fallback_keeps_the_contract(on_path, monkeypatch):
+    from denoisebench.denoisers import shared_frames
+
+    monkeypatch.setattr(shared_frames, "available", lambda: False)  # as where memfd_create is missing
+    denoiser = IsolatedDenoiser("evil_plugins:Counter")
+    assert denoiser._channel is None
+    results = run_sequence(denoiser, synthetic_sequence(frames=2, height=4, width=4))
+    assert [float(r.output[0, 0, 0]) for r in results] == [1.0, 2.0]
+    denoiser.close()
+
+
+def test_output_larger_than_the_frame_is_refused_without_reading_it(tmp_path):
+    module = tmp_path / "huge_output.py"
+    module.write_text("import numpy as np\nclass Huge:\n    name = 'huge'\n"
+                      "    def denoise(self, frame):\n        return np.zeros((512, 512, 3), np.float64)\n")
+    denoiser = IsolatedDenoiser(f"{module}:Huge")
+    (result,) = run_sequence(denoiser, synthetic_sequence(frames=1, height=4, width=4))
+    assert result.status == "failed" and "(512, 512, 3)" in result.error
+    denoiser.close()

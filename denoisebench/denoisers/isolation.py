@@ -247,8 +247,13 @@ class IsolatedDenoiser:
             header = json.loads(self._conn.recv_bytes(1 << 20).decode("utf-8"))
             if not isinstance(header, dict):
                 raise ValueError("reply is not an object")
+            if header.get("payload") and header.get("kind") == "array":
+                shape = tuple(int(n) for n in header.get("shape", ()))
+                declared = int(np.prod(shape, dtype=np.int64)) * np.dtype(str(header.get("dtype"))).itemsize
+                if declared > max_bytes:  # not read: the harness bounds what it takes in
+                    raise WorkerFailure(self._kill(f"returned shape {shape}, expected H×W×3 of the frame; worker killed"))
             payload = self._conn.recv_bytes(max_bytes + 1) if header.get("payload") else None
-        except (EOFError, OSError, ValueError, UnicodeDecodeError) as error:
+        except (EOFError, OSError, ValueError, TypeError, UnicodeDecodeError) as error:
             code = None
             if self._proc is not None:
                 try:
