@@ -131,3 +131,27 @@ def test_round_schedule_and_seeds():
     seeds = {round_seed(7, f, k) for f in range(4) for k in range(MAX_ROUNDS)}
     assert len(seeds) == 4 * MAX_ROUNDS and all(0 <= s < 2 ** 32 for s in seeds)
     assert round_seed(7, 1, 2) == round_seed(7, 1, 2) != round_seed(8, 1, 2)
+
+
+def test_a_floor_estimate_still_rising_does_not_stop_the_loop():
+    """spp × floor growing with the rounds (bright paths still being found) is not trusted to stop on.
+    Steady: each round's variance the same, the floor falls as 1/rounds and the loop stops once it is
+    <= the target. Rising: round k's variance ∝ sqrt(k + 1), so the floor falls only as 1/sqrt(rounds)
+    (growth sqrt(2) ≈ 1.41): the target is met after ~28 rounds, but the loop runs to the cap."""
+    from denoisebench.generator.reference_render import GROWTH_WARNING, floor_growth
+
+    a = 1e-3
+
+    def make_round(rising):
+        def render_round(index, round_spp):
+            per_round_var = a * (np.sqrt(index + 1) if rising else 1.0)  # variance of this round's mean
+            return {"color": np.ones((4, 4, 3)), "color_var": np.full((4, 4, 3), per_round_var)}, 0.1, 0.0
+
+        return render_round
+
+    steady = render_adaptive(make_round(False), cap=1024, ref_error=a / 8)
+    assert 2 * MIN_ROUNDS <= steady.record["rounds"] <= 10 and steady.record["floor_growth"] == pytest.approx(1.0, abs=0.05)
+    rising = render_adaptive(make_round(True), cap=1024, ref_error=a / 8)
+    assert rising.record["rounds"] == MAX_ROUNDS and rising.record["floor_growth"] > GROWTH_WARNING
+    assert rising.record["floor"] <= a / 8  # met long before the cap, but never trusted
+    assert floor_growth([1.0], 16) is None and floor_growth([0.5, 0.25], 16) == pytest.approx(1.0)

@@ -159,6 +159,11 @@ def print_summary(summary) -> None:
         shown = ", ".join(summary.at_cap[:12]) + (f" and {len(summary.at_cap) - 12} more" if len(summary.at_cap) > 12 else "")
         print(f"warning: {len(summary.at_cap)} reference(s) stopped at the --ref-spp cap before reaching --ref-error: "
               f"{shown} (reference_adaptive in dataset.json)", file=sys.stderr)
+    if getattr(summary, "rising", None):
+        shown = ", ".join(summary.rising[:12]) + (f" and {len(summary.rising) - 12} more" if len(summary.rising) > 12 else "")
+        print(f"warning: {len(summary.rising)} reference(s) have a noise-floor estimate still rising with spp "
+              f"(fireflies not yet resolved; their floor is a lower bound): {shown} (floor_growth in dataset.json)",
+              file=sys.stderr)
     for failure in summary.failures:
         print(f"failed: scene {failure.scene} frame {failure.frame}: {failure.message}", file=sys.stderr)
 

@@ -84,6 +84,7 @@ class GenerateSummary:
     wall_seconds: float = 0.0
     too_noisy: int = 0  # frames whose reference is flagged
     at_cap: list = field(default_factory=list)  # "scene/frame" whose adaptive reference stopped at the cap
+    rising: list = field(default_factory=list)  # "scene/frame" whose floor estimate was still rising (a lower bound)
     failures: list = field(default_factory=list)
     complete: bool = False
 
@@ -292,6 +293,14 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
         for name, scene in writer.manifest["scenes"].items()
         for frame, record in sorted(scene["renders"].get(layout.REFERENCE, {}).items())
         if (record.get("reference_adaptive") or {}).get("stopped_at_cap")
+    ]
+    from denoisebench.generator.reference_render import GROWTH_WARNING
+
+    summary.rising = [
+        f"{name}/{frame}"
+        for name, scene in writer.manifest["scenes"].items()
+        for frame, record in sorted(scene["renders"].get(layout.REFERENCE, {}).items())
+        if ((record.get("reference_adaptive") or {}).get("floor_growth") or 0.0) > GROWTH_WARNING
     ]
     summary.wall_seconds = time.perf_counter() - started
     return summary
