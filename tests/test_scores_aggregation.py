@@ -202,3 +202,33 @@ def test_the_demo_renders_sequences_long_enough_to_flicker():
     from denoisebench.commands.demo import DEMO_FRAMES
 
     assert DEMO_FRAMES >= 8  # issue 15: three frames gave two frame differences, two points per line
+
+
+def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
+    import csv
+    import json
+
+    from denoisebench.dataset import open_dataset
+    from denoisebench.dataset.synthetic import make_synthetic_dataset
+    from denoisebench.leaderboard.report import write_report
+    from denoisebench.leaderboard.runner import BenchmarkConfig, run_benchmark
+
+    data = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=1, frames=4, height=16, width=16, spp=(1, 4)))
+    with ResultsStore(tmp_path / "r.sqlite") as store:
+        plan = run_benchmark(data, BenchmarkConfig(["cross_bilateral_fast"], [1, 4], split="all", metrics=["relmse"]),
+                             store, progress=False)
+        index = write_report(store, plan.run_id, data, tmp_path / "report")
+    results = json.loads((tmp_path / "report" / "results.json").read_text())
+    for row in results["summary"]:
+        relmse = row["metrics"]["relmse"]
+        assert relmse["aggregate"] == "mean" and relmse["floor"] > 0
+        assert relmse["corrected"] == pytest.approx(relmse["mean"] - relmse["floor"])
+        assert row["metrics"]["temporal_relmse"]["floor"] > 0
+    assert results["flicker"]["metrics"] == ["temporal_relmse", "tpsnr"]
+    assert set(results["flicker"]["series"]["temporal_relmse"]) == {"1", "4"}  # one panel per input spp
+    header = next(csv.reader((tmp_path / "report" / "results.csv").open()))
+    assert {"relmse_floor", "relmse_corrected", "flicker.temporal_relmse", "flicker.tpsnr"} <= set(header)
+    markdown = (tmp_path / "report" / "report.md").read_text()
+    assert "relmse floor" in markdown and "temporal\\_relmse ↓" in markdown
+    html = index.read_text()
+    assert html.count('alt="frames of ') == 3 and html.count('alt="animated crop of ') == 3  # noisy, denoiser, reference
