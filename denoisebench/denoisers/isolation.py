@@ -38,7 +38,13 @@ Pitfalls
 * Denoise time is measured inside the worker around ``denoise()`` only, as in-process; the
   transfer of the frame and the output (the isolation's overhead) is outside it, and is kept in
   :attr:`IsolatedDenoiser.overhead_seconds`.
-* Start-up costs one Python interpreter plus the plugin's imports (≈0.3 s without torch).
+* Start-up costs one Python interpreter plus the plugin's imports (≈0.3 s without torch, ≈2.5 s
+  with it).
+* The memory limit counts the worker's own resident memory; processes a plugin starts itself are
+  not counted (nor limited in time once the worker is killed: they are the plugin's).
+* The time limit runs while the parent waits for a reply to start; a worker that starts a reply
+  and then stalls mid-message would block the read (the reply header is small and written at
+  once by the harness's worker code, which a plugin would have to replace to do this).
 """
 
 from __future__ import annotations
