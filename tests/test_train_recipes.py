@@ -158,6 +158,7 @@ def test_pcn_convergence_bench_runs_a_few_steps(data, tmp_path):
         assert [s for s, _ in run["validation_history"]] == [2, 4]
         assert all(0 < v < float("inf") for _, v in run["validation_history"])
     assert result["steps_to_target"]["dpcn"] in (2, 4)  # DPCN reaches its own best by definition
+    assert result["steps_to_loss_target"]["dpcn"] is not None and result["loss_target"] > 0
     assert (out / "curves.png").stat().st_size > 1000
     assert bench.steps_to_reach([[2, 0.5], [4, 0.2]], 0.3) == 4 and bench.steps_to_reach([[2, 0.5]], 0.1) is None
 
