@@ -1,14 +1,18 @@
 """Seconds per megapixel of every baseline, against OIDN measured in the same run, and our
 cross-bilateral filter against scikit-image's ``denoise_bilateral`` on the same image and window.
 
-    .venv/bin/python bench/denoiser_speed.py [--size 256] [--rpf-size 64] [--spp 4] [--radius 7] [--repeats 3]
+    .venv/bin/python bench/denoiser_speed.py [--size 256] [--rpf-size 128] [--rpf-spp 4,8] [--rpf-baseline REV]
+                                             [--spp 4] [--radius 7] [--repeats 3]
 
 Frames are synthetic (``denoisebench.denoisers.synthetic``, textured family) with features and
 per-sample data. Each denoiser runs through the harness runner (:func:`run_frame`), which times
 ``denoise()`` alone; the figure is the minimum over ``--repeats`` calls after one warm-up.
-RPF is timed on a ``--rpf-size`` frame (its per-sample work makes the full size slow on two
-cores); seconds per megapixel put both sizes on one scale, and OIDN is timed on that frame too so
-its ratio compares like with like.
+RPF is timed on a ``--rpf-size`` frame at each ``--rpf-spp`` (its per-sample work makes the full size
+slow on two cores); seconds per megapixel put both sizes on one scale, and OIDN is timed on each of
+those frames too so its ratio compares like with like. RPF's relMSE against the frame's reference is
+printed beside its time. ``--rpf-baseline REV`` also times ``denoisebench/baselines/rpf.py`` as it
+was at git revision REV (e.g. the commit before a change) on the same frames, in the same run:
+"x faster" and the quality of both are then measured under the same load.
 
 The bilateral comparison uses colour only (scikit-image's filter knows no feature buffers), the
 same square window of 2·radius+1 pixels and the same σ_spatial: ours with the full 2-D window
@@ -19,8 +23,10 @@ separable default preset, both against ``denoise_bilateral(win_size=2·radius+1)
 from __future__ import annotations
 
 import argparse
+import subprocess
 import sys
 import timeit
+import types
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +37,9 @@ from denoisebench.baselines.cross_bilateral import cross_bilateral_filter  # noq
 from denoisebench.denoisers.registry import load_denoiser  # noqa: E402
 from denoisebench.denoisers.runner import run_frame  # noqa: E402
 from denoisebench.denoisers.synthetic import synthetic_frame  # noqa: E402
+from denoisebench.metrics.spatial import relmse  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
 
 BASELINES = (
     "identity",
@@ -44,13 +53,28 @@ BASELINES = (
 )
 
 
-def seconds_in_denoise(name: str, frame, repeats: int) -> float:
-    """Minimum seconds inside ``denoise()`` over ``repeats`` runner calls, after one warm-up."""
-    denoiser = load_denoiser(name)
-    warm = run_frame(denoiser, frame, keep_output=False)
+def seconds_in_denoise(name, frame, repeats: int, with_output: bool = False):
+    """Minimum seconds inside ``denoise()`` over ``repeats`` runner calls, after one warm-up
+    (``name``: a registered name or a denoiser object); with ``with_output`` also the output."""
+    denoiser = load_denoiser(name) if isinstance(name, str) else name
+    warm = run_frame(denoiser, frame, keep_output=with_output)
     if not warm.ok:
         raise SystemExit(f"{name} failed: {warm.error}")
-    return min(run_frame(denoiser, frame, keep_output=False).seconds for _ in range(repeats))
+    seconds = min(run_frame(denoiser, frame, keep_output=False).seconds for _ in range(repeats))
+    return (seconds, warm.output) if with_output else seconds
+
+
+def rpf_at_revision(revision: str):
+    """A RandomParameterFilter built from ``denoisebench/baselines/rpf.py`` as of git ``revision``."""
+    try:
+        source = subprocess.run(["git", "show", f"{revision}:denoisebench/baselines/rpf.py"], cwd=ROOT,
+                                check=True, capture_output=True, text=True).stdout
+    except (OSError, subprocess.CalledProcessError) as error:
+        raise SystemExit(f"--rpf-baseline {revision}: cannot read rpf.py there ({error})") from None
+    module = types.ModuleType(f"rpf_at_{revision}")
+    module.__package__ = "denoisebench.baselines"  # its relative imports resolve against today's package
+    exec(compile(source, f"rpf.py@{revision}", "exec"), module.__dict__)  # noqa: S102 - our own history
+    return module.RandomParameterFilter()
 
 
 def best_of(fn, repeats: int) -> float:
@@ -62,28 +86,46 @@ def best_of(fn, repeats: int) -> float:
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--size", type=int, default=256)
-    parser.add_argument("--rpf-size", type=int, default=64)
+    parser.add_argument("--rpf-size", type=int, default=128)
+    parser.add_argument("--rpf-spp", default="4,8", help="comma-separated spp of the RPF frames")
+    parser.add_argument("--rpf-baseline", metavar="REV", help="also time rpf.py as of this git revision")
     parser.add_argument("--spp", type=int, default=4)
     parser.add_argument("--radius", type=int, default=7)
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args(argv)
 
     frame = synthetic_frame("textured", args.size, args.size, args.spp, seed=0, samples=False)
-    small = synthetic_frame("textured", args.rpf_size, args.rpf_size, args.spp, seed=0, samples=True)
+    try:
+        rpf_spps = [int(v) for v in args.rpf_spp.split(",") if v.strip()]
+    except ValueError:
+        parser.error(f"--rpf-spp: comma-separated integers expected, got {args.rpf_spp!r}")
     megapixels = args.size * args.size / 1e6
     small_megapixels = args.rpf_size * args.rpf_size / 1e6
 
     per_mp = {name: seconds_in_denoise(name, frame, args.repeats) / megapixels for name in BASELINES}
     oidn = per_mp["oidn"]
-    oidn_small = seconds_in_denoise("oidn", small, args.repeats) / small_megapixels
-    rpf = seconds_in_denoise("rpf", small, args.repeats) / small_megapixels
 
-    print(f"denoiser speed: {args.size}x{args.size} px, {args.spp} spp (rpf: {args.rpf_size}x{args.rpf_size}); "
-          f"min of {args.repeats} after a warm-up")
+    print(f"denoiser speed: {args.size}x{args.size} px, {args.spp} spp (rpf: {args.rpf_size}x{args.rpf_size} at "
+          f"{args.rpf_spp} spp); min of {args.repeats} after a warm-up")
     print(f"{'denoiser':<22}{'s/MP':>10}{'x OIDN (high)':>16}")
     for name, value in per_mp.items():
         print(f"{name:<22}{value:>10.3f}{value / oidn:>16.3f}")
-    print(f"{'rpf':<22}{rpf:>10.3f}{rpf / oidn_small:>16.3f}   (OIDN at {args.rpf_size} px: {oidn_small:.3f} s/MP)")
+
+    baseline = rpf_at_revision(args.rpf_baseline) if args.rpf_baseline else None
+    print(f"\nrpf, textured {args.rpf_size}x{args.rpf_size} px (OIDN timed on the same frame):")
+    for spp in rpf_spps:
+        small = synthetic_frame("textured", args.rpf_size, args.rpf_size, spp, seed=0, samples=True)
+        oidn_small = seconds_in_denoise("oidn", small, args.repeats) / small_megapixels
+        seconds, image = seconds_in_denoise("rpf", small, args.repeats, with_output=True)
+        rpf = seconds / small_megapixels
+        noisy = relmse(small.color, small.reference)
+        print(f"  {spp} spp: rpf {rpf:9.2f} s/MP  {rpf / oidn_small:8.1f}x OIDN ({oidn_small:.3f} s/MP)  "
+              f"relMSE {relmse(image, small.reference):.4f} (input {noisy:.4f})")
+        if baseline is not None:
+            old_seconds, old_image = seconds_in_denoise(baseline, small, args.repeats, with_output=True)
+            old = old_seconds / small_megapixels
+            print(f"          rpf@{args.rpf_baseline} {old:9.2f} s/MP  {old / oidn_small:8.1f}x OIDN  "
+                  f"relMSE {relmse(old_image, small.reference):.4f}  -> today {old / rpf:.1f}x faster")
 
     from skimage.restoration import denoise_bilateral
 
