@@ -179,3 +179,25 @@ def test_var_median_variant_is_finite_and_uses_the_median_variance():
         out_plain, out_median = plain(b)["color"], median(b)["color"]
     assert torch.isfinite(out_median).all()
     assert not torch.equal(out_plain, out_median)
+
+
+def test_demodulate_variant_keeps_texture_and_black():
+    """Demodulated, a flat irradiance under a checker albedo filters to the checker itself."""
+    torch.manual_seed(0)
+    net = build_model("lbf", {"radius": 2, "hidden": [4], "blocks": [3], "demodulate": True}).eval()
+    with torch.no_grad():
+        net.mlp[-1].weight.zero_()
+        net.mlp[-1].bias.fill_(-30.0)  # softplus ≈ 0: a plain 5×5 box filter
+    checker = 0.2 + 0.6 * ((torch.arange(8)[:, None] + torch.arange(8)[None]) % 2).float()
+    albedo = checker.expand(1, 3, 8, 8).contiguous()
+    b = {"color": albedo * 2.0, "albedo": albedo, "color_var": torch.zeros(1, 3, 8, 8)}
+    from denoisebench.models.features import ALBEDO_EPS
+
+    factor = albedo + ALBEDO_EPS  # what the filter divides by and multiplies back
+    irradiance = F.avg_pool2d(F.pad(b["color"] / factor, (2, 2, 2, 2), mode="replicate"), 5, stride=1)
+    with torch.no_grad():
+        out = net(b)["color"]
+        torch.testing.assert_close(out, irradiance * factor, rtol=1e-4, atol=1e-6)
+        assert float((out - b["color"]).abs().max()) < 0.02 * float(b["color"].max())  # the checker survives
+        black = {k: torch.zeros_like(v) for k, v in b.items()}
+        assert float(net(black)["color"].abs().max()) == 0.0
