@@ -73,6 +73,7 @@ def rpf_at_revision(revision: str):
         raise SystemExit(f"--rpf-baseline {revision}: cannot read rpf.py there ({error})") from None
     module = types.ModuleType(f"rpf_at_{revision}")
     module.__package__ = "denoisebench.baselines"  # its relative imports resolve against today's package
+    sys.modules[module.__name__] = module  # dataclasses look their module up there
     exec(compile(source, f"rpf.py@{revision}", "exec"), module.__dict__)  # noqa: S102 - our own history
     return module.RandomParameterFilter()
 
@@ -89,6 +90,7 @@ def main(argv=None) -> int:
     parser.add_argument("--rpf-size", type=int, default=128)
     parser.add_argument("--rpf-spp", default="4,8", help="comma-separated spp of the RPF frames")
     parser.add_argument("--rpf-baseline", metavar="REV", help="also time rpf.py as of this git revision")
+    parser.add_argument("--rpf-only", action="store_true", help="time OIDN and RPF only (no other baselines)")
     parser.add_argument("--spp", type=int, default=4)
     parser.add_argument("--radius", type=int, default=7)
     parser.add_argument("--repeats", type=int, default=3)
@@ -102,7 +104,8 @@ def main(argv=None) -> int:
     megapixels = args.size * args.size / 1e6
     small_megapixels = args.rpf_size * args.rpf_size / 1e6
 
-    per_mp = {name: seconds_in_denoise(name, frame, args.repeats) / megapixels for name in BASELINES}
+    names = ("oidn",) if args.rpf_only else BASELINES
+    per_mp = {name: seconds_in_denoise(name, frame, args.repeats) / megapixels for name in names}
     oidn = per_mp["oidn"]
 
     print(f"denoiser speed: {args.size}x{args.size} px, {args.spp} spp (rpf: {args.rpf_size}x{args.rpf_size} at "
@@ -126,6 +129,8 @@ def main(argv=None) -> int:
             old = old_seconds / small_megapixels
             print(f"          rpf@{args.rpf_baseline} {old:9.2f} s/MP  {old / oidn_small:8.1f}x OIDN  "
                   f"relMSE {relmse(old_image, small.reference):.4f}  -> today {old / rpf:.1f}x faster")
+    if args.rpf_only:
+        return 0
 
     from skimage.restoration import denoise_bilateral
 
