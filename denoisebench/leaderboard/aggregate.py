@@ -18,7 +18,9 @@ Notes
   samples) of the mean on the rule's own scale (values, or logs), mapped back. When the scores
   carry a standard error from the reference's noise (``ses``; :mod:`denoisebench.metrics.floors`)
   every resample also adds a normal draw of that size to each scene's value (on the log scale:
-  se/value, the delta method), so the interval includes the reference's uncertainty. Fixed seed:
+  sqrt(log(1 + (se/value)²)), the spread of a log-normal with that mean and se; the delta method's
+  se/value explodes where the se is comparable to the value, as for linear MSE on a reference
+  with fireflies), so the interval includes the reference's uncertainty. Fixed seed:
   the same run gives the same interval. Fewer than 2 scenes: no interval.
 * **Not distinguishable.** :func:`reference_resolution` is the half-width (95 %) of what the
   reference's noise alone allows between two denoisers' aggregated scores. Their reference-noise
@@ -60,6 +62,13 @@ def _ok(v) -> bool:
     return v is not None and math.isfinite(v)
 
 
+def log_se(se: float | None, value: float) -> float:
+    """Standard deviation on the log scale of a positive value with standard error ``se`` (log-normal)."""
+    if not se or value <= 0:
+        return 0.0
+    return math.sqrt(math.log1p((se / value) ** 2))
+
+
 def scene_terms(rule: str, mine: dict, noisy: dict | None = None, ses: dict | None = None):
     """(terms, term ses, back-transform) on the rule's scale, over the scenes usable for ``rule``.
 
@@ -73,11 +82,11 @@ def scene_terms(rule: str, mine: dict, noisy: dict | None = None, ses: dict | No
     if rule == "geomean":
         if any(mine[s] <= 0 for s in scenes):
             return [], [], None
-        return ([math.log(mine[s]) for s in scenes], [(ses.get(s) or 0.0) / mine[s] for s in scenes], math.exp)
+        return ([math.log(mine[s]) for s in scenes], [log_se(ses.get(s), mine[s]) for s in scenes], math.exp)
     if rule == "relative_to_input":
         noisy = noisy or {}
         keep = [s for s in scenes if _ok(noisy.get(s)) and noisy[s] > 0 and mine[s] > 0]
-        return ([math.log(mine[s] / noisy[s]) for s in keep], [(ses.get(s) or 0.0) / mine[s] for s in keep], math.exp)
+        return ([math.log(mine[s] / noisy[s]) for s in keep], [log_se(ses.get(s), mine[s]) for s in keep], math.exp)
     raise ValueError(f"unknown aggregation rule {rule!r}")
 
 
@@ -131,6 +140,6 @@ def reference_resolution(rule: str, mine_a: dict, ses_a: dict, mine_b: dict, ses
         if rule != "mean":
             if mine_a[s] <= 0 or mine_b[s] <= 0:
                 return None
-            a, b = a / mine_a[s], b / mine_b[s]
+            a, b = log_se(a, mine_a[s]), log_se(b, mine_b[s])
         total += (a + b) ** 2
     return Z95 * math.sqrt(total) / len(scenes)
