@@ -318,3 +318,14 @@ def test_peers_option_checks_its_names(data, tmp_path, capsys):
     assert main(["train", "--model", "lbf", "--data", str(data), "--steps", "0", "--out", str(out), "--evaluate",
                  "--peers", "lbf", *SMALL]) == 2
     assert "--peers" in capsys.readouterr().err
+
+
+def test_loader_workers_give_the_same_weights_as_the_main_process(data, tmp_path):
+    """Crops are drawn per (epoch, item), not per process: 2 loader workers train bit for bit alike."""
+    a, b = tmp_path / "a.pt", tmp_path / "b.pt"
+    common = ["train", "--model", "dpcn", "--data", str(data), "--steps", "5", "--device", "cpu", *SMALL]
+    assert main([*common, "--out", str(a), "--workers", "0"]) == 0
+    assert main([*common, "--out", str(b), "--workers", "2"]) == 0
+    sa, sb = load_checkpoint(a)["state_dict"], load_checkpoint(b)["state_dict"]
+    for name, tensor in sa.items():
+        assert torch.equal(tensor, sb[name]), name

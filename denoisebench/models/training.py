@@ -162,6 +162,38 @@ def _to_device(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str
     return {name: value.to(device, non_blocking=True) for name, value in batch.items()}
 
 
+class _EpochItems(torch.utils.data.Dataset):
+    """A crop dataset addressed by ``(epoch, index)``: the epoch is set where the item is read
+    (in a loader worker too), so crops do not depend on the worker count."""
+
+    def __init__(self, base):
+        self.base = base
+
+    def __len__(self) -> int:
+        return len(self.base)
+
+    def __getitem__(self, key):
+        epoch, index = key
+        if self.base.epoch != epoch:
+            self.base.set_epoch(epoch)
+        return self.base[index]
+
+
+def _batch_plan(length: int, batch_size: int, seed: int, per_epoch: int, start: int, total: int) -> list[list[tuple[int, int]]]:
+    """Batches of ``(epoch, index)`` for steps ``start`` to ``total``: batch *b* of epoch *e* is
+    :func:`_batches`'s, so a resumed run continues with the batches the uninterrupted one had."""
+    plan = []
+    step = start
+    while step < total:
+        epoch, offset = divmod(step, per_epoch)
+        for batch in _batches(length, batch_size, seed, epoch)[offset:]:
+            plan.append([(epoch, int(i)) for i in batch])
+            step += 1
+            if step >= total:
+                break
+    return plan
+
+
 def _loss(model, spec, batch: dict[str, torch.Tensor], kind: str = "log") -> dict[str, torch.Tensor]:
     if not spec.temporal:
         return pcn_loss(model(batch), batch, kind)
@@ -340,13 +372,13 @@ def train(options: TrainOptions) -> dict:
 
     checkpoint.since = started
     try:
-        while step < total:
-            epoch, offset = divmod(step, per_epoch)
-            dataset.set_epoch(epoch)
-            batches = _batches(len(dataset), options.batch_size, options.seed, epoch)[offset:]
-            loader = torch.utils.data.DataLoader(
-                dataset, batch_sampler=batches, num_workers=workers, pin_memory=device.type == "cuda"
-            )
+        # One loader for the whole run (its workers start once, not every epoch); items are
+        # addressed as (epoch, index), so every worker draws the crops the single process would.
+        plan = _batch_plan(len(dataset), options.batch_size, options.seed, per_epoch, step, total)
+        loader = torch.utils.data.DataLoader(
+            _EpochItems(dataset), batch_sampler=plan, num_workers=workers, pin_memory=device.type == "cuda"
+        )
+        if step < total:
             for batch in loader:
                 for group in optimizer.param_groups:
                     group["lr"] = options.lr * lr_factor(options.lr_schedule, step - start_step, options.steps)
