@@ -232,3 +232,21 @@ def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
     assert "relmse floor" in markdown and "temporal\\_relmse ↓" in markdown
     html = index.read_text()
     assert html.count('alt="frames of ') == 3 and html.count('alt="animated crop of ') == 3  # noisy, denoiser, reference
+
+
+def test_the_leaderboard_command_ranks_a_linear_flicker_score_per_scene_against_the_input(tmp_path):
+    from denoisebench.leaderboard.table import leaderboard
+
+    # the temporal_l1 per scene: an arithmetic mean would rank noisy (0.34) above oidn (0.37)
+    noisy = {"cornell": 0.18, "dof": 0.05, "motion_blur": 0.06, "glossy_fireflies": 1.07}
+    oidn = {"cornell": 0.02, "dof": 0.01, "motion_blur": 0.012, "glossy_fireflies": 1.44}
+    units = []
+    for label, values in ((NOISY, noisy), ("oidn", oidn)):
+        for scene, value in values.items():
+            frames = [FrameRecord(i, "ok", None, 1.0, 0.1, 1.1, 0, {"relmse": 0.1}) for i in range(2)]
+            units.append(UnitRecord(label, scene, 4, "ok", None, frames, {"temporal_l1": value}))
+    store, _ = _store_with_units(tmp_path / "r.sqlite", units, (NOISY, "oidn"))
+    metric, spp, _, ranked = leaderboard(store, "temporal_l1", 4)
+    assert metric.aggregate == "relative_to_input" and spp == 4
+    assert [e.denoiser for e in ranked] == ["oidn", NOISY]
+    assert ranked[1].value == pytest.approx(1.0)
