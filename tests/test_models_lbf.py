@@ -201,3 +201,14 @@ def test_demodulate_variant_keeps_texture_and_black():
         assert float((out - b["color"]).abs().max()) < 0.02 * float(b["color"].max())  # the checker survives
         black = {k: torch.zeros_like(v) for k, v in b.items()}
         assert float(net(black)["color"].abs().max()) == 0.0
+
+
+def test_inference_path_equals_the_differentiable_path():
+    buffers, _ = normalize_radiance(batch(n=2, h=10, w=11, seed=13))
+    primary = lbf.primary_features(buffers)
+    g = torch.Generator().manual_seed(14)
+    precisions = 3.0 * torch.rand(2, 2 + len(lbf.FEATURES), 10, 11, generator=g)
+    with torch.no_grad():
+        fast = lbf.filter_image(primary, precisions, 3)
+    slow = lbf.filter_image(primary, precisions.clone().requires_grad_(True), 3)
+    torch.testing.assert_close(fast, slow.detach(), rtol=1e-6, atol=1e-7)

@@ -244,6 +244,9 @@ def filter_image(primary: dict[str, torch.Tensor], precisions: torch.Tensor, rad
     numerator = torch.zeros_like(primary["color"])
     normaliser = torch.zeros_like(var_i)
     size = 2 * radius + 1
+    if not (torch.is_grad_enabled() and precisions.requires_grad):
+        return _filter_in_place(padded_guides, guides, padded_var, padded_color, alpha, beta, gammas, var_i,
+                                numerator, normaliser, radius)
     for dy in range(size):
         for dx in range(size):
             window = (slice(None), slice(None), slice(dy, dy + height), slice(dx, dx + width))
@@ -257,6 +260,33 @@ def filter_image(primary: dict[str, torch.Tensor], precisions: torch.Tensor, rad
             numerator = numerator + weight * padded_color[window]
             normaliser = normaliser + weight
     return numerator / normaliser
+
+
+def _filter_in_place(padded_guides, guides, padded_var, padded_color, alpha, beta, gammas, var_i,
+                     numerator, normaliser, radius):
+    """:func:`filter_image`'s sums without autograd: the same arithmetic, buffers reused in place
+    (inference; about half the time of the differentiable loop)."""
+    height, width = var_i.shape[-2:]
+    exponent = torch.empty_like(var_i)
+    scratch = torch.empty_like(guides[0])
+    single = torch.empty_like(var_i)
+    size = 2 * radius + 1
+    for dy in range(size):
+        for dx in range(size):
+            window = (slice(None), slice(None), slice(dy, dy + height), slice(dx, dx + width))
+            r2 = float((dy - radius) ** 2 + (dx - radius) ** 2)
+            torch.sub(padded_guides[0][window], guides[0], out=scratch).square_()
+            torch.sum(scratch, dim=1, keepdim=True, out=exponent)
+            torch.add(var_i, padded_var[window], out=single).add_(COLOR_VAR_EPS)
+            exponent.div_(single).mul_(beta).add_(alpha, alpha=r2)
+            for gamma, guide, padded in zip(gammas, guides[1:], padded_guides[1:]):
+                difference = (padded[window] - guide).square_()
+                torch.sum(difference, dim=1, keepdim=True, out=single)
+                exponent.addcmul_(gamma, single)
+            weight = exponent.neg_().exp_()
+            numerator.addcmul_(weight, padded_color[window])
+            normaliser.add_(weight)
+    return numerator.div_(normaliser)
 
 
 def make_lbf(
