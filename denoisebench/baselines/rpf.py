@@ -481,7 +481,6 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
     shape = (spp, height, width)
     boxes = list(settings.boxes) if settings.boxes is not None else scaled_boxes(height, width)
     weights = RPFWeights()
-    n_feat = layout.features.stop - layout.features.start
     sigma2 = 8.0 * settings.sigma8_squared / spp
     threads = torch.get_num_threads()
     # Python threads run chunks, each torch operation on one thread: torch's own OpenMP threads spin at
