@@ -8,7 +8,8 @@ import pytest
 from denoisebench.cli import main
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.synthetic import make_synthetic_dataset
-from denoisebench.leaderboard.runner import BenchmarkConfig, run_benchmark
+from denoisebench.leaderboard.benchmark_run import run_benchmark
+from denoisebench.leaderboard.runner import BenchmarkConfig
 from denoisebench.leaderboard.store import ResultsStore
 
 

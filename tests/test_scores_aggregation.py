@@ -211,7 +211,8 @@ def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
     from denoisebench.dataset import open_dataset
     from denoisebench.dataset.synthetic import make_synthetic_dataset
     from denoisebench.leaderboard.report import write_report
-    from denoisebench.leaderboard.runner import BenchmarkConfig, run_benchmark
+    from denoisebench.leaderboard.benchmark_run import run_benchmark
+    from denoisebench.leaderboard.runner import BenchmarkConfig
 
     data = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=1, frames=4, height=16, width=16, spp=(1, 4)))
     with ResultsStore(tmp_path / "r.sqlite") as store:

@@ -92,7 +92,8 @@ def add_arguments(parser) -> None:
 def run(args) -> int:
     from denoisebench.dataset import open_dataset
     from denoisebench.denoisers.isolation import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, limits_from_args
-    from denoisebench.leaderboard.runner import BenchmarkConfig, run_benchmark
+    from denoisebench.leaderboard.benchmark_run import run_benchmark
+    from denoisebench.leaderboard.runner import BenchmarkConfig
     from denoisebench.leaderboard.store import ResultsStore, utc_now
     from denoisebench.outputs import check_writable_dir, check_writable_file
 

@@ -36,7 +36,6 @@ from __future__ import annotations
 import hashlib
 import importlib.metadata
 import platform
-import sys
 from dataclasses import dataclass, field
 from typing import Callable, Iterable
 
@@ -414,47 +413,3 @@ def run_local(dataset: Dataset, plan: RunPlan, store: ResultsStore, on_unit: Cal
         labels = [label for label in plan.labels if (label, scene, spp) not in done]
         for unit in measure_group(dataset, plan, scene, spp, labels, instances):
             on_unit(unit, store.write_unit(plan.run_id, unit))
-
-
-def run_benchmark(
-    dataset: Dataset,
-    config: BenchmarkConfig,
-    store: ResultsStore,
-    *,
-    executor: str = "local",
-    progress: bool = True,
-) -> RunPlan:
-    """Measure every missing unit of the run ``config`` describes; return its plan (with run_id)."""
-    from tqdm import tqdm
-
-    plan = prepare_run(dataset, config, store, progress=progress)
-    done = len(store.done_units(plan.run_id))
-    bar = tqdm(
-        total=plan.total_units, initial=min(done, plan.total_units), desc="benchmark: denoisers × sequences",
-        unit="seq", file=sys.stderr, disable=not progress,
-    )
-
-    def on_unit(unit: UnitRecord, written: bool) -> None:
-        bar.update(1)
-        if unit.status != "ok" and written:
-            bar.write(f"warning: {unit.denoiser} failed on {unit.scene} at {unit.spp} spp: {unit.error}", file=sys.stderr)
-
-    try:
-        if executor == "local":
-            run_local(dataset, plan, store, on_unit)
-        elif executor == "ray":
-            from .ray_executor import run_ray
-
-            run_ray(dataset, plan, store, config, on_unit)
-        else:
-            raise UserInputError(f"unknown executor {executor!r}; use local or ray")
-    finally:
-        bar.close()
-    missing = plan.total_units - len(store.done_units(plan.run_id) & _expected(plan))
-    if missing == 0:
-        store.finish_run(plan.run_id)
-    return plan
-
-
-def _expected(plan: RunPlan) -> set[tuple[str, str, int]]:
-    return {(label, scene, spp) for label in plan.labels for scene in plan.scenes for spp in plan.spp}

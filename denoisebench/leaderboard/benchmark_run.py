@@ -1,0 +1,64 @@
+"""Run a benchmark: prepare the run, measure its missing units with an executor, finish it.
+
+The one entry point of a benchmark (``run-benchmark``, ``denoisebench benchmark``, tests). It sits
+above both executors, :func:`denoisebench.leaderboard.runner.run_local` and
+:func:`denoisebench.leaderboard.ray_executor.run_ray`, so that neither of them imports the other's
+module (the runner measures units; the Ray executor distributes the runner's groups).
+"""
+
+from __future__ import annotations
+
+import sys
+
+from denoisebench.dataset import Dataset
+from denoisebench.errors import UserInputError
+
+from .runner import BenchmarkConfig, RunPlan, prepare_run, run_local
+from .store import ResultsStore, UnitRecord
+
+#: Executors ``run_benchmark`` accepts.
+EXECUTORS = ("local", "ray")
+
+
+def run_benchmark(
+    dataset: Dataset,
+    config: BenchmarkConfig,
+    store: ResultsStore,
+    *,
+    executor: str = "local",
+    progress: bool = True,
+) -> RunPlan:
+    """Measure every missing unit of the run ``config`` describes; return its plan (with run_id)."""
+    from tqdm import tqdm
+
+    plan = prepare_run(dataset, config, store, progress=progress)
+    done = len(store.done_units(plan.run_id))
+    bar = tqdm(
+        total=plan.total_units, initial=min(done, plan.total_units), desc="benchmark: denoisers × sequences",
+        unit="seq", file=sys.stderr, disable=not progress,
+    )
+
+    def on_unit(unit: UnitRecord, written: bool) -> None:
+        bar.update(1)
+        if unit.status != "ok" and written:
+            bar.write(f"warning: {unit.denoiser} failed on {unit.scene} at {unit.spp} spp: {unit.error}", file=sys.stderr)
+
+    try:
+        if executor == "local":
+            run_local(dataset, plan, store, on_unit)
+        elif executor == "ray":
+            from .ray_executor import run_ray  # imports Ray itself only when called
+
+            run_ray(dataset, plan, store, config, on_unit)
+        else:
+            raise UserInputError(f"unknown executor {executor!r}; use one of {', '.join(EXECUTORS)}")
+    finally:
+        bar.close()
+    missing = plan.total_units - len(store.done_units(plan.run_id) & _expected(plan))
+    if missing == 0:
+        store.finish_run(plan.run_id)
+    return plan
+
+
+def _expected(plan: RunPlan) -> set[tuple[str, str, int]]:
+    return {(label, scene, spp) for label in plan.labels for scene in plan.scenes for spp in plan.spp}
