@@ -182,15 +182,17 @@ def test_rpf_feature_weights_drop_with_the_lens_on_synthetic_depth_of_field():
 @pytest.mark.parametrize("family", ["textured", "depth_of_field"])
 def test_rpf_deviations_cost_little(family):
     """The docstring's deviations, each against the setting closer to the paper (draws differ, so
-    not equal): statistics on a grid vs at every pixel, and 128 vs 256 statistics samples, cost
-    nothing (within 5%; measured: the grid and the cap were slightly *better*); the filter's cap of
-    128 samples vs 256 costs at most 25% (measured 0.069 vs 0.057 on textured, nothing on the others)."""
+    not equal; each score is the mean over the filter's seeds 0-2, since one draw of the neighbourhoods
+    moves relMSE by up to 20% here): statistics on a grid vs at every pixel, and 128 vs 256 statistics
+    samples, cost nothing (within 5%; measured over seeds 0-5: the grid and the cap were slightly
+    *better*, textured 0.0995 vs 0.1029 and 0.1028); the filter's cap of 128 samples vs 256 costs at
+    most 25% (measured 0.0995 vs 0.0942 on textured, nothing on depth of field)."""
     frame = synthetic_frame(family, 32, 32, 4, seed=11)
     noisy = relmse(frame.color, frame.reference)
 
     def score(**options):
-        image, _ = rpf_filter(frame.samples, RPFSettings(**options))
-        return relmse(image, frame.reference)
+        return np.mean([relmse(rpf_filter(frame.samples, RPFSettings(seed=seed, **options))[0], frame.reference)
+                        for seed in range(3)])
 
     ours = score()
     assert ours < 0.35 * noisy

@@ -101,7 +101,7 @@ SIGMA8_SQUARED = 0.02  # the paper's σ² at 8 spp; σ² = 8 σ_8² / S
 CLUSTER_TOLERANCE = 0.1
 _EPS = 1e-10
 _STAT_CELLS = 500_000  # gathered samples × channels of one statistics chunk: bounds memory (one-hot codes: × bins)
-_FILTER_PAIRS = 200_000  # sample pairs (own × gathered) of one filter chunk
+_FILTER_PAIRS = 400_000  # sample pairs (own × gathered) of one filter chunk
 
 
 @dataclass
@@ -140,27 +140,33 @@ def _mirror(index: np.ndarray, size: int) -> np.ndarray:
     return np.clip(index, 0, size - 1)
 
 
-def mutual_information(quantised: torch.Tensor, mask: torch.Tensor, bins: int, a: Sequence[int],
-                       b: Sequence[int]) -> torch.Tensor:
-    """n×A×B: MI (nats) between channel a[i] and channel b[j] in each of n neighbourhoods.
+def one_hot_codes(quantised: torch.Tensor, mask: torch.Tensor, bins: int) -> torch.Tensor:
+    """n×M×(D·bins) float32: each sample's bin of every channel as a one-hot block per channel, all
+    zero for samples outside ``mask`` (the cluster). Built once per neighbourhood batch; the joint
+    histograms of any two column blocks are then one batched matmul of slices of it (0/1 squared is
+    itself, so the mask on both sides counts each sample once)."""
+    n, m, d = quantised.shape
+    offsets = torch.arange(d, dtype=torch.int64) * bins
+    codes = torch.zeros((n, m, d * bins), dtype=torch.float32)
+    weight = mask.to(torch.float32).unsqueeze(-1).expand(n, m, d)
+    return codes.scatter_(2, quantised.long() + offsets, weight)
 
-    ``quantised`` (n×M×D integers in [0, bins)) holds each neighbourhood's samples, ``mask`` (n×M
-    bool) which of them count (the cluster). Every joint histogram of the A×B channel pairs comes out
-    of one batched matmul of one-hot codes (n×(A·bins)×(B·bins) counts); entropies are
-    H = log N − Σ c log c / N. Histogram MI from ~100 samples is biased upwards by about
-    (K_a − 1)(K_b − 1)/2N nats, so the Miller–Madow correction (K − 1)/2N is added to each of the
-    three entropies (K: non-empty bins); without it two independent channels would look dependent.
-    """
-    n, m = quantised.shape[:2]
 
-    def one_hot(columns: Sequence[int]) -> torch.Tensor:  # n×M×(len·bins) float32
-        offsets = torch.arange(len(columns), dtype=torch.int64) * bins
-        codes = torch.zeros((n, m, len(columns) * bins), dtype=torch.float32)
-        return codes.scatter_(2, quantised[:, :, list(columns)].long() + offsets, 1.0)
+def _code_block(codes: torch.Tensor, columns: Sequence[int], bins: int) -> torch.Tensor:
+    columns = list(columns)
+    if columns == list(range(columns[0], columns[0] + len(columns))):  # a view, no copy
+        return codes[:, :, columns[0] * bins : (columns[-1] + 1) * bins]
+    picks = torch.tensor([c * bins + j for c in columns for j in range(bins)], dtype=torch.int64)
+    return codes.index_select(2, picks)
 
-    codes_a = one_hot(a).mul_(mask.to(torch.float32).unsqueeze(-1))  # samples outside the cluster: no code
-    joint = torch.bmm(codes_a.transpose(1, 2), one_hot(b)).view(n, len(a), bins, len(b), bins)
-    total = mask.sum(1).clamp_min(1).to(torch.float32)  # n
+
+def mutual_information_codes(codes_a: torch.Tensor, codes_b: torch.Tensor, total: torch.Tensor,
+                             bins: int) -> torch.Tensor:
+    """n×A×B MI (nats) from one-hot blocks (n×M×(A·bins), n×M×(B·bins), see :func:`one_hot_codes`)
+    and the cluster sizes ``total`` (n, float32, ≥ 1); see :func:`mutual_information`."""
+    n = codes_a.shape[0]
+    na, nb = codes_a.shape[2] // bins, codes_b.shape[2] // bins
+    joint = torch.bmm(codes_a.transpose(1, 2), codes_b).view(n, na, bins, nb, bins)
     count_a = joint[:, :, :, 0, :].sum(-1)  # every sample has one bin of each channel
     count_b = joint[:, 0].sum(1)
 
@@ -173,6 +179,22 @@ def mutual_information(quantised: torch.Tensor, mask: torch.Tensor, bins: int, a
     h_b = entropy(count_b, (2,))  # n×B
     h_ab = entropy(joint, (2, 4))  # n×A×B
     return (h_a.unsqueeze(2) + h_b.unsqueeze(1) - h_ab).clamp_(min=0.0)
+
+
+def mutual_information(quantised: torch.Tensor, mask: torch.Tensor, bins: int, a: Sequence[int],
+                       b: Sequence[int]) -> torch.Tensor:
+    """n×A×B: MI (nats) between channel a[i] and channel b[j] in each of n neighbourhoods.
+
+    ``quantised`` (n×M×D integers in [0, bins)) holds each neighbourhood's samples, ``mask`` (n×M
+    bool) which of them count (the cluster). Every joint histogram of the A×B channel pairs comes out
+    of one batched matmul of one-hot codes (n×(A·bins)×(B·bins) counts); entropies are
+    H = log N − Σ c log c / N. Histogram MI from ~100 samples is biased upwards by about
+    (K_a − 1)(K_b − 1)/2N nats, so the Miller–Madow correction (K − 1)/2N is added to each of the
+    three entropies (K: non-empty bins); without it two independent channels would look dependent.
+    """
+    codes = one_hot_codes(quantised, mask, bins)
+    total = mask.sum(1).clamp_min(1).to(torch.float32)  # n
+    return mutual_information_codes(_code_block(codes, a, bins), _code_block(codes, b, bins), total, bins)
 
 
 @dataclass
@@ -255,24 +277,39 @@ def _pattern_pool(rng: np.random.Generator, spp: int, box: int, total: int, heig
     return dy, dx, rng.integers(0, spp, (_PATTERNS, extra))
 
 
-def _draw(rng: np.random.Generator, pool, ys: np.ndarray, xs: np.ndarray, spp: int, height: int, width: int) -> np.ndarray:
+def _mirror_table(size: int, reach: int) -> np.ndarray:
+    """Index i + reach → the mirrored coordinate of i, for i in [−reach, size − 1 + reach]."""
+    return _mirror(np.arange(-reach, size + reach), size)
+
+
+def _draw(rng: np.random.Generator | None, pool, ys: np.ndarray, xs: np.ndarray, spp: int, height: int, width: int,
+          pick: np.ndarray | None = None) -> np.ndarray:
     """n×M flat sample indices ((s·H + y)·W + x): P's own S samples first, then the draws of a
-    pattern of ``pool`` picked at random per pixel, mirrored at the border, never P itself."""
+    pattern of ``pool`` picked at random per pixel (or given: ``pick``, n pattern numbers), mirrored
+    at the border, never P itself."""
     own = (np.arange(spp)[None, :] * height + ys[:, None]) * width + xs[:, None]
     if pool is None:
         return own
     dy, dx, ds = pool
-    pick = rng.integers(0, dy.shape[0], ys.size)
-    gy = _mirror(ys[:, None] + dy[pick], height)
-    gx = _mirror(xs[:, None] + dx[pick], width)
+    if pick is None:
+        pick = rng.integers(0, dy.shape[0], ys.size)
+    # mirroring by table look-up (one gather per axis instead of abs/where/clip on every draw)
+    reach_y, reach_x = int(np.abs(dy).max()), int(np.abs(dx).max())
+    row = _mirror_table(height, reach_y) * width
+    column = _mirror_table(width, reach_x)
+    here = ys * width + xs
+    drawn = row[(ys + reach_y)[:, None] + dy[pick]]
+    drawn += column[(xs + reach_x)[:, None] + dx[pick]]
     # a mirror back onto P (at the border): step to an adjacent pixel instead
-    same = (gy == ys[:, None]) & (gx == xs[:, None])
+    same = drawn == here[:, None]
     if same.any():
         if width > 1:
-            gx = np.where(same, np.where(xs[:, None] > 0, xs[:, None] - 1, xs[:, None] + 1), gx)
+            step = np.where(xs > 0, here - 1, here + 1)
         else:
-            gy = np.where(same, np.where(ys[:, None] > 0, ys[:, None] - 1, ys[:, None] + 1), gy)
-    return np.concatenate([own, (ds[pick] * height + gy) * width + gx], axis=1)
+            step = np.where(ys > 0, here - width, here + width)
+        drawn = np.where(same, step[:, None], drawn)
+    drawn += ds[pick] * (height * width)
+    return np.concatenate([own, drawn], axis=1)
 
 
 def _cluster_mask(gathered, spp: int, cluster: slice, xp=np):
@@ -313,16 +350,22 @@ def _statistics(flat: np.ndarray, layout: _Layout, ys: np.ndarray, xs: np.ndarra
     mask = _cluster_mask(gathered, spp, layout.cluster)
     normal = _normalise(gathered, mask)
     quantised = np.clip(np.floor((normal + 3.0) * (bins / 6.0)), 0, bins - 1).astype(np.uint8)
-    color_cols, feature_cols = _columns(layout.color), _columns(layout.features)
-    p_cols, r_cols = _columns(layout.position), _columns(layout.random)
-    x_cols = color_cols + feature_cols
+    color_cols = _columns(layout.color)
+    # the table's columns are colour, features, screen position, random parameters: the blocks below
+    # are contiguous views of one one-hot table (colour against colour is never needed)
+    assert layout.color.stop == layout.features.start and layout.position.stop == layout.random.start
     with torch.no_grad():
-        mi = mutual_information(torch.from_numpy(quantised), torch.from_numpy(mask), bins, x_cols,
-                                r_cols + p_cols + color_cols).double().numpy()  # n×X×(R + 2 + 3)
-    nr = len(r_cols)
-    d_r = mi[:, :, :nr].sum(2)
-    d_p = mi[:, :, nr : nr + 2].sum(2)
-    d_cf = mi[:, 3:, nr + 2 :].sum(2)  # n×F: features against the colour channels
+        mask_t = torch.from_numpy(mask)
+        codes = one_hot_codes(torch.from_numpy(quantised), mask_t, bins)
+        total = mask_t.sum(1).clamp_min(1).to(torch.float32)
+        x_block = codes[:, :, : layout.features.stop * bins]
+        pr_block = codes[:, :, layout.position.start * bins : layout.random.stop * bins]
+        mi_x = mutual_information_codes(x_block, pr_block, total, bins).double().numpy()  # n×X×(2 + R)
+        mi_f = mutual_information_codes(codes[:, :, layout.features.start * bins : layout.features.stop * bins],
+                                        codes[:, :, : layout.color.stop * bins], total, bins).double().numpy()
+    d_r = mi_x[:, :, 2:].sum(2)
+    d_p = mi_x[:, :, :2].sum(2)
+    d_cf = mi_f.sum(2)  # n×F: features against the colour channels
     w_r = d_r / (d_r + d_p + _EPS)
     d_rc, d_pc, d_fc = d_r[:, :3].sum(1), d_p[:, :3].sum(1), d_cf.sum(1)
     w_rc = d_rc / (d_rc + d_pc + _EPS)
@@ -341,7 +384,7 @@ def _statistics(flat: np.ndarray, layout: _Layout, ys: np.ndarray, xs: np.ndarra
 
 
 def _filter(flat_t: torch.Tensor, layout: _Layout, ys: np.ndarray, xs: np.ndarray, shape, box: int, pool,
-            scale: torch.Tensor, rng: np.random.Generator) -> torch.Tensor:
+            scale: torch.Tensor, pick: np.ndarray) -> torch.Tensor:
     """S×n×3: one pass's new colours of the samples of pixels (ys, xs); ``scale`` (n×K, K = colour and
     feature columns) holds α/2σ_c² on colour columns and β/2σ_f² on feature columns.
 
@@ -351,35 +394,41 @@ def _filter(flat_t: torch.Tensor, layout: _Layout, ys: np.ndarray, xs: np.ndarra
     square Σ k o² + Σ k g² − 2 Σ k o g does not cancel (world positions can be large).
     """
     spp, height, width = shape
-    index = torch.from_numpy(_draw(rng, pool, ys, xs, spp, height, width))
+    index = torch.from_numpy(_draw(None, pool, ys, xs, spp, height, width, pick=pick))
     n, m = index.shape
     gathered = torch.index_select(flat_t, 0, index.view(-1)).view(n, m, -1)  # colour, features, screen position
+    d = gathered.shape[-1]
     kcols = layout.features.stop  # colour and features: the range terms
-    z = gathered - gathered[:, :spp].mean(1, keepdim=True)
+    # z (centred on the mean of P's own samples, so that the expanded squares below do not cancel:
+    # world positions can be large) and z² side by side: every sum the filter needs of both comes out
+    # of one batched matmul
+    zz = torch.empty((n, m, 2 * d), dtype=gathered.dtype)
+    z, squares = zz[:, :, :d], zz[:, :, d:]
+    torch.sub(gathered, gathered[:, :spp].mean(1, keepdim=True), out=z)
+    torch.mul(z, z, out=squares)  # (z * z: Tensor.square() is twice as slow on CPU)
     cl = layout.cluster
     if cl.stop > cl.start:  # the paper's clustering, gating statistics and weights alike
-        own = z[:, :spp, cl]  # centred on its own mean: its standard deviation is its RMS
-        limit = (3.0 * own.square().mean(1, keepdim=True).sqrt_()).clamp_(min=CLUSTER_TOLERANCE)
-        mask = (z[:, :, cl].abs() <= limit).all(-1)
+        # centred on its own mean: the own samples' standard deviation is their RMS
+        limit = (3.0 * squares[:, :spp, cl].mean(1, keepdim=True).sqrt_()).clamp_(min=CLUSTER_TOLERANCE)
+        mask = (squares[:, :, cl] <= limit.square_()).all(-1)  # |z| <= limit, on the squares at hand
         mask[:, :spp] = True
         mask = mask.to(z.dtype)
     else:
         mask = torch.ones((n, m), dtype=z.dtype)
-    # the cluster's variance of every range channel, from masked sums of z and z² (one matmul)
-    values = z[:, :, :kcols]
-    squares = z.square()
-    weights_row = mask.unsqueeze(1)
+    # the cluster's mean and variance of every range channel: masked sums of z and z² (one matmul)
     count = mask.sum(1, keepdim=True)
-    mean = torch.bmm(weights_row, values).squeeze(1) / count
-    var = (torch.bmm(weights_row, squares[:, :, :kcols]).squeeze(1) / count - mean * mean).clamp_(min=0.0)
-    level = (gathered[:, :1, :kcols].squeeze(1).abs() + mean.abs()) ** 2
+    sums = torch.bmm(mask.unsqueeze(1), zz).squeeze(1) / count  # n×2D
+    mean = sums[:, :kcols]
+    var = (sums[:, d : d + kcols] - mean * mean).clamp_(min=0.0)
+    level = gathered[:, 0, :kcols].abs() + mean.abs()
+    level *= level
     inv_var = torch.where(var > 1e-24 + 1e-12 * level, 1.0 / var.clamp_min(1e-30), torch.zeros_like(var))
-    k = torch.cat([scale * inv_var, torch.full((n, 2), 1.0 / (2.0 * (box / 4.0) ** 2))], dim=1)
-    k = k.unsqueeze(1)  # n×1×(K + 2)
+    k = torch.cat([scale * inv_var, torch.full((n, d - kcols), 1.0 / (2.0 * (box / 4.0) ** 2))], dim=1)
     own = z[:, :spp]
-    own_k = own * k
-    # Σ_k k (o − g)² = Σ k o² + Σ k g² − 2 Σ k o g: one batched matmul for the cross term
-    energy = torch.baddbmm(torch.bmm(k, squares.transpose(1, 2)), own_k, z.transpose(1, 2), alpha=-2.0)
+    own_k = own * k.unsqueeze(1)  # n×S×D
+    # Σ_k k (o − g)² = Σ k o² − 2 Σ k o g + Σ k g²: [−2 k o, k] · [g, g²] in one batched matmul
+    left = torch.cat([own_k * -2.0, k.unsqueeze(1).expand(n, spp, d)], dim=2)
+    energy = torch.bmm(left, zz.transpose(1, 2))
     energy += (own_k * own).sum(-1, keepdim=True)
     # capped at 80: exp(−80) ≈ 2e−35 is still a normal float (denormals are ~50x slower), and
     # beside w_ii = 1 a weight that small is nothing
@@ -523,7 +572,8 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
             flat_t = torch.from_numpy(np.ascontiguousarray(flat[:, columns]))
             scale_t = torch.from_numpy(scale)
             new_color = np.empty((spp, height, width, 3), np.float32)
-            filter_seeds = np.random.SeedSequence([settings.seed, t, 3]).spawn(-(-height // rows))
+            # one pattern per pixel, drawn for the whole image: the bytes do not depend on the chunking
+            picks = np.random.default_rng([settings.seed, t, 3]).integers(0, _PATTERNS, height * width)
 
             def run_filter(k: int) -> None:
                 y0 = k * rows
@@ -531,10 +581,10 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
                 ys, xs = np.meshgrid(np.arange(y0, y1), np.arange(width), indexing="ij")
                 with torch.no_grad():
                     out = _filter(flat_t, layout, ys.ravel(), xs.ravel(), shape, box, filter_pool,
-                                  scale_t[y0 * width : y1 * width], np.random.default_rng(filter_seeds[k]))
+                                  scale_t[y0 * width : y1 * width], picks[y0 * width : y1 * width])
                 new_color[:, y0:y1] = out.numpy().reshape(spp, y1 - y0, width, 3)
 
-            _map_chunks(run_filter, len(filter_seeds), _workers())
+            _map_chunks(run_filter, -(-height // rows), _workers())
             table[..., layout.color] = new_color
 
             offset = layout.features.start
