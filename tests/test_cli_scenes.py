@@ -78,4 +78,4 @@ def test_check_prints_plan_and_warnings():
     assert result.returncode == 0
     assert "warning: /World/Hair: prim type BasisCurves is not supported; skipped" in result.stderr
     plan = json.loads(result.stdout)["render_plan"]
-    assert plan["camera_model"] == "pinhole" and plan["random_parameters"] == ["pixel"]
+    assert plan["camera_model"] == "pinhole" and plan["random_parameters"] == ["pixel", "light", "bounce"]

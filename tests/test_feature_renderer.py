@@ -330,3 +330,8 @@ def test_second_hit_channels_only_with_per_sample_data_and_same_image(mi, family
     direct = make_render_plan(translated.effects, RenderOptions(per_sample=True, max_depth=1))
     c = render_frame(scene, translated.camera, 1, direct, width=SIZE, height=SIZE, spp=2, seed=3)
     assert not {"light", "bounce", "position2", "normal2"} & set(c.samples)  # no bounce, no channels
+    # the plan lists exactly the per-sample channels written (random parameters and second-hit features)
+    for plan, frame in ((with_samples, a), (direct, c)):
+        listed = set(plan.random_parameters) | set(plan.sample_features)
+        written = {name for name in frame.samples if name in {"pixel", "lens", "time", "light", "bounce", "position2", "normal2"}}
+        assert listed == written, (plan.max_depth, listed, written)

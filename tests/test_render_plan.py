@@ -22,7 +22,9 @@ def test_nothing_special_is_the_cheapest_plan():
     assert not plan.time_sampling
     assert plan.max_depth == UNBOUNDED_DEPTH and plan.rr_depth == DEFAULT_RR_DEPTH == 5  # Mitsuba path's defaults
     assert plan.max_depth_source == "default" and not plan.transport_restricted
-    assert plan.random_parameters == ("pixel",)
+    # full transport bounces: the first vertex's random numbers and the second hit are per-sample channels
+    assert plan.random_parameters == ("pixel", "light", "bounce")
+    assert plan.sample_features == ("position2", "normal2")
     assert not plan.lobe_split
     assert plan.pixel_filter == "box"
 
@@ -82,8 +84,21 @@ def test_pure_and_order_independent():
 def test_json_round_trip():
     plan = make_render_plan(EFFECTS, RenderOptions(per_sample=True))
     data = json.loads(plan.to_json())
-    assert data["random_parameters"] == ["pixel", "lens", "time"]
+    assert data["random_parameters"] == ["pixel", "lens", "time", "light", "bounce"]
+    assert data["sample_features"] == ["position2", "normal2"]
     assert RenderPlan.from_dict(data) == plan
+    # a plan stored before sample_features existed reads back with it empty
+    del data["sample_features"]
+    assert RenderPlan.from_dict(data).sample_features == ()
+
+
+@pytest.mark.parametrize(("max_depth", "bounces"), [(1, False), (2, True), (5, True), (UNBOUNDED_DEPTH, True)])
+def test_bounce_channels_only_where_paths_bounce(max_depth, bounces):
+    """light/bounce random numbers and second-hit features exist only past the first hit (the rule the
+    feature renderer writes them by: tests/test_feature_renderer.py checks the plan against its output)."""
+    plan = make_render_plan(["depth_of_field"], RenderOptions(max_depth=max_depth, per_sample=True))
+    assert plan.random_parameters == ("pixel", "lens") + (("light", "bounce") if bounces else ())
+    assert plan.sample_features == (("position2", "normal2") if bounces else ())
 
 
 def test_unknown_effect_is_named():

@@ -334,7 +334,9 @@ def render_frame(
     sample_channels = {}
     if keep_samples:
         sample_channels = {k: c for k, c in SAMPLE_BUFFERS.items() if k in stat_channels}
-        sample_channels.update({k: RANDOM_PARAMETER_CHANNELS[k] for k in plan.random_parameters})
+        # light/bounce (listed by the plan when paths bounce) come with the second-hit channels below
+        sample_channels.update({k: RANDOM_PARAMETER_CHANNELS[k] for k in plan.random_parameters
+                                if k in RANDOM_PARAMETER_CHANNELS})
         if opts.second_hit:
             sample_channels.update(SECOND_HIT_CHANNELS)
         samples = {k: np.zeros((spp, height, width, c), np.float32) for k, c in sample_channels.items()}

@@ -36,8 +36,18 @@ UNBOUNDED_DEPTH = -1
 DEFAULT_RR_DEPTH = 5
 #: Key of a stage's ``customLayerData["denoisebench"]`` that restricts its path depth.
 STAGE_MAX_DEPTH_KEY = "maxDepth"
+#: Random numbers of a path's first vertex (RPF's "random parameters" of the bounce), per sample
+BOUNCE_RANDOM_PARAMETERS = ("light", "bounce")
+#: Per-sample features of where the first bounce lands (RPF's second-hit features)
+SECOND_HIT_FEATURES = ("position2", "normal2")
 #: Who decided a plan's depth.
 DEPTH_SOURCES = ("default", "user", "stage")
+
+
+def paths_bounce(max_depth: int) -> bool:
+    """Paths go past the camera's first hit (light sampling and a bounce happen): unbounded depth or
+    ``max_depth`` > 1 (render_integrator's ``KernelOptions.bounces``)."""
+    return max_depth == UNBOUNDED_DEPTH or max_depth > 1
 
 
 def check_max_depth(value, what: str = "max_depth") -> int:
@@ -92,7 +102,14 @@ class RenderPlan:
         lobe_split: render diffuse and specular separately (the scene has non-diffuse lobes);
             without it the specular buffer is identically zero and diffuse equals color.
         random_parameters: per-sample random parameter channels: ``pixel`` always, ``lens`` with
-            depth of field, ``time`` with motion blur.
+            depth of field, ``time`` with motion blur, and ``light`` and ``bounce`` (the first vertex's
+            light-sample and bounce-direction random numbers, :data:`BOUNCE_RANDOM_PARAMETERS`) when
+            paths bounce (``max_depth`` unbounded or > 1: :func:`paths_bounce`, the rule the
+            feature renderer writes them by). Like ``lens`` and ``time`` they are written only with
+            per-sample data (``per_sample``).
+        sample_features: feature channels only the per-sample data holds: the second hit's
+            ``position2`` and ``normal2`` (:data:`SECOND_HIT_FEATURES`) when paths bounce, else empty.
+            Plans stored before this field existed read back with it empty.
         features: feature buffers written for every frame.
         per_sample: per-sample data is written.
         aperture_scale, shutter_scale: the user's lens and shutter multipliers, already reset to
@@ -114,6 +131,7 @@ class RenderPlan:
     pixel_filter: str = "box"
     max_depth_source: str = "default"
     notes: tuple[str, ...] = field(default_factory=tuple)
+    sample_features: tuple[str, ...] = ()
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2, sort_keys=True)
@@ -167,7 +185,9 @@ def make_render_plan(effects, options: RenderOptions | None = None, stage_max_de
     if max_depth != UNBOUNDED_DEPTH:
         notes.append(f"transport restricted to max_depth {max_depth} by the {source}")
 
+    bounce = paths_bounce(max_depth)
     random_parameters = ("pixel",) + (("lens",) if depth_of_field else ()) + (("time",) if motion_blur else ())
+    random_parameters += BOUNCE_RANDOM_PARAMETERS if bounce else ()
     features = ("albedo", "normal", "depth", "position", "roughness", "motion")
     return RenderPlan(
         effects=effects,
@@ -183,4 +203,5 @@ def make_render_plan(effects, options: RenderOptions | None = None, stage_max_de
         shutter_scale=options.shutter_scale if motion_blur else 1.0,
         max_depth_source=source,
         notes=tuple(notes),
+        sample_features=SECOND_HIT_FEATURES if bounce else (),
     )
