@@ -45,11 +45,17 @@ Deviations (each with its reason; tests/test_baselines_classic.py shows what the
       samples were up to 20% better on a textured frame and no better on depth of field, at
       about 1.3× the time.
     * **Statistics on a coarser grid**: α, β and W^r_c are computed at every ``stride``-th pixel,
-      stride = max(2, round(b / ``stat_stride_divisor``)) with divisor 4 (14 px at b = 55, 2 at
-      b = 7), and every pixel takes its nearest grid point's. The statistics describe a
-      neighbourhood of σ_p = b/4 pixels, which a grid of σ_p resolves; clustering, which keeps edges,
-      is still done for every pixel in the filter. Measured: no worse than statistics at every
-      pixel (slightly better: fewer, less noisy estimates), at 1/stride² of their cost.
+      stride = max(f, round(b / ``stat_stride_divisor``)) with divisor 4 and the floor
+      f = max(2, min(``min_stat_stride``, b // 2)), ``min_stat_stride`` 3 (14 px at b = 55, 3 at
+      b = 7, 2 at b = 3 or 5), and every pixel takes its nearest grid point's. The statistics
+      describe a neighbourhood of σ_p = b/4 pixels, which a grid of about σ_p resolves; clustering,
+      which keeps edges, is still done for every pixel in the filter. Measured: no worse than
+      statistics at every pixel (slightly better: fewer, less noisy estimates), at 1/stride² of
+      their cost. The floor of 3 (was 2) only coarsens boxes of 7-11 px (the last pass at 128 px,
+      b = 9 at 64 px), where the 2-px grid's statistics took a quarter of the time (128 px, 4 spp:
+      one thread 53 → 47 CPU s/MP; synthetic textured over seeds 0-3 relMSE 0.0566 vs 0.0563). A
+      3-px grid in a 3-px box was too coarse: a bounce-driven feature then moved one pixel by 1% in
+      tests/test_baselines_rpf.py (0.4% with the 2-px grid), hence the half-box cap.
     * **Clustering features** are the first-hit normal and albedo only. World position varies along
       every surface by an amount set by the scene's scale, so the paper's absolute tolerance 0.1
       would cut a plane into slivers in a large scene and miss nothing in a small one; second hits
@@ -61,8 +67,16 @@ Deviations (each with its reason; tests/test_baselines_classic.py shows what the
     * The lens parameter enters the statistics as the disk point (a defocused hit moves linearly
       with it, non-monotonically with u or v alone, and MI over single coordinates would miss it).
     * Draws come from a pool of 256 random offset patterns per pass and stage (each pixel picks one
-      at random), which costs a fraction of drawing every pixel's own; they are deterministic: one
-      generator per (seed, pass, stage, chunk of pixels), so any number of threads gives the same bytes.
+      at random), which costs a fraction of drawing every pixel's own; they are deterministic: the
+      filter's picks are drawn for the whole image per (seed, pass), the statistics' per (seed, pass,
+      chunk of grid rows) with chunks fixed by the image size, so neither the number of threads nor
+      the filter's chunk size changes the bytes. One draw of the neighbourhoods against another moves
+      relMSE by a few per cent (textured 128 px, 4 spp, seeds 0-3: 0.0555-0.0577).
+
+Cost (where the time goes): per pass every pixel gathers M ≤ 128 samples of D columns, so the filter
+is a few passes over an n×M×D table per chunk of pixels (gather, centre, square, cluster test, three
+batched matmuls: cluster sums, energies, output); the statistics' one-hot histograms dominate the last
+pass (b = 7, a 2-px grid). 128 px, 4 spp: ~55 CPU s/MP on one thread, two threads split the chunks.
     * Two safeguards the paper does not have, both for the relMSE of dark pixels beside bright noise:
       sample colours are capped at ``firefly_factor`` (16) × the largest pixel mean of the 8
       neighbouring pixels before the first pass (:func:`cap_spikes`), and with S ≥ 2 the output is
@@ -446,7 +460,8 @@ class RPFSettings:
     boxes: tuple[int, ...] | None = None  # None: scaled_boxes() of the image
     max_samples: int = 128  # cap of the paper's b²S/2 samples per pixel in the filter
     stat_samples: int = 128  # the same cap for the statistics
-    stat_stride_divisor: float = 4.0  # statistics every max(2, round(b / this)) pixels (0: every pixel)
+    stat_stride_divisor: float = 4.0  # statistics every max(min_stat_stride, round(b / this)) pixels (0: every pixel)
+    min_stat_stride: int = 3  # statistics grid at least this coarse (see the docstring)
     bins: int = 6
     sigma8_squared: float = SIGMA8_SQUARED
     firefly_factor: float | None = 16.0  # sample colours capped at this × the 8 neighbour pixels' largest mean
@@ -456,8 +471,8 @@ class RPFSettings:
     def __post_init__(self) -> None:
         if self.max_samples < 1 or self.stat_samples < 2 or self.bins < 2 or not self.sigma8_squared > 0:
             raise ValueError("max_samples must be >= 1, stat_samples >= 2, bins >= 2 and sigma8_squared > 0")
-        if self.stat_stride_divisor < 0:
-            raise ValueError("stat_stride_divisor must be >= 0")
+        if self.stat_stride_divisor < 0 or self.min_stat_stride < 1:
+            raise ValueError("stat_stride_divisor must be >= 0 and min_stat_stride >= 1")
         if self.firefly_factor is not None and not self.firefly_factor >= 1.0:
             raise ValueError("firefly_factor must be >= 1 or None")
         if self.change_limit is not None and not self.change_limit > 0.0:
@@ -469,7 +484,11 @@ class RPFSettings:
             object.__setattr__(self, "boxes", tuple(int(b) for b in self.boxes))
 
     def stride(self, box: int) -> int:
-        return 1 if self.stat_stride_divisor == 0 else max(2, int(round(box / self.stat_stride_divisor)))
+        if self.stat_stride_divisor == 0:
+            return 1
+        # the floor applies where the grid stays within half the box (b >= 7 for the floor 3)
+        floor = max(2, min(self.min_stat_stride, box // 2))
+        return max(floor, int(round(box / self.stat_stride_divisor)))
 
 
 def cap_spikes(color: np.ndarray, factor: float) -> np.ndarray:
