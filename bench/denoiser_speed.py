@@ -7,6 +7,8 @@ cross-bilateral filter against scikit-image's ``denoise_bilateral`` on the same 
 Frames are synthetic (``denoisebench.denoisers.synthetic``, textured family) with features and
 per-sample data. Each denoiser runs through the harness runner (:func:`run_frame`), which times
 ``denoise()`` alone; the figure is the minimum over ``--repeats`` calls after one warm-up.
+The machine's load average (1, 5, 15 min) is printed before and after: on a shared machine the
+wall-clock figures move with it (2x between load 1 and load 6 here).
 RPF is timed on a ``--rpf-size`` frame at each ``--rpf-spp`` (its per-sample work makes the full size
 slow on two cores); seconds per megapixel put both sizes on one scale, and OIDN is timed on each of
 those frames too so its ratio compares like with like. RPF's relMSE against the frame's reference is
@@ -23,6 +25,7 @@ separable default preset, both against ``denoise_bilateral(win_size=2·radius+1)
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import timeit
@@ -78,6 +81,14 @@ def rpf_at_revision(revision: str):
     return module.RandomParameterFilter()
 
 
+def load_average() -> str:
+    """The 1, 5 and 15 minute load averages, or "unknown" where the OS does not say."""
+    try:
+        return " ".join(f"{v:.2f}" for v in os.getloadavg())
+    except OSError:
+        return "unknown"
+
+
 def best_of(fn, repeats: int) -> float:
     """Minimum seconds of ``repeats`` calls after one warm-up call."""
     fn()
@@ -108,6 +119,7 @@ def main(argv=None) -> int:
     per_mp = {name: seconds_in_denoise(name, frame, args.repeats) / megapixels for name in names}
     oidn = per_mp["oidn"]
 
+    print("load average before: " + load_average())
     print(f"denoiser speed: {args.size}x{args.size} px, {args.spp} spp (rpf: {args.rpf_size}x{args.rpf_size} at "
           f"{args.rpf_spp} spp); min of {args.repeats} after a warm-up")
     print(f"{'denoiser':<22}{'s/MP':>10}{'x OIDN (high)':>16}")
@@ -130,6 +142,7 @@ def main(argv=None) -> int:
             print(f"          rpf@{args.rpf_baseline} {old:9.2f} s/MP  {old / oidn_small:8.1f}x OIDN  "
                   f"relMSE {relmse(old_image, small.reference):.4f}  -> today {old / rpf:.1f}x faster")
     if args.rpf_only:
+        print("load average after: " + load_average())
         return 0
 
     from skimage.restoration import denoise_bilateral
@@ -159,6 +172,7 @@ def main(argv=None) -> int:
     print(f"  ours, full 2-D window       {full_seconds:8.3f} s   skimage/ours = {skimage_seconds / full_seconds:6.1f}x")
     print(f"  ours, separable (default)   {separable_seconds:8.3f} s   skimage/ours = {skimage_seconds / separable_seconds:6.1f}x"
           "   (target >= 10x)")
+    print("load average after: " + load_average())
     return 0
 
 

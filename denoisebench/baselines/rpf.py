@@ -76,7 +76,7 @@ Deviations (each with its reason; tests/test_baselines_classic.py shows what the
 Cost (where the time goes): per pass every pixel gathers M ≤ 128 samples of D columns, so the filter
 is a few passes over an n×M×D table per chunk of pixels (gather, centre, square, cluster test, three
 batched matmuls: cluster sums, energies, output); the statistics' one-hot histograms dominate the last
-pass (b = 7, a 2-px grid). 128 px, 4 spp: ~55 CPU s/MP on one thread, two threads split the chunks.
+pass. 128 px, 4 spp: ~50 CPU s/MP on one thread; two threads split the chunks (about 1.5x).
     * Two safeguards the paper does not have, both for the relMSE of dark pixels beside bright noise:
       sample colours are capped at ``firefly_factor`` (16) × the largest pixel mean of the 8
       neighbouring pixels before the first pass (:func:`cap_spikes`), and with S ≥ 2 the output is
