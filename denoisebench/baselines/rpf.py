@@ -46,16 +46,18 @@ Deviations (each with its reason; tests/test_baselines_classic.py shows what the
       about 1.3× the time.
     * **Statistics on a coarser grid**: α, β and W^r_c are computed at every ``stride``-th pixel,
       stride = max(f, round(b / ``stat_stride_divisor``)) with divisor 4 and the floor
-      f = max(2, min(``min_stat_stride``, b // 2)), ``min_stat_stride`` 3 (14 px at b = 55, 3 at
-      b = 7, 2 at b = 3 or 5), and every pixel takes its nearest grid point's. The statistics
+      f = max(2, min(``min_stat_stride``, b // 2)), ``min_stat_stride`` 2 (14 px at b = 55, 2 at
+      b = 7), and every pixel takes its nearest grid point's. The statistics
       describe a neighbourhood of σ_p = b/4 pixels, which a grid of about σ_p resolves; clustering,
       which keeps edges, is still done for every pixel in the filter. Measured: no worse than
       statistics at every pixel (slightly better: fewer, less noisy estimates), at 1/stride² of
-      their cost. The floor of 3 (was 2) only coarsens boxes of 7-11 px (the last pass at 128 px,
-      b = 9 at 64 px), where the 2-px grid's statistics took a quarter of the time (128 px, 4 spp:
-      one thread 53 → 47 CPU s/MP; synthetic textured over seeds 0-3 relMSE 0.0566 vs 0.0563). A
-      3-px grid in a 3-px box was too coarse: a bounce-driven feature then moved one pixel by 1% in
-      tests/test_baselines_rpf.py (0.4% with the 2-px grid), hence the half-box cap.
+      their cost. ``min_stat_stride=3`` (tried as the default, not kept) coarsens boxes of 7-11 px
+      (the last pass at 128 px, b = 9 at 64 px), where the 2-px grid's statistics take a quarter of
+      the time: 128 px, 4 spp, 2 threads 37 → 34 s/MP and the same synthetic relMSE, but on the
+      rendered 64 px frames of the card dim_room 8 spp got 14% worse (3 seeds) and the lens response
+      of tests/test_baselines_rendered.py weakened (coupled/decoupled β 0.892 vs 0.883, 3 seeds).
+      A 3-px grid in a 3-px box is too coarse (a bounce-driven feature moved a pixel by 1% in
+      tests/test_baselines_rpf.py), hence the half-box cap on the floor.
     * **Clustering features** are the first-hit normal and albedo only. World position varies along
       every surface by an amount set by the scene's scale, so the paper's absolute tolerance 0.1
       would cut a plane into slivers in a large scene and miss nothing in a small one; second hits
@@ -76,7 +78,7 @@ Deviations (each with its reason; tests/test_baselines_classic.py shows what the
 Cost (where the time goes): per pass every pixel gathers M ≤ 128 samples of D columns, so the filter
 is a few passes over an n×M×D table per chunk of pixels (gather, centre, square, cluster test, three
 batched matmuls: cluster sums, energies, output); the statistics' one-hot histograms dominate the last
-pass. 128 px, 4 spp: ~50 CPU s/MP on one thread; two threads split the chunks (about 1.5x).
+pass. 128 px, 4 spp: 50-58 CPU s/MP on one thread; two threads split the chunks (about 1.5x).
     * Two safeguards the paper does not have, both for the relMSE of dark pixels beside bright noise:
       sample colours are capped at ``firefly_factor`` (16) × the largest pixel mean of the 8
       neighbouring pixels before the first pass (:func:`cap_spikes`), and with S ≥ 2 the output is
@@ -461,7 +463,7 @@ class RPFSettings:
     max_samples: int = 128  # cap of the paper's b²S/2 samples per pixel in the filter
     stat_samples: int = 128  # the same cap for the statistics
     stat_stride_divisor: float = 4.0  # statistics every max(min_stat_stride, round(b / this)) pixels (0: every pixel)
-    min_stat_stride: int = 3  # statistics grid at least this coarse (see the docstring)
+    min_stat_stride: int = 2  # statistics grid at least this coarse where within half the box (see the docstring)
     bins: int = 6
     sigma8_squared: float = SIGMA8_SQUARED
     firefly_factor: float | None = 16.0  # sample colours capped at this × the 8 neighbour pixels' largest mean
