@@ -253,3 +253,14 @@ def test_rpf_needs_samples_and_checks_options():
 @pytest.mark.parametrize("size, expected", [((512, 512), [55, 35, 17, 7]), ((64, 48), [29, 19, 9, 5]), ((3, 3), [3])])
 def test_scaled_boxes(size, expected):
     assert scaled_boxes(*size) == expected
+
+
+def test_rpf_on_colour_only_samples():
+    """Per-sample data with colour alone (no features, no random parameters) or with a lens only:
+    no feature blocks for the histograms, and the output is still a finite convex combination."""
+    rng = np.random.default_rng(0)
+    samples = {"color": rng.random((4, 16, 16, 3)).astype(np.float32)}
+    for extra in ({}, {"lens": rng.random((4, 16, 16, 2)).astype(np.float32)}):
+        image, _ = rpf_filter({**samples, **extra})
+        assert image.shape == (16, 16, 3) and np.isfinite(image).all()
+        assert image.min() >= 0.0 and image.max() <= samples["color"].max()

@@ -182,6 +182,8 @@ def mutual_information_codes(codes_a: torch.Tensor, codes_b: torch.Tensor, total
     and the cluster sizes ``total`` (n, float32, ≥ 1); see :func:`mutual_information`."""
     n = codes_a.shape[0]
     na, nb = codes_a.shape[2] // bins, codes_b.shape[2] // bins
+    if na == 0 or nb == 0:  # e.g. colour-only data: no feature channels
+        return torch.zeros((n, na, nb), dtype=torch.float32)
     joint = torch.bmm(codes_a.transpose(1, 2), codes_b).view(n, na, bins, nb, bins)
     count_a = joint[:, :, :, 0, :].sum(-1)  # every sample has one bin of each channel
     count_b = joint[:, 0].sum(1)
