@@ -86,3 +86,38 @@ def test_sizes_seeds_and_scenes_change_between_replays(monkeypatch):
     for k, ((scene, kw), out) in enumerate(zip(calls, frozen)):
         _assert_same(out, render_frame(scene, camera, 1, plan, **kw), k)
     assert not np.array_equal(frozen[0].buffers["color"], frozen[1].buffers["color"])  # seeds do matter
+
+
+@pytest.mark.slow
+def test_motion_blur_reference_rounds_record_each_pass_once(monkeypatch, tmp_path, capfd):
+    """An adaptive reference's rounds (fresh seeds) and later frames replay the recordings.
+
+    Regression: the camera's arrays were NumPy buffers mapped by Dr.Jit, whose alignment (part of a
+    frozen function's input layout) varied from one array to the next, so a motion-blurred scene
+    (per-ray pose tables, rebuilt every pass) recorded a new variant of nearly every pass, and Dr.Jit
+    printed "The frozen function has been recorded N times" from the third on. Each configuration
+    (noisy frame 0 / later frames, reference frame 0 / later frames) must be recorded exactly once.
+    """
+    from denoisebench.generator.reference_render import MIN_ROUNDS, render_adaptive, round_seed
+
+    translated = translate_usd(get_family("motion_blur").author(tmp_path, seed=0, frames=3, width=SIZE, height=SIZE))
+    scene = build_mitsuba_scene(translated)
+    plan = make_render_plan(translated.effects, RenderOptions(), stage_max_depth=translated.max_depth)
+    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", True)
+    kw = dict(width=SIZE, height=SIZE)
+    for frame in (0, 1, 2):
+        render_frame(scene, translated.camera, frame, plan, spp=2, seed=3, **kw)
+
+        def render_round(k, round_spp, frame=frame):
+            out = render_frame(scene, translated.camera, frame, plan, spp=round_spp, seed=round_seed(3, frame, k),
+                               reference=True, **kw)
+            return out.buffers, out.seconds, 0.0
+
+        # cap 128: rounds of 2 spp; a target every floor meets stops after MIN_ROUNDS rounds
+        assert render_adaptive(render_round, 128, 1e9).record["rounds"] == MIN_ROUNDS
+    counts = {}
+    for config, compiled in feature_renderer._COMPILED.items():
+        assert compiled.frozen is not None, config  # no fallback to plain tracing
+        counts[(config.opts.features, config.switches.has_previous)] = compiled.frozen.n_recordings
+    assert counts == {(True, False): 1, (True, True): 1, (False, False): 1, (False, True): 1}
+    assert "frozen function has been recorded" not in capfd.readouterr().err

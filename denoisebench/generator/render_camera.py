@@ -20,7 +20,9 @@ and ``thinlens`` sensors so that both render the same image:
   Dr.Jit. Without time sampling every ray uses the pose at ``t = frame``.
 
 All numbers that vary between frames (pose, lens, time) enter the kernels as *opaque* Dr.Jit values,
-so a new frame reuses the compiled kernel instead of baking new literals into a new one.
+so a new frame reuses the compiled kernel instead of baking new literals into a new one, and they are
+copied into Dr.Jit's own memory, never mapped NumPy buffers, so a frozen pass replays its recording
+for every frame and reference round (:func:`_owned_floats`).
 """
 
 from __future__ import annotations
@@ -177,14 +179,29 @@ def camera_values(mi, setup: CameraSetup) -> dict:
         # Columns 0..3 (three axes and the translation), rows 0..2, for this frame and the previous one.
         for pose in (setup.static_pose, setup.prev_pose if setup.prev_pose is not None else setup.static_pose):
             packed += [float(pose[r, c]) for c in range(4) for r in range(3)]
-        return {"scalars": mi.Float(np.asarray(packed, dtype=np.float32))}
+        return {"scalars": _owned_floats(mi, packed)}
     return {
-        "scalars": mi.Float(np.asarray(packed, dtype=np.float32)),
+        "scalars": _owned_floats(mi, packed),
         "qa": _table(mi, mi.Vector4f, setup.quat_a),
         "qb": _table(mi, mi.Vector4f, setup.quat_b),
         "tr": _table(mi, mi.Vector3f, setup.trans),
         "sc": _table(mi, mi.Vector3f, setup.scale),
     }
+
+
+def _owned_floats(mi, values):
+    """``values`` as a Dr.Jit ``Float`` in memory that Dr.Jit allocated (a copy, never a view).
+
+    Notes:
+        ``mi.Float(numpy_array)`` does not copy: it maps the NumPy buffer (writing to the array
+        afterwards changes the Dr.Jit one). A frozen pass keys its recordings on the layout of its
+        inputs, and that includes whether each mapped buffer is aligned; NumPy's small buffers come
+        at varying alignments, so a frame whose camera arrays landed differently from the last one
+        was recorded again instead of replayed: a motion-blurred scene (14 table columns, fresh every
+        frame and every reference round) re-recorded on nearly every pass. Built from a list, the
+        values are copied into an aligned Dr.Jit allocation, the same bits every time.
+    """
+    return mi.Float(np.asarray(values, dtype=np.float32).tolist())
 
 
 def _table(mi, kind, rows: np.ndarray):
@@ -199,7 +216,7 @@ def _table(mi, kind, rows: np.ndarray):
     import drjit as dr
 
     padded = np.concatenate([rows, np.repeat(rows[-1:], max(0, MIN_TABLE_ROWS - len(rows)), axis=0)])
-    columns = [mi.Float(np.ascontiguousarray(padded[:, c], dtype=np.float32)) for c in range(padded.shape[1])]
+    columns = [_owned_floats(mi, padded[:, c]) for c in range(padded.shape[1])]
     table = kind(*columns)
     dr.make_opaque(table)
     return table
