@@ -60,11 +60,14 @@ def test_ray_executor_scores_like_local_and_contains_an_exiting_plugin(tmp_path)
         ["identity", "cross_bilateral_fast", f"{plugin}:Copy", f"{plugin}:Exits"], [2], metrics=["relmse", "ssim"], split="all"
     )
     results = {}
-    for executor in ("local", "ray"):
-        with ResultsStore(tmp_path / f"{executor}.sqlite") as store:
-            plan = run_benchmark(data, config, store, executor=executor, progress=False)
-            results[executor] = _scores(store, plan.run_id)
-    assert ray.is_initialized()  # the units really went through Ray tasks
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    try:
+        for executor in ("local", "ray"):
+            with ResultsStore(tmp_path / f"{executor}.sqlite") as store:
+                plan = run_benchmark(data, config, store, executor=executor, progress=False)
+                results[executor] = _scores(store, plan.run_id)
+    finally:
+        ray.shutdown()  # other tests start Ray themselves
     local_units, local_values = results["local"]
     ray_units, ray_values = results["ray"]
     assert ray_units == local_units
