@@ -302,11 +302,10 @@ def measure_unit(label: str, denoiser: object | None, sequence, spatial: list[st
     ref_vars = [_reference_variance(f) for f in frames]
     ref_vars = None if any(v is None for v in ref_vars) else ref_vars
     unit.sequence_metrics, unit.sequence_floors, unit.sequence_ref_se = _sequence_metrics(outputs, refs, motion, temporal, ref_vars)
+    unit.image_frame, unit.image = frames[-1].index, outputs[-1]
     if len(outputs) > 1:
         for record, values in zip(records[1:], _flicker(outputs, refs, motion)):
             record.metrics.update(values)
-    unit.image_frame, unit.image = frames[-1].index, outputs[-1]
-    if len(outputs) > 1:
         from .strips import cut
 
         first, unit.strip_window, unit.strip = cut(outputs, [f.color for f in frames], refs, motion)
@@ -369,8 +368,8 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     if config.verify:
         from denoisebench.dataset.verify import run_files, verify_files
 
-        wants_samples = True  # cheap to include; a samples file that is listed must be genuine too
-        verify_files(dataset, run_files(dataset, scenes, spp, samples=wants_samples), progress=progress)
+        # samples files included (cheap): a samples file that is listed must be genuine too
+        verify_files(dataset, run_files(dataset, scenes, spp, samples=True), progress=progress)
     spatial, temporal = split_metrics(config.metrics)
     specs = resolve_denoiser_specs(config.denoisers)
     config.denoisers = specs
