@@ -19,19 +19,10 @@ from denoisebench.generator.feature_renderer import load_scene, render_frame
 from denoisebench.generator.mitsuba_scene import build_mitsuba_scene, sensor_dict
 from denoisebench.generator.render_plan import RenderOptions, make_render_plan
 from denoisebench.generator.translate import translate_usd
-from denoisebench.mitsuba_runtime import load_mitsuba
 from denoisebench.scenes import get_family
 
 SIZE = 24
 BLOCK = 4  # block means over 4×4 pixels: 36 blocks × 3 channels per image
-
-
-@pytest.fixture(scope="module")
-def mi():
-    module = load_mitsuba()
-    if not module.variant().startswith("llvm"):
-        pytest.skip("needs the LLVM variant (libLLVM >= 16)")
-    return module
 
 
 @pytest.fixture(scope="module")

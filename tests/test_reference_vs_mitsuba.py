@@ -27,7 +27,6 @@ from denoisebench.generator.mitsuba_scene import build_mitsuba_scene, sensor_dic
 from denoisebench.generator.reference_render import render_adaptive, round_seed
 from denoisebench.generator.render_plan import RenderOptions, make_render_plan
 from denoisebench.generator.translate import translate_usd
-from denoisebench.mitsuba_runtime import load_mitsuba
 from denoisebench.scenes import get_family, list_families
 from plain_stages import author_every_light, author_plain_box
 
@@ -37,14 +36,6 @@ SIZE = 24
 BLOCK = 4
 OURS_SPP = 256  # 64 rounds of 4 (the adaptive reference's schedule at this cap)
 REPLICAS, REPLICA_SPP = 16, 16
-
-
-@pytest.fixture(scope="module")
-def mi():
-    module = load_mitsuba()
-    if not module.variant().startswith("llvm"):
-        pytest.skip("needs the LLVM variant (libLLVM >= 16)")
-    return module
 
 
 def our_reference(scene, translated, plan, frame, spp=OURS_SPP, seed=11):
