@@ -132,33 +132,40 @@ def nb_psnr(pred, ref) -> float:
     return _psnr(nb_encode(c.pred), nb_encode(c.ref))
 
 
-def nb_ssim(pred, ref) -> float:
-    """pytorch-msssim SSIM of the encoded frames' luminance (their ``ssim``). Higher is better."""
+def _luminance_pair(pred, ref, what: str):
+    """Gray N×C×H×W tensors of the encoded frames' luminance, or None when ``pred`` is not finite.
+
+    A ValueError for frames under 11×11 px (the SSIM window).
+    """
     c = check_pair(pred, ref)
     if min(c.ref.shape[:2]) < 11:
-        raise ValueError(f"SSIM needs images of at least 11×11 px, got {c.ref.shape[0]}×{c.ref.shape[1]}")
+        raise ValueError(f"{what} needs images of at least 11×11 px, got {c.ref.shape[0]}×{c.ref.shape[1]}")
     if c.nonfinite_count:
+        return None
+    return _gray_tensor(nb_luminance(nb_encode(c.pred))), _gray_tensor(nb_luminance(nb_encode(c.ref)))
+
+
+def nb_ssim(pred, ref) -> float:
+    """pytorch-msssim SSIM of the encoded frames' luminance (their ``ssim``). Higher is better."""
+    pair = _luminance_pair(pred, ref, "SSIM")
+    if pair is None:
         return WORST["nb_ssim"]
     import torch
     from pytorch_msssim import ssim
 
     with one_torch_thread(), torch.no_grad():
-        return float(ssim(_gray_tensor(nb_luminance(nb_encode(c.pred))),
-                          _gray_tensor(nb_luminance(nb_encode(c.ref))), data_range=1.0))
+        return float(ssim(*pair, data_range=1.0))
 
 
 def nb_msssim(pred, ref) -> float:
     """pytorch-msssim MS-SSIM of the encoded frames' luminance (their ``msssim``). Higher is better."""
-    c = check_pair(pred, ref)
-    if min(c.ref.shape[:2]) < 11:
-        raise ValueError(f"MS-SSIM needs images of at least 11×11 px, got {c.ref.shape[0]}×{c.ref.shape[1]}")
-    if c.nonfinite_count:
+    pair = _luminance_pair(pred, ref, "MS-SSIM")
+    if pair is None:
         return WORST["nb_msssim"]
     import torch
 
     with one_torch_thread(), torch.no_grad():
-        return float(ms_ssim_tensor(_gray_tensor(nb_luminance(nb_encode(c.pred))),
-                                    _gray_tensor(nb_luminance(nb_encode(c.ref)))))
+        return float(ms_ssim_tensor(*pair))
 
 
 def nb_flip(pred, ref) -> float:
