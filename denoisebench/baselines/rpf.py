@@ -330,20 +330,16 @@ def _draw(rng: np.random.Generator | None, pool, ys: np.ndarray, xs: np.ndarray,
     return np.concatenate([own, drawn], axis=1)
 
 
-def _cluster_mask(gathered, spp: int, cluster: slice, xp=np):
+def _cluster_mask(gathered: np.ndarray, spp: int, cluster: slice) -> np.ndarray:
     """n×M bool: the paper's clustering (|f − m_P| ≤ max(3σ_P, 0.1) for every clustering feature)."""
     n, m = gathered.shape[:2]
     if cluster.stop <= cluster.start:
-        return xp.ones((n, m), dtype=bool)
+        return np.ones((n, m), dtype=bool)
     f = gathered[:, :, cluster]
     own = f[:, :spp]
-    mean = own.mean(1, keepdims=True) if xp is np else own.mean(1, keepdim=True)
-    if xp is np:
-        limit = np.maximum(3.0 * own.std(1, keepdims=True), CLUSTER_TOLERANCE)
-        inside = (np.abs(f - mean) <= limit).all(-1)
-    else:
-        limit = (3.0 * own.std(1, keepdim=True, unbiased=False)).clamp_(min=CLUSTER_TOLERANCE)
-        inside = ((f - mean).abs_() <= limit).all(-1)
+    mean = own.mean(1, keepdims=True)
+    limit = np.maximum(3.0 * own.std(1, keepdims=True), CLUSTER_TOLERANCE)
+    inside = (np.abs(f - mean) <= limit).all(-1)
     inside[:, :spp] = True
     return inside
 
