@@ -56,7 +56,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .features import albedo_factor, normalize_radiance, safe, to_log
+from .features import _get, albedo_factor, normalize_radiance, safe, to_log
 
 #: Floor of the colour distance's noise normaliser (log-colour variance units).
 COLOR_VAR_EPS = 1e-3
@@ -115,11 +115,9 @@ def primary_features(buffers: dict[str, torch.Tensor]) -> dict[str, torch.Tensor
     median) and ``stack`` (the 10 primary channels for the MLP's statistics).
     """
     color = buffers["color"]
-    like = color
 
     def get(name: str, channels: int) -> torch.Tensor:
-        value = buffers.get(name)
-        return like.new_zeros(like.shape[0], channels, *like.shape[2:]) if value is None else safe(value)
+        return _get(buffers, name, channels, color)
 
     log_color = to_log(color)
     # Var[log(1 + X)] ≈ Var[X] / (1 + X)², channel mean
