@@ -147,9 +147,7 @@ def lr_factor(schedule: str, done: int, steps: int) -> float:
 
 def resolve_loss(spec, config, loss: str | None) -> str:
     """The loss a run uses: the one asked for, else the configuration's recipe, else ``log``."""
-    if loss is None:
-        recipe = spec.recipes.get(config, {}) if isinstance(config, str) else {}
-        loss = recipe.get("loss", "log")
+    loss = recipe_value(spec, config, "loss", loss, "log")
     allowed = set(SPATIAL) | ({"lobes"} if spec.name in ("dpcn", "kpcn") else set())
     if loss not in allowed:
         raise UserInputError(f"unknown loss {loss!r} for {spec.name}; losses: {', '.join(sorted(allowed))}")
