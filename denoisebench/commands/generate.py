@@ -144,6 +144,12 @@ def request_from_args(args):
     )
 
 
+def _first_names(names: list, shown: int = 12) -> str:
+    """The first ``shown`` names, comma-separated, and how many more."""
+    more = f" and {len(names) - shown} more" if len(names) > shown else ""
+    return ", ".join(names[:shown]) + more
+
+
 def print_summary(summary) -> None:
     state = "complete" if summary.complete else "INCOMPLETE (rerun the command to finish it)"
     print(
@@ -156,14 +162,12 @@ def print_summary(summary) -> None:
         print(f"warning: {summary.too_noisy} frame(s) have a reference not 4x less noisy than their inputs "
               f"(reference_too_noisy in dataset.json); raise --ref-spp", file=sys.stderr)
     if summary.at_cap:
-        shown = ", ".join(summary.at_cap[:12]) + (f" and {len(summary.at_cap) - 12} more" if len(summary.at_cap) > 12 else "")
         print(f"warning: {len(summary.at_cap)} reference(s) stopped at the --ref-spp cap before reaching --ref-error: "
-              f"{shown} (reference_adaptive in dataset.json)", file=sys.stderr)
-    if getattr(summary, "rising", None):
-        shown = ", ".join(summary.rising[:12]) + (f" and {len(summary.rising) - 12} more" if len(summary.rising) > 12 else "")
+              f"{_first_names(summary.at_cap)} (reference_adaptive in dataset.json)", file=sys.stderr)
+    if summary.rising:
         print(f"warning: {len(summary.rising)} reference(s) have a noise-floor estimate still rising with spp "
-              f"(fireflies not yet resolved; their floor is a lower bound): {shown} (floor_growth in dataset.json)",
-              file=sys.stderr)
+              f"(fireflies not yet resolved; their floor is a lower bound): {_first_names(summary.rising)} "
+              f"(floor_growth in dataset.json)", file=sys.stderr)
     for failure in summary.failures:
         print(f"failed: scene {failure.scene} frame {failure.frame}: {failure.message}", file=sys.stderr)
 

@@ -282,25 +282,15 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
     families = {name: spec.family for name, spec in by_name.items()}
     writer.finalize(assign_splits(list(by_name), request.seed, families=families), allow_incomplete=bool(summary.failures))
     summary.complete = bool(writer.manifest["complete"])
-    summary.too_noisy = sum(
-        1
-        for scene in writer.manifest["scenes"].values()
-        for record in scene["renders"].get(layout.REFERENCE, {}).values()
-        if record.get("reference_too_noisy")
-    )
-    summary.at_cap = [
-        f"{name}/{frame}"
-        for name, scene in writer.manifest["scenes"].items()
-        for frame, record in sorted(scene["renders"].get(layout.REFERENCE, {}).items())
-        if (record.get("reference_adaptive") or {}).get("stopped_at_cap")
-    ]
     from denoisebench.generator.reference_render import GROWTH_WARNING
 
-    summary.rising = [
-        f"{name}/{frame}"
-        for name, scene in writer.manifest["scenes"].items()
-        for frame, record in sorted(scene["renders"].get(layout.REFERENCE, {}).items())
-        if ((record.get("reference_adaptive") or {}).get("floor_growth") or 0.0) > GROWTH_WARNING
-    ]
+    for name, scene in writer.manifest["scenes"].items():
+        for frame, record in sorted(scene["renders"].get(layout.REFERENCE, {}).items()):
+            adaptive = record.get("reference_adaptive") or {}
+            summary.too_noisy += bool(record.get("reference_too_noisy"))
+            if adaptive.get("stopped_at_cap"):
+                summary.at_cap.append(f"{name}/{frame}")
+            if (adaptive.get("floor_growth") or 0.0) > GROWTH_WARNING:
+                summary.rising.append(f"{name}/{frame}")
     summary.wall_seconds = time.perf_counter() - started
     return summary
