@@ -30,7 +30,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from denoisebench.generator.usd_stage import check_finite
+from denoisebench.generator.usd_textures import connected_shader as _connected_shader
 from denoisebench.generator.usd_textures import read_texture
+from denoisebench.generator.usd_textures import shader_id as _shader_id
 
 DEFAULT_GREY = (0.18, 0.18, 0.18)
 _SKIPPED_INPUTS = ("normal", "displacement", "occlusion")
@@ -60,23 +62,6 @@ def default_material(display_color=None) -> MaterialInfo:
 
 def _rgb(values) -> dict:
     return {"type": "rgb", "value": [float(v) for v in values]}
-
-
-def _connected_shader(shader_input):
-    """(shader, output name) feeding this input, or (None, None)."""
-    from pxr import UsdShade
-
-    if not shader_input.HasConnectedSource():
-        return None, None
-    sources = shader_input.GetConnectedSources()[0]
-    if not sources:
-        return None, None
-    info = sources[0]
-    return UsdShade.Shader(info.source.GetPrim()), str(info.sourceName)
-
-
-def _shader_id(shader) -> str:
-    return str(shader.GetIdAttr().Get() or "") if shader else ""
 
 
 def translate_material(material, warnings: list[str]) -> MaterialInfo:

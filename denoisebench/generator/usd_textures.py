@@ -58,18 +58,26 @@ def _input_value(shader, name, default=None):
     return default if value is None else value
 
 
-def _upstream(shader, name):
-    """The shader connected to ``inputs:name`` of ``shader`` (or None)."""
+def connected_shader(shader_input):
+    """(shader, output name) feeding this input, or (None, None)."""
     from pxr import UsdShade
 
-    shader_input = shader.GetInput(name)
-    if not shader_input or not shader_input.HasConnectedSource():
-        return None
+    if not shader_input.HasConnectedSource():
+        return None, None
     sources = shader_input.GetConnectedSources()[0]
-    return UsdShade.Shader(sources[0].source.GetPrim()) if sources else None
+    if not sources:
+        return None, None
+    info = sources[0]
+    return UsdShade.Shader(info.source.GetPrim()), str(info.sourceName)
 
 
-def _shader_id(shader) -> str:
+def _upstream(shader, name):
+    """The shader connected to ``inputs:name`` of ``shader`` (or None)."""
+    shader_input = shader.GetInput(name)
+    return connected_shader(shader_input)[0] if shader_input else None
+
+
+def shader_id(shader) -> str:
     return str(shader.GetIdAttr().Get() or "") if shader else ""
 
 
@@ -91,7 +99,7 @@ def _coordinates(texture_shader, warnings: list[str], owner: str):
     """(primvar name or None, to_uv 3×3 or None) of the ``st`` input's upstream chain."""
     node = _upstream(texture_shader, "st")
     matrix = None
-    if node is not None and _shader_id(node) == "UsdTransform2d":
+    if node is not None and shader_id(node) == "UsdTransform2d":
         scale = tuple(_input_value(node, "scale", (1.0, 1.0)))
         rotation = float(_input_value(node, "rotation", 0.0))
         translation = tuple(_input_value(node, "translation", (0.0, 0.0)))
@@ -99,14 +107,14 @@ def _coordinates(texture_shader, warnings: list[str], owner: str):
         node = _upstream(node, "in")
     if node is None:
         return None, matrix
-    if not _shader_id(node).startswith("UsdPrimvarReader"):
-        warnings.append(f"{texture_shader.GetPath()}: st driven by '{_shader_id(node)}'; the mesh's st is used on {owner}")
+    if not shader_id(node).startswith("UsdPrimvarReader"):
+        warnings.append(f"{texture_shader.GetPath()}: st driven by '{shader_id(node)}'; the mesh's st is used on {owner}")
         return None, matrix
     name = _input_value(node, "varname")
     return (str(name) if name else None), matrix
 
 
-def _asset_bytes(asset, resolved: str) -> bytes:
+def _asset_bytes(resolved: str) -> bytes:
     """The bytes of a resolved asset, through ArResolver (works inside .usdz packages)."""
     from pxr import Ar
 
@@ -138,6 +146,12 @@ def _decode(data: bytes, suffix: str) -> np.ndarray:
     if not np.all(np.isfinite(array)):
         array = np.nan_to_num(array, nan=0.0, posinf=0.0, neginf=0.0)
     return array
+
+
+def _read_rgba(resolved: str, fallback_suffix: str = "") -> tuple[np.ndarray, str]:
+    """(RGBA pixels, file suffix) of a resolved image asset; raises whatever reading or decoding raises."""
+    suffix = Path(resolved.rstrip("]").split("[")[-1]).suffix or fallback_suffix
+    return _expand(_decode(_asset_bytes(resolved), suffix)), suffix
 
 
 def _expand(array: np.ndarray) -> np.ndarray:
@@ -173,9 +187,7 @@ def read_texture(texture_shader, output: str, want_color: bool, warnings: list[s
         warnings.append(f"{path}: texture file '{asset.path}' not found; fallback value used on {owner}")
         return None
     try:
-        raw_bytes = _asset_bytes(asset, resolved)
-        suffix = Path(resolved.rstrip("]").split("[")[-1]).suffix or Path(asset.path).suffix
-        pixels = _expand(_decode(raw_bytes, suffix))
+        pixels, _ = _read_rgba(resolved, Path(asset.path).suffix)
     except Exception as error:  # any decoder failure: corrupt, unknown format, CMYK, truncated
         detail = " ".join(str(error).split())[:120]
         warnings.append(f"{path}: texture '{asset.path}' cannot be read ({detail}); fallback value used on {owner}")
@@ -216,9 +228,8 @@ def read_environment(light_prim, asset, warnings: list[str]) -> np.ndarray | Non
         warnings.append(f"{path}: DomeLight texture '{name}' not found; constant radiance used")
         return None
     try:
-        data = _asset_bytes(asset, resolved)
-        suffix = Path(resolved.rstrip("]").split("[")[-1]).suffix
-        pixels = _expand(_decode(data, suffix))[..., :3]
+        pixels, suffix = _read_rgba(resolved)
+        pixels = pixels[..., :3]
     except Exception as error:
         detail = " ".join(str(error).split())[:120]
         warnings.append(f"{path}: DomeLight texture '{name}' cannot be read ({detail}); constant radiance used")
