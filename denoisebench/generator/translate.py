@@ -151,8 +151,9 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
             moving = len(frames) > 1 and (geometry.is_transform_animated(prim) or geometry.are_points_animated(prim))
             parts = _gprim_parts(prim, to_mitsuba, frames[0], warnings, materials, analytic=not moving)
             if moving and parts:
-                _attach_frames(prim, parts, [_gprim_parts(prim, to_mitsuba, t, [], materials, analytic=False)
-                                             for t in frames], warnings)
+                # parts is already the first frame's (analytic=False when moving)
+                _attach_frames(prim, parts, [parts] + [_gprim_parts(prim, to_mitsuba, t, [], materials, analytic=False)
+                                                       for t in frames[1:]], warnings)
             for record, material in parts:
                 bind(record, material)
             continue
