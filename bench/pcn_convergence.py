@@ -39,11 +39,17 @@ MODELS = ("dpcn", "kpcn")
 
 
 def steps_to_reach(history: list[list[float]], target: float) -> int | None:
-    """First step whose validation relMSE is at or below ``target`` (None: never)."""
+    """First step of a ``[[step, value], ...]`` history whose value is at or below ``target`` (None: never)."""
     for step, value in history:
         if value is not None and value <= target:
             return int(step)
     return None
+
+
+def _speedup(runs: dict, key: str, target: float | None) -> tuple[dict, float | None]:
+    """Steps each model needs for its ``key`` history to reach ``target``, and DPCN's over KPCN's."""
+    reach = {m: (steps_to_reach(runs[m][key], target) if target is not None else None) for m in MODELS}
+    return reach, (reach["dpcn"] / reach["kpcn"] if reach["dpcn"] and reach["kpcn"] else None)
 
 
 def compare(data: str, out: str, config: str = "small", steps: int = 2000, val_every: int = 100, loss: str = "lobes",
@@ -71,11 +77,9 @@ def compare(data: str, out: str, config: str = "small", steps: int = 2000, val_e
         }
     finals = [v for _, v in runs["dpcn"]["validation_history"] if v is not None]
     target = min(finals) if finals else None
-    reach = {m: (steps_to_reach(runs[m]["validation_history"], target) if target is not None else None) for m in MODELS}
-    speedup = reach["dpcn"] / reach["kpcn"] if reach["dpcn"] and reach["kpcn"] else None
+    reach, speedup = _speedup(runs, "validation_history", target)
     loss_target = runs["dpcn"]["loss_history"][-1][1] if runs["dpcn"]["loss_history"] else None
-    loss_reach = {m: (steps_to_reach(runs[m]["loss_history"], loss_target) if loss_target is not None else None) for m in MODELS}
-    loss_speedup = loss_reach["dpcn"] / loss_reach["kpcn"] if loss_reach["dpcn"] and loss_reach["kpcn"] else None
+    loss_reach, loss_speedup = _speedup(runs, "loss_history", loss_target)
     result = {"data": str(data), "config": config, "steps": steps, "loss": loss, "lr": lr, "runs": runs,
               "target": target, "steps_to_target": reach, "speedup": speedup,
               "loss_target": loss_target, "steps_to_loss_target": loss_reach, "loss_speedup": loss_speedup}
