@@ -42,10 +42,7 @@ BOOTSTRAP_SEED = 0
 #: Two-sided 95 % normal quantile.
 Z95 = 1.959963984540054
 
-__all__ = ["aggregate", "scene_terms", "bootstrap_mean", "reference_resolution", "rule_of", "RULE_LABEL"]
-
-#: How a report names each rule next to a column.
-RULE_LABEL = {"mean": "mean", "geomean": "geometric mean", "relative_to_input": "× noisy input (geometric mean)"}
+__all__ = ["aggregate", "scene_terms", "bootstrap_mean", "reference_resolution", "rule_of"]
 
 
 def rule_of(metric_name: str) -> str:

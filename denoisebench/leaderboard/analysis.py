@@ -179,10 +179,8 @@ def metric_cell(data: RunData, label: str, spp: int, metric: str, scenes: list[s
     value, low, high, count = agg.aggregate(rule, mine, noisy, ses)
     floor = corrected = None
     if floors and len(floors) == len(mine) and value is not None:
-        noisy_floors = None
-        if rule == "relative_to_input":  # the floor relative to the input's own score
-            noisy_floors = noisy
-        floor = agg.aggregate(rule, floors, noisy_floors)[0]
+        # relative_to_input: the floor relative to the input's own score (noisy is None otherwise)
+        floor = agg.aggregate(rule, floors, noisy)[0]
         corrected_values = {s: mine[s] - floors[s] for s in mine}
         if rule == "mean" or all(v > 0 for v in corrected_values.values()):
             corrected = agg.aggregate(rule, corrected_values, noisy)[0]
