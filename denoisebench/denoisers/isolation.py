@@ -95,10 +95,6 @@ class Limits:
         if not self.memory_limit_mb > 0:
             raise UserInputError(f"--memory-limit must be > 0 MiB (got {self.memory_limit_mb})")
 
-    @property
-    def is_default(self) -> bool:
-        return self.time_limit == DEFAULT_TIME_LIMIT and self.memory_limit_mb == DEFAULT_MEMORY_LIMIT_MB
-
 
 _LIVE: set["IsolatedDenoiser"] = set()
 
@@ -143,7 +139,6 @@ class IsolatedDenoiser:
         self.limits = limits or Limits()
         self.last_seconds: float | None = None
         self.overhead_seconds = 0.0
-        self.calls = 0
         self._proc: subprocess.Popen | None = None
         self._conn = None
         self._disabled: str | None = None  # reason, after a time-limit kill
@@ -315,7 +310,6 @@ class IsolatedDenoiser:
         else:
             message = ("denoise", frame)
         header, payload = self._call(message, "denoise()", max_bytes)
-        self.calls += 1
         self.last_seconds = float(header["seconds"]) if isinstance(header.get("seconds"), (int, float)) else None
         if not header.get("ok"):
             self.overhead_seconds += time.perf_counter() - started - (self.last_seconds or 0.0)
@@ -362,11 +356,10 @@ def _load_error(type_name: str, message: str, spec: str) -> Exception:
     kinds = {
         "UnknownDenoiserError": registry.UnknownDenoiserError,
         "UnknownOptionError": registry.UnknownOptionError,
+        "DenoiserLoadError": registry.DenoiserLoadError,
     }
     if type_name in kinds:
         return kinds[type_name](message)
-    if type_name == "DenoiserLoadError":
-        return registry.DenoiserLoadError(message)
     return registry.DenoiserLoadError(f"cannot load {spec!r}: {type_name}: {message}")
 
 
