@@ -38,8 +38,9 @@ def translate_options(args, frames: int = 8) -> dict:
     """Keywords of ``translate_usd`` from --camera/--auto-camera/--default-light (strict: refuse black stages)."""
     if args.camera and args.auto_camera:
         raise UserInputError("give --camera or --auto-camera, not both")
-    return {"camera_path": args.camera, "auto_camera": bool(args.auto_camera),
-            "default_light": bool(args.default_light), "frames": frames, "strict": True}
+    from denoisebench.generator.dataset_scenes import stage_options
+
+    return {**stage_options(args.camera, args.auto_camera, args.default_light, frames), "strict": True}
 
 
 def add_arguments(parser) -> None:
