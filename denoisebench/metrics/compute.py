@@ -171,12 +171,9 @@ def compute_metrics(
 
 
 def _floor(m: Metric, pred, ref, ref_var, sequence: bool, context: dict) -> tuple[float, float]:
-    if m.temporal:
-        kwargs = {k: context[k] for k in m.accepts if context.get(k) is not None}
+    if m.temporal or not sequence:  # one call: a whole sequence (temporal) or one frame
+        kwargs = {k: context[k] for k in m.accepts if context.get(k) is not None} if m.temporal else {}
         result = m.floor_fn(pred, ref, ref_var, **kwargs)
-        return float(result[0]), float(result[1])
-    if not sequence:
-        result = m.floor_fn(pred, ref, ref_var)
         return float(result[0]), float(result[1])
     ref_var = np.asarray(ref_var, dtype=np.float64)
     if ref_var.shape[0] != len(ref):
