@@ -100,7 +100,7 @@ def run(args) -> int:
         raise UserInputError(f"--steps must be >= 0 (got {args.steps})")
     if args.batch_size < 1 or (args.crop is not None and args.crop < 4):
         raise UserInputError("--batch-size must be >= 1 and --crop >= 4")
-    from denoisebench.models.training import max_threads
+    from denoisebench.models.training import TrainOptions, max_threads, train
 
     if not 1 <= args.threads <= max_threads():
         raise UserInputError(f"--threads must be between 1 and the core count {max_threads()} (got {args.threads})")
@@ -111,7 +111,6 @@ def run(args) -> int:
         raise UserInputError(f"--peers must name at least one other denoiser (got {args.peers!r})")
     if not (Path(args.data) / "dataset.json").is_file():
         raise UserInputError(f"{args.data}: not a dataset folder (no dataset.json)")
-    from denoisebench.models.training import TrainOptions, train
 
     options = TrainOptions(
         model=args.model,
