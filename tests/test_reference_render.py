@@ -154,4 +154,4 @@ def test_a_floor_estimate_still_rising_does_not_stop_the_loop():
     rising = render_adaptive(make_round(True), cap=1024, ref_error=a / 8)
     assert rising.record["rounds"] == MAX_ROUNDS and rising.record["floor_growth"] > GROWTH_WARNING
     assert rising.record["floor"] <= a / 8  # met long before the cap, but never trusted
-    assert floor_growth([1.0], 16) is None and floor_growth([0.5, 0.25], 16) == pytest.approx(1.0)
+    assert floor_growth([1.0]) is None and floor_growth([0.5, 0.25]) == pytest.approx(1.0)

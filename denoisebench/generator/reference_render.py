@@ -119,19 +119,21 @@ class RoundMerger:
 
     def pooled_var(self, name: str = "color") -> np.ndarray:
         """Variance of the overall mean from all samples: (Σ M2_k + n Σ (m_k − m̄)²) / (N (N − 1))."""
-        n, k, total = self.round_spp, self.rounds, self.spp
+        n, total = self.round_spp, self.spp
         if total < 2:
             return np.zeros_like(self._sum[name])
-        between = np.maximum(self._sq[name] - np.square(self._sum[name]) / k, 0.0)  # Σ (m_k − m̄)²
-        return (self._m2[name] + n * between) / (total * (total - 1))
+        return (self._m2[name] + n * self._between(name)) / (total * (total - 1))
 
     def batch_var(self, name: str = "color") -> np.ndarray:
         """Variance of the overall mean from the spread of the round means (needs 2 rounds)."""
         k = self.rounds
         if k < 2:
             return np.full_like(self._sum[name], np.inf)
-        between = np.maximum(self._sq[name] - np.square(self._sum[name]) / k, 0.0)
-        return between / (k * (k - 1))
+        return self._between(name) / (k * (k - 1))
+
+    def _between(self, name: str) -> np.ndarray:
+        """Σ_k (m_k − m̄)² of the round means (clamped at 0 against rounding)."""
+        return np.maximum(self._sq[name] - np.square(self._sum[name]) / self.rounds, 0.0)
 
     def floors(self) -> tuple[float, float]:
         """(robust floor = max of both estimates, pooled floor) of color."""
@@ -154,7 +156,7 @@ class RoundMerger:
 GROWTH_WARNING = 1.25
 
 
-def floor_growth(history: list, round_spp: int) -> float | None:
+def floor_growth(history: list) -> float | None:
     """How much ``spp × floor`` grew from half the rounds to all of them (1.0: the estimate falls as 1/spp,
     as it does once every kind of path has been sampled often; > 1: rare bright paths are still being
     found, so the estimate is a lower bound). None with fewer than 2 rounds."""
@@ -199,10 +201,10 @@ def render_adaptive(render_round, cap: int, ref_error: float) -> AdaptiveOutcome
         if merger.rounds >= min(MIN_ROUNDS, max_rounds) and merger.spp > 1 and floor <= ref_error:
             # A rising estimate is not trusted to stop on; growth is judged from 2 * MIN_ROUNDS rounds on
             # (over fewer, it is mostly the noise of a few samples per pixel).
-            growth = floor_growth(history, round_spp) if merger.rounds >= 2 * MIN_ROUNDS else None
+            growth = floor_growth(history) if merger.rounds >= 2 * MIN_ROUNDS else None
             if growth is None or growth <= GROWTH_WARNING:
                 break
-    growth = floor_growth(history, round_spp)
+    growth = floor_growth(history)
     if merger.spp < 2:  # one sample per pixel: no variance to estimate, so no floor (None in the record)
         floor = pooled = None
     reached = floor is not None and floor <= ref_error
