@@ -64,7 +64,9 @@ import functools
 import importlib
 from dataclasses import dataclass
 
+from denoisebench.generator.mitsuba_scene import PREVIOUS_POSITION
 from denoisebench.generator.render_camera import DrCamera
+from denoisebench.generator.render_plan import UNBOUNDED_DEPTH, paths_bounce
 
 
 @dataclass(frozen=True)
@@ -86,12 +88,12 @@ class KernelOptions:
     @property
     def bounded(self) -> bool:
         """False for ``max_depth == -1`` (unbounded: no depth test in the loop at all)."""
-        return self.max_depth != -1
+        return self.max_depth != UNBOUNDED_DEPTH
 
     @property
     def bounces(self) -> bool:
         """Paths go past the camera's first hit (next-event estimation and BSDF sampling happen)."""
-        return not self.bounded or self.max_depth > 1
+        return paths_bounce(self.max_depth)
 
 
 def _mis_weight(dr, pdf_a, pdf_b):
@@ -131,9 +133,6 @@ def _diffuse_part(mi, bsdf, ctx_diffuse, si, wo, val, active):
     if lobes & ~diffuse == 0:
         return mi.Color3f(val)
     return bsdf.eval(ctx_diffuse, si, wo, active)
-
-
-PREVIOUS_POSITION = "vertex_prev_position"  # mitsuba_scene.PREVIOUS_POSITION (no Mitsuba import here)
 
 
 #: Fully transparent cut-out layers a camera ray passes through before its first vertex (scenes with masks).
