@@ -36,6 +36,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 from denoisebench.generator.feature_renderer import render_frame  # noqa: E402
 from denoisebench.generator.mitsuba_scene import build_mitsuba_scene, sensor_dict  # noqa: E402
+from denoisebench.generator.reference_render import floor_of  # noqa: E402
 from denoisebench.generator.render_plan import make_render_plan  # noqa: E402
 from denoisebench.generator.translate import translate_usd  # noqa: E402
 from denoisebench.mitsuba_runtime import load_mitsuba  # noqa: E402
@@ -101,7 +102,7 @@ def main(argv=None) -> int:
     per = max(1, args.truth_spp // replicas)
     truth_images = np.stack([theirs(per, 1000 + r)[0] for r in range(replicas)])
     truth = truth_images.mean(axis=0)
-    truth_floor = float(np.mean(truth_images.var(axis=0, ddof=1) / replicas / (np.square(truth) + 0.01)))
+    truth_floor = floor_of(truth, truth_images.var(axis=0, ddof=1) / replicas)
     ours(args.eff_spp, 3)  # warm-up: compile and record
     theirs(args.eff_spp, 4)
     o_times, t_times, o_err, t_err = [], [], [], []
