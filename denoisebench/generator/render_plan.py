@@ -40,8 +40,6 @@ STAGE_MAX_DEPTH_KEY = "maxDepth"
 BOUNCE_RANDOM_PARAMETERS = ("light", "bounce")
 #: Per-sample features of where the first bounce lands (RPF's second-hit features)
 SECOND_HIT_FEATURES = ("position2", "normal2")
-#: Who decided a plan's depth.
-DEPTH_SOURCES = ("default", "user", "stage")
 
 
 def paths_bounce(max_depth: int) -> bool:
