@@ -14,7 +14,10 @@ slow on two cores); seconds per megapixel put both sizes on one scale, and OIDN 
 those frames too so its ratio compares like with like. RPF's relMSE against the frame's reference is
 printed beside its time. ``--rpf-baseline REV`` also times ``denoisebench/baselines/rpf.py`` as it
 was at git revision REV (e.g. the commit before a change) on the same frames, in the same run:
-"x faster" and the quality of both are then measured under the same load.
+"x faster" and the quality of both are then measured under the same load. ``--rpf-data DIR`` times
+RPF (and the baseline, and OIDN) on rendered frames instead: frame 0 of every scene of a dataset made
+with ``generate-dataset --samples`` at each of its spp (the kind of frame the issue's figures came
+from: rendered scenes' per-sample data, not the synthetic family's).
 
 The bilateral comparison uses colour only (scikit-image's filter knows no feature buffers), the
 same square window of 2·radius+1 pixels and the same σ_spatial: ours with the full 2-D window
@@ -81,6 +84,19 @@ def rpf_at_revision(revision: str):
     return module.RandomParameterFilter()
 
 
+def dataset_frames(path: str):
+    """(scene, spp, frame 0) for every scene and spp of a dataset with per-sample data."""
+    from denoisebench.dataset.reader import open_dataset  # noqa: PLC0415
+
+    dataset = open_dataset(path)
+    for scene in dataset.scenes:
+        for spp in dataset.scene(scene).spp:
+            frame = dataset.frame(scene, spp, 0)
+            if frame.samples is None:
+                raise SystemExit(f"--rpf-data {path}: {scene} has no per-sample data (generate it with --samples)")
+            yield scene, spp, frame
+
+
 def load_average() -> str:
     """The 1, 5 and 15 minute load averages, or "unknown" where the OS does not say."""
     try:
@@ -102,6 +118,8 @@ def main(argv=None) -> int:
     parser.add_argument("--rpf-spp", default="4,8", help="comma-separated spp of the RPF frames")
     parser.add_argument("--rpf-baseline", metavar="REV", help="also time rpf.py as of this git revision")
     parser.add_argument("--rpf-only", action="store_true", help="time OIDN and RPF only (no other baselines)")
+    parser.add_argument("--rpf-data", metavar="DIR", help="time RPF on frame 0 of every scene of this dataset "
+                        "(made with --samples) instead of synthetic frames")
     parser.add_argument("--spp", type=int, default=4)
     parser.add_argument("--radius", type=int, default=7)
     parser.add_argument("--repeats", type=int, default=3)
@@ -113,7 +131,6 @@ def main(argv=None) -> int:
     except ValueError:
         parser.error(f"--rpf-spp: comma-separated integers expected, got {args.rpf_spp!r}")
     megapixels = args.size * args.size / 1e6
-    small_megapixels = args.rpf_size * args.rpf_size / 1e6
 
     names = ("oidn",) if args.rpf_only else BASELINES
     per_mp = {name: seconds_in_denoise(name, frame, args.repeats) / megapixels for name in names}
@@ -127,20 +144,33 @@ def main(argv=None) -> int:
         print(f"{name:<22}{value:>10.3f}{value / oidn:>16.3f}")
 
     baseline = rpf_at_revision(args.rpf_baseline) if args.rpf_baseline else None
-    print(f"\nrpf, textured {args.rpf_size}x{args.rpf_size} px (OIDN timed on the same frame):")
-    for spp in rpf_spps:
-        small = synthetic_frame("textured", args.rpf_size, args.rpf_size, spp, seed=0, samples=True)
+    if args.rpf_data:
+        cases = list(dataset_frames(args.rpf_data))
+        print(f"\nrpf on frame 0 of every scene of {args.rpf_data} (OIDN timed on the same frame):")
+    else:
+        cases = [(f"textured {args.rpf_size}x{args.rpf_size}", spp,
+                  synthetic_frame("textured", args.rpf_size, args.rpf_size, spp, seed=0, samples=True))
+                 for spp in rpf_spps]
+        print(f"\nrpf, textured {args.rpf_size}x{args.rpf_size} px (OIDN timed on the same frame):")
+    totals = {"rpf": 0.0, "old": 0.0}
+    for label, spp, small in cases:
+        small_megapixels = small.color.shape[0] * small.color.shape[1] / 1e6
         oidn_small = seconds_in_denoise("oidn", small, args.repeats) / small_megapixels
         seconds, image = seconds_in_denoise("rpf", small, args.repeats, with_output=True)
         rpf = seconds / small_megapixels
         noisy = relmse(small.color, small.reference)
-        print(f"  {spp} spp: rpf {rpf:9.2f} s/MP  {rpf / oidn_small:8.1f}x OIDN ({oidn_small:.3f} s/MP)  "
+        print(f"  {label}, {spp} spp: rpf {rpf:9.2f} s/MP  {rpf / oidn_small:8.1f}x OIDN ({oidn_small:.3f} s/MP)  "
               f"relMSE {relmse(image, small.reference):.4f} (input {noisy:.4f})")
+        totals["rpf"] += seconds
         if baseline is not None:
             old_seconds, old_image = seconds_in_denoise(baseline, small, args.repeats, with_output=True)
             old = old_seconds / small_megapixels
+            totals["old"] += old_seconds
             print(f"          rpf@{args.rpf_baseline} {old:9.2f} s/MP  {old / oidn_small:8.1f}x OIDN  "
                   f"relMSE {relmse(old_image, small.reference):.4f}  -> today {old / rpf:.1f}x faster")
+    if baseline is not None and len(cases) > 1:
+        print(f"  all frames: rpf@{args.rpf_baseline} {totals['old']:.2f} s, today {totals['rpf']:.2f} s "
+              f"-> {totals['old'] / totals['rpf']:.1f}x faster")
     if args.rpf_only:
         print("load average after: " + load_average())
         return 0

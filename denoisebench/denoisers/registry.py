@@ -4,7 +4,7 @@ Spec grammar (first match wins):
 
 ``NAME``
     a built-in (see :data:`BUILTINS`: ``identity``, ``cross_bilateral``, ``cross_bilateral_fast``,
-    ``cross_bilateral_high``, ``rpf``, ``nlmeans``, ``oidn``, ``oidn_balanced``, ``oidn_fast``, and the
+    ``cross_bilateral_high``, ``rpf``, ``rpf_fast``, ``nlmeans``, ``oidn``, ``oidn_balanced``, ``oidn_fast``, and the
     learned ``dpcn``, ``kpcn``, ``rae``, ``lbf``), else
     an entry point of the group ``denoisebench.denoisers`` (a plugin package declares
     ``[project.entry-points."denoisebench.denoisers"] my_denoiser = "my_pkg:MyDenoiser"``).
@@ -45,6 +45,7 @@ BUILTINS: dict[str, tuple[str, dict[str, Any]]] = {
     "cross_bilateral_fast": ("denoisebench.baselines.cross_bilateral:CrossBilateral", {"preset": "fast"}),
     "cross_bilateral_high": ("denoisebench.baselines.cross_bilateral:CrossBilateral", {"preset": "high"}),
     "rpf": ("denoisebench.baselines.rpf:RandomParameterFilter", {}),
+    "rpf_fast": ("denoisebench.baselines.rpf:RandomParameterFilter", {"preset": "fast"}),
     "nlmeans": ("denoisebench.baselines.nlmeans:NLMeans", {}),
     "oidn": ("denoisebench.baselines.oidn:OIDN", {"quality": "high"}),
     "oidn_balanced": ("denoisebench.baselines.oidn:OIDN", {"quality": "balanced"}),
