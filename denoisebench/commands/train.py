@@ -64,8 +64,8 @@ def add_arguments(parser) -> None:
                         help="crop side in pixels, capped by the smallest train scene (default: the recipe's, "
                         "rae paper 128; else 32)")
     parser.add_argument("--play-backward", action=argparse.BooleanOptionalAction, default=None,
-                        help="rae: play each training window backwards half the time (default: on in the paper "
-                        "configuration, off otherwise)")
+                        help="rae: play each training window backwards half the time (default: on in both "
+                        "configurations' recipes)")
     parser.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
     parser.add_argument("--spp", default=None, help="train on these noisy spp only, e.g. 4 (default all)")
     parser.add_argument("--sequence-length", type=int, default=7, help="frames per training window, rae only (default 7)")

@@ -37,10 +37,11 @@ MODELS: dict[str, ModelSpec] = {
                       recipes={"paper": {"loss": "lobes"}}),
     "kpcn": ModelSpec("kpcn", pcn.make_kpcn, pcn.KPCN_CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS,
                       recipes={"paper": {"loss": "lobes"}}),
-    # The paper's recipe: 128 px crops (where the scenes are that large), windows played both ways.
+    # The paper's recipe: 128 px crops (where the scenes are that large), windows played both ways
+    # (the small configuration plays both ways too).
     "rae": ModelSpec(
         "rae", rae.make_rae, rae.CONFIGS, True, ("color",), ("albedo", "normal", "depth", "roughness", "position"),
-        recipes={"paper": {"crop": 128, "play_backward": True}},
+        recipes={"paper": {"crop": 128, "play_backward": True}, "small": {"play_backward": True}},
     ),
     # The paper's loss, relative MSE of the filtered image, in every configuration.
     "lbf": ModelSpec(
