@@ -12,8 +12,8 @@ wall-clock figures move with it (2x between load 1 and load 6 here).
 RPF is timed on a ``--rpf-size`` frame at each ``--rpf-spp`` (its per-sample work makes the full size
 slow on two cores); seconds per megapixel put both sizes on one scale, and OIDN is timed on each of
 those frames too so its ratio compares like with like. RPF's relMSE against the frame's reference is
-printed beside its time. ``--rpf-baseline REV`` also times ``denoisebench/baselines/rpf.py`` as it
-was at git revision REV (e.g. the commit before a change) on the same frames, in the same run:
+printed beside its time, for the paper settings (``rpf``) and the ``rpf_fast`` preset.
+``--rpf-baseline REV`` also times ``denoisebench/baselines/rpf.py`` as it was at git revision REV (e.g. the commit before a change) on the same frames, in the same run:
 "x faster" and the quality of both are then measured under the same load. ``--rpf-data DIR`` times
 RPF (and the baseline, and OIDN) on rendered frames instead: frame 0 of every scene of a dataset made
 with ``generate-dataset --samples`` at each of its spp (the kind of frame the issue's figures came
@@ -152,25 +152,30 @@ def main(argv=None) -> int:
                   synthetic_frame("textured", args.rpf_size, args.rpf_size, spp, seed=0, samples=True))
                  for spp in rpf_spps]
         print(f"\nrpf, textured {args.rpf_size}x{args.rpf_size} px (OIDN timed on the same frame):")
-    totals = {"rpf": 0.0, "old": 0.0}
+    presets = ("rpf", "rpf_fast")  # the paper settings and the 48-draw preset
+    totals = dict.fromkeys(presets + ("old",), 0.0)
     for label, spp, small in cases:
         small_megapixels = small.color.shape[0] * small.color.shape[1] / 1e6
         oidn_small = seconds_in_denoise("oidn", small, args.repeats) / small_megapixels
-        seconds, image = seconds_in_denoise("rpf", small, args.repeats, with_output=True)
-        rpf = seconds / small_megapixels
         noisy = relmse(small.color, small.reference)
-        print(f"  {label}, {spp} spp: rpf {rpf:9.2f} s/MP  {rpf / oidn_small:8.1f}x OIDN ({oidn_small:.3f} s/MP)  "
-              f"relMSE {relmse(image, small.reference):.4f} (input {noisy:.4f})")
-        totals["rpf"] += seconds
+        print(f"  {label}, {spp} spp (input relMSE {noisy:.4f}, OIDN {oidn_small:.3f} s/MP):")
+        per_mp = {}
+        for name in presets:
+            seconds, image = seconds_in_denoise(name, small, args.repeats, with_output=True)
+            per_mp[name] = seconds / small_megapixels
+            totals[name] += seconds
+            print(f"    {name:<12}{per_mp[name]:9.2f} s/MP  {per_mp[name] / oidn_small:8.1f}x OIDN  "
+                  f"relMSE {relmse(image, small.reference):.4f}")
         if baseline is not None:
             old_seconds, old_image = seconds_in_denoise(baseline, small, args.repeats, with_output=True)
             old = old_seconds / small_megapixels
             totals["old"] += old_seconds
-            print(f"          rpf@{args.rpf_baseline} {old:9.2f} s/MP  {old / oidn_small:8.1f}x OIDN  "
-                  f"relMSE {relmse(old_image, small.reference):.4f}  -> today {old / rpf:.1f}x faster")
+            faster = ", ".join(f"{name} {old / per_mp[name]:.1f}x" for name in presets)
+            print(f"    {'rpf@' + args.rpf_baseline:<12}{old:9.2f} s/MP  {old / oidn_small:8.1f}x OIDN  "
+                  f"relMSE {relmse(old_image, small.reference):.4f}  -> faster today: {faster}")
     if baseline is not None and len(cases) > 1:
-        print(f"  all frames: rpf@{args.rpf_baseline} {totals['old']:.2f} s, today {totals['rpf']:.2f} s "
-              f"-> {totals['old'] / totals['rpf']:.1f}x faster")
+        faster = ", ".join(f"{name} {totals['old'] / totals[name]:.1f}x" for name in presets)
+        print(f"  all frames: rpf@{args.rpf_baseline} {totals['old']:.2f} s; faster today: {faster}")
     if args.rpf_only:
         print("load average after: " + load_average())
         return 0
