@@ -2,7 +2,7 @@
 cross-bilateral filter against scikit-image's ``denoise_bilateral`` on the same image and window.
 
     .venv/bin/python bench/denoiser_speed.py [--size 256] [--rpf-size 128] [--rpf-spp 4,8] [--rpf-baseline REV]
-                                             [--spp 4] [--radius 7] [--repeats 3]
+                                             [--spp 4] [--radius 7] [--repeats 3] [--rpf-only] [--rpf-data DIR]
 
 Frames are synthetic (``denoisebench.denoisers.synthetic``, textured family) with features and
 per-sample data. Each denoiser runs through the harness runner (:func:`run_frame`), which times
