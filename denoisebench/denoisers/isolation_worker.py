@@ -20,10 +20,7 @@ import json
 import sys
 import time
 
-
-def _one_line(error: BaseException) -> str:
-    lines = str(error).strip().splitlines()
-    return f"{type(error).__name__}: {lines[0]}" if lines else type(error).__name__
+from denoisebench.errors import one_line
 
 
 def _reply(conn, header: dict, payload: bytes | memoryview | None = None) -> None:
@@ -42,7 +39,7 @@ def _load(conn, spec: str, options: dict, sys_path: list[str]):
         denoiser = load_denoiser(spec, **options)
         info = describe(denoiser, fallback_name=spec)
     except BaseException as error:  # noqa: BLE001 - every failure goes back as one line
-        _reply(conn, {"ok": False, "error_type": type(error).__name__, "error": str(error).strip().splitlines()[0] if str(error).strip() else _one_line(error)})
+        _reply(conn, {"ok": False, "error_type": type(error).__name__, "error": str(error).strip().splitlines()[0] if str(error).strip() else one_line(error)})
         return None
     _reply(conn, {"ok": True, "name": str(info.name), "needs": sorted(str(n) for n in info.needs), "temporal": bool(info.temporal)})
     return denoiser
@@ -57,7 +54,7 @@ def _denoise(conn, denoiser, frame, view=None, descriptor=None) -> None:
     try:
         output = denoiser.denoise(frame)
     except BaseException as error:  # noqa: BLE001 - SystemExit included: contained and reported
-        _reply(conn, {"ok": False, "error": f"raised {_one_line(error)}", "seconds": time.perf_counter() - started})
+        _reply(conn, {"ok": False, "error": f"raised {one_line(error)}", "seconds": time.perf_counter() - started})
         return
     seconds = time.perf_counter() - started
     if not isinstance(output, np.ndarray):
@@ -104,7 +101,7 @@ def main(fd: int, memfd: int | None = None) -> None:
                 if callable(reset):
                     reset()
             except BaseException as error:  # noqa: BLE001
-                _reply(conn, {"ok": False, "error": f"reset() raised {_one_line(error)}"})
+                _reply(conn, {"ok": False, "error": f"reset() raised {one_line(error)}"})
                 continue
             _reply(conn, {"ok": True})
         elif op == "denoise":

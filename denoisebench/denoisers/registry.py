@@ -32,7 +32,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from denoisebench.errors import UserInputError
+from denoisebench.errors import UserInputError, one_line
 
 from .protocol import describe
 
@@ -71,12 +71,6 @@ class UnknownOptionError(UserInputError):
 
 class DenoiserUnavailableError(RuntimeError):
     """Raised by a built-in whose optional dependency is missing (caught and re-raised as a load error)."""
-
-
-def _one_line(error: BaseException) -> str:
-    text = str(error).strip().splitlines()
-    first = text[0] if text else ""
-    return f"{type(error).__name__}: {first}" if first else type(error).__name__
 
 
 def _entry_points() -> dict[str, importlib.metadata.EntryPoint]:
@@ -200,10 +194,10 @@ def load_denoiser(spec: str, **options: Any):
     except UserInputError:
         raise
     except Exception as error:  # noqa: BLE001 - a broken plugin is a one-line load error
-        raise DenoiserLoadError(f"cannot import {where}: {_one_line(error)}") from error
+        raise DenoiserLoadError(f"cannot import {where}: {one_line(error)}") from error
     try:
         return _instantiate(obj, spec, kwargs)
     except UserInputError:
         raise
     except Exception as error:  # noqa: BLE001
-        raise DenoiserLoadError(f"cannot construct {where}: {_one_line(error)}") from error
+        raise DenoiserLoadError(f"cannot construct {where}: {one_line(error)}") from error

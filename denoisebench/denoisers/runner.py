@@ -38,6 +38,7 @@ from typing import Iterable, Mapping
 import numpy as np
 
 from denoisebench.dataset.frame import Frame, Sequence
+from denoisebench.errors import one_line
 
 from .isolation import IsolatedDenoiser, WorkerFailure
 from .protocol import describe
@@ -68,11 +69,6 @@ class DenoiseResult:
     @property
     def sanitized_total(self) -> int:
         return sum(self.sanitized.values())
-
-
-def _one_line(error: BaseException) -> str:
-    lines = str(error).strip().splitlines()
-    return f"{type(error).__name__}: {lines[0]}" if lines else type(error).__name__
 
 
 # --------------------------------------------------------------------------------------------------
@@ -195,7 +191,7 @@ def run_frame(denoiser: object, frame: Frame, *, name: str | None = None, keep_o
         info = describe(denoiser, fallback_name=name or type(denoiser).__name__)
         label = name or info.name
     except Exception as error:  # noqa: BLE001
-        return DenoiseResult(name or repr(denoiser), frame.scene, frame.index, STATUS_FAILED, _one_line(error))
+        return DenoiseResult(name or repr(denoiser), frame.scene, frame.index, STATUS_FAILED, one_line(error))
     isolated = isinstance(denoiser, IsolatedDenoiser)  # its transfer into the worker is the copy
     safe, counts = sanitize_frame(frame, samples="samples" in info.needs, copy=not (isolated or _builtin(denoiser)))
     result = DenoiseResult(label, frame.scene, frame.index, STATUS_FAILED, sanitized=counts)
@@ -212,7 +208,7 @@ def run_frame(denoiser: object, frame: Frame, *, name: str | None = None, keep_o
         return result
     except Exception as error:  # noqa: BLE001 - contained and recorded
         result.seconds = time.perf_counter() - started
-        result.error = f"raised {_one_line(error)}"
+        result.error = f"raised {one_line(error)}"
         return result
     result.seconds = denoiser.last_seconds if isolated else time.perf_counter() - started
     reason = check_output(output, frame.height, frame.width)
@@ -235,7 +231,7 @@ def run_sequence(
         try:
             reset()
         except Exception as error:  # noqa: BLE001
-            reason = str(error) if isinstance(error, WorkerFailure) else f"reset() raised {_one_line(error)}"
+            reason = str(error) if isinstance(error, WorkerFailure) else f"reset() raised {one_line(error)}"
             return [DenoiseResult(label, f.scene, f.index, STATUS_FAILED, reason) for f in frames]
     return [run_frame(denoiser, frame, name=label, keep_output=keep_output) for frame in frames]
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Iterable, Iterator, Mapping
 
-from denoisebench.errors import UserInputError
+from denoisebench.errors import UserInputError, one_line
 from denoisebench.generator.dataset_scenes import SceneSpec, read_stage_files
 from denoisebench.generator.sequence import FrameJob, RenderedJob, render_job
 
@@ -41,11 +41,6 @@ class JobFailure:
     message: str
 
 
-def _one_line(error: BaseException) -> str:
-    text = str(error).strip().splitlines()
-    return f"{type(error).__name__}: {text[0] if text else ''}".rstrip(": ")
-
-
 def _run_guarded(job: FrameJob, stage_files=None, threads: int | None = None) -> RenderedJob | JobFailure:
     try:
         if threads:
@@ -57,7 +52,7 @@ def _run_guarded(job: FrameJob, stage_files=None, threads: int | None = None) ->
             dr.set_thread_count(int(threads))
         return render_job(job, stage_files)
     except Exception as error:  # one bad job must not take the others down
-        return JobFailure(job.scene, job.frame, _one_line(error))
+        return JobFailure(job.scene, job.frame, one_line(error))
 
 
 class LocalExecutor:
@@ -99,7 +94,7 @@ class RayExecutor:
                 else:
                     ray.init(num_cpus=num_cpus, **kwargs)
             except (ConnectionError, ValueError, RuntimeError) as error:
-                raise UserInputError(f"cannot start or reach a Ray cluster at {address or 'local'}: {_one_line(error)}") from None
+                raise UserInputError(f"cannot start or reach a Ray cluster at {address or 'local'}: {one_line(error)}") from None
             self._started = True
         self.cpus_per_task = int(cpus_per_task)
         self._remote = ray.remote(num_cpus=self.cpus_per_task, max_retries=1)(_run_guarded)
@@ -132,7 +127,7 @@ class RayExecutor:
             try:
                 yield ray.get(ref)
             except Exception as error:  # a worker died or the task could not run
-                yield JobFailure(job.scene, job.frame, _one_line(error))
+                yield JobFailure(job.scene, job.frame, one_line(error))
             submit_next()
 
     def close(self) -> None:
