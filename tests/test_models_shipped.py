@@ -37,8 +37,8 @@ def test_weights_are_small_safe_and_documented(name):
 
 #: (model, peer) pairs whose shipped small weights do not (yet) beat the peer on the held-out
 #: scenes: the issue asks for a win; strict xfail turns green into a failure once they do.
-#: lbf: the MLP-driven cross-bilateral filter, 1200 CPU steps on 27 scenes of 64 px, scores 24%
-#: above the hand-tuned cross_bilateral on the held-out scenes (ratio CI 0.79–2.25: not resolved).
+#: lbf: the MLP-driven cross-bilateral filter, 4000 CPU steps on 40 scenes of 64 px, scores 10.5%
+#: above the hand-tuned cross_bilateral on the held-out scenes (ratio CI 0.68–1.89: not resolved).
 NOT_YET_BEATEN: set[tuple[str, str]] = {("lbf", "cross_bilateral")}
 
 
