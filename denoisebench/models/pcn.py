@@ -51,12 +51,12 @@ PAPER_CONFIG = {"layers": 9, "channels": 100, "kernel": 5, "kernel_size": 21, "i
 # and could not tell which of the outer taps to trust). The 1×1 head keeps the 24 → 441 logits
 # layer cheap. The shipped dpcn_small.pt predates this (5 layers of 3×3, default init): its
 # checkpoint records that shape, so it still loads and scores as before. Retraining DPCN in this
-# configuration on the 40-scene full-transport set failed three ways (8000 steps each): with the
-# relative loss its output settled too dark (held-out relMSE 0.374; a cornell test frame at 0.29× the
-# reference's mean:
-# the relative L1 punishes overshoot on dark pixels more than undershoot), with log L1 a few pixels
-# per frame ran to the output clamp (relMSE 4e14 at lr 1e-3; val 5e17 at lr 3e-4), while KPCN on the
-# same data and configuration reached 0.0477. The old weights stay shipped.
+# configuration on the 40-scene full-transport set failed (8000 steps; the third run stopped at
+# 5600): with the relative loss its output settled too dark (held-out relMSE 0.374; a cornell test
+# frame at 0.29× the reference's mean: the relative L1 punishes overshoot on dark pixels more than
+# undershoot); with log L1 a few pixels per frame ran to the output clamp (relMSE 4e14 at lr 1e-3,
+# val 5e17 at lr 3e-4), while KPCN on the same data and configuration reached 0.0477. The old
+# weights stay shipped.
 # Torch's default initialisation in the small configuration (the shipped kpcn_small.pt's; on
 # the unit tests' toy batch Xavier's larger start made KPCN's first steps at lr 5e-3 overshoot).
 SMALL_CONFIG = {"layers": 6, "channels": 24, "kernel": 5, "kernel_size": 21, "head_kernel": 1, "log_depth_var": True}
