@@ -180,6 +180,11 @@ def test_a_few_steps_lower_the_loss_on_a_tiny_batch(name):
         # and the identity is already near this toy task's optimum: start it too bright instead.
         with torch.no_grad():
             net.output.bias.fill_(0.3)
+    if name == "dpcn":
+        # The bounded output already gets this task's black specular lobe exactly (its noisy window
+        # is black): start the diffuse branch too bright, so that there is something to learn.
+        with torch.no_grad():
+            net.diffuse[-1].bias.add_(0.3)
     optimizer = torch.optim.Adam(net.parameters(), lr={"dpcn": 5e-3, "kpcn": 5e-3, "rae": 5e-3}[name])
     losses = []
     for _ in range(5):
@@ -323,3 +328,25 @@ def test_softmax_kernels_inference_path_equals_the_autograd_path():
     assert torch.isfinite(in_place).all() and (in_place >= 0).all()
     torch.testing.assert_close(in_place, tracked, rtol=1e-5, atol=1e-7)
     torch.testing.assert_close(in_place.sum(dim=1), torch.ones(2, 5, 4), rtol=1e-5, atol=1e-6)
+
+
+def test_bounded_dpcn_stays_within_its_noisy_window():
+    """``bound_output`` (the small and paper configurations): a DPCN head pushed to predict e^40 gives,
+    unbounded, radiance at the 1e8 output clamp (what the failed full-transport runs did on a few pixels
+    per frame); bounded, no pixel exceeds the brightest noisy value of its 21×21 window (albedo 1, so
+    remodulation does not scale it), and a black specular lobe stays black."""
+    b = batch(n=1, h=24, w=24, seed=5)
+    b.update(albedo=torch.ones_like(b["color"]), specular=torch.zeros_like(b["color"]))
+    b["diffuse"] = b["color"]
+    outputs = {}
+    for bound in (False, True):
+        net = build_model("dpcn", {**model_config("dpcn", "small"), "bound_output": bound}).eval()
+        with torch.no_grad():
+            for branch in (net.diffuse, net.specular):
+                branch[-1].bias.fill_(40.0)
+            outputs[bound] = net(b)
+    assert float(outputs[False]["color"].max()) > 1e6
+    bounded = outputs[True]
+    assert torch.isfinite(bounded["color"]).all()
+    assert float(bounded["specular"].abs().max()) == 0.0
+    assert float(bounded["color"].max()) <= float(b["color"].max()) * (1 + 1e-3)
