@@ -7,7 +7,10 @@ Each branch is a plain stack of ``layers`` convolutions of ``channels`` channels
 support with ReLU between them (the paper: 9 × 100 × 5×5).
 
 * **DPCN** (direct prediction): the last layer outputs the denoised colour of its branch, in the
-  log domain the network sees (log(1 + demodulated diffuse), log(1 + specular)).
+  log domain the network sees (log(1 + demodulated diffuse), log(1 + specular)). With
+  ``bound_output`` (our deviation, in the small and paper configurations) that output is capped by
+  the brightest noisy value of the lobe within the ``kernel_size`` window: nothing KPCN could
+  produce from the same window is refused, and an unseen input can no longer send a pixel to e^30.
 * **KPCN** (kernel prediction): the last layer outputs ``kernel_size²`` (21² = 441) logits per pixel,
   softmax-normalised into a non-negative kernel summing to one that is applied to the branch's noisy
   buffer (demodulated diffuse, log specular) around the pixel.
