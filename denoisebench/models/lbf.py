@@ -19,7 +19,7 @@ Filter (the lecture's d_ij, one weight per pixel j in the (2R+1)² window of pix
   variance estimate is itself very noisy (often 0 when both samples agree). A frame whose
   ``color_var`` is all zero (1 spp, or none given) gets a robust spatial estimate instead
   (:func:`spread_variance`); the shipped weights were trained at 2-8 spp and still filter 1-spp
-  frames less well than cross_bilateral (``make demo``, 1 spp: relMSE 0.55 against 0.12).
+  frames less well than cross_bilateral (``make demo``, 1 spp: relMSE 0.666 against 0.121).
 * ``demodulate``: colour (and its variance) is divided by albedo + ε before filtering and
   multiplied back after (:func:`~denoisebench.models.features.albedo_factor`: emitters, background
   and black materials are left as they are), so texture detail is not blurred away with the noise.
