@@ -74,11 +74,6 @@ Deviations (each with its reason; tests/test_baselines_classic.py shows what the
       chunk of grid rows) with chunks fixed by the image size, so neither the number of threads nor
       the filter's chunk size changes the bytes. One draw of the neighbourhoods against another moves
       relMSE by a few per cent (textured 128 px, 4 spp, seeds 0-3: 0.0555-0.0577).
-
-Cost (where the time goes): per pass every pixel gathers M ≤ 128 samples of D columns, so the filter
-is a few passes over an n×M×D table per chunk of pixels (gather, centre, square, cluster test, three
-batched matmuls: cluster sums, energies, output); the statistics' one-hot histograms dominate the last
-pass. 128 px, 4 spp: 50-58 CPU s/MP on one thread; two threads split the chunks (about 1.5x).
     * Two safeguards the paper does not have, both for the relMSE of dark pixels beside bright noise:
       sample colours are capped at ``firefly_factor`` (16) × the largest pixel mean of the 8
       neighbouring pixels before the first pass (:func:`cap_spikes`), and with S ≥ 2 the output is
@@ -87,6 +82,11 @@ pass. 128 px, 4 spp: 50-58 CPU s/MP on one thread; two threads split the chunks 
       RPF averaged a glossy floor's few highlight samples into pixels whose own samples were all
       dark: relMSE 95 at 4 spp against the input's 12 (with it: 0.46); cornell 4 spp 0.083 → 0.047.
       It cost depth_of_field 4 spp 0.034 → 0.043 (cross_bilateral: 0.149).
+
+Cost (where the time goes): per pass every pixel gathers M ≤ 128 samples of D columns, so the filter
+is a few passes over an n×M×D table per chunk of pixels (gather, centre, square, cluster test, three
+batched matmuls: cluster sums, energies, output); the statistics' one-hot histograms dominate the last
+pass. 128 px, 4 spp: 50-58 CPU s/MP on one thread; two threads split the chunks (about 1.5x).
 
 Per-pixel α (mean over colour channels), β (mean over each feature's channels) and W^r of every pass
 are kept in :attr:`RandomParameterFilter.last_weights` for inspection and tests.
@@ -545,7 +545,8 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
     spp, height, width, dims = table.shape
     if settings.firefly_factor is not None and height * width > 1:
         table[..., layout.color] = cap_spikes(table[..., layout.color], settings.firefly_factor)
-    own_color = table[..., layout.color].astype(np.float64)
+    limit = settings.change_limit is not None and spp > 1
+    own_color = table[..., layout.color].astype(np.float64) if limit else None
     shape = (spp, height, width)
     boxes = list(settings.boxes) if settings.boxes is not None else scaled_boxes(height, width)
     weights = RPFWeights()
@@ -623,7 +624,7 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
     finally:
         torch.set_num_threads(threads)
     image = table[..., layout.color].mean(axis=0)
-    if settings.change_limit is not None and spp > 1:
+    if limit:
         image = limit_change(image, own_color, settings.change_limit)
     return np.maximum(image, 0.0).astype(np.float32), weights
 

@@ -68,11 +68,7 @@ def _denoise(conn, denoiser, frame, view=None, descriptor=None) -> None:
     if view is not None and view.write_output(descriptor, plain):
         _reply(conn, {**header, "in_shm": True})
         return
-    _reply(
-        conn,
-        {"ok": True, "seconds": seconds, "kind": "array", "dtype": plain.dtype.str, "shape": list(plain.shape)},
-        memoryview(plain).cast("B") if plain.size else b"",
-    )
+    _reply(conn, header, memoryview(plain).cast("B") if plain.size else b"")
 
 
 def main(fd: int, memfd: int | None = None) -> None:

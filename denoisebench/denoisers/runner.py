@@ -133,7 +133,8 @@ def sanitize_frame(frame: Frame, *, samples: bool = True, copy: bool = True) -> 
 
     Per-sample arrays are counted as ``samples.<name>``; ``samples=False`` leaves them out.
     ``copy=False`` gives read-only views instead of copies: only for a consumer that copies
-    anyway (an isolated denoiser's transfer), never for a denoiser in this process.
+    anyway (an isolated denoiser's transfer) or a built-in (trusted not to make them writable),
+    never for a plugin in this process.
     """
     counts: dict[str, int] = {}
     buffers = {}

@@ -33,6 +33,7 @@ from denoisebench.dataset.writer import DatasetWriter
 from denoisebench.errors import UserInputError
 from denoisebench.generator import dataset_scenes as scenes_mod
 from denoisebench.generator.dataset_scenes import SceneSpec
+from denoisebench.generator.reference_render import GROWTH_WARNING
 from denoisebench.generator.sequence import missing_jobs, write_rendered
 
 CONFIG_KIND = "denoisebench.generate"
@@ -282,8 +283,6 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
     families = {name: spec.family for name, spec in by_name.items()}
     writer.finalize(assign_splits(list(by_name), request.seed, families=families), allow_incomplete=bool(summary.failures))
     summary.complete = bool(writer.manifest["complete"])
-    from denoisebench.generator.reference_render import GROWTH_WARNING
-
     for name, scene in writer.manifest["scenes"].items():
         for frame, record in sorted(scene["renders"].get(layout.REFERENCE, {}).items()):
             adaptive = record.get("reference_adaptive") or {}

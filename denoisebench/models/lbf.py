@@ -236,7 +236,7 @@ class LBF(nn.Module):
             scale = scale * factor
         primary = primary_features(buffers)
         if self.var_median:
-            primary["log_color_var"] = _neighbours(primary["log_color_var"])[:, 0].median(dim=1, keepdim=True).values
+            primary["log_color_var"] = _median3x3(primary["log_color_var"])
         inputs = secondary_features(primary, self.blocks)
         return F.softplus(self.mlp(inputs)), primary, scale
 
