@@ -123,6 +123,42 @@ def test_lobes_loss_is_the_two_branch_l1_without_a_colour_term():
     torch.testing.assert_close(no_lobes["loss"], spatial_l1(out["color"], b["reference"]))
 
 
+@pytest.mark.parametrize("mode", ["dpcn", "kpcn"])
+def test_exposure_loss_is_scale_invariant_where_the_log_loss_is_not(mode):
+    """The same scene 1000x darker: the PCN's output scales with it (it normalises its input), the
+    exposure loss stays put, the plain log loss (almost linear below 1) drops by orders of magnitude."""
+    g = torch.Generator().manual_seed(3)
+    torch.manual_seed(0)
+    net = build_model(mode, "small")
+    batch = {name: torch.rand(2, 3, 12, 12, generator=g) * 2.0
+             for name in ("color", "diffuse", "specular", "reference", "reference_diffuse", "reference_specular")}
+    batch["albedo"] = torch.rand(2, 3, 12, 12, generator=g)
+    dark = {name: value * 1e-3 if name != "albedo" else value for name, value in batch.items()}
+    with torch.no_grad():
+        bright_out, dark_out = net(batch), net(dark)
+    torch.testing.assert_close(dark_out["color"], bright_out["color"] * 1e-3, rtol=1e-4, atol=1e-9)
+    exposure = [float(pcn_loss(o, b, "exposure")["loss"]) for o, b in ((bright_out, batch), (dark_out, dark))]
+    log = [float(pcn_loss(o, b, "log")["loss"]) for o, b in ((bright_out, batch), (dark_out, dark))]
+    assert exposure[0] > 0.01 and math.isclose(exposure[0], exposure[1], rel_tol=1e-3)
+    assert log[1] < 0.01 * log[0]
+    black = {name: torch.zeros_like(value) for name, value in batch.items()}
+    black["reference"] = torch.full_like(batch["reference"], 0.5)
+    with torch.no_grad():
+        black_out = net(black)
+    value = float(pcn_loss(black_out, black, "exposure")["loss"])  # black input: compared unscaled, no 1e30
+    assert math.isclose(value, float(pcn_loss(black_out, black, "log")["loss"]), rel_tol=1e-6) and value < 1.0
+
+
+def test_exposure_loss_trains_dpcn_through_the_cli(data, tmp_path, capsys):
+    out = tmp_path / "e.pt"
+    assert main(["train", "--model", "dpcn", "--data", str(data), "--steps", "2", "--out", str(out), "--loss", "exposure", *SMALL]) == 0
+    meta = load_checkpoint(out)["meta"]
+    assert meta["loss"] == "exposure" and meta["skipped_steps"] == 0 and math.isfinite(meta["last_loss"])
+    capsys.readouterr()
+    assert main(["train", "--model", "lbf", "--data", str(data), "--steps", "1", "--out", str(out), "--loss", "exposure", *SMALL]) == 2
+    assert "unknown loss" in capsys.readouterr().err
+
+
 def test_lobes_loss_trains_through_the_cli_and_is_refused_for_rae(data, tmp_path, capsys):
     out = tmp_path / "p.pt"
     assert main(["train", "--model", "kpcn", "--data", str(data), "--steps", "1", "--out", str(out), "--loss", "lobes", *SMALL]) == 0

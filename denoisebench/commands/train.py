@@ -69,9 +69,10 @@ def add_arguments(parser) -> None:
     parser.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
     parser.add_argument("--spp", default=None, help="train on these noisy spp only, e.g. 4 (default all)")
     parser.add_argument("--sequence-length", type=int, default=7, help="frames per training window, rae only (default 7)")
-    parser.add_argument("--loss", default=None, choices=("log", "relative", "relmse", "lobes"),
+    parser.add_argument("--loss", default=None, choices=("log", "relative", "relmse", "lobes", "exposure"),
                         help="spatial loss: log = L1 of log(1+x); relative adds |p-r|/(r+0.01); relmse = "
-                        "(p-r)^2/(r^2+0.01); lobes = separate diffuse/specular L1 (dpcn/kpcn) "
+                        "(p-r)^2/(r^2+0.01); lobes = separate diffuse/specular L1 (dpcn/kpcn); exposure = log "
+                        "after dividing by the input's exposure, so dark scenes count (dpcn/kpcn) "
                         "(default: the configuration's recipe, else log)")
     parser.add_argument("--lr-schedule", default="constant", choices=("constant", "cosine", "step"),
                         help="learning rate over this command's steps: constant, cosine (to lr/100) or "

@@ -9,7 +9,9 @@
 * :func:`rae_sequence_loss`: Chaitanya et al.'s 0.8·L_s + 0.1·L_g + 0.1·L_t over a K-frame
   sequence with rising per-frame weights (:func:`frame_weights`).
 * :func:`pcn_loss`: L1 on the combined colour plus L1 on each branch's log output against the
-  reference lobes; ``lobes`` drops the colour term (Bako et al. train each branch on its own lobe).
+  reference lobes; ``lobes`` drops the colour term (Bako et al. train each branch on its own lobe);
+  ``exposure`` is ``log`` in the network's own range (everything divided by the exposure the model
+  normalised its input by, ``out["exposure"]``).
 * :func:`relmse_loss`: relative MSE of linear radiance, LBF's training loss (Kalantari et al.).
 * :func:`relmse`: the validation figure, mean((p−r)²/(r²+0.01)) as DESIGN.md defines it (linear).
 
@@ -19,6 +21,12 @@ Notes
   every input is passed through :func:`~denoisebench.models.features.safe` first, so NaN/Inf in a
   reference cannot reach the optimiser.
 * The LoG convolution pads by replication: a flat border then has zero response, as it should.
+* ``log`` is not scale-invariant: below radiance 1, log(1 + x) ≈ x, so a scene of radiance 0.01 gives
+  a hundredth of the gradient of a scene of radiance 1 and a direct predictor (DPCN) is hardly
+  trained on dark scenes; on the 40-scene full-transport set DPCN then missed each scene by a
+  factor of its own (val relMSE 1820). ``exposure`` compares log(1 + x / exposure), the range the
+  network sees, so every frame counts alike whatever its brightness. KPCN's output is a convex
+  combination of its input and cannot miss the scale.
 """
 
 from __future__ import annotations
@@ -123,13 +131,36 @@ def rae_sequence_loss(preds: list[torch.Tensor], refs: list[torch.Tensor], kind:
     return {"loss": total, "spatial": spatial, "gradient": gradient, "temporal": temporal}
 
 
+#: pcn_loss kinds beyond SPATIAL's.
+PCN_KINDS = ("lobes", "exposure")
+
+
+def _exposed(out: dict[str, torch.Tensor], batch: dict[str, torch.Tensor]) -> tuple[dict, dict]:
+    """``out``'s and ``batch``'s radiance divided by the model's exposure (``out["exposure"]``, N×1×1×1).
+
+    A black input (exposure 0, whose output is black) is compared unscaled: dividing its reference
+    by ~0 would add a constant of ~70 to the loss that no weight can change."""
+    scale = out["exposure"].detach()
+    scale = torch.where(scale > 0, scale, torch.ones_like(scale))
+    names = ("color", "diffuse", "specular")
+    exposed_out = {name: out[name] / scale for name in names if name in out}
+    refs = ("reference", "reference_diffuse", "reference_specular")
+    exposed_batch = {name: batch[name] / scale for name in refs if name in batch}
+    return exposed_out, exposed_batch
+
+
 def pcn_loss(out: dict[str, torch.Tensor], batch: dict[str, torch.Tensor], kind: str = "log") -> dict[str, torch.Tensor]:
     """Spatial loss (SPATIAL[kind]) on colour, plus log L1 on each branch against its reference lobe when the batch has it.
 
     ``kind="lobes"`` is Bako et al.'s recipe: only the two branch losses (L1 of log(1 + x) of each
     lobe; the branches have separate weights, so the sum trains each on its own lobe), no colour
     term. A batch without reference lobes falls back to the log L1 of the colour.
+    ``kind="exposure"`` is ``log`` after dividing prediction and references by ``out["exposure"]``
+    (the PCN's input exposure): scale-invariant, see the module Notes.
     """
+    if kind == "exposure":
+        out, batch = _exposed(out, batch)
+        kind = "log"
     if kind == "lobes":
         if "reference_diffuse" in batch and "reference_specular" in batch:
             diffuse = spatial_l1(out["diffuse"], batch["reference_diffuse"])

@@ -172,7 +172,8 @@ class PCN(nn.Module):
     """A two-branch pixel network; ``mode`` is ``"direct"`` (DPCN) or ``"kernel"`` (KPCN).
 
     ``forward(buffers)`` takes N×C×H×W tensors by buffer name and returns a dict with ``color``,
-    ``diffuse`` and ``specular`` (linear radiance, N×3×H×W) and ``kernels`` (KPCN only,
+    ``diffuse`` and ``specular`` (linear radiance, N×3×H×W), ``exposure`` (N×1×1×1, what the input
+    was divided by; the ``exposure`` loss reads it) and ``kernels`` (KPCN only,
     N×2×size²×H×W: diffuse and specular branch; unless ``return_kernels`` is off).
     """
 
@@ -235,7 +236,7 @@ class PCN(nn.Module):
         specular_log, ks = self._branch(self.specular, prepared["specular_in"], prepared["specular_log"])
         specular = from_log(specular_log)
         diffuse, specular = diffuse * scale, specular * scale
-        out = {"color": diffuse + specular, "diffuse": diffuse, "specular": specular}
+        out = {"color": diffuse + specular, "diffuse": diffuse, "specular": specular, "exposure": scale}
         if kd is not None and self.return_kernels:
             out["kernels"] = torch.stack([kd, ks], dim=1)  # N×2×size²×H×W
         return out

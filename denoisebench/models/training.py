@@ -52,7 +52,7 @@ from denoisebench.errors import UserInputError
 from .catalog import build_model, get_spec, model_config
 from .checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
 from .features import frame_tensors
-from .losses import SPATIAL, pcn_loss, rae_sequence_loss, relmse
+from .losses import PCN_KINDS, SPATIAL, pcn_loss, rae_sequence_loss, relmse
 
 
 @dataclass
@@ -69,7 +69,7 @@ class TrainOptions:
     lr: float = 1e-3
     spp: list[int] | None = None  # None: every noisy spp of the dataset
     sequence_length: int = 7
-    loss: str | None = None  # losses.SPATIAL name or "lobes"; None: the configuration's recipe, else "log"
+    loss: str | None = None  # losses.SPATIAL name or one of losses.PCN_KINDS; None: the configuration's recipe, else "log"
     val_every: int = 0  # 0: validate once, at the end
     val_frames: int = 8  # per val scene and spp
     checkpoint_every: int = 100
@@ -148,7 +148,7 @@ def lr_factor(schedule: str, done: int, steps: int) -> float:
 def resolve_loss(spec, config, loss: str | None) -> str:
     """The loss a run uses: the one asked for, else the configuration's recipe, else ``log``."""
     loss = recipe_value(spec, config, "loss", loss, "log")
-    allowed = set(SPATIAL) | ({"lobes"} if spec.name in ("dpcn", "kpcn") else set())
+    allowed = set(SPATIAL) | (set(PCN_KINDS) if spec.name in ("dpcn", "kpcn") else set())
     if loss not in allowed:
         raise UserInputError(f"unknown loss {loss!r} for {spec.name}; losses: {', '.join(sorted(allowed))}")
     return loss
