@@ -122,7 +122,7 @@ def main(argv=None) -> int:
     parser.add_argument("--config", default="small", choices=("small", "paper"))
     parser.add_argument("--steps", type=int, default=2000)
     parser.add_argument("--val-every", type=int, default=100)
-    parser.add_argument("--loss", default="lobes", choices=("log", "relative", "lobes"))
+    parser.add_argument("--loss", default="lobes", choices=("log", "relative", "lobes", "exposure"))
     parser.add_argument("--lr", type=float, default=1e-3)
     parser.add_argument("--batch-size", type=int, default=8)
     parser.add_argument("--crop", type=int, default=32)

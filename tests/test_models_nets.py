@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import numpy as np
 import pytest
 import torch
@@ -350,3 +351,22 @@ def test_bounded_dpcn_stays_within_its_noisy_window():
     assert torch.isfinite(bounded["color"]).all()
     assert float(bounded["specular"].abs().max()) == 0.0
     assert float(bounded["color"].max()) <= float(b["color"].max()) * (1 + 1e-3)
+
+
+def test_bounded_dpcn_passes_gradient_where_the_cap_binds():
+    """Straight through: a head stuck far above the cap still learns to come down (a plain minimum gives
+    zero gradient there, and such a head stays stuck), while the forward value is capped as at inference."""
+    b = batch(n=1, h=16, w=16, seed=6)
+    b["reference"] = b["color"] * 0.5
+    net = build_model("dpcn", model_config("dpcn", "small"))
+    with torch.no_grad():
+        for branch in (net.diffuse, net.specular):
+            branch[-1].bias.fill_(40.0)
+    out = net(b)
+    with torch.no_grad():
+        capped = net.eval()(b)
+    torch.testing.assert_close(out["color"], capped["color"])
+    loss = pcn_loss(out, b, "exposure")["loss"]
+    loss.backward()
+    bias_grad = float(net.diffuse[-1].bias.grad.sum() + net.specular[-1].bias.grad.sum())
+    assert math.isfinite(bias_grad) and bias_grad > 0  # descent lowers the head's output
