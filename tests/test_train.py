@@ -97,3 +97,27 @@ def test_bad_input_exits_2_with_one_line(data, tmp_path, capsys):
     result = run_cli("train", "--model", "kpcn", "--data", tmp_path / "nowhere", "--steps", 1)
     assert result.returncode == 2 and "not a dataset folder" in result.stderr
     assert "Traceback" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+def test_set_overrides_a_configuration_key_and_the_checkpoint_loads_as_trained(data, tmp_path, capsys):
+    from denoisebench.models.checkpoint import model_from_checkpoint
+
+    out = tmp_path / "direct.pt"
+    assert train("--model", "rae", "--data", data, "--steps", 2, "--out", out, "--set", "residual=false") == 0
+    payload = load_checkpoint(out, expect_model="rae")
+    assert payload["config"]["residual"] is False
+    assert model_from_checkpoint(payload).residual is False  # the ablation, not the shipped form
+    assert "--set residual=false" in payload["meta"]["commands"][-1]
+    # resuming needs the same override (the configuration must match the checkpoint's)
+    capsys.readouterr()
+    assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out) == 2
+    assert "trained with config" in capsys.readouterr().err
+    assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out,
+                 "--set", "residual=false") == 0
+    for bad, message in ((["--set", "no_such_key=1"], "not a rae configuration key"),
+                         (["--set", "residual"], "expects KEY=VALUE"),
+                         (["--set", "residual=3"], "expected a value like")):
+        assert train("--model", "rae", "--data", data, "--steps", 1, "--out", tmp_path / "x.pt", *bad) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+        assert not (tmp_path / "x.pt").exists()

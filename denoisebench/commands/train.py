@@ -31,6 +31,7 @@ EPILOG = """examples:
   denoisebench train --model lbf --data data/small --steps 600 --lr-schedule cosine --val-every 200 --out lbf.pt
   denoisebench train --model kpcn --data data/big --config paper --device cuda --batch-size 32 --crop 64
   denoisebench train --model kpcn --data data/small --steps 1000 --resume kpcn.pt --out kpcn.pt
+  denoisebench train --model rae --data data/small --set residual=false --out rae_direct.pt   # an ablation
   denoisebench train --model rae --data data/small --steps 0 --resume rae.pt --out rae.pt --evaluate
   denoisebench benchmark ... --denoiser kpcn --option checkpoint=kpcn.pt   # use the result
 """
@@ -55,6 +56,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--data", required=True, help="dataset folder (dataset.json inside)")
     parser.add_argument("--config", default="small", choices=("small", "paper"),
                         help="network size: small (trains on a CPU) or paper (default small)")
+    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="overrides",
+                        help="replace one key of the configuration for this run, e.g. residual=false "
+                             "(repeatable; VALUE is JSON; the checkpoint records the result)")
     parser.add_argument("--steps", type=int, default=500, help="optimisation steps to add (default 500)")
     parser.add_argument("--out", default=None, help="checkpoint to write (default checkpoints/MODEL_CONFIG.pt)")
     parser.add_argument("--resume", default=None, metavar="CKPT", help="continue from this checkpoint")
@@ -101,7 +105,7 @@ def run(args) -> int:
         raise UserInputError(f"--steps must be >= 0 (got {args.steps})")
     if args.batch_size < 1 or (args.crop is not None and args.crop < 4):
         raise UserInputError("--batch-size must be >= 1 and --crop >= 4")
-    from denoisebench.models.training import TrainOptions, max_threads, train
+    from denoisebench.models.training import TrainOptions, max_threads, parse_override, train
 
     if not 1 <= args.threads <= max_threads():
         raise UserInputError(f"--threads must be between 1 and the core count {max_threads()} (got {args.threads})")
@@ -135,6 +139,7 @@ def run(args) -> int:
         lr_schedule=args.lr_schedule,
         val_every=args.val_every,
         progress=not args.quiet,
+        overrides=dict(parse_override(text) for text in args.overrides),
     )
     try:
         meta = train(options)

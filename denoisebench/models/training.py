@@ -37,6 +37,7 @@ Notes
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import time
@@ -79,7 +80,9 @@ class TrainOptions:
     lr_schedule: str = "constant"  # constant | cosine | step
     play_backward: bool | None = None  # temporal models: windows reversed half the time; None: recipe
     progress: bool = True
-    extra: dict = field(default_factory=dict)
+    #: configuration keys replaced for this run (``--set KEY=VALUE``: ablations such as rae
+    #: ``residual=false``); the checkpoint records the resulting configuration, so it loads as trained
+    overrides: dict = field(default_factory=dict)
 
 
 def _available(ds: Dataset, scene: str, spp: int, wanted: tuple[str, ...], targets: tuple[str, ...]):
@@ -240,6 +243,41 @@ def validate(model, spec, ds: Dataset, scenes: list[str], spp: list[int], max_fr
     }
 
 
+def parse_override(text: str) -> tuple[str, object]:
+    """``KEY=VALUE`` → (key, value); VALUE is JSON (``false``, ``3``, ``[12, 18]``), else the plain string."""
+    key, sep, value = text.partition("=")
+    key = key.strip()
+    if not sep or not key.isidentifier():
+        raise UserInputError(f"--set expects KEY=VALUE, e.g. residual=false (got {text!r})")
+    value = value.strip()
+    lowered = value.lower()
+    if lowered in ("true", "false"):
+        return key, lowered == "true"
+    try:
+        return key, json.loads(value)
+    except ValueError:
+        return key, value
+
+
+def apply_overrides(spec, config: dict, overrides: dict) -> dict:
+    """``config`` with ``overrides`` applied; a key the configuration does not have and the model's
+    constructor does not take, or a value of another type than the configuration's, is a UserInputError."""
+    if not overrides:
+        return config
+    import inspect
+
+    accepted = set(config) | {name for name in inspect.signature(spec.build).parameters if name != "self"}
+    out = dict(config)
+    for key, value in overrides.items():
+        if key not in accepted:
+            raise UserInputError(
+                f"--set {key}: not a {spec.name} configuration key (keys: {', '.join(sorted(accepted))})")
+        if key in config and config[key] is not None and isinstance(config[key], bool) != isinstance(value, bool):
+            raise UserInputError(f"--set {key}={value!r}: expected a value like {config[key]!r}")
+        out[key] = value
+    return out
+
+
 def recipe_value(spec, config, key: str, given, default):
     """``given`` unless None, else the configuration's recipe value for ``key``, else ``default``."""
     if given is not None:
@@ -287,7 +325,7 @@ def train(options: TrainOptions) -> dict:
         raise UserInputError(f"{options.data}: no reference frames; training needs them")
     buffers, targets = _available(ds, train_scenes[0], spp[0], spec.buffers, spec.targets)
 
-    config = model_config(spec.name, options.config)
+    config = apply_overrides(spec, model_config(spec.name, options.config), options.overrides)
     torch.manual_seed(options.seed)
     model = build_model(spec.name, config).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
@@ -443,6 +481,8 @@ def command_line(options: TrainOptions, out: str) -> str:
         parts += ["--sequence-length", str(options.sequence_length)]
     if options.loss is not None and options.loss != "log":
         parts += ["--loss", options.loss]
+    for key, value in sorted(options.overrides.items()):
+        parts += ["--set", f"{key}={json.dumps(value)}"]
     if options.lr_schedule != "constant":
         parts += ["--lr-schedule", options.lr_schedule]
     if options.val_every:
