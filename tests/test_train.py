@@ -121,3 +121,36 @@ def test_set_overrides_a_configuration_key_and_the_checkpoint_loads_as_trained(d
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err
         assert not (tmp_path / "x.pt").exists()
+
+
+def test_steps_0_scores_shipped_weights_on_another_dataset_and_keeps_their_provenance(data, tmp_path, capsys):
+    """Shipped weights (no optimiser state) cannot be trained further, but ``--steps 0`` scores them on
+    another dataset: the card keeps the training run's data, scenes and validation, and adds the scoring
+    dataset's command, hash and val figure, with the held-out table and intervals from its test split."""
+    other = make_synthetic_dataset(tmp_path / "other", scenes=5, frames=3, height=20, width=20, spp=(2,), seed=9)
+    ck, first, second = tmp_path / "ck.pt", tmp_path / "ship1", tmp_path / "ship2"
+    first.mkdir(), second.mkdir()
+    assert train("--model", "dpcn", "--data", data, "--steps", 2, "--out", ck, "--ship", first) == 0
+    shipped = first / "dpcn_small.pt"
+    capsys.readouterr()
+    assert train("--model", "dpcn", "--data", other, "--steps", 1, "--resume", shipped, "--out", tmp_path / "x.pt") == 2
+    assert "--steps 0 scores them" in capsys.readouterr().err and not (tmp_path / "x.pt").exists()
+    rescored = tmp_path / "rescored.pt"
+    assert train("--model", "dpcn", "--data", other, "--steps", 0, "--resume", shipped, "--out", rescored,
+                 "--ship", second) == 0
+    before, after = load_checkpoint(shipped)["meta"], load_checkpoint(second / "dpcn_small.pt")["meta"]
+    for key in ("dataset_hash", "train_scenes", "val_scenes", "validation", "stages", "steps", "seconds"):
+        assert after[key] == before[key], key
+    assert after["evaluated_on"]["dataset_hash"] == open_dataset(other).config_hash != before["dataset_hash"]
+    assert after["evaluated_on"]["validation"]["scenes"] == open_dataset(other).split("val")
+    torch.testing.assert_close(load_checkpoint(second / "dpcn_small.pt")["state_dict"],
+                               load_checkpoint(shipped)["state_dict"])
+    card = (second / "dpcn_small.md").read_text()
+    assert f"dataset config hash `{before['dataset_hash']}`" in card
+    assert f"Scored on another dataset than the training one: config hash `{open_dataset(other).config_hash}`" in card
+    assert f"test (held-out) scenes: {', '.join(open_dataset(other).split('test'))}" in card
+    seen = sorted(set(open_dataset(other).split("test")) & set(before["train_scenes"]))  # synthetic names repeat
+    assert (f"share a name (family and seed) with a training scene: {', '.join(seen)}." if seen
+            else "None of its test scenes shares a name") in card
+    assert after["commands"][-1] in card and "--steps 0" in after["commands"][-1]
+    assert "not the one they were trained on" in card and "[95% CI" in card

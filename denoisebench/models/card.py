@@ -55,6 +55,32 @@ def generate_command(config: dict, out: str) -> str:
     return shlex.join(parts)
 
 
+def _command_block(meta: dict, train_commands: list[str], data_dir: str) -> list[str]:
+    """The card's commands: the training data's generate-dataset, the train commands; for weights scored on
+    another dataset (``meta["evaluated_on"]``) that dataset's generate-dataset before the last (scoring) command."""
+    elsewhere = meta.get("evaluated_on")
+    if not elsewhere:
+        return [generate_command(meta.get("dataset_config", {}), data_dir), *train_commands]
+    return [generate_command(meta.get("dataset_config", {}), meta.get("dataset") or "DATA"), *train_commands[:-1],
+            generate_command(elsewhere.get("dataset_config", {}), data_dir), *train_commands[-1:]]
+
+
+def _scored_elsewhere_lines(elsewhere: dict, meta: dict, evaluation: dict) -> list[str]:
+    """The scoring dataset's hash, val figure and whether its test scenes share names with training scenes."""
+    if not elsewhere:
+        return []
+    lines = ["", f"Scored on another dataset than the training one: config hash `{elsewhere.get('dataset_hash')}`, "
+             f"config `{elsewhere.get('dataset_config')}`."]
+    val = elsewhere.get("validation") or {}
+    if val:
+        lines.append(f"On its val split: relMSE {val['relmse']:.5f} against the noisy input's {val['relmse_noisy']:.5f} "
+                     f"(ratio {val['relmse_ratio']:.3f}) over {val['frames']} frames.")
+    seen = sorted(set(evaluation["scenes"]) & set(meta.get("train_scenes", [])))
+    lines.append(f"Test scenes that share a name (family and seed) with a training scene: {', '.join(seen)}."
+                 if seen else "None of its test scenes shares a name (family and seed) with a training scene.")
+    return lines
+
+
 def _threads(used: list[int]) -> str:
     """'one CPU thread', 'two CPU threads', or '1 and 2 CPU threads' when the commands differed."""
     words = {1: "one", 2: "two"}
@@ -109,6 +135,7 @@ def render_card(
     data_dir: str,
 ) -> str:
     val = meta.get("validation") or {}
+    scored_elsewhere = meta.get("evaluated_on") or {}
     relmse = evaluation["relmse"]
     ours = relmse[model]
     lines = [
@@ -124,15 +151,17 @@ def render_card(
         "## How it was made (exact commands)",
         "",
         "```sh",
-        generate_command(meta.get("dataset_config", {}), data_dir),
-        *train_commands,
+        *_command_block(meta, train_commands, data_dir),
         "```",
         "",
         "The last command, run with `--ship denoisebench/models/weights`"
         + ("" if list(evaluation["ratio"]) == ["identity", "cross_bilateral"] else f" `--peers {','.join(evaluation['ratio'])}`")
         + " added, also scored the test split and wrote these weights (without optimiser state) and this card."
         + (" It adds no steps (`--steps 0`): it validates and ships the checkpoint the command before it wrote."
-           if train_commands and " --steps 0 " in f"{train_commands[-1]} " else ""),
+           if train_commands and " --steps 0 " in f"{train_commands[-1]} " and not scored_elsewhere else "")
+        + (" It adds no steps (`--steps 0`): it scores the weights the commands before it made on the val and test"
+           " splits of the dataset made by the second `generate-dataset` command, not the one they were trained on."
+           if scored_elsewhere else ""),
         "",
         f"* dataset config hash `{meta.get('dataset_hash')}`; config `{meta.get('dataset_config')}`",
         f"* train scenes ({len(meta.get('train_scenes', []))}): {', '.join(meta.get('train_scenes', []))}",
@@ -152,6 +181,7 @@ def render_card(
         ]
     else:
         lines.append("The dataset had no val split.")
+    lines += _scored_elsewhere_lines(scored_elsewhere, meta, evaluation)
     lines += [
         "",
         f"## Held-out scenes (test split: {evaluation['frames']} frames per denoiser, every spp)",

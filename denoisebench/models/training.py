@@ -330,23 +330,33 @@ def train(options: TrainOptions) -> dict:
     model = build_model(spec.name, config).to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
     meta = {"steps": 0, "seconds": 0.0, "skipped_steps": 0, "history": []}
+    rescoring = False  # --steps 0 on another dataset than the checkpoint's: score it, keep its provenance
     if options.resume:
         payload = load_checkpoint(options.resume, expect_model=spec.name)
+        if options.steps == 0 and not options.overrides:
+            config = payload["config"]  # nothing is trained: the checkpoint is scored as it was made
         if payload["config"] != config:
             raise UserInputError(f"{options.resume}: trained with config {payload['config']}, not {config}")
-        if "optimizer" not in payload:
-            raise UserInputError(f"{options.resume}: has no optimiser state (shipped weights cannot be resumed)")
+        if "optimizer" not in payload and options.steps > 0:
+            raise UserInputError(f"{options.resume}: has no optimiser state (shipped weights cannot be trained "
+                                 "further; --steps 0 scores them)")
         model = model_from_checkpoint(payload).to(device)
         optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
-        optimizer.load_state_dict(payload["optimizer"])
+        if "optimizer" in payload:
+            optimizer.load_state_dict(payload["optimizer"])
         for group in optimizer.param_groups:  # load_state_dict restored the old rate; --lr wins
             group["lr"] = options.lr
+        if options.steps == 0 and payload["meta"].get("dataset_hash") not in (None, ds.config_hash):
+            rescoring = True
+            meta = dict(payload["meta"])  # the training run's record stays as it was
+            meta.pop("evaluated_on", None)
         kept = ("steps", "seconds", "skipped_steps", "history", "commands", "threads", "stages", "validation_history", "devices")
         meta.update({k: payload["meta"][k] for k in kept if k in payload["meta"]})
 
     dataset, crop, frames = _make_dataset(spec, ds, train_scenes, spp, options, buffers, targets)
     out = Path(options.out or f"checkpoints/{spec.name}_{options.config if isinstance(options.config, str) else 'custom'}.pt")
-    meta.update(
+    run_fields = meta.setdefault("evaluated_on", {}) if rescoring else meta
+    run_fields.update(
         {
             "model": spec.name,
             "config_name": options.config if isinstance(options.config, str) else None,
@@ -369,6 +379,10 @@ def train(options: TrainOptions) -> dict:
             "torch": str(torch.__version__),
         }
     )
+    if rescoring:
+        meta["model"] = spec.name
+        for key in ("seed", "crop", "play_backward", "sequence_length", "batch_size", "lr", "loss", "lr_schedule"):
+            run_fields.pop(key, None)  # describe training, which this command does not do
     if int(meta["steps"]) > 0 and not meta.get("commands") and options.resume:
         # A checkpoint from before commands were recorded: rebuild its command from its metadata.
         earlier = TrainOptions(
@@ -381,14 +395,16 @@ def train(options: TrainOptions) -> dict:
         meta["commands"] = [command_line(earlier, str(options.resume))]
     meta.setdefault("commands", []).append(command_line(options, str(out)))
     # Every torch thread count the training ran with (the card's training time depends on it).
-    meta["threads"] = sorted(set(meta.get("threads", [])) | {threads})
-    meta["devices"] = sorted(set(meta.get("devices", [])) | {device.type})
-    # One record per command (stage) of a multi-stage run: what the card lists.
-    meta.setdefault("stages", []).append(
-        {"steps": int(options.steps), "from_step": int(meta["steps"]), "lr": options.lr, "lr_schedule": options.lr_schedule,
-         "loss": loss_kind, "batch_size": options.batch_size, "crop": crop, "spp": spp, "device": device.type,
-         "threads": threads}
-    )
+    if not rescoring:
+        meta["threads"] = sorted(set(meta.get("threads", [])) | {threads})
+        meta["devices"] = sorted(set(meta.get("devices", [])) | {device.type})
+    # One record per command (stage) of a multi-stage run: what the card lists (scoring is no stage).
+    if not rescoring:
+        meta.setdefault("stages", []).append(
+            {"steps": int(options.steps), "from_step": int(meta["steps"]), "lr": options.lr, "lr_schedule": options.lr_schedule,
+             "loss": loss_kind, "batch_size": options.batch_size, "crop": crop, "spp": spp, "device": device.type,
+             "threads": threads}
+        )
     start_step, total = int(meta["steps"]), int(meta["steps"]) + int(options.steps)
     per_epoch = len(_batches(len(dataset), options.batch_size, options.seed, 0))
     workers = options.workers if options.workers is not None else (min(4, max_threads()) if device.type == "cuda" else 0)
@@ -400,10 +416,11 @@ def train(options: TrainOptions) -> dict:
 
     def checkpoint(validation: dict | None = None) -> None:
         meta["steps"] = step
-        meta["seconds"] = round(meta["seconds"] + time.perf_counter() - checkpoint.since, 3)
+        if not rescoring:  # training time only
+            meta["seconds"] = round(meta["seconds"] + time.perf_counter() - checkpoint.since, 3)
         checkpoint.since = time.perf_counter()
         if validation is not None:
-            meta["validation"] = validation
+            (meta["evaluated_on"] if rescoring else meta)["validation"] = validation
         save_checkpoint(out, spec.name, config, model, meta, config_name=meta["config_name"], optimizer=optimizer)
 
     checkpoint.since = started
