@@ -236,20 +236,25 @@ def test_rpf_straddling_pixels_get_statistics_of_their_own():
     """On the statistics grid a horizon pixel takes the statistics of a grid point that sees only sky
     or only ground: no edge there, so α = β = 0 and the pass blurs sky into the ground samples of the
     horizon row (rendered motion_blur, 64 px 8 spp: the excess over cross_bilateral sat on the horizon
-    and the columns' edges). Pixels whose own samples straddle surfaces get their own statistics, as
-    with statistics at every pixel (measured over seeds 0-2: row 0.14-0.15 against a truth of 0.143;
-    the grid alone brightened it to 0.18-0.20)."""
+    and the columns' edges). Pixels whose own samples straddle surfaces get their own statistics. In
+    every pass that matches statistics at every pixel (seeds 0-2: row 0.138-0.151 against a truth of
+    0.143; the grid alone 0.18-0.20); the default refines the first two, coarsest passes only (on
+    rendered frames as good as all passes, at less cost: rpf.py), which here leaves 0.147-0.161."""
     row = 16
     for seed in range(2):
         samples, truth = horizon(seed=seed, row=row)
-        refined, _ = rpf_filter(samples)
-        grid, _ = rpf_filter(samples, RPFSettings(refine_straddling=False))
+        first, _ = rpf_filter(samples)
+        refined, _ = rpf_filter(samples, RPFSettings(refine_passes=4))
+        grid, _ = rpf_filter(samples, RPFSettings(refine_passes=0))
         every, _ = rpf_filter(samples, RPFSettings(stat_stride_divisor=0))
-        assert abs(refined[row].mean() - truth[row].mean()) < 0.015
-        assert grid[row].mean() > truth[row].mean() + 0.03  # what the grid alone does
+        target = truth[row].mean()
+        assert grid[row].mean() > target + 0.03  # what the grid alone does
+        assert abs(refined[row].mean() - target) < 0.015
         assert relmse(refined, truth) < 0.7 * relmse(grid, truth)
         assert relmse(refined, truth) < 1.2 * relmse(every, truth)
-        assert relmse(refined, truth) < 0.25 * relmse(samples["color"].mean(0), truth)
+        assert first[row].mean() - target < 0.65 * (grid[row].mean() - target)
+        assert relmse(first, truth) < 0.8 * relmse(grid, truth)
+        assert relmse(first, truth) < 0.25 * relmse(samples["color"].mean(0), truth)
 
 
 def test_rpf_does_not_carry_highlight_samples_into_dark_pixels():
@@ -324,6 +329,7 @@ def test_fast_preset_trades_a_little_quality_for_time():
     fast, paper = load_denoiser("rpf_fast"), load_denoiser("rpf")
     assert fast.name == "rpf_fast" and paper.name == "rpf"
     assert (fast.settings.max_samples, fast.settings.stat_samples, fast.settings.min_stat_stride) == (48, 48, 3)
+    assert fast.settings.refine_passes == 0 and RPFSettings().refine_passes == 2
     assert load_denoiser("rpf", preset="fast", max_samples=64).settings.max_samples == 64  # keywords override
     with pytest.raises(ValueError, match="preset"):
         RandomParameterFilter(preset="turbo")

@@ -58,15 +58,18 @@ Deviations (each with its reason; tests/test_baselines_classic.py shows what the
       of tests/test_baselines_rendered.py weakened (coupled/decoupled β 0.892 vs 0.883, 3 seeds).
       A 3-px grid in a 3-px box is too coarse (a bounce-driven feature moved a pixel by 1% in
       tests/test_baselines_rpf.py), hence the half-box cap on the floor.
-      **Straddling pixels are refined** (``refine_straddling``): a pixel whose own samples straddle
-      surfaces (3σ of its own clustering features above the tolerance 0.1 in some channel) clusters
-      differently from its grid point, which may see one surface only and so no edge at all (α = β =
-      0 there: the pass blurs sky into the ground samples of a horizon pixel). In passes whose grid is
-      at least ``refine_min_stride`` (5) px, such pixels get statistics of their own. Measured on
-      rendered 64 px frames (motion_blur and depth_of_field seeds 40-41, 8 spp): motion_blur 0.0142 →
-      0.0126 (statistics at every pixel: 0.0124), depth_of_field 0.0439 → 0.0431; on the card's ten
-      families it helps most where edges straddle (cornell, moving_objects, motion_blur 8 spp:
-      baselines/rpf_card.md). Refining the finer passes too (stride 2) measured no better.
+      **Straddling pixels are refined** (``refine_passes``, ``refine_samples``): a pixel whose own
+      samples straddle surfaces (3σ of its own clustering features above the tolerance 0.1 in some
+      channel) clusters differently from its grid point, which may see one surface only and so no
+      edge at all (α = β = 0 there: the pass blurs sky into the ground samples of a horizon pixel).
+      In the first ``refine_passes`` (2) passes, whose grids are the coarsest (14 and 9 px at 128 px),
+      such pixels get statistics of their own from ``refine_samples`` (48) draws. Measured on rendered
+      64 px frames (motion_blur and depth_of_field seeds 40-41, 8 spp): motion_blur 0.0142 → 0.0123
+      (statistics at every pixel in every pass: 0.0124), depth_of_field 0.0439 → 0.0435; on the
+      card's ten families a geometric mean of 0.913 of before (baselines/rpf_card.md: tried variants
+      and their figures). Cost: 16-44% of the pixels of rendered frames straddle, and statistics
+      dominate, so the paper preset takes up to 2.4× as long on rendered 128 px frames; the ``fast``
+      preset does not refine (0 passes) and keeps its speed.
     * **Clustering features** are the first-hit normal and albedo only. World position varies along
       every surface by an amount set by the scene's scale, so the paper's absolute tolerance 0.1
       would cut a plane into slivers in a large scene and miss nothing in a small one; second hits
@@ -471,8 +474,8 @@ class RPFSettings:
     stat_samples: int = 128  # the same cap for the statistics
     stat_stride_divisor: float = 4.0  # statistics every max(min_stat_stride, round(b / this)) pixels (0: every pixel)
     min_stat_stride: int = 2  # statistics grid at least this coarse where within half the box (see the docstring)
-    refine_straddling: bool = True  # pixels whose own samples straddle surfaces get statistics of their own
-    refine_min_stride: int = 5  # ... in passes whose statistics grid is at least this coarse
+    refine_passes: int = 2  # in this many first passes, pixels whose own samples straddle surfaces get their own statistics
+    refine_samples: int = 48  # ... from this many draws (capped by stat_samples)
     bins: int = 6
     sigma8_squared: float = SIGMA8_SQUARED
     firefly_factor: float | None = 16.0  # sample colours capped at this × the 8 neighbour pixels' largest mean
@@ -480,10 +483,10 @@ class RPFSettings:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if self.max_samples < 1 or self.stat_samples < 2 or self.bins < 2 or not self.sigma8_squared > 0:
+        if self.max_samples < 1 or self.stat_samples < 2 or self.refine_samples < 2 or self.bins < 2 or not self.sigma8_squared > 0:
             raise ValueError("max_samples must be >= 1, stat_samples >= 2, bins >= 2 and sigma8_squared > 0")
-        if self.stat_stride_divisor < 0 or self.min_stat_stride < 1:
-            raise ValueError("stat_stride_divisor must be >= 0 and min_stat_stride >= 1")
+        if self.stat_stride_divisor < 0 or self.min_stat_stride < 1 or self.refine_passes < 0:
+            raise ValueError("stat_stride_divisor must be >= 0, min_stat_stride >= 1 and refine_passes >= 0")
         if self.firefly_factor is not None and not self.firefly_factor >= 1.0:
             raise ValueError("firefly_factor must be >= 1 or None")
         if self.change_limit is not None and not self.change_limit > 0.0:
@@ -600,19 +603,22 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
             alpha, beta, w_rc, w_rf, kept = (np.concatenate([p[i] for p in parts]) for i in range(5))
             pick = (_nearest(height, gy)[:, None] * gx.size + _nearest(width, gx)[None, :]).ravel()
             alpha, beta, w_rc, w_rf, kept = alpha[pick], beta[pick], w_rc[pick], w_rf[pick], kept[pick]
-            if settings.refine_straddling and stride >= settings.refine_min_stride and straddling.any():
+            if t < settings.refine_passes and stride > 1 and straddling.any():
                 # a pixel whose own samples straddle surfaces clusters differently from its grid
                 # point (which may see one surface only, and no edge): its statistics are its own
                 on_grid = np.zeros((height, width), bool)
                 on_grid[np.ix_(gy, gx)] = True
                 todo = np.flatnonzero((straddling & ~on_grid).ravel())
-                per = max(1, _STAT_CELLS // max(1, stat_total * dims))
+                refine_total = min(stat_total, max(settings.refine_samples, spp))
+                refine_pool = stat_pool if refine_total == stat_total else _pattern_pool(
+                    np.random.default_rng([settings.seed, t, 5]), spp, box, refine_total, height, width)
+                per = max(1, _STAT_CELLS // max(1, refine_total * dims))
                 pieces = [todo[i : i + per] for i in range(0, todo.size, per)]
                 refine_seeds = np.random.SeedSequence([settings.seed, t, 4]).spawn(max(1, len(pieces)))
 
                 def refine(k: int):
                     ys, xs = np.divmod(pieces[k], width)
-                    return _statistics(flat, layout, ys, xs, shape, stat_pool, t, settings.bins,
+                    return _statistics(flat, layout, ys, xs, shape, refine_pool, t, settings.bins,
                                        np.random.default_rng(refine_seeds[k]))
 
                 if pieces:
@@ -672,10 +678,11 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
 #: Named option sets. ``fast`` (registered as ``rpf_fast``) draws 48 samples per neighbourhood for the
 #: filter and the statistics instead of 128 and keeps the statistics grid at least 3 px: 2.3x less CPU
 #: than ``paper`` (textured 128 px, 4 spp: 0.66 vs 1.55 CPU s) for relMSE 0.0668 vs 0.0577 there
-#: (8 spp: 0.0864 vs 0.0629). Rendered figures: baselines/rpf_card.md.
+#: (8 spp: 0.0864 vs 0.0629), and does not refine straddling pixels (``paper`` does in its first pass,
+#: at 0-38% more time). Rendered figures: baselines/rpf_card.md.
 PRESETS: dict[str, dict] = {
     "paper": {},
-    "fast": {"max_samples": 48, "stat_samples": 48, "min_stat_stride": 3},
+    "fast": {"max_samples": 48, "stat_samples": 48, "min_stat_stride": 3, "refine_passes": 0},
 }
 
 
