@@ -32,6 +32,8 @@ EPILOG = """examples:
   denoisebench train --model kpcn --data data/big --config paper --device cuda --batch-size 32 --crop 64
   denoisebench train --model kpcn --data data/small --steps 1000 --resume kpcn.pt --out kpcn.pt
   denoisebench train --model rae --data data/small --set residual=false --out rae_direct.pt   # an ablation
+  denoisebench train --model dpcn --data data/mine --steps 0 --resume denoisebench/models/weights/dpcn_small.pt \
+      --out dpcn_scored.pt --evaluate   # score the shipped weights on your own dataset's val and test splits
   denoisebench train --model rae --data data/small --steps 0 --resume rae.pt --out rae.pt --evaluate
   denoisebench benchmark ... --denoiser kpcn --option checkpoint=kpcn.pt   # use the result
 """
@@ -61,7 +63,8 @@ def add_arguments(parser) -> None:
                              "(repeatable; VALUE is JSON; the checkpoint records the result)")
     parser.add_argument("--steps", type=int, default=500, help="optimisation steps to add (default 500)")
     parser.add_argument("--out", default=None, help="checkpoint to write (default checkpoints/MODEL_CONFIG.pt)")
-    parser.add_argument("--resume", default=None, metavar="CKPT", help="continue from this checkpoint")
+    parser.add_argument("--resume", default=None, metavar="CKPT", help="continue from this checkpoint; with --steps 0 also shipped weights, to score them "
+                             "(--evaluate/--ship) on another dataset")
     parser.add_argument("--seed", type=int, default=0, help="initialisation and batch-order seed (default 0)")
     parser.add_argument("--batch-size", type=int, default=8, help="crops per step (default 8)")
     parser.add_argument("--crop", type=int, default=None,
