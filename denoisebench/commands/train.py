@@ -32,8 +32,7 @@ EPILOG = """examples:
   denoisebench train --model kpcn --data data/big --config paper --device cuda --batch-size 32 --crop 64
   denoisebench train --model kpcn --data data/small --steps 1000 --resume kpcn.pt --out kpcn.pt
   denoisebench train --model rae --data data/small --set residual=false --out rae_direct.pt   # an ablation
-  denoisebench train --model dpcn --data data/mine --steps 0 --resume denoisebench/models/weights/dpcn_small.pt \
-      --out dpcn_scored.pt --evaluate   # score the shipped weights on your own dataset's val and test splits
+  denoisebench train --model dpcn --data data/mine --steps 0 --resume denoisebench/models/weights/dpcn_small.pt --out d.pt --evaluate
   denoisebench train --model rae --data data/small --steps 0 --resume rae.pt --out rae.pt --evaluate
   denoisebench benchmark ... --denoiser kpcn --option checkpoint=kpcn.pt   # use the result
 """
