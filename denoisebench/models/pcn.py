@@ -12,7 +12,10 @@ support with ReLU between them (the paper: 9 × 100 × 5×5).
   the brightest noisy value of the lobe within the ``kernel_size`` window: nothing KPCN could
   produce from the same window is refused, and an unseen input can no longer send a pixel to e^30.
   The cap is straight-through in training (gradient of the uncapped output), else a pixel above it
-  gets no gradient and can never come back down.
+  gets no gradient and can never come back down. With ``log_offset`` ε > 0 (off in every named
+  configuration; ``train --set log_offset=0.01``) the head's output is read as log(x + ε) of the
+  normalised lobe instead of log(1 + x): a head error of 0.1 then moves a pixel at 1% of the exposure
+  by ~20%, not by ~1000% (log(1 + x) is linear near 0, where relMSE weighs most).
 * **KPCN** (kernel prediction): the last layer outputs ``kernel_size²`` (21² = 441) logits per pixel,
   softmax-normalised into a non-negative kernel summing to one that is applied to the branch's noisy
   buffer (demodulated diffuse, log specular) around the pixel.
@@ -41,6 +44,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
+from .features import LOG_MAX as LOG_MAX_OUTPUT
 from .features import PCN_INPUT_CHANNELS, from_log, normalize_radiance, pcn_inputs, safe
 
 #: Logits beyond this carry no extra information (exp(±50) spans every float32 ratio) and keep softmax finite.
@@ -189,9 +193,14 @@ class PCN(nn.Module):
 
     def __init__(
         self, mode: str, layers: int, channels: int, kernel: int, kernel_size: int = 21, head_kernel: int | None = None,
-        init: str = "default", log_depth_var: bool = False, bound_output: bool = False,
+        init: str = "default", log_depth_var: bool = False, bound_output: bool = False, log_offset: float = 0.0,
     ):
         super().__init__()
+        #: DPCN: with log_offset ε > 0 the head outputs log(x + ε) of the normalised lobe instead of
+        #: log(1 + x), so that dark pixels keep relative precision (0: log(1 + x), old checkpoints)
+        self.log_offset = float(log_offset)
+        if self.log_offset < 0:
+            raise ValueError(f"log_offset must be >= 0 (got {log_offset})")
         #: depth_var through log(1 + d) like the depth itself (features.feature_stack); False in old checkpoints
         self.log_depth_var = bool(log_depth_var)
         #: DPCN: each lobe's log output is capped by the largest noisy value of that lobe within the
@@ -213,7 +222,7 @@ class PCN(nn.Module):
             # Radiance is normalised to mean 1 (features.normalize_radiance): start at log(1 + 1), not at black.
             with torch.no_grad():
                 for branch in (self.diffuse, self.specular):
-                    branch[-1].bias.fill_(math.log(2.0))
+                    branch[-1].bias.fill_(math.log(1.0 + self.log_offset) if self.log_offset else math.log(2.0))
         if mode == "kernel":
             # Start near the identity: a centre-tap bias of log(size² − 1) gives the centre half the
             # weight. A near-uniform 21×21 start would smear emitters over their neighbours, and
@@ -228,7 +237,10 @@ class PCN(nn.Module):
         if self.mode == "direct":
             if self.bound_output:
                 size = self.kernel_size
-                bounded = torch.minimum(out, F.max_pool2d(noisy.max(dim=1, keepdim=True).values, size, 1, size // 2))
+                cap = F.max_pool2d(noisy.max(dim=1, keepdim=True).values, size, 1, size // 2)  # log(1 + x)
+                if self.log_offset:
+                    cap = torch.log(torch.expm1(cap) + self.log_offset)
+                bounded = torch.minimum(out, cap)
                 # straight through: the forward value is bounded, the gradient is the unbounded output's
                 # (a plain minimum passes none where the cap binds, and a head that drifted above the cap
                 # stayed there: training loss rose 0.42 → 1.0 over 2000 steps, val relMSE 409)
@@ -237,18 +249,24 @@ class PCN(nn.Module):
         kernels = softmax_kernels(out)
         return apply_kernels(noisy, kernels, self.kernel_size), kernels
 
+    def _from_offset_log(self, y: torch.Tensor) -> torch.Tensor:
+        """exp(y) − ε, y clamped to [log ε, LOG_MAX] with a straight-through gradient (as from_log)."""
+        clamped = y.clamp(math.log(self.log_offset), LOG_MAX_OUTPUT)
+        return (torch.exp(y + (clamped - y).detach()) - self.log_offset).clamp_min(0.0)
+
     def forward(self, buffers: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
         buffers, scale = normalize_radiance(buffers)
         prepared = pcn_inputs(buffers, self.log_depth_var)
         factor = prepared["albedo_factor"]
+        decode = from_log if self.mode != "direct" or not self.log_offset else self._from_offset_log
         if self.mode == "direct":
             diffuse_log, kd = self._branch(self.diffuse, prepared["diffuse_in"], prepared["diffuse_log"])
-            diffuse = from_log(diffuse_log) * factor
+            diffuse = decode(diffuse_log) * factor
         else:
             diffuse_lin, kd = self._branch(self.diffuse, prepared["diffuse_in"], prepared["diffuse_lin"])
             diffuse = diffuse_lin * factor
         specular_log, ks = self._branch(self.specular, prepared["specular_in"], prepared["specular_log"])
-        specular = from_log(specular_log)
+        specular = decode(specular_log)
         diffuse, specular = diffuse * scale, specular * scale
         out = {"color": diffuse + specular, "diffuse": diffuse, "specular": specular, "exposure": scale}
         if kd is not None and self.return_kernels:
@@ -257,8 +275,10 @@ class PCN(nn.Module):
 
 
 def make_dpcn(layers: int, channels: int, kernel: int, kernel_size: int = 21, head_kernel: int | None = None,
-              init: str = "default", log_depth_var: bool = False, bound_output: bool = False) -> PCN:
-    return PCN("direct", layers, channels, kernel, kernel_size, head_kernel, init, log_depth_var, bound_output)
+              init: str = "default", log_depth_var: bool = False, bound_output: bool = False,
+              log_offset: float = 0.0) -> PCN:
+    return PCN("direct", layers, channels, kernel, kernel_size, head_kernel, init, log_depth_var, bound_output,
+               log_offset)
 
 
 def make_kpcn(layers: int, channels: int, kernel: int, kernel_size: int = 21, head_kernel: int | None = None,
