@@ -394,7 +394,7 @@ def test_dpcn_log_offset_output_keeps_relative_precision_near_black():
     assert float(out["specular"].abs().max()) == 0.0 and torch.isfinite(out["color"]).all()
     # untrained: the head's bias is log(1 + ε), the diffuse output the exposure times the (unit) albedo
     fresh = build_model("dpcn", {**model_config("dpcn", "small"), "log_offset": 0.01})
-    assert float(fresh.diffuse[-1].bias[0]) == pytest.approx(math.log(1.01))
+    assert float(fresh.diffuse[-1].bias.detach()[0]) == pytest.approx(math.log(1.01))
     with pytest.raises(ValueError, match="log_offset"):
         build_model("dpcn", {**model_config("dpcn", "small"), "log_offset": -1.0})
     assert float(scale.flatten()[0]) > 0
