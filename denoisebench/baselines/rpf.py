@@ -98,7 +98,8 @@ Deviations (each with its reason; tests/test_baselines_classic.py shows what the
 Cost (where the time goes): per pass every pixel gathers M ≤ 128 samples of D columns, so the filter
 is a few passes over an n×M×D table per chunk of pixels (gather, centre, square, cluster test, three
 batched matmuls: cluster sums, energies, output); the statistics' one-hot histograms dominate the last
-pass. 128 px, 4 spp: 50-58 CPU s/MP on one thread; two threads split the chunks (about 1.5x).
+pass. 128 px, 4 spp: 50-58 CPU s/MP on one thread before the straddling refinement (up to 2.4x that on
+rendered frames with it; the fast preset does not refine); two threads split the chunks (about 1.5x).
 
 Per-pixel α (mean over colour channels), β (mean over each feature's channels) and W^r of every pass
 are kept in :attr:`RandomParameterFilter.last_weights` for inspection and tests.
