@@ -392,7 +392,7 @@ def test_dpcn_log_offset_output_keeps_relative_precision_near_black():
         out = net(b)
         scale = out["exposure"]
     assert float(out["specular"].abs().max()) == 0.0 and torch.isfinite(out["color"]).all()
-    # untrained: the head's bias is log(1 + ε), the diffuse output the exposure times the (unit) albedo
+    # untrained: the head's bias is log(1 + ε), i.e. normalised radiance 1 (the exposure)
     fresh = build_model("dpcn", {**model_config("dpcn", "small"), "log_offset": 0.01})
     assert float(fresh.diffuse[-1].bias.detach()[0]) == pytest.approx(math.log(1.01))
     with pytest.raises(ValueError, match="log_offset"):

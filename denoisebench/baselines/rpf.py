@@ -679,8 +679,8 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
 #: Named option sets. ``fast`` (registered as ``rpf_fast``) draws 48 samples per neighbourhood for the
 #: filter and the statistics instead of 128 and keeps the statistics grid at least 3 px: 2.3x less CPU
 #: than ``paper`` (textured 128 px, 4 spp: 0.66 vs 1.55 CPU s) for relMSE 0.0668 vs 0.0577 there
-#: (8 spp: 0.0864 vs 0.0629), and does not refine straddling pixels (``paper`` does in its first pass,
-#: at 0-38% more time). Rendered figures: baselines/rpf_card.md.
+#: (8 spp: 0.0864 vs 0.0629), and does not refine straddling pixels (``paper`` does in its first two
+#: passes, at up to 2.4x the time on rendered frames). Rendered figures: baselines/rpf_card.md.
 PRESETS: dict[str, dict] = {
     "paper": {},
     "fast": {"max_samples": 48, "stat_samples": 48, "min_stat_stride": 3, "refine_passes": 0},

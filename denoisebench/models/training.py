@@ -349,40 +349,40 @@ def train(options: TrainOptions) -> dict:
         if options.steps == 0 and payload["meta"].get("dataset_hash") not in (None, ds.config_hash):
             rescoring = True
             meta = dict(payload["meta"])  # the training run's record stays as it was
-            meta.pop("evaluated_on", None)
         kept = ("steps", "seconds", "skipped_steps", "history", "commands", "threads", "stages", "validation_history", "devices")
         meta.update({k: payload["meta"][k] for k in kept if k in payload["meta"]})
 
     dataset, crop, frames = _make_dataset(spec, ds, train_scenes, spp, options, buffers, targets)
     out = Path(options.out or f"checkpoints/{spec.name}_{options.config if isinstance(options.config, str) else 'custom'}.pt")
-    run_fields = meta.setdefault("evaluated_on", {}) if rescoring else meta
-    run_fields.update(
-        {
-            "model": spec.name,
-            "config_name": options.config if isinstance(options.config, str) else None,
-            "seed": options.seed,
-            "dataset": str(Path(options.data).resolve()),
-            "dataset_hash": ds.config_hash,
-            "dataset_config": ds.config,
-            "train_scenes": train_scenes,
-            "val_scenes": val_scenes,
-            "spp": spp,
-            "crop": crop,
-            "play_backward": bool(getattr(dataset, "play_backward", False)),
-            "sequence_length": frames,
-            "batch_size": options.batch_size,
-            "lr": options.lr,
-            "loss": loss_kind,
-            "lr_schedule": options.lr_schedule,
-            "buffers": list(buffers),
-            "targets": list(targets),
-            "torch": str(torch.__version__),
-        }
-    )
+    data_fields = {
+        "dataset": str(Path(options.data).resolve()),
+        "dataset_hash": ds.config_hash,
+        "dataset_config": ds.config,
+        "val_scenes": val_scenes,
+    }
     if rescoring:
-        meta["model"] = spec.name
-        for key in ("seed", "crop", "play_backward", "sequence_length", "batch_size", "lr", "loss", "lr_schedule"):
-            run_fields.pop(key, None)  # describe training, which this command does not do
+        meta["evaluated_on"] = data_fields  # the training run's own fields stay as they were
+    else:
+        meta.update(
+            {
+                **data_fields,
+                "model": spec.name,
+                "config_name": options.config if isinstance(options.config, str) else None,
+                "seed": options.seed,
+                "train_scenes": train_scenes,
+                "spp": spp,
+                "crop": crop,
+                "play_backward": bool(getattr(dataset, "play_backward", False)),
+                "sequence_length": frames,
+                "batch_size": options.batch_size,
+                "lr": options.lr,
+                "loss": loss_kind,
+                "lr_schedule": options.lr_schedule,
+                "buffers": list(buffers),
+                "targets": list(targets),
+                "torch": str(torch.__version__),
+            }
+        )
     if int(meta["steps"]) > 0 and not meta.get("commands") and options.resume:
         # A checkpoint from before commands were recorded: rebuild its command from its metadata.
         earlier = TrainOptions(
@@ -395,11 +395,10 @@ def train(options: TrainOptions) -> dict:
         meta["commands"] = [command_line(earlier, str(options.resume))]
     meta.setdefault("commands", []).append(command_line(options, str(out)))
     # Every torch thread count the training ran with (the card's training time depends on it).
-    if not rescoring:
+    if not rescoring:  # threads, devices and stages describe training; scoring is no stage
         meta["threads"] = sorted(set(meta.get("threads", [])) | {threads})
         meta["devices"] = sorted(set(meta.get("devices", [])) | {device.type})
-    # One record per command (stage) of a multi-stage run: what the card lists (scoring is no stage).
-    if not rescoring:
+        # One record per command (stage) of a multi-stage run: what the card lists.
         meta.setdefault("stages", []).append(
             {"steps": int(options.steps), "from_step": int(meta["steps"]), "lr": options.lr, "lr_schedule": options.lr_schedule,
              "loss": loss_kind, "batch_size": options.batch_size, "crop": crop, "spp": spp, "device": device.type,
