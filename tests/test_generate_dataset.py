@@ -297,3 +297,20 @@ def test_adaptive_reference_stops_at_target_or_names_capped_frames(tmp_path, cap
     manifest = json.loads((tmp_path / "tight" / layout.MANIFEST_NAME).read_text())
     assert manifest["config"]["ref_error"] == 1e-9 and manifest["scenes"]["cornell_005"]["plan"]["max_depth"] == -1
     assert manifest["scenes"]["cornell_005"]["transport"].startswith("full transport")
+
+
+def test_stage_folders_of_dead_workers_are_swept_and_live_ones_kept(tmp_path):
+    """A Ray worker killed at shutdown runs no atexit: its materialised stage folder would stay in the
+    temporary directory for good. The next worker sweeps folders whose pid is gone."""
+    from denoisebench.generator.sequence import sweep_stale_stage_dirs
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    dead_pid = int(dead.stdout)
+    stale = tmp_path / f"denoisebench-stage-0123456789ab-{dead_pid}-x1y2z3"
+    live = tmp_path / f"denoisebench-stage-0123456789ab-{os.getpid()}-a1b2c3"
+    other = tmp_path / "denoisebench-stage-not-a-worker-folder"
+    for folder in (stale, live, other):
+        folder.mkdir()
+        (folder / "scene.usda").write_text("#usda 1.0\n")
+    assert sweep_stale_stage_dirs(tmp_path) == 1
+    assert not stale.exists() and live.exists() and other.exists()

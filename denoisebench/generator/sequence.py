@@ -28,6 +28,7 @@ Notes:
 from __future__ import annotations
 
 import atexit
+import os
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -115,11 +116,42 @@ _CACHE: dict[tuple, _LoadedScene] = {}
 _STAGE_DIRS: dict[str, Path] = {}
 
 
+_STAGE_PREFIX = "denoisebench-stage-"
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process: alive
+        return True
+    return True
+
+
+def sweep_stale_stage_dirs(root: Path | None = None) -> int:
+    """Remove stage folders whose worker process is gone; return how many.
+
+    A Ray worker is killed at shutdown without running ``atexit``, so the folder it materialised
+    would stay in the temporary directory for good; its name carries the worker's pid
+    (``denoisebench-stage-<key>-<pid>-<random>``), and the next worker to materialise a stage sweeps
+    the folders of dead pids. Folders of live processes (this one included) are left alone."""
+    removed = 0
+    for folder in Path(root or tempfile.gettempdir()).glob(f"{_STAGE_PREFIX}*-*-*"):
+        parts = folder.name[len(_STAGE_PREFIX):].split("-")
+        if len(parts) != 3 or not parts[1].isdigit() or not folder.is_dir() or _pid_alive(int(parts[1])):
+            continue
+        shutil.rmtree(folder, ignore_errors=True)
+        removed += not folder.exists()
+    return removed
+
+
 def _materialize(stage_key: str, files: dict[str, bytes]) -> Path:
     """Write shipped stage files into a private temporary folder (once per stage); return scene.usda."""
     folder = _STAGE_DIRS.get(stage_key)
     if folder is None:
-        folder = Path(tempfile.mkdtemp(prefix=f"denoisebench-stage-{stage_key[:12]}-"))
+        sweep_stale_stage_dirs()
+        folder = Path(tempfile.mkdtemp(prefix=f"{_STAGE_PREFIX}{stage_key[:12]}-{os.getpid()}-"))
         atexit.register(shutil.rmtree, folder, True)  # a worker's copies go when the worker does
         for relative, data in files.items():
             target = folder / relative
@@ -133,6 +165,8 @@ def _loaded(job: FrameJob, stage_files: dict[str, bytes] | None) -> _LoadedScene
     key = (job.stage_key, tuple(sorted(job.options.items())))
     if key not in _CACHE:
         _CACHE.clear()
+        for stale in [k for k in _STAGE_DIRS if k != job.stage_key]:  # one stage's files on disk at a time
+            shutil.rmtree(_STAGE_DIRS.pop(stale), ignore_errors=True)
         usd = _materialize(job.stage_key, stage_files) if stage_files is not None else Path(job.usd_path)
         _CACHE[key] = _LoadedScene(usd, job.options)
     return _CACHE[key]
