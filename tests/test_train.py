@@ -154,3 +154,53 @@ def test_steps_0_scores_shipped_weights_on_another_dataset_and_keeps_their_prove
             else "None of its test scenes shares a name") in card
     assert after["commands"][-1] in card and "--steps 0" in after["commands"][-1]
     assert "not the one they were trained on" in card and "[95% CI" in card
+
+
+def test_init_from_fine_tunes_on_another_dataset_and_the_card_lists_both_runs(data, tmp_path, capsys):
+    """--resume continues a run on its own data only; --init-from fine-tunes weights (shipped ones too) on
+    another dataset: the earlier run's data, commands and stages stay in ``earlier_runs`` and its card."""
+    other = make_synthetic_dataset(tmp_path / "other", scenes=5, frames=3, height=20, width=20, spp=(2,), seed=9)
+    ck, first, second = tmp_path / "ck.pt", tmp_path / "ship1", tmp_path / "ship2"
+    first.mkdir(), second.mkdir()
+    assert train("--model", "dpcn", "--data", data, "--steps", 2, "--out", ck, "--ship", first) == 0
+    shipped = first / "dpcn_small.pt"
+    capsys.readouterr()
+    refused = [
+        (["--resume", ck, "--steps", 1], "--init-from fine-tunes the weights on this one"),  # another dataset
+        (["--init-from", shipped, "--steps", 0], "give --steps >= 1"),
+        (["--init-from", shipped, "--steps", 1, "--set", "layers=3"], "--set cannot change it"),
+        (["--init-from", shipped, "--resume", ck, "--steps", 1], "give one"),
+        (["--init-from", shipped, "--steps", 1, "--config", "paper"], "add --config small"),
+    ]
+    for extra, message in refused:
+        assert train("--model", "dpcn", "--data", other, "--out", tmp_path / "x.pt", *extra) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+        assert not (tmp_path / "x.pt").exists()
+    tuned = tmp_path / "tuned.pt"
+    assert train("--model", "dpcn", "--data", other, "--init-from", shipped, "--steps", 2, "--lr", "1e-4",
+                 "--loss", "relmse", "--out", tuned, "--ship", second) == 0
+    before, after = load_checkpoint(shipped)["meta"], load_checkpoint(tuned)["meta"]
+    assert after["steps"] == 4 and after["dataset_hash"] == open_dataset(other).config_hash != before["dataset_hash"]
+    assert after["train_scenes"] == open_dataset(other).split("train")
+    (run,) = after["earlier_runs"]
+    assert run["dataset_hash"] == before["dataset_hash"] and run["train_scenes"] == before["train_scenes"]
+    assert run["commands"] == before["commands"] and run["validation"] == before["validation"]
+    assert [s["steps"] for s in run["stages"]] == [2] and run["stages"][0]["dataset_hash"] == before["dataset_hash"]
+    (stage,) = after["stages"]
+    assert (stage["from_step"], stage["steps"], stage["loss"], stage["dataset_hash"]) == (2, 2, "relmse", after["dataset_hash"])
+    assert "--init-from" in after["commands"][-1] and len(after["commands"]) == 1
+    assert not torch.equal(load_checkpoint(tuned)["state_dict"]["diffuse.0.weight"],
+                           load_checkpoint(shipped)["state_dict"]["diffuse.0.weight"])
+    card = (second / "dpcn_small.md").read_text()
+    assert f"`{before['dataset_hash']}`" in card and f"dataset config hash `{after['dataset_hash']}`" in card
+    assert before["commands"][0] in card and after["commands"][-1] in card
+    assert card.index(before["commands"][0]) < card.index(after["commands"][-1])
+    assert "1. run 1, steps 0–2" in card and "2. run 2, steps 2–4" in card and "fine-tuned from run 1" in card
+    seen = sorted(set(open_dataset(other).split("test")) & (set(before["train_scenes"]) | set(after["train_scenes"])))
+    assert (f"share a name (family and seed) with a training scene: {', '.join(seen)}." if seen
+            else "None of its test scenes shares a name") in card
+    # and resuming the fine-tune on its own data continues it, earlier runs kept
+    assert train("--model", "dpcn", "--data", other, "--resume", tuned, "--steps", 1, "--out", tuned) == 0
+    again = load_checkpoint(tuned)["meta"]
+    assert again["steps"] == 5 and again["earlier_runs"] == after["earlier_runs"] and len(again["stages"]) == 2

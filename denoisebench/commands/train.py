@@ -4,7 +4,9 @@ Trains on the dataset's train split (random crops, flips and rotations; K-frame 
 recurrent autoencoder), validates on whole frames of its val split, and writes a checkpoint with
 its metadata: model and configuration, dataset config hash, steps, seed, training seconds and the
 validation relMSE next to the noisy input's. The same command with --resume CKPT continues a run
-exactly where it stopped (same seed, same batches).
+exactly where it stopped (same seed, same batches), on the dataset it was trained on; --init-from
+CKPT fine-tunes a checkpoint's weights (shipped weights too) on another dataset with a fresh
+optimiser, and its card then lists both datasets, every command and every stage.
 
 Options left out take the configuration's recipe (lbf: --loss relmse, the paper's relative MSE),
 then the defaults below. --device auto trains on a CUDA GPU when torch sees one (loader workers
@@ -32,6 +34,7 @@ EPILOG = """examples:
   denoisebench train --model kpcn --data data/big --config paper --device cuda --batch-size 32 --crop 64
   denoisebench train --model kpcn --data data/small --steps 1000 --resume kpcn.pt --out kpcn.pt
   denoisebench train --model rae --data data/small --set residual=false --out rae_direct.pt   # an ablation
+  denoisebench train --model dpcn --data data/mine --steps 3000 --lr 1e-4 --loss relmse --init-from denoisebench/models/weights/dpcn_small.pt --out d.pt
   denoisebench train --model dpcn --data data/mine --steps 0 --resume denoisebench/models/weights/dpcn_small.pt --out d.pt --evaluate
   denoisebench train --model rae --data data/small --steps 0 --resume rae.pt --out rae.pt --evaluate
   denoisebench benchmark ... --denoiser kpcn --option checkpoint=kpcn.pt   # use the result
@@ -64,6 +67,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--out", default=None, help="checkpoint to write (default checkpoints/MODEL_CONFIG.pt)")
     parser.add_argument("--resume", default=None, metavar="CKPT", help="continue from this checkpoint; with --steps 0 also shipped weights, to score them "
                              "(--evaluate/--ship) on another dataset")
+    parser.add_argument("--init-from", default=None, metavar="CKPT",
+                        help="fine-tune: start from this checkpoint's weights (shipped weights too) and step count "
+                        "with a fresh optimiser, on --data (which may differ from the checkpoint's)")
     parser.add_argument("--seed", type=int, default=0, help="initialisation and batch-order seed (default 0)")
     parser.add_argument("--batch-size", type=int, default=8, help="crops per step (default 8)")
     parser.add_argument("--crop", type=int, default=None,
@@ -126,6 +132,7 @@ def run(args) -> int:
         steps=args.steps,
         out=args.out,
         resume=args.resume,
+        init_from=args.init_from,
         seed=args.seed,
         batch_size=args.batch_size,
         crop=args.crop,

@@ -6,12 +6,17 @@ made the data and the weights, the dataset config and hash, training time, valid
 and relMSE on held-out scenes against identity and cross_bilateral with the margin stated and,
 when the evaluation carries them, 95% bootstrap intervals (scenes resampled). Every stage of a
 multi-stage run (``meta["stages"]``, one per ``denoisebench train`` command) is listed with its own
-steps, learning rate, schedule and loss. Pure formatting: no torch, no metrics.
+steps, learning rate, schedule and loss. Weights fine-tuned on another dataset (``train --init-from``)
+list every earlier run first (``meta["earlier_runs"]``, :mod:`~denoisebench.models.provenance`): its
+data, commands and stages, and held-out scenes are checked against the train scenes of every run.
+Pure formatting: no torch, no metrics.
 """
 
 from __future__ import annotations
 
 import shlex
+
+from .provenance import all_train_scenes
 
 DESCRIPTIONS = {
     "dpcn": "Direct-prediction convolutional network after Bako et al. 2017: two branches (albedo-demodulated "
@@ -57,12 +62,40 @@ def generate_command(config: dict, out: str) -> str:
 
 def _command_block(meta: dict, train_commands: list[str], data_dir: str) -> list[str]:
     """The card's commands: the training data's generate-dataset, the train commands; for weights scored on
-    another dataset (``meta["evaluated_on"]``) that dataset's generate-dataset before the last (scoring) command."""
+    another dataset (``meta["evaluated_on"]``) that dataset's generate-dataset before the last (scoring) command;
+    for fine-tuned weights every earlier run's generate-dataset and train commands first."""
+    earlier: list[str] = []
+    for run in meta.get("earlier_runs", []):  # fine-tuned weights: the runs they started from, oldest first
+        earlier += [generate_command(run.get("dataset_config", {}), run.get("dataset") or "DATA"), *run.get("commands", [])]
     elsewhere = meta.get("evaluated_on")
     if not elsewhere:
-        return [generate_command(meta.get("dataset_config", {}), data_dir), *train_commands]
-    return [generate_command(meta.get("dataset_config", {}), meta.get("dataset") or "DATA"), *train_commands[:-1],
+        return [*earlier, generate_command(meta.get("dataset_config", {}), data_dir), *train_commands]
+    return [*earlier, generate_command(meta.get("dataset_config", {}), meta.get("dataset") or "DATA"), *train_commands[:-1],
             generate_command(elsewhere.get("dataset_config", {}), data_dir), *train_commands[-1:]]
+
+
+def _overlap_line(evaluation: dict, meta: dict) -> str:
+    """Whether any test scene shares a name (family and seed) with a train scene of any run."""
+    seen = sorted(set(evaluation["scenes"]) & all_train_scenes(meta))
+    return (f"Test scenes that share a name (family and seed) with a training scene: {', '.join(seen)}."
+            if seen else "None of its test scenes shares a name (family and seed) with a training scene.")
+
+
+def _earlier_run_lines(meta: dict) -> list[str]:
+    """Fine-tuned weights: one bullet per earlier run (its data, scenes, steps and own validation)."""
+    lines = []
+    for number, run in enumerate(meta.get("earlier_runs", []), 1):
+        val = run.get("validation") or {}
+        lines.append(
+            f"* run {number} (the weights this one started from, `{run.get('checkpoint')}`): {run.get('steps')} steps on "
+            f"dataset config hash `{run.get('dataset_hash')}`, config `{run.get('dataset_config')}`; train scenes "
+            f"({len(run.get('train_scenes', []))}): {', '.join(run.get('train_scenes', []))}; val scenes: "
+            f"{', '.join(run.get('val_scenes', [])) or 'none'}"
+            + (f"; its val relMSE {val['relmse']:.5f} (noisy {val['relmse_noisy']:.5f})" if val else "")
+        )
+    if lines:
+        lines.append(f"* run {len(lines) + 1} (this card's weights), fine-tuned from run {len(lines)} on the data below:")
+    return lines
 
 
 def _scored_elsewhere_lines(elsewhere: dict, meta: dict, evaluation: dict) -> list[str]:
@@ -75,9 +108,7 @@ def _scored_elsewhere_lines(elsewhere: dict, meta: dict, evaluation: dict) -> li
     if val:
         lines.append(f"On its val split: relMSE {val['relmse']:.5f} against the noisy input's {val['relmse_noisy']:.5f} "
                      f"(ratio {val['relmse_ratio']:.3f}) over {val['frames']} frames.")
-    seen = sorted(set(evaluation["scenes"]) & set(meta.get("train_scenes", [])))
-    lines.append(f"Test scenes that share a name (family and seed) with a training scene: {', '.join(seen)}."
-                 if seen else "None of its test scenes shares a name (family and seed) with a training scene.")
+    lines.append(_overlap_line(evaluation, meta))
     return lines
 
 
@@ -91,17 +122,21 @@ def _threads(used: list[int]) -> str:
 
 
 def _stage_lines(meta: dict) -> list[str]:
-    """One bullet per training stage (command); a checkpoint from before stages were recorded gets its summary."""
-    stages = meta.get("stages") or []
+    """One bullet per training stage (command); a checkpoint from before stages were recorded gets its summary.
+
+    Fine-tuned weights list the earlier runs' stages first, each stage with its run's number."""
+    earlier = meta.get("earlier_runs", [])
+    stages = [(number, stage) for number, run in enumerate(earlier, 1) for stage in run.get("stages", [])]
+    stages += [(len(earlier) + 1, stage) for stage in meta.get("stages") or []]
     if not stages:
         return [
             f"* {meta.get('steps')} steps of batch {meta.get('batch_size')} × {meta.get('crop')}² crops"
             + f", spp {meta.get('spp')}, Adam lr {meta.get('lr')} (of the last command), seed {meta.get('seed')}, torch {meta.get('torch')}"
         ]
     lines = [f"* {meta.get('steps')} steps in {len(stages)} stage(s), seed {meta.get('seed')}, torch {meta.get('torch')}:"]
-    for number, stage in enumerate(stages, 1):
+    for number, (run, stage) in enumerate(stages, 1):
         lines.append(
-            f"  {number}. steps {stage['from_step']}–{stage['from_step'] + stage['steps']}: batch {stage['batch_size']} × "
+            f"  {number}. {f'run {run}, ' if earlier else ''}steps {stage['from_step']}–{stage['from_step'] + stage['steps']}: batch {stage['batch_size']} × "
             f"{stage['crop']}² crops, spp {stage['spp']}, Adam lr {stage['lr']} ({stage['lr_schedule']}), "
             f"loss {stage['loss']}, {stage['device']}, {stage['threads']} thread(s)"
         )
@@ -163,6 +198,7 @@ def render_card(
            " splits of the dataset made by the second `generate-dataset` command, not the one they were trained on."
            if scored_elsewhere else ""),
         "",
+        *_earlier_run_lines(meta),
         f"* dataset config hash `{meta.get('dataset_hash')}`; config `{meta.get('dataset_config')}`",
         f"* train scenes ({len(meta.get('train_scenes', []))}): {', '.join(meta.get('train_scenes', []))}",
         f"* val scenes: {', '.join(meta.get('val_scenes', [])) or 'none'}; test (held-out) scenes: {', '.join(evaluation['scenes'])}",
@@ -182,6 +218,8 @@ def render_card(
     else:
         lines.append("The dataset had no val split.")
     lines += _scored_elsewhere_lines(scored_elsewhere, meta, evaluation)
+    if meta.get("earlier_runs") and not scored_elsewhere:
+        lines += ["", _overlap_line(evaluation, meta)]
     lines += [
         "",
         f"## Held-out scenes (test split: {evaluation['frames']} frames per denoiser, every spp)",
@@ -205,7 +243,7 @@ def render_card(
         "",
         "## Limits",
         "",
-        f"Trained for minutes on a CPU on {len(meta.get('train_scenes', []))} small scenes "
+        f"Trained for minutes on a CPU on {len(all_train_scenes(meta))} small scenes "
         f"({meta.get('dataset_config', {}).get('width', '?')}×{meta.get('dataset_config', {}).get('height', '?')} "
         "pixels): a reference point for the harness, not a production denoiser. The paper configuration "
         "(`--config paper`) is the published size and needs far more data and training.",

@@ -31,6 +31,11 @@ Notes
   ``lr/100`` over this command's steps) or ``step`` (×0.1 at half and three quarters of them).
   The schedule spans one command: a resumed run is a new stage with its own schedule, and every
   stage is recorded in ``meta["stages"]`` (the model card lists them).
+* ``--resume`` continues a run on its own dataset only: with ``--steps`` > 0 on another dataset
+  the card would list that dataset's scenes as though every step had been trained on them.
+  ``--init-from`` fine-tunes instead: the checkpoint's weights, configuration and step count with a
+  fresh optimiser on the new data; the earlier run's record moves into ``meta["earlier_runs"]``
+  (:mod:`~denoisebench.models.provenance`) and the batch order continues from its step count.
 * ``loss`` None takes the configuration's recipe (catalog ``recipes``), else ``log``. ``lobes``
   (DPCN/KPCN) is the paper's separate L1 per branch, no combined-colour term.
 """
@@ -54,6 +59,7 @@ from .catalog import build_model, get_spec, model_config
 from .checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
 from .features import frame_tensors
 from .losses import PCN_KINDS, SPATIAL, pcn_loss, rae_sequence_loss, relmse
+from .provenance import run_record
 
 
 @dataclass
@@ -64,6 +70,8 @@ class TrainOptions:
     steps: int = 200
     out: str | None = None
     resume: str | None = None
+    #: fine-tune: start from these weights (shipped ones too) with a fresh optimiser, on ``data``
+    init_from: str | None = None
     seed: int = 0
     batch_size: int = 8
     crop: int | None = None  # None: the configuration's recipe, else 32
@@ -331,15 +339,22 @@ def train(options: TrainOptions) -> dict:
     optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
     meta = {"steps": 0, "seconds": 0.0, "skipped_steps": 0, "history": []}
     rescoring = False  # --steps 0 on another dataset than the checkpoint's: score it, keep its provenance
+    if options.resume and options.init_from:
+        raise UserInputError("--resume continues a run, --init-from starts a new one from its weights: give one")
     if options.resume:
         payload = load_checkpoint(options.resume, expect_model=spec.name)
         if options.steps == 0 and not options.overrides:
             config = payload["config"]  # nothing is trained: the checkpoint is scored as it was made
         if payload["config"] != config:
             raise UserInputError(f"{options.resume}: trained with config {payload['config']}, not {config}")
+        trained_on = payload["meta"].get("dataset_hash")
+        if options.steps > 0 and trained_on not in (None, ds.config_hash):
+            raise UserInputError(f"{options.resume}: trained on another dataset (config hash {trained_on[:12]}…, "
+                                 f"this one {ds.config_hash[:12]}…); --resume continues a run on its own data: "
+                                 "--init-from fine-tunes the weights on this one, --steps 0 scores them")
         if "optimizer" not in payload and options.steps > 0:
-            raise UserInputError(f"{options.resume}: has no optimiser state (shipped weights cannot be trained "
-                                 "further; --steps 0 scores them)")
+            raise UserInputError(f"{options.resume}: has no optimiser state (shipped weights cannot be resumed; "
+                                 "--init-from fine-tunes them, --steps 0 scores them)")
         model = model_from_checkpoint(payload).to(device)
         optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
         if "optimizer" in payload:
@@ -349,8 +364,30 @@ def train(options: TrainOptions) -> dict:
         if options.steps == 0 and payload["meta"].get("dataset_hash") not in (None, ds.config_hash):
             rescoring = True
             meta = dict(payload["meta"])  # the training run's record stays as it was
-        kept = ("steps", "seconds", "skipped_steps", "history", "commands", "threads", "stages", "validation_history", "devices")
+        kept = ("steps", "seconds", "skipped_steps", "history", "commands", "threads", "stages", "validation_history",
+                "devices", "earlier_runs")
         meta.update({k: payload["meta"][k] for k in kept if k in payload["meta"]})
+    elif options.init_from:
+        payload = load_checkpoint(options.init_from, expect_model=spec.name)
+        if options.steps < 1:
+            raise UserInputError("--init-from fine-tunes: give --steps >= 1 (--steps 0 --resume scores weights)")
+        if options.overrides:
+            raise UserInputError("--init-from keeps the checkpoint's configuration: --set cannot change it")
+        if payload.get("config_name") not in (None, options.config):
+            raise UserInputError(f"{options.init_from}: weights of the {payload['config_name']!r} configuration; "
+                                 f"add --config {payload['config_name']}")
+        config = payload["config"]  # the weights' own shape (the shipped dpcn_small.pt predates the small config)
+        model = model_from_checkpoint(payload).to(device)
+        optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
+        earlier = payload["meta"]
+        meta.update({
+            "steps": int(earlier.get("steps", 0)),  # the batch order continues from here
+            "seconds": float(earlier.get("seconds", 0.0)),  # the weights' whole training time
+            "threads": list(earlier.get("threads", [])),
+            "devices": list(earlier.get("devices", [])),
+            "earlier_runs": [*earlier.get("earlier_runs", []), run_record(
+                earlier, options.init_from, lambda name: resolve_loss(spec, name, None))],
+        })
 
     dataset, crop, frames = _make_dataset(spec, ds, train_scenes, spp, options, buffers, targets)
     out = Path(options.out or f"checkpoints/{spec.name}_{options.config if isinstance(options.config, str) else 'custom'}.pt")
@@ -402,7 +439,7 @@ def train(options: TrainOptions) -> dict:
         meta.setdefault("stages", []).append(
             {"steps": int(options.steps), "from_step": int(meta["steps"]), "lr": options.lr, "lr_schedule": options.lr_schedule,
              "loss": loss_kind, "batch_size": options.batch_size, "crop": crop, "spp": spp, "device": device.type,
-             "threads": threads}
+             "threads": threads, "dataset_hash": ds.config_hash}
         )
     start_step, total = int(meta["steps"]), int(meta["steps"]) + int(options.steps)
     per_epoch = len(_batches(len(dataset), options.batch_size, options.seed, 0))
@@ -485,6 +522,8 @@ def command_line(options: TrainOptions, out: str) -> str:
              "--config", str(options.config), "--steps", str(options.steps), "--out", out]
     if options.resume:
         parts += ["--resume", str(options.resume)]
+    if options.init_from:
+        parts += ["--init-from", str(options.init_from)]
     parts += ["--seed", str(options.seed), "--batch-size", str(options.batch_size)]
     if options.crop is not None:
         parts += ["--crop", str(options.crop)]
