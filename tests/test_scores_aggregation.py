@@ -204,6 +204,23 @@ def test_the_demo_renders_sequences_long_enough_to_flicker():
     assert DEMO_FRAMES >= 8  # issue 15: three frames gave two frame differences, two points per line
 
 
+def test_the_demo_scores_shipped_weights_on_scenes_none_of_them_trained_on():
+    """A scene name is its family and seed, so the same name is the same stage (geometry, materials, lights)."""
+    from pathlib import Path
+
+    from denoisebench.commands.demo import DEMO_DATASET_FAMILIES, DEMO_DATASET_SEED
+    from denoisebench.generator.dataset_scenes import family_scene_names
+    from denoisebench.models.checkpoint import load_checkpoint
+    from denoisebench.models.provenance import all_train_scenes
+
+    demo = {name for _, _, name in family_scene_names(list(DEMO_DATASET_FAMILIES), 1, DEMO_DATASET_SEED)}
+    shipped = sorted((Path(__file__).parents[1] / "denoisebench" / "models" / "weights").glob("*.pt"))
+    assert len(shipped) >= 4
+    for path in shipped:
+        trained = all_train_scenes(load_checkpoint(path)["meta"])
+        assert trained and not demo & trained, (path.name, sorted(demo & trained))
+
+
 def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
     import csv
     import json
