@@ -68,6 +68,9 @@ def test_ship_writes_weights_and_a_card_that_replays_the_commands(data, tmp_path
     assert "--threads" not in first and second.endswith("--threads 2") and "--resume" in second
     assert all(c in card for c in (first, second, third)) and "1 and 2 CPU threads" in card
     assert "--steps 0" in third and "It adds no steps" in card
+    # two stages: the --steps 0 command trained nothing and is no stage
+    assert [(s["from_step"], s["steps"]) for s in payload["meta"]["stages"]] == [(0, 1), (1, 1)]
+    assert "2. steps 1–2" in card and "3. steps" not in card
     test_scenes = open_dataset(data).split("test")
     assert f"test (held-out) scenes: {', '.join(test_scenes)}" in card
     for peer in ("identity", "cross_bilateral"):

@@ -128,6 +128,7 @@ def _stage_lines(meta: dict) -> list[str]:
     earlier = meta.get("earlier_runs", [])
     stages = [(number, stage) for number, run in enumerate(earlier, 1) for stage in run.get("stages", [])]
     stages += [(len(earlier) + 1, stage) for stage in meta.get("stages") or []]
+    stages = [(run, stage) for run, stage in stages if stage["steps"] > 0]  # a --steps 0 command trained nothing
     if not stages:
         return [
             f"* {meta.get('steps')} steps of batch {meta.get('batch_size')} × {meta.get('crop')}² crops"

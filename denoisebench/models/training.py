@@ -432,7 +432,7 @@ def train(options: TrainOptions) -> dict:
         meta["commands"] = [command_line(earlier, str(options.resume))]
     meta.setdefault("commands", []).append(command_line(options, str(out)))
     # Every torch thread count the training ran with (the card's training time depends on it).
-    if not rescoring:  # threads, devices and stages describe training; scoring is no stage
+    if not rescoring and options.steps > 0:  # threads, devices and stages describe training; scoring is no stage
         meta["threads"] = sorted(set(meta.get("threads", [])) | {threads})
         meta["devices"] = sorted(set(meta.get("devices", [])) | {device.type})
         # One record per command (stage) of a multi-stage run: what the card lists.
