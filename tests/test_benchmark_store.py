@@ -176,3 +176,51 @@ def test_split_all_scores_every_scene_of_the_dataset(dataset, tmp_path):
     with ResultsStore(db, readonly=True) as store:
         scenes = {run["config"]["split"]: {u["scene"] for u in store.units(run["run_id"])} for run in store.runs()}
     assert len(scenes["all"]) == 4 and len(scenes["test"]) == 1 and scenes["test"] < scenes["all"]
+
+
+def test_scores_on_a_denoisers_own_training_scenes_are_marked_not_held_out(tmp_path, capsys):
+    """A learned denoiser scored on scenes it was trained on (same name: same family and seed, the same stage)
+    looks better than it is: the run warns, the store records those scenes and the report marks them. The
+    built-in models read their train scenes from the checkpoint; a plugin declares ``trained_scenes``
+    (here from its isolated worker process)."""
+    from denoisebench.cli import main
+    from denoisebench.dataset import open_dataset
+
+    data = make_synthetic_dataset(tmp_path / "ds", scenes=4, frames=2, height=16, width=16, spp=(2,))
+    ck = tmp_path / "dpcn.pt"
+    assert main(["train", "--model", "dpcn", "--data", str(data), "--steps", "1", "--out", str(ck),
+                 "--batch-size", "2", "--crop", "8", "--quiet"]) == 0
+    ds = open_dataset(data)
+    train_scenes, test_scene = ds.split("train"), ds.split("test")[0]
+    plugin = tmp_path / "memoriser.py"
+    plugin.write_text(textwrap.dedent(f"""
+        import numpy as np
+        class Memoriser:
+            name = "memoriser"
+            trained_scenes = frozenset({{{test_scene!r}, "a_scene_of_another_dataset"}})
+            def denoise(self, frame):
+                return np.array(frame.color, dtype=np.float32)
+        """))
+    db, out = tmp_path / "b.sqlite", tmp_path / "report"
+    capsys.readouterr()
+    assert main(["benchmark", "--data", str(data), "--db", str(db), "--out", str(out), "--metrics", "relmse",
+                 "--split", "all", "--denoisers", f"identity,dpcn,{plugin}:Memoriser",
+                 "--option", f"dpcn:checkpoint={ck}"]) == 0
+    err = capsys.readouterr().err
+    assert f"warning: dpcn was trained on {len(train_scenes)} of this run's 4 scene(s)" in err
+    assert f"warning: memoriser was trained on 1 of this run's 4 scene(s) ({test_scene})" in err
+    assert "warning: identity" not in err
+    with ResultsStore(db, readonly=True) as store:
+        (run,) = store.runs()
+        declared = {d["label"]: d["trained_on"] for d in store.denoisers(run["run_id"])}
+    assert declared["dpcn"] == sorted(train_scenes) and declared["memoriser"] == [test_scene]
+    assert declared["identity"] == [] and declared["noisy"] == []
+    html, md = (out / "index.html").read_text(), (out / "report.md").read_text().replace("\\_", "_")  # Markdown escapes _
+    for text in (html, md):
+        assert f"memoriser was trained on 1 of the 4 scene(s) scored here ({test_scene})" in text
+        assert f"dpcn was trained on {len(train_scenes)} of the 4 scene(s)" in text and "not held-out" in text
+    # held out: on the test split dpcn saw none of the scenes, and nothing is marked
+    capsys.readouterr()
+    assert main(["benchmark", "--data", str(data), "--db", str(db), "--out", str(tmp_path / "r2"), "--metrics", "relmse",
+                 "--denoisers", "dpcn", "--option", f"dpcn:checkpoint={ck}"]) == 0
+    assert "not held-out" not in capsys.readouterr().err + (tmp_path / "r2" / "report.md").read_text()

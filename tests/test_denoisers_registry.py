@@ -146,3 +146,18 @@ def test_entry_points_are_found_and_builtins_win(monkeypatch):
     with pytest.raises(UserInputError) as caught:
         load_denoiser("broken_ep")
     assert "\n" not in str(caught.value) and "no_such_module_xyz" in str(caught.value)
+
+
+def test_describe_reads_trained_scenes_and_refuses_a_bare_string():
+    class Learned:
+        trained_scenes = ["cornell_100", "glass_env_101"]
+
+        def denoise(self, frame):
+            return frame.color
+
+    assert describe(Learned()).trained_scenes == frozenset({"cornell_100", "glass_env_101"})
+    Learned.trained_scenes = "cornell_100"  # would be read as its letters
+    with pytest.raises(TypeError, match="trained_scenes must be a collection of scene names"):
+        describe(Learned())
+    del Learned.trained_scenes
+    assert describe(Learned()).trained_scenes == frozenset()

@@ -111,12 +111,17 @@ def test_set_overrides_a_configuration_key_and_the_checkpoint_loads_as_trained(d
     assert payload["config"]["residual"] is False
     assert model_from_checkpoint(payload).residual is False  # the ablation, not the shipped form
     assert "--set residual=false" in payload["meta"]["commands"][-1]
-    # resuming needs the same override (the configuration must match the checkpoint's)
+    # resuming continues the checkpoint's configuration; a --set that contradicts it is refused
     capsys.readouterr()
-    assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out) == 2
-    assert "trained with config" in capsys.readouterr().err
+    assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out) == 0
+    assert load_checkpoint(out)["config"]["residual"] is False
     assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out,
                  "--set", "residual=false") == 0
+    assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out,
+                 "--set", "residual=true") == 2
+    assert "trained with config" in capsys.readouterr().err
+    assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out, "--config", "paper") == 2
+    assert "trained with config" in capsys.readouterr().err
     for bad, message in ((["--set", "no_such_key=1"], "not a rae configuration key"),
                          (["--set", "residual"], "expects KEY=VALUE"),
                          (["--set", "residual=3"], "expected a value like")):
@@ -165,7 +170,8 @@ def test_init_from_fine_tunes_on_another_dataset_and_the_card_lists_both_runs(da
     other = make_synthetic_dataset(tmp_path / "other", scenes=5, frames=3, height=20, width=20, spp=(2,), seed=9)
     ck, first, second = tmp_path / "ck.pt", tmp_path / "ship1", tmp_path / "ship2"
     first.mkdir(), second.mkdir()
-    assert train("--model", "dpcn", "--data", data, "--steps", 2, "--out", ck, "--ship", first) == 0
+    # weights of another shape than today's small configuration (as the first shipped dpcn_small.pt)
+    assert train("--model", "dpcn", "--data", data, "--steps", 2, "--out", ck, "--ship", first, "--set", "layers=3") == 0
     shipped = first / "dpcn_small.pt"
     capsys.readouterr()
     refused = [
@@ -199,6 +205,7 @@ def test_init_from_fine_tunes_on_another_dataset_and_the_card_lists_both_runs(da
     assert f"`{before['dataset_hash']}`" in card and f"dataset config hash `{after['dataset_hash']}`" in card
     assert before["commands"][0] in card and after["commands"][-1] in card
     assert card.index(before["commands"][0]) < card.index(after["commands"][-1])
+    assert "`--init-from` keeps a checkpoint's shape" in card and "'layers': 3" in card
     assert "1. run 1, steps 0–2" in card and "2. run 2, steps 2–4" in card and "fine-tuned from run 1" in card
     seen = sorted(set(open_dataset(other).split("test")) & (set(before["train_scenes"]) | set(after["train_scenes"])))
     assert (f"share a name (family and seed) with a training scene: {', '.join(seen)}." if seen

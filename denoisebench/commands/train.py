@@ -176,7 +176,7 @@ def run(args) -> int:
 def ship(checkpoint: str, args, evaluation: dict) -> str:
     """Write the stripped weights and the model card into ``args.ship``; return a one-line summary."""
     from denoisebench.models.card import render_card
-    from denoisebench.models.catalog import parameter_count
+    from denoisebench.models.catalog import model_config, parameter_count
     from denoisebench.models.checkpoint import load_checkpoint, model_from_checkpoint
     from denoisebench.models.training import strip_for_shipping
 
@@ -189,6 +189,7 @@ def ship(checkpoint: str, args, evaluation: dict) -> str:
         weights.name, weights.stat().st_size, payload["meta"], evaluation,
         list(payload["meta"].get("commands", [])),
         args.data,
+        named_config=model_config(args.model, args.config),
     )
     (folder / f"{stem}.md").write_text(card)
     return f"shipped {weights} ({weights.stat().st_size / 1024:.0f} KiB) and {folder / f'{stem}.md'}"

@@ -128,7 +128,7 @@ def _exit_reason(code: int | None) -> str:
 class IsolatedDenoiser:
     """A denoiser living in a worker process; see the module docstring.
 
-    ``name``, ``needs`` and ``temporal`` are what the worker's instance declared.
+    ``name``, ``needs``, ``temporal`` and ``trained_scenes`` are what the worker's instance declared.
     ``last_seconds`` is the time inside the worker's ``denoise()`` of the last call,
     ``overhead_seconds`` the total time spent around those calls (transfer, checks).
     """
@@ -153,6 +153,7 @@ class IsolatedDenoiser:
         self.name: str = info["name"]
         self.needs: frozenset[str] = frozenset(info["needs"])
         self.temporal: bool = bool(info["temporal"])
+        self.trained_scenes: frozenset[str] = frozenset(str(s) for s in info.get("trained_scenes", []))
 
     # ------------------------------------------------------------------ process
 

@@ -41,7 +41,8 @@ def _load(conn, spec: str, options: dict, sys_path: list[str]):
     except BaseException as error:  # noqa: BLE001 - every failure goes back as one line
         _reply(conn, {"ok": False, "error_type": type(error).__name__, "error": str(error).strip().splitlines()[0] if str(error).strip() else one_line(error)})
         return None
-    _reply(conn, {"ok": True, "name": str(info.name), "needs": sorted(str(n) for n in info.needs), "temporal": bool(info.temporal)})
+    _reply(conn, {"ok": True, "name": str(info.name), "needs": sorted(str(n) for n in info.needs), "temporal": bool(info.temporal),
+                  "trained_scenes": sorted(info.trained_scenes)})
     return denoiser
 
 

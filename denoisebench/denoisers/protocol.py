@@ -5,12 +5,16 @@ A denoiser is any object with::
     name: str
     needs: frozenset[str]      # buffers read, e.g. {"color", "albedo", "normal"}, or {"samples"}
     temporal: bool             # True: frames arrive in order; reset() is called between sequences
+    trained_scenes: frozenset[str]  # optional: scene names (family_seed) a learned denoiser was trained on
     def reset(self) -> None: ...
     def denoise(self, frame: Frame) -> np.ndarray: ...   # H×W×3 float32 linear radiance
 
 Only ``denoise`` is required of a plugin: :func:`describe` reads the other attributes with the
 defaults ``name`` = the spec it was loaded from, ``needs`` = {"color"}, ``temporal`` = False and a
-no-op ``reset``. The frame a denoiser receives has been sanitised by the runner (no NaN/Inf) and its
+no-op ``reset``; ``trained_scenes`` defaults to none. A learned denoiser that declares the scenes it
+was trained on (the built-in ``dpcn``/``kpcn``/``rae``/``lbf`` read them from their checkpoint) has its
+scores on those scenes marked in the benchmark and its report as not held-out: a scene name is its
+family and seed, so the same name is the same stage. The frame a denoiser receives has been sanitised by the runner (no NaN/Inf) and its
 arrays are read-only views: a denoiser that wants to write must copy.
 """
 
@@ -41,6 +45,7 @@ class DenoiserBase:
     name: str = "unnamed"
     needs: frozenset[str] = frozenset({"color"})
     temporal: bool = False
+    trained_scenes: frozenset[str] = frozenset()
 
     def reset(self) -> None:
         """Forget state between sequences (nothing to forget for a spatial denoiser)."""
@@ -59,13 +64,14 @@ class DenoiserInfo:
     name: str
     needs: frozenset[str]
     temporal: bool
+    trained_scenes: frozenset[str] = frozenset()
 
 
 def describe(denoiser: object, fallback_name: str = "unnamed") -> DenoiserInfo:
-    """Read ``name``, ``needs`` and ``temporal`` of any denoiser-like object, with defaults.
+    """Read ``name``, ``needs``, ``temporal`` and ``trained_scenes`` of any denoiser-like object, with defaults.
 
     Raises TypeError (one line) when the object has no callable ``denoise`` or a malformed
-    attribute (``needs`` not a collection of strings, ``name`` not a string).
+    attribute (``needs`` or ``trained_scenes`` not a collection of strings, ``name`` not a string).
     """
     if not callable(getattr(denoiser, "denoise", None)):
         raise TypeError(f"{type(denoiser).__name__} object has no callable denoise(frame)")
@@ -78,4 +84,7 @@ def describe(denoiser: object, fallback_name: str = "unnamed") -> DenoiserInfo:
     if isinstance(needs, str) or not all(isinstance(item, str) for item in needs):
         raise TypeError(f"denoiser {name!r}: needs must be a collection of buffer names")
     temporal = bool(getattr(denoiser, "temporal", False))
-    return DenoiserInfo(name=name, needs=frozenset(needs), temporal=temporal)
+    trained = getattr(denoiser, "trained_scenes", None) or frozenset()
+    if isinstance(trained, str) or not all(isinstance(item, str) for item in trained):
+        raise TypeError(f"denoiser {name!r}: trained_scenes must be a collection of scene names")
+    return DenoiserInfo(name=name, needs=frozenset(needs), temporal=temporal, trained_scenes=frozenset(trained))

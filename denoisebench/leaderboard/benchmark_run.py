@@ -32,6 +32,10 @@ def run_benchmark(
     from tqdm import tqdm
 
     plan = prepare_run(dataset, config, store, progress=progress)
+    for label, scenes in plan.trained_on().items():
+        shown = ", ".join(scenes[:6]) + (f" and {len(scenes) - 6} more" if len(scenes) > 6 else "")
+        print(f"warning: {label} was trained on {len(scenes)} of this run's {len(plan.scenes)} scene(s) ({shown}): "
+              "its scores there are not held-out (the report marks them)", file=sys.stderr)
     done = len(store.done_units(plan.run_id))
     bar = tqdm(
         total=plan.total_units, initial=min(done, plan.total_units), desc="benchmark: denoisers × sequences",

@@ -93,6 +93,17 @@ def flicker_rows(report: dict, spp: int) -> tuple[list[str], list[list[str]]]:
     return ["denoiser", *headings], [[r.denoiser, *(make(r) for make in makers)] for r in sorted(rows, key=key)]
 
 
+def not_held_out_lines(report: dict) -> list[str]:
+    """One sentence per denoiser that was trained on some of the run's scenes (store ``trained_on``)."""
+    lines = []
+    for d in report.get("denoisers", []):
+        scenes = d.get("trained_on") or []
+        if scenes:
+            lines.append(f"{d['label']} was trained on {len(scenes)} of the {len(report['scenes'])} scene(s) scored here "
+                         f"({', '.join(scenes)}): its scores are not held-out there and flatter it.")
+    return lines
+
+
 def indistinguishable_lines(report: dict) -> list[str]:
     """One sentence per pair of denoisers the reference cannot tell apart (analysis.indistinguishable_pairs)."""
     from .aggregate import rule_of

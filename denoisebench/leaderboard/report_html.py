@@ -145,6 +145,7 @@ def _results(report: dict) -> str:
              "<b>floor</b>: the score a perfect denoiser would get against this noisy reference (from its variance "
              "buffer); <b>\u2212 floor</b>: the score corrected for it, an unbiased estimate of the error against the "
              "noise-free image.</p>"]
+    parts += [f'<p class="error">Not held-out: {e(line)}</p>' for line in fmt.not_held_out_lines(report)]
     for spp in report["spp"]:
         header, rows = fmt.summary_rows(report, spp)
         classes = ["input" if r[0] == "noisy" else "" for r in rows]

@@ -55,6 +55,7 @@ def render_markdown(report: dict) -> str:
               "that includes the reference's uncertainty (↓ lower is better, ↑ higher). *floor*: the score of a perfect "
               "denoiser against this noisy reference; *− floor*: the score corrected for it (unbiased against the "
               "noise-free image).", ""]
+    lines += [f"> **Not held-out:** {md(line)}\n" for line in fmt.not_held_out_lines(report)]
     for spp in report["spp"]:
         header, rows = fmt.summary_rows(report, spp)
         lines += [f"### {spp} spp", ""] + _table(header, rows)

@@ -116,6 +116,7 @@ class LoadedDenoiser:
     needs: frozenset[str]
     temporal: bool
     load_error: str | None = None
+    trained_scenes: frozenset[str] = frozenset()  # what the denoiser declared (learned models: their checkpoint's)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -177,14 +178,14 @@ def load_denoisers(specs: list[str], options: dict[str, dict], *, isolation: str
         try:
             instance = isolation_mod.load(spec, options.get(spec, {}), policy=isolation, limits=limits)
             info = describe(instance, fallback_name=spec)
-            label, needs, temporal, error = info.name, info.needs, info.temporal, None
+            label, needs, temporal, error, trained = info.name, info.needs, info.temporal, None, info.trained_scenes
         except DenoiserLoadError as exc:
-            instance, label, needs, temporal, error = None, spec, frozenset(), False, str(exc)
+            instance, label, needs, temporal, error, trained = None, spec, frozenset(), False, str(exc), frozenset()
         base, n = label, 2
         while label in taken:  # two specs with one name (or a plugin called "noisy") stay apart
             label, n = f"{base}#{n}", n + 1
         taken.add(label)
-        loaded.append(LoadedDenoiser(label, spec, instance, needs, temporal, error))
+        loaded.append(LoadedDenoiser(label, spec, instance, needs, temporal, error, trained))
     return loaded
 
 
@@ -352,6 +353,11 @@ class RunPlan:
     def total_units(self) -> int:
         return len(self.labels) * len(self.scenes) * len(self.spp)
 
+    def trained_on(self) -> dict[str, list[str]]:
+        """Denoisers (label) that were trained on some of this run's scenes, and those scenes."""
+        seen = {d.label: sorted(set(self.scenes) & d.trained_scenes) for d in self.denoisers if d.instance is not None}
+        return {label: scenes for label, scenes in seen.items() if scenes}
+
 
 def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, *, progress: bool = False) -> RunPlan:
     """Check the inputs, load the denoisers, create (or find) the run in the store."""
@@ -378,9 +384,12 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     denoisers = load_denoisers(specs, config.options, isolation=config.isolation, limits=config.limits())
     created = store.ensure_run(run_id, data_hash, str(dataset.root.resolve()), config.as_dict(), software_versions())
     store.add_denoiser(run_id, NOISY, NOISY, "input", {"color"}, False, None)
+    plan = RunPlan(run_id, scenes, spp, denoisers, spatial, temporal, resumed=not created)
+    seen = plan.trained_on()
     for d in denoisers:
-        store.add_denoiser(run_id, d.label, d.spec, "denoiser", d.needs, d.temporal, d.load_error)
-    return RunPlan(run_id, scenes, spp, denoisers, spatial, temporal, resumed=not created)
+        store.add_denoiser(run_id, d.label, d.spec, "denoiser", d.needs, d.temporal, d.load_error,
+                           seen.get(d.label, []) if d.trained_scenes else None)
+    return plan
 
 
 def pending_groups(plan: RunPlan, done: set[tuple[str, str, int]]) -> list[tuple[str, int, list[str]]]:

@@ -3,7 +3,8 @@
 Tables (schema version :data:`SCHEMA_VERSION`, kept in ``schema_version``):
 
 ``runs``            one row per benchmark run: dataset hash, config (JSON), software versions (JSON)
-``run_denoisers``   the denoisers of a run: label, spec, needs, temporal, load error (if any)
+``run_denoisers``   the denoisers of a run: label, spec, needs, temporal, load error (if any), and
+                    ``trained_on``: the run's scenes the denoiser declared it was trained on (JSON list)
 ``units``           one denoiser on one sequence (scene) at one input spp: status, error, seconds
 ``frames``          one row per frame of a unit: status, error, render/denoise/total seconds
 ``frame_metrics``   metric values per frame (spatial, gradient, and per-frame flicker), with the
@@ -25,8 +26,9 @@ Notes
 * **Schema versions.** Version 2 added ``floor`` and ``ref_se`` to ``frame_metrics`` and
   ``sequence_metrics`` and the ``strips`` table (:mod:`denoisebench.metrics.floors`). A version-1 database opened for
   writing is migrated in place (``ALTER TABLE ... ADD COLUMN``, one transaction; its old rows get
-  NULL floors); opened read-only it is read as it is, every floor None. A newer version than this
-  code knows is refused.
+  NULL floors); opened read-only it is read as it is, every floor None. Version 3 added
+  ``run_denoisers.trained_on`` (migrated the same way; NULL: not declared). A newer version than
+  this code knows is refused.
 * The WAL journal mode is a property of the database file; network file systems do not support it
   (SQLite's documentation): keep the database on a local disk.
 """
@@ -47,9 +49,9 @@ import numpy as np
 
 from denoisebench.errors import UserInputError
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 #: Versions this code reads (older ones are migrated when opened for writing).
-READABLE_VERSIONS = (1, 2)
+READABLE_VERSIONS = (1, 2, 3)
 #: Seconds a writer waits for another's transaction before giving up.
 BUSY_TIMEOUT_S = 120.0
 
@@ -72,6 +74,7 @@ CREATE TABLE IF NOT EXISTS run_denoisers (
     needs TEXT NOT NULL,
     temporal INTEGER NOT NULL,
     load_error TEXT,
+    trained_on TEXT,
     PRIMARY KEY (run_id, label)
 );
 CREATE TABLE IF NOT EXISTS units (
@@ -257,6 +260,12 @@ class ResultsStore:
                         if column not in have:
                             self.conn.execute(f"ALTER TABLE {table} ADD COLUMN {column} REAL")
                 self.conn.execute("UPDATE schema_version SET version = 2")
+                version = 2
+            if version == 2:  # 2 → 3: the scenes a denoiser was trained on
+                have = {row[1] for row in self.conn.execute("PRAGMA table_info(run_denoisers)")}
+                if "trained_on" not in have:
+                    self.conn.execute("ALTER TABLE run_denoisers ADD COLUMN trained_on TEXT")
+                self.conn.execute("UPDATE schema_version SET version = 3")
 
     def _check_version(self) -> None:
         try:
@@ -270,6 +279,7 @@ class ResultsStore:
             )
         self.version = int(row[0])
         self._floor_columns = "floor, ref_se" if self.version >= 2 else "NULL, NULL"
+        self._trained_column = "trained_on" if self.version >= 3 else "NULL"
 
     @contextmanager
     def transaction(self) -> Iterator[sqlite3.Connection]:
@@ -305,11 +315,15 @@ class ResultsStore:
             )
             return True
 
-    def add_denoiser(self, run_id: str, label: str, spec: str, kind: str, needs, temporal: bool, load_error: str | None) -> None:
+    def add_denoiser(self, run_id: str, label: str, spec: str, kind: str, needs, temporal: bool, load_error: str | None,
+                     trained_on=None) -> None:
+        """``trained_on``: the run's scenes the denoiser was trained on (None: it declared none)."""
         with self.transaction() as conn:
             conn.execute(
-                "INSERT OR REPLACE INTO run_denoisers (run_id, label, spec, kind, needs, temporal, load_error) VALUES (?, ?, ?, ?, ?, ?, ?)",
-                (run_id, label, spec, kind, json.dumps(sorted(needs)), int(bool(temporal)), load_error),
+                "INSERT OR REPLACE INTO run_denoisers (run_id, label, spec, kind, needs, temporal, load_error, trained_on) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                (run_id, label, spec, kind, json.dumps(sorted(needs)), int(bool(temporal)), load_error,
+                 None if trained_on is None else json.dumps(sorted(trained_on))),
             )
 
     def finish_run(self, run_id: str) -> None:
@@ -336,10 +350,12 @@ class ResultsStore:
 
     def denoisers(self, run_id: str) -> list[dict]:
         rows = self.conn.execute(
-            "SELECT label, spec, kind, needs, temporal, load_error FROM run_denoisers WHERE run_id = ? ORDER BY rowid", (run_id,)
+            f"SELECT label, spec, kind, needs, temporal, load_error, {self._trained_column} FROM run_denoisers "
+            "WHERE run_id = ? ORDER BY rowid", (run_id,)
         )
         return [
-            {"label": r[0], "spec": r[1], "kind": r[2], "needs": json.loads(r[3]), "temporal": bool(r[4]), "load_error": r[5]}
+            {"label": r[0], "spec": r[1], "kind": r[2], "needs": json.loads(r[3]), "temporal": bool(r[4]), "load_error": r[5],
+             "trained_on": json.loads(r[6]) if r[6] else []}
             for r in rows
         ]
 

@@ -169,7 +169,11 @@ def render_card(
     evaluation: dict,
     train_commands: list[str],
     data_dir: str,
+    named_config: dict | None = None,
 ) -> str:
+    """The card's Markdown. ``named_config``: today's keywords of ``config_name``; when the weights'
+    ``config`` differs (weights made before the configuration changed, kept by ``--init-from``), the
+    card says so."""
     val = meta.get("validation") or {}
     scored_elsewhere = meta.get("evaluated_on") or {}
     relmse = evaluation["relmse"]
@@ -181,7 +185,10 @@ def render_card(
         "",
         f"* weights: `{file_name}` ({file_bytes / 1024:.0f} KiB, {parameters:,} parameters, float32); "
         "load with `load_denoiser(\"" + model + "\")` (default) or `--option checkpoint=PATH` for your own",
-        f"* configuration `{config_name}`: `{config}`",
+        f"* configuration `{config_name}`: `{config}`"
+        + ("" if named_config is None or named_config == config else
+           f" (the shape these weights were first trained in; today's `{config_name}` is `{named_config}`: "
+           "`--init-from` keeps a checkpoint's shape)"),
         f"* inputs: {', '.join(meta.get('buffers', []))} (+ color); trained against {', '.join(meta.get('targets', []))}",
         "",
         "## How it was made (exact commands)",

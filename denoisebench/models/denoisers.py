@@ -29,6 +29,7 @@ from denoisebench.denoisers.registry import DenoiserUnavailableError
 
 from .checkpoint import load_checkpoint, model_from_checkpoint
 from .features import exposure, frame_tensors, to_image
+from .provenance import all_train_scenes
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
 
@@ -50,6 +51,8 @@ class LearnedDenoiser(DenoiserBase):
         payload = load_checkpoint(path, expect_model=self.model_name)
         self.checkpoint = str(path)
         self.meta = payload["meta"]
+        #: every run's train scenes (fine-tuned weights: the earlier runs' too); the benchmark marks them
+        self.trained_scenes = frozenset(all_train_scenes(self.meta))
         self.config = payload["config"]
         self.model = model_from_checkpoint(payload).eval()
         self.threads = max(1, int(threads))

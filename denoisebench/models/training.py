@@ -343,8 +343,10 @@ def train(options: TrainOptions) -> dict:
         raise UserInputError("--resume continues a run, --init-from starts a new one from its weights: give one")
     if options.resume:
         payload = load_checkpoint(options.resume, expect_model=spec.name)
-        if options.steps == 0 and not options.overrides:
-            config = payload["config"]  # nothing is trained: the checkpoint is scored as it was made
+        if not options.overrides and (options.steps == 0 or payload.get("config_name") in (None, options.config)):
+            # scored, or continued, as it was made: its --set keys, or a shape kept by --init-from from
+            # before the named configuration changed (the shipped dpcn_small.pt: 5 layers of 3x3)
+            config = payload["config"]
         if payload["config"] != config:
             raise UserInputError(f"{options.resume}: trained with config {payload['config']}, not {config}")
         trained_on = payload["meta"].get("dataset_hash")
