@@ -214,3 +214,14 @@ def test_init_from_fine_tunes_on_another_dataset_and_the_card_lists_both_runs(da
     assert train("--model", "dpcn", "--data", other, "--resume", tuned, "--steps", 1, "--out", tuned) == 0
     again = load_checkpoint(tuned)["meta"]
     assert again["steps"] == 5 and again["earlier_runs"] == after["earlier_runs"] and len(again["stages"]) == 2
+
+
+def test_init_from_on_the_same_dataset_lists_its_generate_command_once(data, tmp_path):
+    ck, tuned, shipped = tmp_path / "ck.pt", tmp_path / "tuned.pt", tmp_path / "ship"
+    shipped.mkdir()
+    assert train("--model", "lbf", "--data", data, "--steps", 2, "--out", ck) == 0
+    assert train("--model", "lbf", "--data", data, "--init-from", ck, "--steps", 2, "--out", tuned, "--ship", shipped) == 0
+    card = (shipped / "lbf_small.md").read_text()
+    block = card.split("```sh")[1].split("```")[0].strip().splitlines()
+    assert [line.split()[0] for line in block] == ["#", "denoisebench", "denoisebench"]  # synthetic data: no generate-dataset
+    assert "--init-from" in block[2] and "1. run 1, steps 0–2" in card and "2. run 2, steps 2–4" in card

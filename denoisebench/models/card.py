@@ -65,12 +65,18 @@ def _command_block(meta: dict, train_commands: list[str], data_dir: str) -> list
     another dataset (``meta["evaluated_on"]``) that dataset's generate-dataset before the last (scoring) command;
     for fine-tuned weights every earlier run's generate-dataset and train commands first."""
     earlier: list[str] = []
+    made = None  # the dataset hash the last generate-dataset line made (a run on the same data needs none)
     for run in meta.get("earlier_runs", []):  # fine-tuned weights: the runs they started from, oldest first
-        earlier += [generate_command(run.get("dataset_config", {}), run.get("dataset") or "DATA"), *run.get("commands", [])]
+        if run.get("dataset_hash") != made:
+            earlier.append(generate_command(run.get("dataset_config", {}), run.get("dataset") or "DATA"))
+            made = run.get("dataset_hash")
+        earlier += run.get("commands", [])
+    own = [] if made is not None and meta.get("dataset_hash") == made else [
+        generate_command(meta.get("dataset_config", {}), data_dir if not meta.get("evaluated_on") else meta.get("dataset") or "DATA")]
     elsewhere = meta.get("evaluated_on")
     if not elsewhere:
-        return [*earlier, generate_command(meta.get("dataset_config", {}), data_dir), *train_commands]
-    return [*earlier, generate_command(meta.get("dataset_config", {}), meta.get("dataset") or "DATA"), *train_commands[:-1],
+        return [*earlier, *own, *train_commands]
+    return [*earlier, *own, *train_commands[:-1],
             generate_command(elsewhere.get("dataset_config", {}), data_dir), *train_commands[-1:]]
 
 
