@@ -71,9 +71,9 @@ def _command_block(meta: dict, train_commands: list[str], data_dir: str) -> list
             earlier.append(generate_command(run.get("dataset_config", {}), run.get("dataset") or "DATA"))
             made = run.get("dataset_hash")
         earlier += run.get("commands", [])
-    own = [] if made is not None and meta.get("dataset_hash") == made else [
-        generate_command(meta.get("dataset_config", {}), data_dir if not meta.get("evaluated_on") else meta.get("dataset") or "DATA")]
     elsewhere = meta.get("evaluated_on")
+    own = [] if made is not None and meta.get("dataset_hash") == made else [  # the training data, where it was made
+        generate_command(meta.get("dataset_config", {}), meta.get("dataset") or "DATA" if elsewhere else data_dir)]
     if not elsewhere:
         return [*earlier, *own, *train_commands]
     return [*earlier, *own, *train_commands[:-1],
