@@ -204,7 +204,7 @@ def mutual_information_codes(codes_a: torch.Tensor, codes_b: torch.Tensor, total
     # Miller–Madow entropy log N − Σ c log c / N + (K − 1)/2N (K: non-empty cells) is
     # log N − (Σ g(c) + ½)/N with g(c) = c log c − ½ for c ≥ 1 and g(0) = 0: the counts are whole
     # numbers ≤ N, so g is one table look-up per cell instead of xlogy plus a separate count of the
-    # non-empty cells (14% less CPU for the whole filter on a rendered 128 px depth_of_field frame)
+    # non-empty cells (10-20% less CPU for the whole filter on rendered 128 px frames, A/B interleaved)
     size = int(total.max()) + 1
     whole = torch.arange(size, dtype=torch.float32)
     table = torch.xlogy(whole, whole) - 0.5
