@@ -205,7 +205,7 @@ def mutual_information_codes(codes_a: torch.Tensor, codes_b: torch.Tensor, total
     # log N − (Σ g(c) + ½)/N with g(c) = c log c − ½ for c ≥ 1 and g(0) = 0: the counts are whole
     # numbers ≤ N, so g is one table look-up per cell instead of xlogy plus a separate count of the
     # non-empty cells (10-20% less CPU for the whole filter on rendered 128 px frames, A/B interleaved)
-    size = int(total.max()) + 1
+    size = int(total.max()) + 1 if total.numel() else 1
     whole = torch.arange(size, dtype=torch.float32)
     table = torch.xlogy(whole, whole) - 0.5
     table[0] = 0.0
