@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.setup-stamp
 DEMO_OUT ?= demo_out
 
-.PHONY: setup demo test clean
+.PHONY: setup demo test lint format clean
 
 setup: $(STAMP)
 
@@ -23,9 +23,18 @@ $(STAMP): requirements.txt requirements-nodeps.txt pyproject.toml scripts/ensure
 demo: setup
 	$(VENV)/bin/denoisebench demo --out $(DEMO_OUT)
 
-test: setup
+test: setup lint
 	bash scripts/ensure_chromium.sh
 	$(PY) -m pytest -q tests
+
+# One style, enforced: ruff's linter and formatter, configured in pyproject.toml.
+lint: setup
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+format: setup
+	$(VENV)/bin/ruff check --fix .
+	$(VENV)/bin/ruff format .
 
 clean:
 	rm -rf $(VENV) $(DEMO_OUT) build *.egg-info

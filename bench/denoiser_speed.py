@@ -73,8 +73,13 @@ def seconds_in_denoise(name, frame, repeats: int, with_output: bool = False):
 def rpf_at_revision(revision: str):
     """A RandomParameterFilter built from ``denoisebench/baselines/rpf.py`` as of git ``revision``."""
     try:
-        source = subprocess.run(["git", "show", f"{revision}:denoisebench/baselines/rpf.py"], cwd=ROOT,
-                                check=True, capture_output=True, text=True).stdout
+        source = subprocess.run(
+            ["git", "show", f"{revision}:denoisebench/baselines/rpf.py"],
+            cwd=ROOT,
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout
     except (OSError, subprocess.CalledProcessError) as error:
         raise SystemExit(f"--rpf-baseline {revision}: cannot read rpf.py there ({error})") from None
     module = types.ModuleType(f"rpf_at_{revision}")
@@ -118,8 +123,11 @@ def main(argv=None) -> int:
     parser.add_argument("--rpf-spp", default="4,8", help="comma-separated spp of the RPF frames")
     parser.add_argument("--rpf-baseline", metavar="REV", help="also time rpf.py as of this git revision")
     parser.add_argument("--rpf-only", action="store_true", help="time OIDN and RPF only (no other baselines)")
-    parser.add_argument("--rpf-data", metavar="DIR", help="time RPF on frame 0 of every scene of this dataset "
-                        "(made with --samples) instead of synthetic frames")
+    parser.add_argument(
+        "--rpf-data",
+        metavar="DIR",
+        help="time RPF on frame 0 of every scene of this dataset (made with --samples) instead of synthetic frames",
+    )
     parser.add_argument("--spp", type=int, default=4)
     parser.add_argument("--radius", type=int, default=7)
     parser.add_argument("--repeats", type=int, default=3)
@@ -137,8 +145,10 @@ def main(argv=None) -> int:
     oidn = per_mp["oidn"]
 
     print("load average before: " + load_average())
-    print(f"denoiser speed: {args.size}x{args.size} px, {args.spp} spp (rpf: {args.rpf_size}x{args.rpf_size} at "
-          f"{args.rpf_spp} spp); min of {args.repeats} after a warm-up")
+    print(
+        f"denoiser speed: {args.size}x{args.size} px, {args.spp} spp (rpf: {args.rpf_size}x{args.rpf_size} at "
+        f"{args.rpf_spp} spp); min of {args.repeats} after a warm-up"
+    )
     print(f"{'denoiser':<22}{'s/MP':>10}{'x OIDN (high)':>16}")
     for name, value in per_mp.items():
         print(f"{name:<22}{value:>10.3f}{value / oidn:>16.3f}")
@@ -148,9 +158,14 @@ def main(argv=None) -> int:
         cases = list(dataset_frames(args.rpf_data))
         print(f"\nrpf on frame 0 of every scene of {args.rpf_data} (OIDN timed on the same frame):")
     else:
-        cases = [(f"textured {args.rpf_size}x{args.rpf_size}", spp,
-                  synthetic_frame("textured", args.rpf_size, args.rpf_size, spp, seed=0, samples=True))
-                 for spp in rpf_spps]
+        cases = [
+            (
+                f"textured {args.rpf_size}x{args.rpf_size}",
+                spp,
+                synthetic_frame("textured", args.rpf_size, args.rpf_size, spp, seed=0, samples=True),
+            )
+            for spp in rpf_spps
+        ]
         print(f"\nrpf, textured {args.rpf_size}x{args.rpf_size} px (OIDN timed on the same frame):")
     presets = ("rpf", "rpf_fast")  # the paper settings and the 48-draw preset
     totals = dict.fromkeys(presets + ("old",), 0.0)
@@ -164,15 +179,19 @@ def main(argv=None) -> int:
             seconds, image = seconds_in_denoise(name, small, args.repeats, with_output=True)
             per_mp[name] = seconds / small_megapixels
             totals[name] += seconds
-            print(f"    {name:<12}{per_mp[name]:9.2f} s/MP  {per_mp[name] / oidn_small:8.1f}x OIDN  "
-                  f"relMSE {relmse(image, small.reference):.4f}")
+            print(
+                f"    {name:<12}{per_mp[name]:9.2f} s/MP  {per_mp[name] / oidn_small:8.1f}x OIDN  "
+                f"relMSE {relmse(image, small.reference):.4f}"
+            )
         if baseline is not None:
             old_seconds, old_image = seconds_in_denoise(baseline, small, args.repeats, with_output=True)
             old = old_seconds / small_megapixels
             totals["old"] += old_seconds
             faster = ", ".join(f"{name} {old / per_mp[name]:.1f}x" for name in presets)
-            print(f"    {'rpf@' + args.rpf_baseline:<12}{old:9.2f} s/MP  {old / oidn_small:8.1f}x OIDN  "
-                  f"relMSE {relmse(old_image, small.reference):.4f}  -> faster today: {faster}")
+            print(
+                f"    {'rpf@' + args.rpf_baseline:<12}{old:9.2f} s/MP  {old / oidn_small:8.1f}x OIDN  "
+                f"relMSE {relmse(old_image, small.reference):.4f}  -> faster today: {faster}"
+            )
     if baseline is not None and len(cases) > 1:
         faster = ", ".join(f"{name} {totals['old'] / totals[name]:.1f}x" for name in presets)
         print(f"  all frames: rpf@{args.rpf_baseline} {totals['old']:.2f} s; faster today: {faster}")
@@ -190,23 +209,40 @@ def main(argv=None) -> int:
     )
     full_seconds = best_of(
         lambda: cross_bilateral_filter(
-            color, {}, color_variance=frame.buffers["color_var"], radius=args.radius, sigma_spatial=sigma_spatial,
-            feature_sigmas={}, separable=False, firefly_support=None,
+            color,
+            {},
+            color_variance=frame.buffers["color_var"],
+            radius=args.radius,
+            sigma_spatial=sigma_spatial,
+            feature_sigmas={},
+            separable=False,
+            firefly_support=None,
         ),
         args.repeats,
     )
     separable_seconds = best_of(
         lambda: cross_bilateral_filter(
-            color, {}, color_variance=frame.buffers["color_var"], radius=args.radius, sigma_spatial=sigma_spatial,
-            feature_sigmas={}, separable=True,
+            color,
+            {},
+            color_variance=frame.buffers["color_var"],
+            radius=args.radius,
+            sigma_spatial=sigma_spatial,
+            feature_sigmas={},
+            separable=True,
         ),
         args.repeats,
     )
-    print(f"\nbilateral, colour only, {window}x{window} window, sigma_spatial {sigma_spatial:g}, {args.size}x{args.size} px:")
+    print(
+        f"\nbilateral, colour only, {window}x{window} window, sigma_spatial {sigma_spatial:g}, {args.size}x{args.size} px:"
+    )
     print(f"  skimage denoise_bilateral   {skimage_seconds:8.3f} s")
-    print(f"  ours, full 2-D window       {full_seconds:8.3f} s   skimage/ours = {skimage_seconds / full_seconds:6.1f}x")
-    print(f"  ours, separable (default)   {separable_seconds:8.3f} s   skimage/ours = {skimage_seconds / separable_seconds:6.1f}x"
-          "   (target >= 10x)")
+    print(
+        f"  ours, full 2-D window       {full_seconds:8.3f} s   skimage/ours = {skimage_seconds / full_seconds:6.1f}x"
+    )
+    print(
+        f"  ours, separable (default)   {separable_seconds:8.3f} s   skimage/ours = {skimage_seconds / separable_seconds:6.1f}x"
+        "   (target >= 10x)"
+    )
     print("load average after: " + load_average())
     return 0
 

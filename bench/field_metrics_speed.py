@@ -29,9 +29,9 @@ from denoisebench.metrics.colorvideovdp import cvvdp  # noqa: E402
 def make_sequence(size: int, frames: int, seed: int = 0):
     """A panning textured plane (2 px per frame) and a noisy prediction, float32 linear radiance."""
     rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:size, 0: size + 2 * frames].astype(np.float32)
+    yy, xx = np.mgrid[0:size, 0 : size + 2 * frames].astype(np.float32)
     plane = np.stack([0.6 + 0.5 * np.sin(0.15 * xx + c) * np.cos(0.11 * yy) for c in range(3)], -1)
-    ref = np.stack([plane[:, 2 * k: 2 * k + size] for k in range(frames)]).astype(np.float32)
+    ref = np.stack([plane[:, 2 * k : 2 * k + size] for k in range(frames)]).astype(np.float32)
     pred = np.clip(ref + rng.normal(0, 0.08, ref.shape).astype(np.float32), 0, None)
     return pred, ref
 
@@ -61,8 +61,10 @@ def main(argv=None) -> int:
 
     import torch
 
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads; {args.frames} frames; "
-          f"min of {args.repeats} repeats")
+    print(
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads; {args.frames} frames; "
+        f"min of {args.repeats} repeats"
+    )
     p, r = make_sequence(16, 2)
     t0 = time.perf_counter()
     cvvdp(p, r)

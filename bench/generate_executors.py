@@ -24,8 +24,9 @@ from denoisebench.generator.executors import LocalExecutor, RayExecutor
 
 
 def _hashes(root: Path) -> dict[str, str]:
-    return {p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(root.rglob("*.exr"))}
+    return {
+        p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(root.rglob("*.exr"))
+    }
 
 
 def main() -> None:
@@ -36,9 +37,17 @@ def main() -> None:
     args = parser.parse_args()
     families = tuple(args.families.split(","))
     with tempfile.TemporaryDirectory() as tmp:
+
         def request(name: str) -> GenerateRequest:
-            return GenerateRequest(out=Path(tmp) / name, families=families, frames=args.frames, width=args.size,
-                                   height=args.size, spp=(1, 4), ref_spp=64)
+            return GenerateRequest(
+                out=Path(tmp) / name,
+                families=families,
+                frames=args.frames,
+                width=args.size,
+                height=args.size,
+                spp=(1, 4),
+                ref_spp=64,
+            )
 
         generate_dataset(request("warm"), LocalExecutor(), progress=False)
         results = {}
@@ -51,15 +60,22 @@ def main() -> None:
                 executor.close()
             results[name] = (time.perf_counter() - started, summary)
         same = _hashes(Path(tmp) / "local") == _hashes(Path(tmp) / "ray") and manifest_without_timings(
-            Path(tmp) / "local" / "dataset.json") == manifest_without_timings(Path(tmp) / "ray" / "dataset.json")
-    print(f"config: {','.join(families)}, {args.frames} frames, {args.size}x{args.size}, spp 1,4, ref 64; "
-          f"{os.cpu_count()} cores")
+            Path(tmp) / "local" / "dataset.json"
+        ) == manifest_without_timings(Path(tmp) / "ray" / "dataset.json")
+    print(
+        f"config: {','.join(families)}, {args.frames} frames, {args.size}x{args.size}, spp 1,4, ref 64; "
+        f"{os.cpu_count()} cores"
+    )
     for name, (wall, summary) in results.items():
-        print(f"{name:6s} wall {wall:7.2f} s   render {summary.render_seconds:7.2f} s   "
-              f"{summary.samples_per_second:10.3g} samples/s (render)   {summary.samples / wall:10.3g} samples/s (wall)")
+        print(
+            f"{name:6s} wall {wall:7.2f} s   render {summary.render_seconds:7.2f} s   "
+            f"{summary.samples_per_second:10.3g} samples/s (render)   {summary.samples / wall:10.3g} samples/s (wall)"
+        )
     (lw, ls), (rw, rs) = results["local"], results["ray"]
-    print(f"ray/local: wall {rw / lw:.2f}x, render samples/s {rs.samples_per_second / ls.samples_per_second:.2f}x; "
-          f"same bytes: {same}")
+    print(
+        f"ray/local: wall {rw / lw:.2f}x, render samples/s {rs.samples_per_second / ls.samples_per_second:.2f}x; "
+        f"same bytes: {same}"
+    )
 
 
 if __name__ == "__main__":

@@ -65,8 +65,10 @@ def main() -> int:
     names = [n for n in args.only.split(",") if n] or list(BUILTINS)
     sequence = synthetic_sequence("textured", args.size, args.size, args.spp, args.frames, samples=True)
     print(f"{args.size}x{args.size}, {args.spp} spp, {args.frames} frames, per-sample data; min of {args.repeats}")
-    print(f"{'denoiser':<22}{'denoise s/frame':>16}{'in-proc wall':>14}{'isolated wall':>15}"
-          f"{'overhead ms/frame':>19}{'overhead':>10}{'start-up s':>12}")
+    print(
+        f"{'denoiser':<22}{'denoise s/frame':>16}{'in-proc wall':>14}{'isolated wall':>15}"
+        f"{'overhead ms/frame':>19}{'overhead':>10}{'start-up s':>12}"
+    )
     total_denoise = total_extra = 0.0
     for name in names:
         try:
@@ -87,11 +89,15 @@ def main() -> int:
         extra = float(np.median(per_call))
         total_denoise += frame_denoise
         total_extra += extra
-        print(f"{name:<22}{frame_denoise:>16.4f}{wall_local:>14.4f}{wall_remote:>15.4f}{1e3 * extra:>19.2f}"
-              f"{100 * extra / max(frame_denoise, 1e-9):>9.1f}%{startup:>12.2f}")
+        print(
+            f"{name:<22}{frame_denoise:>16.4f}{wall_local:>14.4f}{wall_remote:>15.4f}{1e3 * extra:>19.2f}"
+            f"{100 * extra / max(frame_denoise, 1e-9):>9.1f}%{startup:>12.2f}"
+        )
     if total_denoise > 0:
-        print(f"{'all (sum per frame)':<22}{total_denoise:>16.4f}{'':>14}{'':>15}{1e3 * total_extra:>19.2f}"
-              f"{100 * total_extra / total_denoise:>9.1f}%")
+        print(
+            f"{'all (sum per frame)':<22}{total_denoise:>16.4f}{'':>14}{'':>15}{1e3 * total_extra:>19.2f}"
+            f"{100 * total_extra / total_denoise:>9.1f}%"
+        )
     return 0
 
 

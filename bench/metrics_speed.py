@@ -31,11 +31,11 @@ def make_data(size: int, frames: int, seed: int = 0):
     rng = np.random.default_rng(seed)
     h = w = size
     shift = 2
-    yy, xx = np.mgrid[0:h, 0: w + shift * frames].astype(np.float32)
+    yy, xx = np.mgrid[0:h, 0 : w + shift * frames].astype(np.float32)
     plane = np.stack([0.6 + 0.5 * np.sin(0.05 * xx + c) * np.cos(0.04 * yy) for c in range(3)], -1)
     fireflies = rng.random(plane.shape[:2]) < 1e-3
     plane[fireflies] *= 50.0
-    ref = np.stack([plane[:, shift * k: shift * k + w] for k in range(frames)]).astype(np.float32)
+    ref = np.stack([plane[:, shift * k : shift * k + w] for k in range(frames)]).astype(np.float32)
     pred = np.clip(ref + rng.normal(0, 0.1, ref.shape).astype(np.float32), 0, None)
     motion = np.zeros((frames, h, w, 2), dtype=np.float32)
     motion[..., 0] = shift
@@ -78,8 +78,10 @@ def main(argv=None) -> int:
     pred_seq, ref_seq, motion = make_data(args.size, args.frames)
     pred, ref = pred_seq[0], ref_seq[0]
     mp = M.megapixels(ref.shape)
-    print(f"image {args.size}×{args.size} ({mp:.3f} MP), float32, {args.frames} frames for temporal; "
-          f"min of {args.repeats} repeats")
+    print(
+        f"image {args.size}×{args.size} ({mp:.3f} MP), float32, {args.frames} frames for temporal; "
+        f"min of {args.repeats} repeats"
+    )
     print(f"{'metric':<20}{'value':>12}{'s/call':>10}{'s/MP':>10}")
     for name in M.metric_names():
         m = M.get_metric(name)
@@ -94,22 +96,22 @@ def main(argv=None) -> int:
         seconds = best_of(call, args.repeats)
         print(f"{name:<20}{value:>12.5g}{seconds:>10.4f}{seconds / pixels:>10.4f}")
     cost = M.measure_call(M.relmse, pred, ref)
-    print(f"peak traced memory of relmse: {cost.peak_bytes / 2**20:.1f} MiB "
-          f"(inputs {2 * ref.nbytes / 2**20:.1f} MiB)")
+    print(f"peak traced memory of relmse: {cost.peak_bytes / 2**20:.1f} MiB (inputs {2 * ref.nbytes / 2**20:.1f} MiB)")
 
     print("\nwrapper vs the library called directly (ratio = ours / direct; target ≈ 1)")
     print("  direct: library on data prepared beforehand; direct+prep: preparation inside the timed call")
     print(f"{'metric':<12}{'ours s':>10}{'direct s':>10}{'ratio':>8}{'direct+prep s':>15}{'ratio':>8}")
-    from skimage.metrics import structural_similarity
     import flip_evaluator
+    from skimage.metrics import structural_similarity
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         import colour
 
     def ssim_lib(p, r):
-        return structural_similarity(p, r, gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
-                                     data_range=1.0, channel_axis=-1)
+        return structural_similarity(
+            p, r, gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=1.0, channel_axis=-1
+        )
 
     def flip_lib(p, r):
         return flip_evaluator.evaluate(r, p, "HDR", applyMagma=False)[1]

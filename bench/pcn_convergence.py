@@ -52,22 +52,51 @@ def _speedup(runs: dict, key: str, target: float | None) -> tuple[dict, float | 
     return reach, (reach["dpcn"] / reach["kpcn"] if reach["dpcn"] and reach["kpcn"] else None)
 
 
-def compare(data: str, out: str, config: str = "small", steps: int = 2000, val_every: int = 100, loss: str = "lobes",
-            lr: float = 1e-3, batch_size: int = 8, crop: int = 32, seed: int = 0, device: str = "auto",
-            threads: int = 1, val_frames: int = 8, progress: bool = True, plot: bool = True) -> dict:
+def compare(
+    data: str,
+    out: str,
+    config: str = "small",
+    steps: int = 2000,
+    val_every: int = 100,
+    loss: str = "lobes",
+    lr: float = 1e-3,
+    batch_size: int = 8,
+    crop: int = 32,
+    seed: int = 0,
+    device: str = "auto",
+    threads: int = 1,
+    val_frames: int = 8,
+    progress: bool = True,
+    plot: bool = True,
+) -> dict:
     """Train DPCN and KPCN alike and return ``{"runs": {model: {...}}, "target", "steps_to_target", "speedup"}``."""
     folder = Path(out)
     folder.mkdir(parents=True, exist_ok=True)
     runs = {}
     for model in MODELS:
         options = TrainOptions(
-            model=model, data=data, config=config, steps=steps, out=str(folder / f"{model}.pt"), seed=seed,
-            batch_size=batch_size, crop=crop, lr=lr, loss=loss, val_every=val_every, val_frames=val_frames,
-            checkpoint_every=0, threads=threads, device=device, progress=progress,
+            model=model,
+            data=data,
+            config=config,
+            steps=steps,
+            out=str(folder / f"{model}.pt"),
+            seed=seed,
+            batch_size=batch_size,
+            crop=crop,
+            lr=lr,
+            loss=loss,
+            val_every=val_every,
+            val_frames=val_frames,
+            checkpoint_every=0,
+            threads=threads,
+            device=device,
+            progress=progress,
         )
         meta = train(options)
         # the final validation closes the curve (val_every validates only strictly before the end)
-        validation = list(meta.get("validation_history", [])) + [[meta["steps"], (meta.get("validation") or {}).get("relmse")]]
+        validation = list(meta.get("validation_history", [])) + [
+            [meta["steps"], (meta.get("validation") or {}).get("relmse")]
+        ]
         runs[model] = {
             "command": command_line(options, options.out),
             "seconds": meta["seconds"],
@@ -80,9 +109,20 @@ def compare(data: str, out: str, config: str = "small", steps: int = 2000, val_e
     reach, speedup = _speedup(runs, "validation_history", target)
     loss_target = runs["dpcn"]["loss_history"][-1][1] if runs["dpcn"]["loss_history"] else None
     loss_reach, loss_speedup = _speedup(runs, "loss_history", loss_target)
-    result = {"data": str(data), "config": config, "steps": steps, "loss": loss, "lr": lr, "runs": runs,
-              "target": target, "steps_to_target": reach, "speedup": speedup,
-              "loss_target": loss_target, "steps_to_loss_target": loss_reach, "loss_speedup": loss_speedup}
+    result = {
+        "data": str(data),
+        "config": config,
+        "steps": steps,
+        "loss": loss,
+        "lr": lr,
+        "runs": runs,
+        "target": target,
+        "steps_to_target": reach,
+        "speedup": speedup,
+        "loss_target": loss_target,
+        "steps_to_loss_target": loss_reach,
+        "loss_speedup": loss_speedup,
+    }
     (folder / "curves.json").write_text(json.dumps(result, indent=2))
     if plot:
         _plot(result, folder / "curves.png")
@@ -135,14 +175,32 @@ def main(argv=None) -> int:
     if args.steps < 1 or args.val_every < 1:
         print("error: --steps and --val-every must be >= 1", file=sys.stderr)
         return 2
-    result = compare(args.data, args.out, args.config, args.steps, args.val_every, args.loss, args.lr, args.batch_size,
-                     args.crop, args.seed, args.device, args.threads, args.val_frames, progress=not args.quiet)
+    result = compare(
+        args.data,
+        args.out,
+        args.config,
+        args.steps,
+        args.val_every,
+        args.loss,
+        args.lr,
+        args.batch_size,
+        args.crop,
+        args.seed,
+        args.device,
+        args.threads,
+        args.val_frames,
+        progress=not args.quiet,
+    )
     for model, run in result["runs"].items():
         print(f"{model}: {run['seconds']:.0f} s, validation relMSE by step {run['validation_history']}")
-    print(f"steps to reach DPCN's final training loss {result['loss_target']}: {result['steps_to_loss_target']}; "
-          f"KPCN speed-up {result['loss_speedup']}")
-    print(f"steps to reach DPCN's best val relMSE {result['target']}: {result['steps_to_target']}; "
-          f"KPCN speed-up {result['speedup']}")
+    print(
+        f"steps to reach DPCN's final training loss {result['loss_target']}: {result['steps_to_loss_target']}; "
+        f"KPCN speed-up {result['loss_speedup']}"
+    )
+    print(
+        f"steps to reach DPCN's best val relMSE {result['target']}: {result['steps_to_target']}; "
+        f"KPCN speed-up {result['speedup']}"
+    )
     print(f"wrote {Path(args.out) / 'curves.json'} and curves.png")
     return 0
 

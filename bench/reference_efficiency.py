@@ -34,11 +34,11 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 
-from denoisebench.generator.feature_renderer import render_frame  # noqa: E402
-from denoisebench.generator.mitsuba_scene import build_mitsuba_scene, sensor_dict  # noqa: E402
-from denoisebench.generator.reference_render import floor_of  # noqa: E402
-from denoisebench.generator.render_plan import make_render_plan  # noqa: E402
-from denoisebench.generator.translate import translate_usd  # noqa: E402
+from denoisebench.generator.contract.render_plan import make_render_plan  # noqa: E402
+from denoisebench.generator.render.frame import render_frame  # noqa: E402
+from denoisebench.generator.render.reference import floor_of  # noqa: E402
+from denoisebench.generator.render.scene import build_mitsuba_scene, sensor_dict  # noqa: E402
+from denoisebench.generator.usd.translate import translate_usd  # noqa: E402
 from denoisebench.mitsuba_runtime import load_mitsuba  # noqa: E402
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -74,7 +74,9 @@ def main(argv=None) -> int:
     print(f"scene {usd} ({size}x{size}); plan: {plan.transport_line()}; Mitsuba {mi.__version__} {mi.variant()}")
 
     def ours(spp: int, seed: int):
-        out = render_frame(scene, translated.camera, 0, plan, width=size, height=size, spp=spp, seed=seed, reference=True)
+        out = render_frame(
+            scene, translated.camera, 0, plan, width=size, height=size, spp=spp, seed=seed, reference=True
+        )
         return out.buffers["color"].astype(np.float64), out.seconds
 
     def theirs(spp: int, seed: int):
@@ -93,9 +95,11 @@ def main(argv=None) -> int:
     ba = la[:h, :w].reshape(h // k, k, w // k, k).mean(axis=(1, 3))
     bb = lb[:h, :w].reshape(h // k, k, w // k, k).mean(axis=(1, 3))
     block_diff = np.abs(ba - bb) / np.maximum(bb, 1e-12)
-    print(f"agreement at {args.spp} spp: image mean ours {la.mean():.5f} vs path {lb.mean():.5f}: "
-          f"{100 * mean_diff:.2f}% (target < 2%); {k}x{k} blocks: max {100 * block_diff.max():.2f}%, "
-          f"median {100 * np.median(block_diff):.2f}% (target every block < 8%)")
+    print(
+        f"agreement at {args.spp} spp: image mean ours {la.mean():.5f} vs path {lb.mean():.5f}: "
+        f"{100 * mean_diff:.2f}% (target < 2%); {k}x{k} blocks: max {100 * block_diff.max():.2f}%, "
+        f"median {100 * np.median(block_diff):.2f}% (target every block < 8%)"
+    )
 
     # --------------------------------------------------------------- efficiency
     replicas = 16
@@ -117,10 +121,14 @@ def main(argv=None) -> int:
     o_rel, t_rel = float(np.mean(o_err)), float(np.mean(t_err))
     o_eff, t_eff = 1 / (o_rel * o_sec), 1 / (t_rel * t_sec)
     print(f"truth: path {replicas}x{per} spp, its floor {truth_floor:.2e} (subtracted)")
-    print(f"ours  at {args.eff_spp} spp: relMSE {o_rel:.4e}, {o_sec:.3f} s (median of {args.repeats}), "
-          f"efficiency 1/(relMSE*s) {o_eff:.4g}")
-    print(f"path  at {args.eff_spp} spp: relMSE {t_rel:.4e}, {t_sec:.3f} s (median of {args.repeats}), "
-          f"efficiency 1/(relMSE*s) {t_eff:.4g}")
+    print(
+        f"ours  at {args.eff_spp} spp: relMSE {o_rel:.4e}, {o_sec:.3f} s (median of {args.repeats}), "
+        f"efficiency 1/(relMSE*s) {o_eff:.4g}"
+    )
+    print(
+        f"path  at {args.eff_spp} spp: relMSE {t_rel:.4e}, {t_sec:.3f} s (median of {args.repeats}), "
+        f"efficiency 1/(relMSE*s) {t_eff:.4g}"
+    )
     print(f"efficiency ratio ours / path: {o_eff / t_eff:.3f} (target >= 1.0)")
     return 0
 

@@ -28,10 +28,10 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from denoisebench.generator import feature_renderer  # noqa: E402
-from denoisebench.generator.camera_track import CameraTrack  # noqa: E402
-from denoisebench.generator.feature_renderer import load_scene, render_frame  # noqa: E402
-from denoisebench.generator.render_plan import RenderOptions, make_render_plan  # noqa: E402
+from denoisebench.generator.contract.camera_track import CameraTrack  # noqa: E402
+from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan  # noqa: E402
+from denoisebench.generator.render import frame as feature_renderer  # noqa: E402
+from denoisebench.generator.render.frame import load_scene, render_frame  # noqa: E402
 from denoisebench.mitsuba_runtime import load_mitsuba  # noqa: E402
 
 
@@ -39,8 +39,12 @@ def cornell_scene(mi, glossy: bool) -> dict:
     scene = mi.cornell_box()
     del scene["sensor"]
     if glossy:
-        scene["large-box"]["bsdf"] = {"type": "principled", "base_color": {"type": "rgb", "value": [0.8, 0.8, 0.8]},
-                                      "roughness": 0.25, "metallic": 0.5}
+        scene["large-box"]["bsdf"] = {
+            "type": "principled",
+            "base_color": {"type": "rgb", "value": [0.8, 0.8, 0.8]},
+            "roughness": 0.25,
+            "metallic": 0.5,
+        }
         scene["small-box"]["bsdf"] = {"type": "roughconductor", "alpha": 0.1}
     return scene
 
@@ -68,13 +72,24 @@ def main(argv=None) -> int:
     plan = make_render_plan(effects, RenderOptions(max_depth=args.max_depth))
     size, spp = args.size, args.spp
 
-    sensor = mi.load_dict({
-        "type": "perspective", "fov": camera.fov_x_deg, "fov_axis": "x",
-        "near_clip": camera.near_clip, "far_clip": camera.far_clip,
-        "to_world": mi.ScalarTransform4f(camera.mitsuba_to_world(1)),
-        "film": {"type": "hdrfilm", "width": size, "height": size, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
-        "sampler": {"type": "independent", "sample_count": spp},
-    })
+    sensor = mi.load_dict(
+        {
+            "type": "perspective",
+            "fov": camera.fov_x_deg,
+            "fov_axis": "x",
+            "near_clip": camera.near_clip,
+            "far_clip": camera.far_clip,
+            "to_world": mi.ScalarTransform4f(camera.mitsuba_to_world(1)),
+            "film": {
+                "type": "hdrfilm",
+                "width": size,
+                "height": size,
+                "rfilter": {"type": "box"},
+                "pixel_format": "rgb",
+            },
+            "sampler": {"type": "independent", "sample_count": spp},
+        }
+    )
     integrator = mi.load_dict({"type": "path", "max_depth": args.max_depth, "rr_depth": plan.rr_depth})
 
     cpu = {}  # process CPU seconds (all threads) per run: robust to other processes on a shared machine
@@ -111,17 +126,23 @@ def main(argv=None) -> int:
         for name, run in runs.items():
             times[name].append(run(k))
     samples = size * size * spp
-    print(f"scene={args.scene} {size}x{size} spp={spp} max_depth={args.max_depth} repeats={args.repeats} "
-          f"threads={dr.thread_count()} target_lanes={extra.get('target_lanes', 'default')} "
-          f"frozen={feature_renderer.FREEZE_PASSES}")
+    print(
+        f"scene={args.scene} {size}x{size} spp={spp} max_depth={args.max_depth} repeats={args.repeats} "
+        f"threads={dr.thread_count()} target_lanes={extra.get('target_lanes', 'default')} "
+        f"frozen={feature_renderer.FREEZE_PASSES}"
+    )
     medians = {name: statistics.median(t) for name, t in times.items()}
     for name, t in times.items():
-        print(f"{labels[name]:36s}: {samples / medians[name] / 1e6:7.3f} Msamples/s  "
-              f"(median {medians[name] * 1e3:7.1f} ms, min {min(t) * 1e3:7.1f} ms)")
+        print(
+            f"{labels[name]:36s}: {samples / medians[name] / 1e6:7.3f} Msamples/s  "
+            f"(median {medians[name] * 1e3:7.1f} ms, min {min(t) * 1e3:7.1f} ms)"
+        )
     for name in ("ours", "ours_ref"):
-        print(f"throughput ratio {name:8s} / path: median {medians['path'] / medians[name]:.3f}  "
-              f"min {min(times['path']) / min(times[name]):.3f}  "
-              f"CPU-time median {statistics.median(cpu['path']) / statistics.median(cpu[name]):.3f}")
+        print(
+            f"throughput ratio {name:8s} / path: median {medians['path'] / medians[name]:.3f}  "
+            f"min {min(times['path']) / min(times[name]):.3f}  "
+            f"CPU-time median {statistics.median(cpu['path']) / statistics.median(cpu[name]):.3f}"
+        )
     return 0
 
 

@@ -36,7 +36,13 @@ def test_cross_bilateral_without_range_terms_is_scipy_normalised_gaussian(separa
     color = rng.random((13, 17, 3)).astype(np.float32)
     radius, sigma = 3, 1.5
     out = cb.cross_bilateral_filter(
-        color, {}, radius=radius, sigma_spatial=sigma, sigma_color=1e12, feature_sigmas={}, separable=separable,
+        color,
+        {},
+        radius=radius,
+        sigma_spatial=sigma,
+        sigma_color=1e12,
+        feature_sigmas={},
+        separable=separable,
         firefly_support=None,
     )
     taps = np.arange(-radius, radius + 1)
@@ -44,14 +50,23 @@ def test_cross_bilateral_without_range_terms_is_scipy_normalised_gaussian(separa
         # one horizontal then one vertical normalised pass
         kernel = np.exp(-(taps**2) / (2 * sigma**2))
         ones = np.ones(color.shape[:2])
-        step = ndimage.correlate1d(color, kernel, axis=1, mode="constant") / ndimage.correlate1d(ones, kernel, axis=1, mode="constant")[..., None]
-        peer = ndimage.correlate1d(step, kernel, axis=0, mode="constant") / ndimage.correlate1d(ones, kernel, axis=0, mode="constant")[..., None]
+        step = (
+            ndimage.correlate1d(color, kernel, axis=1, mode="constant")
+            / ndimage.correlate1d(ones, kernel, axis=1, mode="constant")[..., None]
+        )
+        peer = (
+            ndimage.correlate1d(step, kernel, axis=0, mode="constant")
+            / ndimage.correlate1d(ones, kernel, axis=0, mode="constant")[..., None]
+        )
     else:
         yy, xx = np.meshgrid(taps, taps, indexing="ij")
         kernel = np.exp(-(yy**2 + xx**2) / (2 * sigma**2))
         ones = np.ones(color.shape[:2])
         norm = ndimage.correlate(ones, kernel, mode="constant")
-        peer = np.stack([ndimage.correlate(color[..., c], kernel, mode="constant") for c in range(3)], -1) / norm[..., None]
+        peer = (
+            np.stack([ndimage.correlate(color[..., c], kernel, mode="constant") for c in range(3)], -1)
+            / norm[..., None]
+        )
     np.testing.assert_allclose(out, peer, rtol=2e-5, atol=1e-6)
 
 
@@ -64,8 +79,14 @@ def test_cross_bilateral_matches_brute_force_weights():
     radius, sigma_s = 2, 1.7
     guide = cb.build_guide(color, {"albedo": albedo}, sigma_color=5.0, feature_sigmas=sigmas)
     out = cb.cross_bilateral_filter(
-        color, {"albedo": albedo}, radius=radius, sigma_spatial=sigma_s, sigma_color=5.0, feature_sigmas=sigmas,
-        separable=False, firefly_support=None,
+        color,
+        {"albedo": albedo},
+        radius=radius,
+        sigma_spatial=sigma_s,
+        sigma_color=5.0,
+        feature_sigmas=sigmas,
+        separable=False,
+        firefly_support=None,
     )
     expected = np.zeros_like(color, dtype=np.float64)
     for y in range(9):

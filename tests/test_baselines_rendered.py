@@ -27,10 +27,10 @@ FAMILIES = {"texture_checker": 1.0, "dim_room": 1.0, "depth_of_field": 6.0}  # f
 
 
 def _render(family: str, aperture_scale: float, tmp_dir) -> Frame:
-    from denoisebench.generator.feature_renderer import render_frame
-    from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
-    from denoisebench.generator.render_plan import RenderOptions, make_render_plan
-    from denoisebench.generator.translate import translate_usd
+    from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
+    from denoisebench.generator.render.frame import render_frame
+    from denoisebench.generator.render.scene import build_mitsuba_scene
+    from denoisebench.generator.usd.translate import translate_usd
     from denoisebench.scenes import get_family
 
     path = get_family(family).author(tmp_dir / family, seed=0, frames=1, width=SIZE, height=SIZE)

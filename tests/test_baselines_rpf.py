@@ -199,8 +199,12 @@ def test_rpf_deviations_cost_little(family):
     noisy = relmse(frame.color, frame.reference)
 
     def score(**options):
-        return np.mean([relmse(rpf_filter(frame.samples, RPFSettings(seed=seed, **options))[0], frame.reference)
-                        for seed in range(3)])
+        return np.mean(
+            [
+                relmse(rpf_filter(frame.samples, RPFSettings(seed=seed, **options))[0], frame.reference)
+                for seed in range(3)
+            ]
+        )
 
     ours = score()
     assert ours < 0.35 * noisy
@@ -225,7 +229,9 @@ def horizon(size: int = 32, spp: int = 8, seed: int = 0, row: int = 16) -> tuple
         "normal": np.where(sky, 0.0, np.array([0.0, 1.0, 0.0])),
         "albedo": np.where(sky, 0.0, 0.05) * np.ones(3),
         "position": np.where(sky, 0.0, np.stack([xs[None] + pixel[..., 0], np.zeros_like(y), 40.0 - y], -1)),
-        "pixel": pixel, "bounce": bounce, "light": light,
+        "pixel": pixel,
+        "bounce": bounce,
+        "light": light,
     }
     truth = np.where((ys < row)[..., None], 0.33, 0.08) * np.ones(3)
     truth[row] = 0.25 * 0.33 + 0.75 * 0.08
@@ -285,8 +291,10 @@ def test_cap_spikes_and_limit_change():
     color[1, 2, 3] = 100.0  # one isolated spike sample
     capped = cap_spikes(color, 16.0)
     assert capped[1, 2, 3, 0] == pytest.approx(16 * 0.5)
-    np.testing.assert_array_equal(np.delete(capped.reshape(-1, 3), 1 * 30 + 2 * 6 + 3, axis=0),
-                                  np.delete(color.reshape(-1, 3), 1 * 30 + 2 * 6 + 3, axis=0))
+    np.testing.assert_array_equal(
+        np.delete(capped.reshape(-1, 3), 1 * 30 + 2 * 6 + 3, axis=0),
+        np.delete(color.reshape(-1, 3), 1 * 30 + 2 * 6 + 3, axis=0),
+    )
     ramp = np.broadcast_to(np.linspace(0.1, 3.0, 6, dtype=np.float32)[None, None, :, None], (2, 5, 6, 3))
     np.testing.assert_array_equal(cap_spikes(ramp, 16.0), ramp)  # a bright region with bright neighbours stays
     own = np.stack([np.zeros((4, 4, 3)), np.ones((4, 4, 3))])  # mean 0.5, standard error 0.5

@@ -25,14 +25,17 @@ FRAMES = 3
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory) -> Path:
     # 4 scenes → one test scene; 2 spp
-    return make_synthetic_dataset(tmp_path_factory.mktemp("ds") / "ds", scenes=4, frames=FRAMES, height=16, width=16, spp=(1, 4))
+    return make_synthetic_dataset(
+        tmp_path_factory.mktemp("ds") / "ds", scenes=4, frames=FRAMES, height=16, width=16, spp=(1, 4)
+    )
 
 
 @pytest.fixture(scope="module")
 def plugins(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("plugins")
-    (folder / "plugins.py").write_text(textwrap.dedent(
-        """
+    (folder / "plugins.py").write_text(
+        textwrap.dedent(
+            """
         import time
         import numpy as np
 
@@ -51,13 +54,26 @@ def plugins(tmp_path_factory) -> Path:
             def denoise(self, frame):
                 raise RuntimeError("kaboom")
         """
-    ))
+        )
+    )
     return folder
 
 
 def _command(dataset: Path, db: Path, *extra: str) -> list[str]:
-    return [sys.executable, "-m", "denoisebench.cli", "benchmark", "--data", str(dataset), "--db", str(db),
-            "--metrics", "relmse", "--no-report", *extra]
+    return [
+        sys.executable,
+        "-m",
+        "denoisebench.cli",
+        "benchmark",
+        "--data",
+        str(dataset),
+        "--db",
+        str(db),
+        "--metrics",
+        "relmse",
+        "--no-report",
+        *extra,
+    ]
 
 
 def _env(plugins: Path | None = None) -> dict:
@@ -84,7 +100,10 @@ def test_two_processes_writing_one_database_lose_no_rows(dataset, tmp_path):
     # two processes on the same run (they race for the same units) and a third on another run
     same = _command(dataset, db, "--denoisers", "identity,cross_bilateral_fast")
     other = _command(dataset, db, "--denoisers", "nlmeans", "--spp", "4")
-    procs = [subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env()) for cmd in (same, same, other)]
+    procs = [
+        subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_env())
+        for cmd in (same, same, other)
+    ]
     outputs = [p.communicate(timeout=300) for p in procs]
     for proc, (out, err) in zip(procs, outputs):
         assert proc.returncode == 0, err
@@ -92,7 +111,9 @@ def test_two_processes_writing_one_database_lose_no_rows(dataset, tmp_path):
     assert counts["problems"] == []
     units_same = 3 * 1 * 2  # (noisy, identity, cross_bilateral_fast) × 1 test scene × 2 spp
     units_other = 2 * 1 * 1  # (noisy, nlmeans) × 1 scene × 1 spp
-    assert sorted(counts["runs"].values()) == sorted([(units_other, units_other * FRAMES), (units_same, units_same * FRAMES)])
+    assert sorted(counts["runs"].values()) == sorted(
+        [(units_other, units_other * FRAMES), (units_same, units_same * FRAMES)]
+    )
     assert all(counts["finished"].values())
     # relmse and flip (always) per frame, two flicker scores (temporal_relmse, tpsnr) on frames 1.. :
     # nothing lost, nothing doubled
@@ -121,7 +142,7 @@ def test_killed_run_leaves_a_consistent_database_and_a_rerun_completes_it(datase
         proc.wait(timeout=30)
     before = _counts(db)
     assert before["problems"] == []
-    (run_id, (units, frames)), = before["runs"].items()
+    ((run_id, (units, frames)),) = before["runs"].items()
     total = 3 * 1 * 2  # (noisy, identity, slow) × 1 scene × 2 spp
     assert 2 <= units < total and frames == units * FRAMES
     assert before["finished"][run_id] is False
@@ -155,7 +176,9 @@ def test_missing_reference_is_a_clear_error_naming_the_frame(tmp_path):
     missing = data / "synthetic_000" / "reference" / "frame_0001.exr"
     missing.unlink()
     db = tmp_path / "r.sqlite"
-    result = subprocess.run(_command(data, db, "--denoisers", "identity"), capture_output=True, text=True, env=_env(), timeout=120)
+    result = subprocess.run(
+        _command(data, db, "--denoisers", "identity"), capture_output=True, text=True, env=_env(), timeout=120
+    )
     assert result.returncode == 2
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1, result.stderr
@@ -170,8 +193,13 @@ def test_split_all_scores_every_scene_of_the_dataset(dataset, tmp_path):
     # the demo's benchmark-only dataset: --split all covers the 4 scenes, --split test only its one
     db = tmp_path / "all.sqlite"
     for split in ("all", "test"):
-        result = subprocess.run(_command(dataset, db, "--denoisers", "identity", "--spp", "1", "--split", split),
-                                capture_output=True, text=True, env=_env(), timeout=300)
+        result = subprocess.run(
+            _command(dataset, db, "--denoisers", "identity", "--spp", "1", "--split", split),
+            capture_output=True,
+            text=True,
+            env=_env(),
+            timeout=300,
+        )
         assert result.returncode == 0, result.stderr
     with ResultsStore(db, readonly=True) as store:
         scenes = {run["config"]["split"]: {u["scene"] for u in store.units(run["run_id"])} for run in store.runs()}
@@ -188,24 +216,64 @@ def test_scores_on_a_denoisers_own_training_scenes_are_marked_not_held_out(tmp_p
 
     data = make_synthetic_dataset(tmp_path / "ds", scenes=4, frames=2, height=16, width=16, spp=(2,))
     ck = tmp_path / "dpcn.pt"
-    assert main(["train", "--model", "dpcn", "--data", str(data), "--steps", "1", "--out", str(ck),
-                 "--batch-size", "2", "--crop", "8", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "dpcn",
+                "--data",
+                str(data),
+                "--steps",
+                "1",
+                "--out",
+                str(ck),
+                "--batch-size",
+                "2",
+                "--crop",
+                "8",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     ds = open_dataset(data)
     train_scenes, test_scene = ds.split("train"), ds.split("test")[0]
     plugin = tmp_path / "memoriser.py"
-    plugin.write_text(textwrap.dedent(f"""
+    plugin.write_text(
+        textwrap.dedent(f"""
         import numpy as np
         class Memoriser:
             name = "memoriser"
             trained_scenes = frozenset({{{test_scene!r}, "a_scene_of_another_dataset"}})
             def denoise(self, frame):
                 return np.array(frame.color, dtype=np.float32)
-        """))
+        """)
+    )
     db, out = tmp_path / "b.sqlite", tmp_path / "report"
     capsys.readouterr()
-    assert main(["benchmark", "--data", str(data), "--db", str(db), "--out", str(out), "--metrics", "relmse",
-                 "--split", "all", "--denoisers", f"identity,dpcn,{plugin}:Memoriser",
-                 "--option", f"dpcn:checkpoint={ck}"]) == 0
+    assert (
+        main(
+            [
+                "benchmark",
+                "--data",
+                str(data),
+                "--db",
+                str(db),
+                "--out",
+                str(out),
+                "--metrics",
+                "relmse",
+                "--split",
+                "all",
+                "--denoisers",
+                f"identity,dpcn,{plugin}:Memoriser",
+                "--option",
+                f"dpcn:checkpoint={ck}",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert f"warning: dpcn was trained on {len(train_scenes)} of this run's 4 scene(s)" in err
     assert f"warning: memoriser was trained on 1 of this run's 4 scene(s) ({test_scene})" in err
@@ -215,12 +283,33 @@ def test_scores_on_a_denoisers_own_training_scenes_are_marked_not_held_out(tmp_p
         declared = {d["label"]: d["trained_on"] for d in store.denoisers(run["run_id"])}
     assert declared["dpcn"] == sorted(train_scenes) and declared["memoriser"] == [test_scene]
     assert declared["identity"] == [] and declared["noisy"] == []
-    html, md = (out / "index.html").read_text(), (out / "report.md").read_text().replace("\\_", "_")  # Markdown escapes _
+    html, md = (
+        (out / "index.html").read_text(),
+        (out / "report.md").read_text().replace("\\_", "_"),
+    )  # Markdown escapes _
     for text in (html, md):
         assert f"memoriser was trained on 1 of the 4 scene(s) scored here ({test_scene})" in text
         assert f"dpcn was trained on {len(train_scenes)} of the 4 scene(s)" in text and "not held-out" in text
     # held out: on the test split dpcn saw none of the scenes, and nothing is marked
     capsys.readouterr()
-    assert main(["benchmark", "--data", str(data), "--db", str(db), "--out", str(tmp_path / "r2"), "--metrics", "relmse",
-                 "--denoisers", "dpcn", "--option", f"dpcn:checkpoint={ck}"]) == 0
+    assert (
+        main(
+            [
+                "benchmark",
+                "--data",
+                str(data),
+                "--db",
+                str(db),
+                "--out",
+                str(tmp_path / "r2"),
+                "--metrics",
+                "relmse",
+                "--denoisers",
+                "dpcn",
+                "--option",
+                f"dpcn:checkpoint={ck}",
+            ]
+        )
+        == 0
+    )
     assert "not held-out" not in capsys.readouterr().err + (tmp_path / "r2" / "report.md").read_text()

@@ -6,8 +6,8 @@ import importlib
 import json
 import site
 import subprocess
-import sysconfig
 import sys
+import sysconfig
 import textwrap
 from pathlib import Path
 
@@ -26,7 +26,18 @@ EXAMPLE = REPO / "examples" / "denoisebench-example-plugin"
 def installed_example():
     """``pip install --no-deps --no-build-isolation -e`` the example package into this environment."""
     done = subprocess.run(
-        [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation", "--no-index", "-e", str(EXAMPLE)],
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "install",
+            "--quiet",
+            "--no-deps",
+            "--no-build-isolation",
+            "--no-index",
+            "-e",
+            str(EXAMPLE),
+        ],
         capture_output=True,
         text=True,
     )
@@ -131,7 +142,10 @@ def test_bad_input_exits_2_with_one_line(argv, fragment, capsys):
 
 def test_parse_options():
     assert parse_options(["radius=7", "preset=fast", "features=[\"albedo\"]", "x=1.5"]) == {
-        "radius": 7, "preset": "fast", "features": ["albedo"], "x": 1.5,
+        "radius": 7,
+        "preset": "fast",
+        "features": ["albedo"],
+        "x": 1.5,
     }
     with pytest.raises(UserInputError):
         parse_options(["1bad=3"])

@@ -14,8 +14,13 @@ DATA = Path(__file__).parent / "data" / "usd"
 
 
 def run_cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "denoisebench.cli", *map(str, args)],
-                          capture_output=True, text=True, cwd=cwd, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "denoisebench.cli", *map(str, args)],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        timeout=300,
+    )
 
 
 def test_help_has_an_example():
@@ -25,9 +30,13 @@ def test_help_has_an_example():
     assert run_cli("--help").returncode == 0
 
 
-@pytest.mark.parametrize("name", ["bad_not_usd.usda", "bad_no_camera.usda", "bad_nan_points.usda", "bad_face_indices.usda"])
+@pytest.mark.parametrize(
+    "name", ["bad_not_usd.usda", "bad_no_camera.usda", "bad_nan_points.usda", "bad_face_indices.usda"]
+)
 def test_bad_stage_exits_2_with_one_line(name, tmp_path):
-    result = run_cli("scenes", "preview", DATA / name, "--out", tmp_path / "p.png", "--width", 8, "--height", 8, "--spp", 1)
+    result = run_cli(
+        "scenes", "preview", DATA / name, "--out", tmp_path / "p.png", "--width", 8, "--height", 8, "--spp", 1
+    )
     assert result.returncode == 2, result.stderr
     lines = [line for line in result.stderr.splitlines() if line.startswith("error:")]
     assert len(lines) == 1 and "Traceback" not in result.stderr
@@ -51,7 +60,11 @@ def test_list_names_every_family_with_effects():
 
 
 def _digest(folder: Path) -> dict:
-    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*")) if p.is_file()}
+    return {
+        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
 
 
 def test_make_is_byte_identical_and_preview_writes_a_png(tmp_path):
@@ -64,8 +77,21 @@ def test_make_is_byte_identical_and_preview_writes_a_png(tmp_path):
         result = run_cli("scenes", "make", family, "--seed", 5, "--frames", 3, "--out", tmp_path / run)
         assert result.returncode == 0, result.stderr
     assert _digest(tmp_path / "a") == _digest(tmp_path / "b")
-    result = run_cli("scenes", "preview", tmp_path / "a" / "scene.usda", "--out", tmp_path / "p.png",
-                     "--width", 24, "--height", 16, "--spp", 4, "--frame", 2)
+    result = run_cli(
+        "scenes",
+        "preview",
+        tmp_path / "a" / "scene.usda",
+        "--out",
+        tmp_path / "p.png",
+        "--width",
+        24,
+        "--height",
+        16,
+        "--spp",
+        4,
+        "--frame",
+        2,
+    )
     assert result.returncode == 0, result.stderr
     image = np.asarray(Image.open(tmp_path / "p.png"))
     assert image.shape == (16, 24, 3) and image.max() > 0

@@ -6,7 +6,6 @@ invariants: exact float32 round trips, deterministic bytes, warping with augment
 
 from __future__ import annotations
 
-import io
 import json
 import os
 
@@ -18,7 +17,9 @@ from denoisebench.dataset import (
     DatasetError,
     DatasetWriter,
     assign_splits,
+    augment,
     config_hash,
+    layout,
     manifest_without_timings,
     open_dataset,
     read_exr,
@@ -26,7 +27,6 @@ from denoisebench.dataset import (
     reference_quality,
     write_exr,
 )
-from denoisebench.dataset import augment, layout
 from denoisebench.dataset.exr_io import encode_exr, load_exr, sha256_file
 from denoisebench.dataset.manifest import load_manifest, relative_standard_error
 from denoisebench.dataset.synthetic import make_synthetic_dataset
@@ -67,8 +67,18 @@ def test_exr_round_trip_types_and_channel_names_as_openexr_sees_them(tmp_path):
     # The peer: OpenEXR itself reads layer.channel names and the stored pixel types.
     with OpenEXR.File(str(path), True) as exr:
         channels = exr.channels()
-        assert {"color.R", "color.G", "color.B", "normal.X", "depth.Z", "motion.X", "motion.Y",
-                "roughness.Y", "extra5.C4", "color_var.B"} <= set(channels)
+        assert {
+            "color.R",
+            "color.G",
+            "color.B",
+            "normal.X",
+            "depth.Z",
+            "motion.X",
+            "motion.Y",
+            "roughness.Y",
+            "extra5.C4",
+            "color_var.B",
+        } <= set(channels)
         assert channels["color.R"].pixels.dtype == np.float32
         assert channels["albedo.G"].pixels.dtype == np.float16
         assert channels["color_var.R"].pixels.dtype == np.float32
@@ -184,10 +194,15 @@ def test_relative_standard_error_formula_and_hard_cases():
 
 
 def test_manifest_without_timings_and_bad_manifests(tmp_path):
-    manifest = {"a": {"seconds": 1.0, "seconds_per_spp": 0.5, "jit_compile_seconds": 2.0, "spp": 2, "l": [{"seconds": 3}]}}
+    manifest = {
+        "a": {"seconds": 1.0, "seconds_per_spp": 0.5, "jit_compile_seconds": 2.0, "spp": 2, "l": [{"seconds": 3}]}
+    }
     assert manifest_without_timings(manifest) == {"a": {"spp": 2, "l": [{}]}}
-    for name, text in {"x.json": "{", "y.json": '{"schema": "other"}',
-                       "z.json": '{"schema": "denoisebench-dataset", "schema_version": 99}'}.items():
+    for name, text in {
+        "x.json": "{",
+        "y.json": '{"schema": "other"}',
+        "z.json": '{"schema": "denoisebench-dataset", "schema_version": 99}',
+    }.items():
         (tmp_path / name).write_text(text)
         with pytest.raises(DatasetError, match=name):
             load_manifest(tmp_path / name)
@@ -316,8 +331,16 @@ def test_synthetic_dataset_same_bytes(tmp_path):
 
 @pytest.fixture(scope="module")
 def synthetic(tmp_path_factory):
-    return make_synthetic_dataset(tmp_path_factory.mktemp("syn") / "ds", scenes=3, frames=4, height=12, width=20,
-                                  spp=(1, 4), per_sample=True, velocity=(1.0, 0.0))
+    return make_synthetic_dataset(
+        tmp_path_factory.mktemp("syn") / "ds",
+        scenes=3,
+        frames=4,
+        height=12,
+        width=20,
+        spp=(1, 4),
+        per_sample=True,
+        velocity=(1.0, 0.0),
+    )
 
 
 def test_reader_catalogue_frames_and_sequences(synthetic):
@@ -378,8 +401,10 @@ def _warp(prev: np.ndarray, motion: np.ndarray) -> np.ndarray:
 
 def test_the_eight_transforms_are_distinct_and_drawn_uniformly():
     image = np.arange(3 * 5).reshape(3, 5, 1).astype(np.float32)
-    outs = {augment.transform_array("color", image, t).tobytes() + bytes(augment.transform_array("color", image, t).shape)
-            for t in augment.all_transforms()}
+    outs = {
+        augment.transform_array("color", image, t).tobytes() + bytes(augment.transform_array("color", image, t).shape)
+        for t in augment.all_transforms()
+    }
     assert len(outs) == 8
     rng = np.random.default_rng(0)
     counts = {}
@@ -389,7 +414,9 @@ def test_the_eight_transforms_are_distinct_and_drawn_uniformly():
     assert len(counts) == 8 and all(350 < c < 650 for c in counts.values())
 
 
-@pytest.mark.parametrize("t", augment.all_transforms() + [augment.Transform(1, True, True), augment.Transform(3, False, True)])
+@pytest.mark.parametrize(
+    "t", augment.all_transforms() + [augment.Transform(1, True, True), augment.Transform(3, False, True)]
+)
 def test_augmented_motion_still_warps_the_previous_frame_onto_the_current(t):
     prev = RNG.random((6, 9, 3), dtype=np.float32)  # non-square: axis mix-ups fail
     dx, dy = -2, 1
@@ -421,7 +448,7 @@ def test_crop_dataset_items_are_windows_of_the_frames(synthetic):
     scene, spp, index, _ = data.items[5]
     full = open_dataset(synthetic).frame(scene, spp, index).color
     crop = item["color"].permute(1, 2, 0).numpy()
-    matches = [(y, x) for y in range(12 - 7) for x in range(20 - 7) if np.array_equal(full[y:y + 8, x:x + 8], crop)]
+    matches = [(y, x) for y in range(12 - 7) for x in range(20 - 7) if np.array_equal(full[y : y + 8, x : x + 8], crop)]
     assert matches  # a real window of the frame
     assert all((data[5][k] == item[k]).all() for k in item)  # same epoch, same crop
     epoch0 = [data[i]["color"] for i in range(len(data))]

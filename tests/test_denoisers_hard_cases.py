@@ -32,7 +32,10 @@ def test_case_frames_hold_what_they_claim(frames):
         for array in (dirty.buffers[name], dirty.samples[name]):
             assert np.isnan(array).any() and np.isposinf(array).any() and np.isneginf(array).any()
     constant = frames["constant_features"][0]
-    assert all(not np.ptp(constant.buffers[name], axis=(0, 1)).any() for name in ("albedo", "normal", "depth", "position", "roughness"))
+    assert all(
+        not np.ptp(constant.buffers[name], axis=(0, 1)).any()
+        for name in ("albedo", "normal", "depth", "position", "roughness")
+    )
     assert frames["one_spp"][0].spp == 1 and frames["one_spp"][0].samples["color"].shape[0] == 1
     assert (frames["odd_size"][0].height, frames["odd_size"][0].width) == (45, 67)
     assert (frames["tiny"][0].height, frames["tiny"][0].width) == (3, 3)
@@ -49,7 +52,15 @@ BASELINES = sorted(name for name, (target, _) in BUILTINS.items() if target.star
 
 
 def test_baselines_are_all_there():
-    assert set(BASELINES) >= {"identity", "cross_bilateral", "cross_bilateral_fast", "cross_bilateral_high", "rpf", "nlmeans", "oidn"}
+    assert set(BASELINES) >= {
+        "identity",
+        "cross_bilateral",
+        "cross_bilateral_fast",
+        "cross_bilateral_high",
+        "rpf",
+        "nlmeans",
+        "oidn",
+    }
 
 
 @pytest.mark.parametrize("name", BASELINES)

@@ -21,7 +21,6 @@ from denoisebench.denoisers.registry import (
 from denoisebench.denoisers.synthetic import synthetic_frame
 from denoisebench.errors import UserInputError
 
-
 BASELINES = sorted(name for name, (target, _) in BUILTINS.items() if target.startswith("denoisebench.baselines."))
 OTHERS = sorted(set(BUILTINS) - set(BASELINES))  # the learned models: their weights ship with them
 
@@ -53,7 +52,9 @@ def test_unknown_name_is_a_one_line_user_error_listing_the_known():
     assert "\n" not in message and "no_such_denoiser" in message and "cross_bilateral" in message
 
 
-@pytest.mark.parametrize("spec", ["", "   ", "pkg:", ":Attr", "denoisebench.baselines.identity:Nope", "no_module_xyz:Thing"])
+@pytest.mark.parametrize(
+    "spec", ["", "   ", "pkg:", ":Attr", "denoisebench.baselines.identity:Nope", "no_module_xyz:Thing"]
+)
 def test_malformed_or_missing_specs_are_unknown(spec):
     with pytest.raises(UnknownDenoiserError):
         load_denoiser(spec)
@@ -97,7 +98,9 @@ def test_module_attr_and_dotted_attr(tmp_path, monkeypatch):
 
 def test_file_spec_and_missing_file(tmp_path):
     plugin = tmp_path / "plugin_file.py"
-    plugin.write_text("import numpy as np\nclass Zero:\n    def denoise(self, frame):\n        return np.zeros_like(frame.color)\n")
+    plugin.write_text(
+        "import numpy as np\nclass Zero:\n    def denoise(self, frame):\n        return np.zeros_like(frame.color)\n"
+    )
     denoiser = load_denoiser(f"{plugin}:Zero")
     assert describe(denoiser).name == f"{plugin}:Zero"  # no name attribute: the spec names it
     with pytest.raises(UnknownDenoiserError, match="no such plugin file"):
@@ -135,7 +138,9 @@ def test_constructor_failures_and_non_denoisers_are_load_errors(tmp_path):
 
 def test_entry_points_are_found_and_builtins_win(monkeypatch):
     points = [
-        importlib.metadata.EntryPoint("fake_ep", "denoisebench.baselines.identity:Identity", registry.ENTRY_POINT_GROUP),
+        importlib.metadata.EntryPoint(
+            "fake_ep", "denoisebench.baselines.identity:Identity", registry.ENTRY_POINT_GROUP
+        ),
         importlib.metadata.EntryPoint("identity", "no_such_module_xyz:Thing", registry.ENTRY_POINT_GROUP),
         importlib.metadata.EntryPoint("broken_ep", "no_such_module_xyz:Thing", registry.ENTRY_POINT_GROUP),
     ]

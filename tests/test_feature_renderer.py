@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 from scipy import ndimage, stats
 
-from denoisebench.generator.camera_track import CameraTrack
-from denoisebench.generator.feature_renderer import load_scene, render_frame
-from denoisebench.generator.mitsuba_scene import build_mitsuba_scene, sensor_dict
-from denoisebench.generator.render_plan import RenderOptions, make_render_plan
-from denoisebench.generator.translate import translate_usd
+from denoisebench.generator.contract.camera_track import CameraTrack
+from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
+from denoisebench.generator.render.frame import load_scene, render_frame
+from denoisebench.generator.render.scene import build_mitsuba_scene, sensor_dict
+from denoisebench.generator.usd.translate import translate_usd
 from denoisebench.scenes import get_family
 
 SIZE = 24
@@ -44,9 +44,13 @@ def family_scene(mi, tmp_path_factory):
 def mitsuba_path_replicas(mi, translated, scene, plan, *, frame: int, spp: int, replicas: int, max_depth: int):
     """``replicas`` independent renders by Mitsuba's ``path`` integrator (box filter), R×H×W×3."""
     sensor = mi.load_dict(sensor_dict(translated.camera, frame, SIZE, SIZE, spp, aperture_scale=plan.aperture_scale))
-    integrator = mi.load_dict({"type": "path", "max_depth": max_depth, "rr_depth": plan.rr_depth, "hide_emitters": False})
-    images = [np.array(mi.render(scene, sensor=sensor, integrator=integrator, seed=1000 + k, spp=spp))[..., :3]
-              for k in range(replicas)]
+    integrator = mi.load_dict(
+        {"type": "path", "max_depth": max_depth, "rr_depth": plan.rr_depth, "hide_emitters": False}
+    )
+    images = [
+        np.array(mi.render(scene, sensor=sensor, integrator=integrator, seed=1000 + k, spp=spp))[..., :3]
+        for k in range(replicas)
+    ]
     return np.stack(images).astype(np.float64)
 
 
@@ -83,8 +87,9 @@ def test_color_is_unbiased_against_mitsuba_path(mi, family_scene, family, spp):
     translated, scene = family_scene(family)
     plan = make_render_plan(translated.effects)
     ours = render_frame(scene, translated.camera, 1, plan, width=SIZE, height=SIZE, spp=spp, seed=7, reference=True)
-    replicas = mitsuba_path_replicas(mi, translated, scene, plan, frame=1, spp=spp // 16, replicas=16,
-                                     max_depth=plan.max_depth)
+    replicas = mitsuba_path_replicas(
+        mi, translated, scene, plan, frame=1, spp=spp // 16, replicas=16, max_depth=plan.max_depth
+    )
     assert ours.buffers["color"].mean() > 1e-3  # a lit image, so the comparison means something
     z_image, z_blocks = agreement(ours.buffers["color"], ours.buffers["color_var"], replicas)
     assert np.all(np.abs(z_image) < 4.0), z_image
@@ -97,8 +102,9 @@ def test_color_is_unbiased_against_mitsuba_path(mi, family_scene, family, spp):
         # The same statistics catch a biased renderer: paths cut at depth 2 (direct light only)
         # against Mitsuba at the plan's depth (unbounded) lose the indirect light.
         short = make_render_plan(translated.effects, RenderOptions(max_depth=2))
-        biased = render_frame(scene, translated.camera, 1, short, width=SIZE, height=SIZE, spp=spp, seed=7,
-                              reference=True)
+        biased = render_frame(
+            scene, translated.camera, 1, short, width=SIZE, height=SIZE, spp=spp, seed=7, reference=True
+        )
         z_image, z_blocks = agreement(biased.buffers["color"], biased.buffers["color_var"], replicas)
         assert np.all(z_image < -6.0), z_image  # measured: -21, -17, -10 (R, G, B)
         assert np.mean(np.abs(z_blocks) > 4.0) > 0.5
@@ -139,7 +145,9 @@ def aov_render(mi, translated, scene, frame: int):
 def test_features_match_mitsuba_aov(mi, family_scene, family):
     translated, scene = family_scene(family)
     plan = make_render_plan(translated.effects)
-    ours = render_frame(scene, translated.camera, 1, plan, width=SIZE, height=SIZE, spp=2, seed=0, _jitter=False).buffers
+    ours = render_frame(
+        scene, translated.camera, 1, plan, width=SIZE, height=SIZE, spp=2, seed=0, _jitter=False
+    ).buffers
     theirs = aov_render(mi, translated, scene, 1)
     hit = (ours["depth"][..., 0] > 0) & (np.abs(theirs["position"]).sum(-1) > 0)
     assert hit.mean() > 0.5
@@ -162,8 +170,9 @@ def warp_error(previous: np.ndarray, current: np.ndarray, motion: np.ndarray) ->
     src_rows, src_cols = rows + motion[..., 1], cols + motion[..., 0]
     inside = (src_rows >= 0) & (src_rows <= SIZE - 1) & (src_cols >= 0) & (src_cols <= SIZE - 1)
     assert inside.mean() > 0.3
-    warped = np.stack([ndimage.map_coordinates(previous[..., c], [src_rows, src_cols], order=1, mode="nearest")
-                       for c in range(3)], -1)
+    warped = np.stack(
+        [ndimage.map_coordinates(previous[..., c], [src_rows, src_cols], order=1, mode="nearest") for c in range(3)], -1
+    )
     return np.abs(warped - current)[inside].mean(), np.abs(previous - current)[inside].mean()
 
 
@@ -204,8 +213,7 @@ def test_per_sample_data_averages_to_means(mi, family_scene):
         assert 0.0 <= out.samples[name].min() and out.samples[name].max() < 1.0
         assert 0.4 < out.samples[name].mean() < 0.6  # uniform numbers, not a constant
     # Samples split over several lanes per pixel, or one lane looping over all: same statistics.
-    one_lane = render_frame(scene, translated.camera, 1, plan, width=SIZE, height=SIZE, spp=spp, seed=5,
-                            target_lanes=1)
+    one_lane = render_frame(scene, translated.camera, 1, plan, width=SIZE, height=SIZE, spp=spp, seed=5, target_lanes=1)
     assert np.allclose(one_lane.samples["color"].mean(0), one_lane.buffers["color"], rtol=1e-5, atol=1e-5)
 
 
@@ -258,7 +266,9 @@ def test_determinism_and_independent_streams(mi, family_scene):
     assert abs(stats.spearmanr(error_noisy, error_reference).statistic) < 0.2
     # Another seed gives other noise too.
     other_seed = render_frame(scene, translated.camera, 1, plan, width=SIZE, height=SIZE, spp=4, seed=12)
-    assert abs(stats.spearmanr(error_noisy, (other_seed.buffers["color"] - truth.buffers["color"])[lit]).statistic) < 0.2
+    assert (
+        abs(stats.spearmanr(error_noisy, (other_seed.buffers["color"] - truth.buffers["color"])[lit]).statistic) < 0.2
+    )
 
 
 def test_buffers_finite_on_hard_cases(mi, family_scene):
@@ -324,5 +334,9 @@ def test_second_hit_channels_only_with_per_sample_data_and_same_image(mi, family
     # the plan lists exactly the per-sample channels written (random parameters and second-hit features)
     for plan, frame in ((with_samples, a), (direct, c)):
         listed = set(plan.random_parameters) | set(plan.sample_features)
-        written = {name for name in frame.samples if name in {"pixel", "lens", "time", "light", "bounce", "position2", "normal2"}}
+        written = {
+            name
+            for name in frame.samples
+            if name in {"pixel", "lens", "time", "light", "bounce", "position2", "normal2"}
+        }
         assert listed == written, (plan.max_depth, listed, written)

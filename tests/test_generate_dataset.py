@@ -24,8 +24,25 @@ from denoisebench.dataset.atomic import is_temporary
 from denoisebench.dataset.manifest import assign_splits, reference_quality
 
 WIDTH, HEIGHT, FRAMES = 24, 16, 3
-ARGS = ["--families", "cornell", "--scenes", "2", "--frames", str(FRAMES), "--width", str(WIDTH),
-        "--height", str(HEIGHT), "--spp", "1,2", "--ref-spp", "16", "--seed", "5", "--quiet"]
+ARGS = [
+    "--families",
+    "cornell",
+    "--scenes",
+    "2",
+    "--frames",
+    str(FRAMES),
+    "--width",
+    str(WIDTH),
+    "--height",
+    str(HEIGHT),
+    "--spp",
+    "1,2",
+    "--ref-spp",
+    "16",
+    "--seed",
+    "5",
+    "--quiet",
+]
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -63,7 +80,13 @@ def test_layout_manifest_and_reader(local_dataset):
     assert ds.splits == assign_splits(ds.scenes, 5)
     for name in ds.scenes:
         info = ds.scene(name)
-        assert (info.frame_count, info.width, info.height, info.spp, info.ref_spp) == (FRAMES, WIDTH, HEIGHT, [1, 2], 16)
+        assert (info.frame_count, info.width, info.height, info.spp, info.ref_spp) == (
+            FRAMES,
+            WIDTH,
+            HEIGHT,
+            [1, 2],
+            16,
+        )
         assert (local_dataset / info.usd).is_file()
         assert info.plan["pixel_filter"] == "box"
         for index in range(FRAMES):
@@ -79,7 +102,7 @@ def test_layout_manifest_and_reader(local_dataset):
 
 
 def test_frames_follow_the_camera_and_streams_are_independent(local_dataset):
-    from denoisebench.generator.translate import translate_usd
+    from denoisebench.generator.usd.translate import translate_usd
 
     ds = open_dataset(local_dataset)
     name = ds.scenes[0]
@@ -125,8 +148,12 @@ def test_reference_quality_is_recorded_and_flagged(local_dataset):
 def test_sigkill_then_rerun_gives_the_bytes_of_an_uninterrupted_run(local_dataset, tmp_path):
     out = tmp_path / "killed"
     env = dict(os.environ, PYTHONPATH=str(REPO))
-    proc = subprocess.Popen([sys.executable, "-m", "denoisebench.cli", "generate", "--out", str(out), *ARGS],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "denoisebench.cli", "generate", "--out", str(out), *ARGS],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=env,
+    )
     manifest_path = out / layout.MANIFEST_NAME
     deadline = time.monotonic() + 120
     killed_with = None
@@ -210,7 +237,9 @@ def test_bad_input_is_one_line_exit_2_and_writes_nothing(tmp_path, capsys, args,
     nocam.write_text('#usda 1.0\ndef Sphere "Ball"\n{\n    double radius = 1\n}\n')
     args = [a.format(bad=bad, nocam=nocam) for a in args]
     out = tmp_path / "out"
-    assert main(["generate", "--out", str(out), "--frames", "1", "--width", "8", "--height", "8", "--quiet", *args]) == 2
+    assert (
+        main(["generate", "--out", str(out), "--frames", "1", "--width", "8", "--height", "8", "--quiet", *args]) == 2
+    )
     err = capsys.readouterr().err.strip()
     assert err.startswith("error:") and len(err.splitlines()) == 1 and message in err
     assert not out.exists()
@@ -223,8 +252,26 @@ def test_user_usd_renders_along_its_own_camera_with_its_textures(tmp_path):
     get_family("texture_checker").author(shot, seed=2, frames=2, width=WIDTH, height=HEIGHT)
     (shot / "scene.usda").rename(shot / "my shot.usda")
     out = tmp_path / "ds"
-    code = main(["generate", "--out", str(out), "--usd", str(shot / "my shot.usda"), "--frames", "5",
-                 "--width", str(WIDTH), "--height", str(HEIGHT), "--spp", "1,2", "--ref-spp", "16", "--quiet"])
+    code = main(
+        [
+            "generate",
+            "--out",
+            str(out),
+            "--usd",
+            str(shot / "my shot.usda"),
+            "--frames",
+            "5",
+            "--width",
+            str(WIDTH),
+            "--height",
+            str(HEIGHT),
+            "--spp",
+            "1,2",
+            "--ref-spp",
+            "16",
+            "--quiet",
+        ]
+    )
     assert code == 0
     ds = open_dataset(out, verify=True)
     assert ds.scenes == ["usd_my_shot"]
@@ -237,7 +284,9 @@ def test_user_usd_renders_along_its_own_camera_with_its_textures(tmp_path):
     assert ds.frame("usd_my_shot", 2, 1).reference.std() > 0  # textured, lit, not blank
 
 
-def test_a_failing_frame_is_reported_others_carry_on_and_a_rerun_completes(local_dataset, tmp_path, monkeypatch, capsys):
+def test_a_failing_frame_is_reported_others_carry_on_and_a_rerun_completes(
+    local_dataset, tmp_path, monkeypatch, capsys
+):
     from denoisebench.generator import executors
 
     real = executors.render_job
@@ -262,8 +311,27 @@ def test_a_failing_frame_is_reported_others_carry_on_and_a_rerun_completes(local
 
 def test_per_sample_data_matches_the_pixel_means(tmp_path):
     out = tmp_path / "ds"
-    code = main(["generate", "--out", str(out), "--families", "cornell", "--frames", "2", "--width", str(WIDTH),
-                 "--height", str(HEIGHT), "--spp", "2", "--ref-spp", "16", "--samples", "--quiet"])
+    code = main(
+        [
+            "generate",
+            "--out",
+            str(out),
+            "--families",
+            "cornell",
+            "--frames",
+            "2",
+            "--width",
+            str(WIDTH),
+            "--height",
+            str(HEIGHT),
+            "--spp",
+            "2",
+            "--ref-spp",
+            "16",
+            "--samples",
+            "--quiet",
+        ]
+    )
     assert code == 0
     frame = open_dataset(out, verify=True).frame("cornell_000", 2, 1)
     assert frame.samples["pixel"].shape == (2, HEIGHT, WIDTH, 2)
@@ -275,22 +343,40 @@ def test_per_sample_data_matches_the_pixel_means(tmp_path):
 def test_adaptive_reference_stops_at_target_or_names_capped_frames(tmp_path, capsys):
     """A loose --ref-error stops after the fewest rounds with the floor recorded; an unreachable one
     runs to the --ref-spp cap and the warning names every such frame."""
-    from denoisebench.generator.reference_render import MIN_ROUNDS, round_schedule
+    from denoisebench.generator.render.reference import MIN_ROUNDS, round_schedule
 
-    base = ["--families", "cornell", "--frames", "2", "--width", str(WIDTH), "--height", str(HEIGHT),
-            "--spp", "1", "--seed", "5", "--quiet"]
+    base = [
+        "--families",
+        "cornell",
+        "--frames",
+        "2",
+        "--width",
+        str(WIDTH),
+        "--height",
+        str(HEIGHT),
+        "--spp",
+        "1",
+        "--seed",
+        "5",
+        "--quiet",
+    ]
     assert main(["generate", "--out", str(tmp_path / "loose"), *base, "--ref-spp", "64", "--ref-error", "10"]) == 0
     assert "cap" not in capsys.readouterr().err
     round_spp, _ = round_schedule(64)
     for record in open_dataset(tmp_path / "loose").scene("cornell_005").record["renders"][layout.REFERENCE].values():
         adaptive = record["reference_adaptive"]
         assert record["spp"] == adaptive["spp"] == MIN_ROUNDS * round_spp and adaptive["rounds"] == MIN_ROUNDS
-        assert adaptive["floor"] <= 10 and not adaptive["stopped_at_cap"] and adaptive["floor_pooled"] <= adaptive["floor"]
+        assert (
+            adaptive["floor"] <= 10 and not adaptive["stopped_at_cap"] and adaptive["floor_pooled"] <= adaptive["floor"]
+        )
     from denoisebench.leaderboard.report import _reference_info
 
     loose = open_dataset(tmp_path / "loose")
     described = _reference_info(loose, loose.scenes)["description"]  # the report's reference line
-    assert described.startswith(f"adaptive {MIN_ROUNDS * round_spp} spp (cap 64), noise floor") and "full transport" in described
+    assert (
+        described.startswith(f"adaptive {MIN_ROUNDS * round_spp} spp (cap 64), noise floor")
+        and "full transport" in described
+    )
     assert main(["generate", "--out", str(tmp_path / "tight"), *base, "--ref-spp", "16", "--ref-error", "1e-9"]) == 0
     err = capsys.readouterr().err
     assert "2 reference(s) stopped at the --ref-spp cap" in err and "cornell_005/0000, cornell_005/0001" in err
@@ -302,7 +388,7 @@ def test_adaptive_reference_stops_at_target_or_names_capped_frames(tmp_path, cap
 def test_stage_folders_of_dead_workers_are_swept_and_live_ones_kept(tmp_path):
     """A Ray worker killed at shutdown runs no atexit: its materialised stage folder would stay in the
     temporary directory for good. The next worker sweeps folders whose pid is gone."""
-    from denoisebench.generator.sequence import sweep_stale_stage_dirs
+    from denoisebench.generator.frame_jobs import sweep_stale_stage_dirs
 
     dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
     dead_pid = int(dead.stdout)

@@ -21,7 +21,9 @@ def db(tmp_path_factory):
     with ResultsStore(path) as store:
         # two runs on one dataset: identity in the first, cross_bilateral_fast in the second
         run_benchmark(data, BenchmarkConfig(["identity"], [1, 4], metrics=["relmse", "ssim"]), store, progress=False)
-        run_benchmark(data, BenchmarkConfig(["cross_bilateral_fast"], [1, 4], metrics=["relmse", "ssim"]), store, progress=False)
+        run_benchmark(
+            data, BenchmarkConfig(["cross_bilateral_fast"], [1, 4], metrics=["relmse", "ssim"]), store, progress=False
+        )
         expected = {}
         for run in store.runs():
             for f in store.frames(run["run_id"]):

@@ -43,8 +43,10 @@ def test_flicker_scores_far_below_the_same_change_held_static(ref):
 
 def test_more_noise_scores_lower_and_static_noise_lower_than_dynamic(ref):
     rng = np.random.default_rng(0)
-    dyn = {s: cvvdp(np.clip(ref + s * rng.standard_normal(ref.shape), 0, None).astype(np.float32), ref)
-           for s in (0.03, 0.1)}
+    dyn = {
+        s: cvvdp(np.clip(ref + s * rng.standard_normal(ref.shape), 0, None).astype(np.float32), ref)
+        for s in (0.03, 0.1)
+    }
     still = cvvdp(np.clip(ref + 0.1 * rng.standard_normal(ref.shape[1:]), 0, None).astype(np.float32), ref)
     assert 10.0 > dyn[0.03] > dyn[0.1] > still  # measured 9.86 > 9.22 > 9.08
     assert dyn[0.03] - dyn[0.1] >= 0.3

@@ -98,7 +98,7 @@ def test_floors_refuse_bad_variance_and_give_nan_se_for_a_nonfinite_prediction()
 def _sequence(scale, seed, frames=6, size=24, denoised=False):
     """A panning bright/dark scene at ``scale``; noisy input or a smooth, slightly wrong prediction."""
     rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:size, 0:size + frames]
+    yy, xx = np.mgrid[0:size, 0 : size + frames]
     base = scale * (0.2 + np.sin(xx / 3.0) ** 2 + 0.5 * (yy / size))[..., None] * np.array([1.0, 0.8, 0.6])
     ref = np.stack([base[:, t : t + size] for t in range(frames)])  # moves one pixel left per frame
     motion = np.zeros((frames, size, size, 2))

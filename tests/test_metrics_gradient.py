@@ -33,7 +33,7 @@ def numpy_log(img, sigma=1.5, size=15):
     h −= mean(h) (fspecial's zero-sum step).
     """
     r = size // 2
-    y, x = np.mgrid[-r:r + 1, -r:r + 1].astype(np.float64)
+    y, x = np.mgrid[-r : r + 1, -r : r + 1].astype(np.float64)
     g = np.exp(-(x**2 + y**2) / (2 * sigma**2))
     g /= g.sum()
     kernel = g * (x**2 + y**2 - 2 * sigma**2) / sigma**4

@@ -61,8 +61,12 @@ def test_psnr_matches_scikit_image_on_encoded_frames():
 def test_ssim_is_luminance_ssim_as_scikit_image_computes_it():
     pred, ref = _scene(t=1)
     expected = structural_similarity(
-        _hand_lum(_hand_encode(pred[0])), _hand_lum(_hand_encode(ref[0])), data_range=1.0,
-        gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
+        _hand_lum(_hand_encode(pred[0])),
+        _hand_lum(_hand_encode(ref[0])),
+        data_range=1.0,
+        gaussian_weights=True,
+        sigma=1.5,
+        use_sample_covariance=False,
     )
     assert nb.nb_ssim(pred[0], ref[0]) == pytest.approx(expected, abs=2e-4)
 

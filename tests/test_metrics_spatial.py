@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from denoisebench import metrics as M
-from denoisebench.metrics import spatial, tonemap as tm
+from denoisebench.metrics import spatial
+from denoisebench.metrics import tonemap as tm
 
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")
@@ -46,6 +47,7 @@ def ref_tonemap(x):
 
 # --------------------------------------------------------------------------- tone map
 
+
 def test_tonemap_matches_colour_srgb_encoding_and_pins():
     x = np.array([0.0, 1e-6, 0.001, 0.5, 1.0, 7.0, 1e6, -3.0])
     np.testing.assert_allclose(tm.tonemap(x), ref_tonemap(x), rtol=0, atol=1e-12)
@@ -58,6 +60,7 @@ def test_tonemap_matches_colour_srgb_encoding_and_pins():
 
 
 # --------------------------------------------------------------------------- numpy peers
+
 
 def test_pixelwise_metrics_match_numpy_formulas(pair):
     p, r = pair
@@ -85,6 +88,7 @@ def test_pixelwise_pinned_by_hand():
 
 
 # --------------------------------------------------------------------------- scikit-image peers
+
 
 def test_psnr_matches_scikit_image(pair):
     p, r = pair
@@ -118,6 +122,7 @@ def test_pinned_values_on_pattern():
 
 # --------------------------------------------------------------------------- flip-evaluator peer
 
+
 def test_flip_matches_flip_evaluator(pair):
     p, r = pair
     r32, p32 = r.astype(np.float32), p.astype(np.float32)
@@ -130,8 +135,9 @@ def test_flip_matches_flip_evaluator(pair):
 def test_flip_clamps_negative_predictions():
     r = pattern(16, 16)
     p = r - 0.3  # negatives: FLIP wants non-negative HDR input; we clamp to 0
-    emap, _, _ = flip_evaluator.evaluate(r.astype(np.float32), np.clip(p, 0, None).astype(np.float32), "HDR",
-                                         applyMagma=False)
+    emap, _, _ = flip_evaluator.evaluate(
+        r.astype(np.float32), np.clip(p, 0, None).astype(np.float32), "HDR", applyMagma=False
+    )
     assert M.flip(p, r) == pytest.approx(float(emap.mean(dtype=np.float64)), abs=1e-7)
 
 
@@ -269,8 +275,16 @@ def test_deltae2000_ignores_a_global_colour_scale(pair):
 
 # --------------------------------------------------------------------------- invariants
 
-PERFECT = {"mse": 0.0, "relmse": 0.0, "smape": 0.0, "l1": 0.0, "psnr": math.inf, "ssim": 1.0,
-           "flip": 0.0, "deltae2000": 0.0}
+PERFECT = {
+    "mse": 0.0,
+    "relmse": 0.0,
+    "smape": 0.0,
+    "l1": 0.0,
+    "psnr": math.inf,
+    "ssim": 1.0,
+    "flip": 0.0,
+    "deltae2000": 0.0,
+}
 
 
 @pytest.mark.parametrize("name", SPATIAL)
@@ -295,6 +309,7 @@ def test_error_grows_monotonically_with_noise(name):
 
 
 # --------------------------------------------------------------------------- hard inputs
+
 
 @pytest.mark.parametrize("name", SPATIAL)
 def test_all_black_reference(name):
@@ -354,8 +369,13 @@ def test_nonfinite_maps_mark_the_pixel(pair):
     p, r = pair
     p = p.copy()
     p[3, 4, 1] = np.nan
-    for name, worst in (("mse", math.inf), ("relmse", math.inf), ("smape", 1.0), ("l1", math.inf),
-                        ("deltae2000", math.inf)):
+    for name, worst in (
+        ("mse", math.inf),
+        ("relmse", math.inf),
+        ("smape", 1.0),
+        ("l1", math.inf),
+        ("deltae2000", math.inf),
+    ):
         m = getattr(M, name + "_map")(p, r)
         assert m[3, 4] == worst
         assert np.isfinite(m[0, 0]) and np.count_nonzero(m == worst) == 1, name
@@ -393,8 +413,15 @@ def test_ssim_size_limits():
         with pytest.raises(ValueError, match="at least 11"):
             M.ssim(r * 1.1, r)
     r = rng.random((11, 13, 3))  # odd, smallest allowed
-    expected = structural_similarity(ref_tonemap(r * 1.1), ref_tonemap(r), gaussian_weights=True, sigma=1.5,
-                                     use_sample_covariance=False, data_range=1.0, channel_axis=-1)
+    expected = structural_similarity(
+        ref_tonemap(r * 1.1),
+        ref_tonemap(r),
+        gaussian_weights=True,
+        sigma=1.5,
+        use_sample_covariance=False,
+        data_range=1.0,
+        channel_axis=-1,
+    )
     assert M.ssim(r * 1.1, r) == pytest.approx(expected, rel=1e-10)
 
 
@@ -406,9 +433,17 @@ def test_mismatched_shapes_name_both(name):
         FNS[name](a, b)
 
 
-@pytest.mark.parametrize("bad", [np.ones((16, 16)), np.ones((16, 16, 4)), np.ones((0, 16, 3)),
-                                 np.ones((16, 16, 3), dtype=complex), np.ones((16, 16, 3), dtype=bool),
-                                 "not an image"])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        np.ones((16, 16)),
+        np.ones((16, 16, 4)),
+        np.ones((0, 16, 3)),
+        np.ones((16, 16, 3), dtype=complex),
+        np.ones((16, 16, 3), dtype=bool),
+        "not an image",
+    ],
+)
 def test_bad_layouts_are_errors(bad):
     good = np.ones((16, 16, 3))
     for fn in (M.mse, M.flip, M.deltae2000):

@@ -32,14 +32,15 @@ def pan(shift=2, t=4, h=20, w=28, seed=0):
     rng = np.random.default_rng(seed)
     plane = gaussian_filter(rng.random((h, w + shift * t, 3)), (1.0, 1.0, 0)) * 2 + 0.1
     stable = 0.8 * gaussian_filter(plane, (1.5, 1.5, 0)) + 0.05
-    ref = np.stack([plane[:, shift * k: shift * k + w] for k in range(t)])
-    pred = np.stack([stable[:, shift * k: shift * k + w] for k in range(t)])
+    ref = np.stack([plane[:, shift * k : shift * k + w] for k in range(t)])
+    pred = np.stack([stable[:, shift * k : shift * k + w] for k in range(t)])
     motion = np.zeros((t, h, w, 2))
     motion[..., 0] = shift
     return pred, ref, motion
 
 
 # --------------------------------------------------------------------------- peers
+
 
 def test_temporal_l1_matches_numpy():
     p, r = random_seq()
@@ -117,6 +118,7 @@ def test_warped_matches_explicit_loop():
 
 # --------------------------------------------------------------------------- invariants
 
+
 @pytest.mark.parametrize("offset", [0.0, 0.37, -0.05])
 def test_zero_for_reference_and_reference_plus_constant(offset):
     _, r = random_seq(seed=1)
@@ -172,6 +174,7 @@ def test_error_grows_monotonically_with_noise(name):
 
 # --------------------------------------------------------------------------- disocclusion
 
+
 def moving_square(t=3, h=16, w=24, step=2):
     """Static textured background (depth 10) with a square (depth 1) moving right by ``step``."""
     rng = np.random.default_rng(5)
@@ -187,7 +190,7 @@ def moving_square(t=3, h=16, w=24, step=2):
         depth[k, rows, cols] = 1.0
         motion[k, rows, cols, 0] = -step
         if k:
-            disoccluded[k, rows, 3 + step * (k - 1): 3 + step * k] = True
+            disoccluded[k, rows, 3 + step * (k - 1) : 3 + step * k] = True
     return ref, depth, motion, disoccluded
 
 
@@ -240,6 +243,7 @@ def test_everything_disoccluded_is_an_error():
 
 
 # --------------------------------------------------------------------------- hard inputs
+
 
 @pytest.mark.parametrize("name", ["temporal_l1", "temporal_l1_warped", "tpsnr"])
 @pytest.mark.parametrize("bad", [np.nan, np.inf])

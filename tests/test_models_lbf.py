@@ -52,7 +52,9 @@ def direct_filter(primary, precisions, radius):
                     for dx in range(-radius, radius + 1):
                         yy, xx = clamp(y + dy, h), clamp(x + dx, w)
                         dc = ((p["log_color"][b, :, y, x] - p["log_color"][b, :, yy, xx]) ** 2).sum()
-                        dc = dc / (lbf.COLOR_VAR_EPS + p["log_color_var"][b, 0, y, x] + p["log_color_var"][b, 0, yy, xx])
+                        dc = dc / (
+                            lbf.COLOR_VAR_EPS + p["log_color_var"][b, 0, y, x] + p["log_color_var"][b, 0, yy, xx]
+                        )
                         e = prec[b, 0, y, x] * (dy * dy + dx * dx) + prec[b, 1, y, x] * dc
                         for k, name in enumerate(lbf.FEATURES):
                             e = e + prec[b, 2 + k, y, x] * ((p[name][b, :, y, x] - p[name][b, :, yy, xx]) ** 2).sum()
@@ -69,7 +71,9 @@ def test_filter_matches_the_formula_pixel_by_pixel():
     g = torch.Generator().manual_seed(2)
     precisions = 2.0 * torch.rand(1, 2 + len(lbf.FEATURES), 6, 7, generator=g)
     ours = lbf.filter_image(primary, precisions, radius=2)
-    np.testing.assert_allclose(ours.double().numpy(), direct_filter(primary, precisions, 2).numpy(), rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(
+        ours.double().numpy(), direct_filter(primary, precisions, 2).numpy(), rtol=1e-5, atol=1e-6
+    )
 
 
 def test_limits_identity_and_box_filter():
@@ -166,8 +170,27 @@ def test_paper_configuration_builds_with_its_window():
 def test_train_lbf_uses_the_relmse_recipe(tmp_path):
     data = make_synthetic_dataset(tmp_path / "data", scenes=4, frames=1, height=16, width=16, spp=(2,))
     out = tmp_path / "lbf.pt"
-    assert main(["train", "--model", "lbf", "--data", str(data), "--steps", "3", "--out", str(out),
-                 "--batch-size", "2", "--crop", "12", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "lbf",
+                "--data",
+                str(data),
+                "--steps",
+                "3",
+                "--out",
+                str(out),
+                "--batch-size",
+                "2",
+                "--crop",
+                "12",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     meta = load_checkpoint(out, expect_model="lbf")["meta"]
     assert meta["loss"] == "relmse" and meta["steps"] == 3 and meta["stages"][0]["loss"] == "relmse"
     assert 0.0 < meta["validation"]["relmse"] < float("inf")
@@ -240,8 +263,13 @@ def test_lbf_at_one_spp_estimates_the_variance_it_is_not_given():
     assert not np.any(frame.buffers["color_var"] > 0)
     denoiser = load_denoiser("lbf")
     estimated = relmse(denoiser.denoise(frame), frame.reference)
-    told_noise_free = Frame(buffers={**frame.buffers, "color_var": np.full_like(frame.buffers["color_var"], 1e-12)},
-                            spp=1, scene=frame.scene, index=frame.index, reference=frame.reference)
+    told_noise_free = Frame(
+        buffers={**frame.buffers, "color_var": np.full_like(frame.buffers["color_var"], 1e-12)},
+        spp=1,
+        scene=frame.scene,
+        index=frame.index,
+        reference=frame.reference,
+    )
     trusting = relmse(denoiser.denoise(told_noise_free), frame.reference)
     assert estimated < 0.2 * relmse(frame.color, frame.reference)
     assert estimated < trusting

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+
 import numpy as np
 import pytest
 import torch
@@ -173,7 +174,9 @@ def test_a_few_steps_lower_the_loss_on_a_tiny_batch(name):
     # A denoising task: a smooth reference, the noisy colour is it times mean-one noise.
     y, x = torch.meshgrid(torch.arange(16.0), torch.arange(16.0), indexing="ij")
     ref = (0.5 + 0.3 * torch.sin(0.4 * x) * torch.cos(0.3 * y)).expand(2, 3, 16, 16).contiguous()
-    b.update(reference=ref, reference_diffuse=ref, reference_specular=torch.zeros_like(ref), albedo=torch.ones_like(ref))
+    b.update(
+        reference=ref, reference_diffuse=ref, reference_specular=torch.zeros_like(ref), albedo=torch.ones_like(ref)
+    )
     b.update(color=ref * (0.5 + b["color"]), specular=torch.zeros_like(ref))
     b["diffuse"] = b["color"]
     if name == "rae":
@@ -285,8 +288,10 @@ def test_checkpoints_load_safely(tmp_path):
 
 
 def test_clamp_isolated_matches_the_oidn_wrapper():
-    from denoisebench.baselines.oidn import FIREFLY_FACTOR, clamp_isolated as numpy_clamp
-    from denoisebench.models.features import FIREFLY_FACTOR as OURS, clamp_isolated
+    from denoisebench.baselines.oidn import FIREFLY_FACTOR
+    from denoisebench.baselines.oidn import clamp_isolated as numpy_clamp
+    from denoisebench.models.features import FIREFLY_FACTOR as OURS
+    from denoisebench.models.features import clamp_isolated
 
     assert OURS == FIREFLY_FACTOR
     image = np.random.default_rng(5).random((11, 13, 3)).astype(np.float32)
@@ -307,8 +312,13 @@ def test_output_scales_with_exposure_and_black_stays_black(name):
         for k in (1e-6, 1e6):
             if name == "rae":
                 net.reset()
-            scaled = dict(b, color=k * b["color"], diffuse=k * b["diffuse"], specular=k * b["specular"],
-                          color_var=k * k * b["color_var"])
+            scaled = dict(
+                b,
+                color=k * b["color"],
+                diffuse=k * b["diffuse"],
+                specular=k * b["specular"],
+                color_var=k * k * b["color_var"],
+            )
             torch.testing.assert_close(net(scaled)["color"], k * base, rtol=1e-3, atol=0)
         if name == "rae":
             net.reset()

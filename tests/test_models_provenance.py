@@ -17,13 +17,23 @@ OLD_COMMANDS = [
 def test_stages_from_commands_of_a_checkpoint_without_stages():
     stages = stages_from_commands(OLD_COMMANDS, {"spp": [2, 4, 8]}, lambda config: "log")
     assert [(s["from_step"], s["steps"], s["loss"], s["lr"], s["lr_schedule"]) for s in stages] == [
-        (0, 2000, "log", 0.001, "constant"), (2000, 1500, "relative", 0.001, "constant")]
+        (0, 2000, "log", 0.001, "constant"),
+        (2000, 1500, "relative", 0.001, "constant"),
+    ]
     assert all(s["batch_size"] == 8 and s["crop"] == 32 and s["spp"] == [2, 4, 8] and s["threads"] == 1 for s in stages)
 
 
 def test_run_record_keeps_training_commands_only_and_tags_stages_with_their_data():
-    meta = {"commands": OLD_COMMANDS, "steps": 3500, "seconds": 720.0, "dataset_hash": "abc", "train_scenes": ["a_000"],
-            "val_scenes": ["b_001"], "validation": {"relmse": 0.08}, "evaluated_on": {"dataset_hash": "def"}}
+    meta = {
+        "commands": OLD_COMMANDS,
+        "steps": 3500,
+        "seconds": 720.0,
+        "dataset_hash": "abc",
+        "train_scenes": ["a_000"],
+        "val_scenes": ["b_001"],
+        "validation": {"relmse": 0.08},
+        "evaluated_on": {"dataset_hash": "def"},
+    }
     record = run_record(meta, "ck.pt", lambda config: "log")
     assert record["commands"] == OLD_COMMANDS[:2]  # the scoring command changed no weights
     assert [s["dataset_hash"] for s in record["stages"]] == ["abc", "abc"]

@@ -54,7 +54,9 @@ NOT_YET_BEATEN: set[tuple[str, str]] = {("lbf", "cross_bilateral")}
 )
 def test_card_reports_a_win_on_held_out_scenes(name, peer):
     card = (WEIGHTS_DIR / f"{name}_small.md").read_text()
-    found = re.search(rf"against {peer}: relMSE ([0-9.]+) vs ([0-9.]+), ratio ([0-9.]+) \(([0-9.]+)% (lower|HIGHER)\)", card)
+    found = re.search(
+        rf"against {peer}: relMSE ([0-9.]+) vs ([0-9.]+), ratio ([0-9.]+) \(([0-9.]+)% (lower|HIGHER)\)", card
+    )
     assert found, f"no margin over {peer} in the card"
     ours, theirs, ratio = float(found.group(1)), float(found.group(2)), float(found.group(3))
     assert abs(ratio - ours / theirs) <= 6e-4 + 1e-3 * ratio  # the card prints 3 decimals

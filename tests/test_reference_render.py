@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from denoisebench.generator.reference_render import (
+from denoisebench.generator.render.reference import (
     MAX_ROUNDS,
     MIN_ROUNDS,
     RoundMerger,
@@ -73,11 +73,11 @@ def test_floor_estimate_is_unbiased_and_conservative_over_many_draws(kind):
     else:
         p, big, base = 1 / 200, 300.0, 0.2
         mu = base + p * big
-        sigma2 = p * (1 - p) * big ** 2
+        sigma2 = p * (1 - p) * big**2
         draw = lambda size: base + big * (rng.random(size) < p)  # noqa: E731
     n = round_spp * k
     # With the denominator at the true mean: the floor a perfect denoiser scores in expectation.
-    truth = sigma2 / n / (mu ** 2 + 0.01)
+    truth = sigma2 / n / (mu**2 + 0.01)
     robust, pooled = [], []
     for _ in range(300):
         merger = RoundMerger(round_spp)
@@ -108,7 +108,9 @@ def test_render_adaptive_stops_at_the_target_or_the_cap_and_names_it():
     assert not easy.record["stopped_at_cap"] and easy.record["floor"] <= 1e-3
     round_spp, max_rounds = round_schedule(4096)
     assert easy.spp % round_spp == 0 and MIN_ROUNDS * round_spp <= easy.spp <= 1536
-    assert easy.seconds == pytest.approx(0.5 * easy.record["rounds"]) and easy.compile_seconds == pytest.approx(0.1 * easy.record["rounds"])
+    assert easy.seconds == pytest.approx(0.5 * easy.record["rounds"]) and easy.compile_seconds == pytest.approx(
+        0.1 * easy.record["rounds"]
+    )
     again = render_adaptive(make_round(1.0), cap=4096, ref_error=1e-3)
     assert again.record == easy.record
     assert all(np.array_equal(again.buffers[k], easy.buffers[k]) for k in easy.buffers)
@@ -129,7 +131,7 @@ def test_round_schedule_and_seeds():
     with pytest.raises(ValueError):
         round_schedule(0)
     seeds = {round_seed(7, f, k) for f in range(4) for k in range(MAX_ROUNDS)}
-    assert len(seeds) == 4 * MAX_ROUNDS and all(0 <= s < 2 ** 32 for s in seeds)
+    assert len(seeds) == 4 * MAX_ROUNDS and all(0 <= s < 2**32 for s in seeds)
     assert round_seed(7, 1, 2) == round_seed(7, 1, 2) != round_seed(8, 1, 2)
 
 
@@ -138,7 +140,7 @@ def test_a_floor_estimate_still_rising_does_not_stop_the_loop():
     Steady: each round's variance the same, the floor falls as 1/rounds and the loop stops once it is
     <= the target. Rising: round k's variance ∝ sqrt(k + 1), so the floor falls only as 1/sqrt(rounds)
     (growth sqrt(2) ≈ 1.41): the target is met after ~28 rounds, but the loop runs to the cap."""
-    from denoisebench.generator.reference_render import GROWTH_WARNING, floor_growth
+    from denoisebench.generator.render.reference import GROWTH_WARNING, floor_growth
 
     a = 1e-3
 
@@ -150,7 +152,9 @@ def test_a_floor_estimate_still_rising_does_not_stop_the_loop():
         return render_round
 
     steady = render_adaptive(make_round(False), cap=1024, ref_error=a / 8)
-    assert 2 * MIN_ROUNDS <= steady.record["rounds"] <= 10 and steady.record["floor_growth"] == pytest.approx(1.0, abs=0.05)
+    assert 2 * MIN_ROUNDS <= steady.record["rounds"] <= 10 and steady.record["floor_growth"] == pytest.approx(
+        1.0, abs=0.05
+    )
     rising = render_adaptive(make_round(True), cap=1024, ref_error=a / 8)
     assert rising.record["rounds"] == MAX_ROUNDS and rising.record["floor_growth"] > GROWTH_WARNING
     assert rising.record["floor"] <= a / 8  # met long before the cap, but never trusted

@@ -21,14 +21,14 @@ import dataclasses
 
 import numpy as np
 import pytest
-
-from denoisebench.generator.feature_renderer import render_frame
-from denoisebench.generator.mitsuba_scene import build_mitsuba_scene, sensor_dict
-from denoisebench.generator.reference_render import render_adaptive, round_seed
-from denoisebench.generator.render_plan import RenderOptions, make_render_plan
-from denoisebench.generator.translate import translate_usd
-from denoisebench.scenes import get_family, list_families
 from plain_stages import author_every_light, author_plain_box
+
+from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
+from denoisebench.generator.render.frame import render_frame
+from denoisebench.generator.render.reference import render_adaptive, round_seed
+from denoisebench.generator.render.scene import build_mitsuba_scene, sensor_dict
+from denoisebench.generator.usd.translate import translate_usd
+from denoisebench.scenes import get_family, list_families
 
 pytestmark = pytest.mark.slow
 
@@ -42,8 +42,17 @@ def our_reference(scene, translated, plan, frame, spp=OURS_SPP, seed=11):
     """The reference as the dataset renders it: adaptive rounds (target unreachable: all rounds run)."""
 
     def render_round(index, round_spp):
-        out = render_frame(scene, translated.camera, frame, plan, width=SIZE, height=SIZE, spp=round_spp,
-                           seed=round_seed(seed, frame, index), reference=True)
+        out = render_frame(
+            scene,
+            translated.camera,
+            frame,
+            plan,
+            width=SIZE,
+            height=SIZE,
+            spp=round_spp,
+            seed=round_seed(seed, frame, index),
+            reference=True,
+        )
         return out.buffers, out.seconds, 0.0
 
     outcome = render_adaptive(render_round, spp, ref_error=1e-12)
@@ -55,8 +64,10 @@ def mitsuba_path(mi, translated, scene, frame, aperture_scale=1.0):
     """REPLICAS independent renders by Mitsuba ``path`` at its defaults (box filter), R×H×W×3."""
     sensor = mi.load_dict(sensor_dict(translated.camera, frame, SIZE, SIZE, REPLICA_SPP, aperture_scale=aperture_scale))
     integrator = mi.load_dict({"type": "path"})
-    images = [np.array(mi.render(scene, sensor=sensor, integrator=integrator, seed=500 + k, spp=REPLICA_SPP))[..., :3]
-              for k in range(REPLICAS)]
+    images = [
+        np.array(mi.render(scene, sensor=sensor, integrator=integrator, seed=500 + k, spp=REPLICA_SPP))[..., :3]
+        for k in range(REPLICAS)
+    ]
     return np.stack(images).astype(np.float64)
 
 
@@ -72,12 +83,15 @@ def z_scores(mean_a, var_a, mean_b, var_b):
     # Float rounding (1e-6 relative) stands in for the variance where both have none (a constant sky).
     a_blocks, b_blocks = block_means(mean_a), block_means(mean_b)
     blocks = (a_blocks - b_blocks) / np.sqrt(
-        (block_means(var_a) + block_means(var_b)) / n + np.square(1e-6 * (np.abs(a_blocks) + np.abs(b_blocks))) + 1e-20)
+        (block_means(var_a) + block_means(var_b)) / n + np.square(1e-6 * (np.abs(a_blocks) + np.abs(b_blocks))) + 1e-20
+    )
     pixels = mean_a[..., 0].size
     a_image, b_image = mean_a.mean(axis=(0, 1)), mean_b.mean(axis=(0, 1))
     image = (a_image - b_image) / np.sqrt(
-        (var_a.sum(axis=(0, 1)) + var_b.sum(axis=(0, 1))) / pixels ** 2 + np.square(1e-6 * (np.abs(a_image) + np.abs(b_image)))
-        + 1e-30)
+        (var_a.sum(axis=(0, 1)) + var_b.sum(axis=(0, 1))) / pixels**2
+        + np.square(1e-6 * (np.abs(a_image) + np.abs(b_image)))
+        + 1e-30
+    )
     return image, blocks
 
 
@@ -99,8 +113,12 @@ def _compare(mi, translated, frame, plan):
     theirs = mitsuba_path(mi, translated, scene, frame, aperture_scale=plan.aperture_scale)
     assert ours["color"].mean() > 1e-3, "a black image compares nothing"
     mean_b, var_b = replicas_as_mean(theirs)
-    return scene, ours, (mean_b, var_b), z_scores(ours["color"].astype(np.float64), ours["color_var"].astype(np.float64),
-                                                  mean_b, var_b)
+    return (
+        scene,
+        ours,
+        (mean_b, var_b),
+        z_scores(ours["color"].astype(np.float64), ours["color_var"].astype(np.float64), mean_b, var_b),
+    )
 
 
 @pytest.mark.parametrize("family", [f.name for f in list_families()])
@@ -111,8 +129,9 @@ def test_every_family_reference_matches_mitsuba_path(mi, tmp_path, family):
     if plan.time_sampling:
         # Mitsuba's sensor cannot move the camera within the shutter: compare the frame's own pose
         # (without time samples our camera sits at the frame's pose, as Mitsuba's does).
-        plan = dataclasses.replace(plan, time_sampling=False,
-                                   random_parameters=tuple(p for p in plan.random_parameters if p != "time"))
+        plan = dataclasses.replace(
+            plan, time_sampling=False, random_parameters=tuple(p for p in plan.random_parameters if p != "time")
+        )
     _, _, _, (z_image, z_blocks) = _compare(mi, translated, 1, plan)
     assert_agree(z_image, z_blocks)
 
@@ -135,7 +154,8 @@ def test_every_light_kind_stage_matches_mitsuba_path(mi, tmp_path):
     translated = translate_usd(author_every_light(tmp_path / "lights.usda"))
     assert translated.effects_declared == () and not translated.warnings, translated.warnings
     kinds = {e["type"] for e in translated.scene_dict["emitters"]} | {
-        s["emitter"]["type"] for s in translated.scene_dict["shapes"] if s.get("emitter")}
+        s["emitter"]["type"] for s in translated.scene_dict["shapes"] if s.get("emitter")
+    }
     assert {"area", "point", "spot", "directional", "constant"} <= kinds, kinds
     assert {"textures", "glossy", "specular", "transmission"} <= set(translated.effects)
     plan = make_render_plan(translated.effects)
@@ -147,17 +167,25 @@ def test_pruned_and_unpruned_plans_agree_in_expectation(mi, tmp_path):
     """What the plan skips (thin lens of zero aperture, time samples of a static camera, the lobe split
     of a scene without glossy/specular effects) changes the work, not the expected image."""
     box = translate_usd(author_plain_box(tmp_path / "box.usda"))  # static camera, no depth of field
-    cornell = translate_usd(get_family("cornell").author(tmp_path / "cornell", seed=0, frames=2, width=SIZE, height=SIZE))
+    cornell = translate_usd(
+        get_family("cornell").author(tmp_path / "cornell", seed=0, frames=2, width=SIZE, height=SIZE)
+    )
     for translated, frame, with_time in ((box, 0, True), (cornell, 1, False)):
         pruned = make_render_plan(translated.effects)
         assert pruned.camera_model == "pinhole" and not pruned.time_sampling
         unpruned = dataclasses.replace(
-            pruned, camera_model="thin_lens", time_sampling=with_time, lobe_split=True,
-            random_parameters=("pixel", "lens") + (("time",) if with_time else ()))
+            pruned,
+            camera_model="thin_lens",
+            time_sampling=with_time,
+            lobe_split=True,
+            random_parameters=("pixel", "lens") + (("time",) if with_time else ()),
+        )
         scene = build_mitsuba_scene(translated)
         a = our_reference(scene, translated, pruned, frame, seed=21)
         b = our_reference(scene, translated, unpruned, frame, seed=22)
-        z_image, z_blocks = z_scores(*(x.astype(np.float64) for x in (a["color"], a["color_var"], b["color"], b["color_var"])))
+        z_image, z_blocks = z_scores(
+            *(x.astype(np.float64) for x in (a["color"], a["color_var"], b["color"], b["color_var"]))
+        )
         assert np.all(np.abs(z_image) < 4.0), z_image
         assert np.mean(np.abs(z_blocks) > 4.0) <= 0.02 and np.abs(z_blocks).max() < 6.0
         np.testing.assert_allclose(b["diffuse"] + b["specular"], b["color"], rtol=1e-4, atol=1e-5)

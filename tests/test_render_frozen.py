@@ -11,20 +11,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from denoisebench.generator import feature_renderer
-from denoisebench.generator.feature_renderer import load_scene, render_frame
-from denoisebench.generator.camera_track import CameraTrack
-from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
-from denoisebench.generator.render_plan import RenderOptions, make_render_plan
-from denoisebench.generator.translate import translate_usd
+from denoisebench.generator.contract.camera_track import CameraTrack
+from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
+from denoisebench.generator.render import frame as feature_renderer
+from denoisebench.generator.render.frame import load_scene, render_frame
+from denoisebench.generator.render.scene import build_mitsuba_scene
+from denoisebench.generator.usd.translate import translate_usd
 from denoisebench.mitsuba_runtime import load_mitsuba
 from denoisebench.scenes import get_family
 
 SIZE = 16
 
 
-pytestmark = pytest.mark.skipif(not load_mitsuba().variant().startswith("llvm"),
-                                reason="needs the LLVM variant (libLLVM >= 16)")
+pytestmark = pytest.mark.skipif(
+    not load_mitsuba().variant().startswith("llvm"), reason="needs the LLVM variant (libLLVM >= 16)"
+)
 
 
 def _assert_same(a, b, frame) -> None:
@@ -98,7 +99,7 @@ def test_motion_blur_reference_rounds_record_each_pass_once(monkeypatch, tmp_pat
     printed "The frozen function has been recorded N times" from the third on. Each configuration
     (noisy frame 0 / later frames, reference frame 0 / later frames) must be recorded exactly once.
     """
-    from denoisebench.generator.reference_render import MIN_ROUNDS, render_adaptive, round_seed
+    from denoisebench.generator.render.reference import MIN_ROUNDS, render_adaptive, round_seed
 
     translated = translate_usd(get_family("motion_blur").author(tmp_path, seed=0, frames=3, width=SIZE, height=SIZE))
     scene = build_mitsuba_scene(translated)
@@ -109,8 +110,9 @@ def test_motion_blur_reference_rounds_record_each_pass_once(monkeypatch, tmp_pat
         render_frame(scene, translated.camera, frame, plan, spp=2, seed=3, **kw)
 
         def render_round(k, round_spp, frame=frame):
-            out = render_frame(scene, translated.camera, frame, plan, spp=round_spp, seed=round_seed(3, frame, k),
-                               reference=True, **kw)
+            out = render_frame(
+                scene, translated.camera, frame, plan, spp=round_spp, seed=round_seed(3, frame, k), reference=True, **kw
+            )
             return out.buffers, out.seconds, 0.0
 
         # cap 128: rounds of 2 spp; a target every floor meets stops after MIN_ROUNDS rounds

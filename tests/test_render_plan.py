@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from denoisebench.generator.render_plan import (
+from denoisebench.generator.contract.render_plan import (
     DEFAULT_RR_DEPTH,
     UNBOUNDED_DEPTH,
     RenderOptions,
@@ -127,7 +127,7 @@ def test_stage_metadata_max_depth_is_read(tmp_path):
     from pxr import Usd, UsdGeom
 
     from denoisebench.errors import UserInputError
-    from denoisebench.generator.translate import translate_usd
+    from denoisebench.generator.usd.translate import translate_usd
 
     def stage_with(meta):
         path = tmp_path / f"s{len(list(tmp_path.iterdir()))}.usda"

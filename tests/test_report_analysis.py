@@ -81,7 +81,7 @@ def test_worst_windows_find_planted_errors_without_overlap():
     # a window at the border stays inside the image
     edge = np.zeros((16, 16))
     edge[-1, -1] = 1.0
-    (top, left), = images.worst_windows(edge, 4, count=1)
+    ((top, left),) = images.worst_windows(edge, 4, count=1)
     assert 0 <= top <= 12 and 0 <= left <= 12 and top + 4 == 16 and left + 4 == 16
 
 

@@ -30,8 +30,9 @@ def _chromium_paths():
 def report(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("browser")
     data = make_synthetic_dataset(root / "ds", scenes=1, frames=2, height=16, width=16, spp=(1, 4))
-    (root / "evil.py").write_text(textwrap.dedent(
-        f"""
+    (root / "evil.py").write_text(
+        textwrap.dedent(
+            f"""
         import numpy as np
 
         class Evil:
@@ -39,13 +40,31 @@ def report(tmp_path_factory) -> Path:
             def denoise(self, frame):
                 return np.array(frame.color, dtype=np.float32) * np.float32(0.9)
         """
-    ))
+        )
+    )
     out = root / "report"
     result = subprocess.run(
-        [sys.executable, "-m", "denoisebench.cli", "benchmark", "--data", str(data), "--db", str(root / "r.sqlite"),
-         "--denoisers", "cross_bilateral_fast", "--denoiser", f"{root / 'evil.py'}:Evil", "--metrics", "relmse",
-         "--out", str(out)],
-        capture_output=True, text=True, timeout=300,
+        [
+            sys.executable,
+            "-m",
+            "denoisebench.cli",
+            "benchmark",
+            "--data",
+            str(data),
+            "--db",
+            str(root / "r.sqlite"),
+            "--denoisers",
+            "cross_bilateral_fast",
+            "--denoiser",
+            f"{root / 'evil.py'}:Evil",
+            "--metrics",
+            "relmse",
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert result.returncode == 0, result.stderr
     assert f"report: {(out / 'index.html').resolve()}" in result.stdout
@@ -72,7 +91,13 @@ def driver():
 
     options = webdriver.ChromeOptions()
     options.binary_location = browser
-    for flag in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1400,2000"):
+    for flag in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--window-size=1400,2000",
+    ):
         options.add_argument(flag)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     # the driver from Debian, never a downloaded one (Selenium Manager is not consulted with a path)
@@ -91,9 +116,7 @@ def test_report_renders_in_chromium(report, driver):
     assert errors == [], errors
 
     # every image decoded (data URIs: a broken one has naturalWidth 0)
-    images = driver.execute_script(
-        "return Array.from(document.images).map(i => [i.alt, i.complete, i.naturalWidth]);"
-    )
+    images = driver.execute_script("return Array.from(document.images).map(i => [i.alt, i.complete, i.naturalWidth]);")
     assert len(images) >= 8
     assert all(complete and width > 0 for _, complete, width in images), images
     # no request left the page: only data: resources were loaded

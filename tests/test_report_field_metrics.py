@@ -19,15 +19,28 @@ from denoisebench.metrics.noisebase import NOISEBASE_METRICS
 def report(tmp_path_factory):
     root = tmp_path_factory.mktemp("field")
     data = make_synthetic_dataset(root / "ds", scenes=4, frames=3, height=16, width=16, spp=(1,))
-    code = main(["benchmark", "--data", str(data), "--db", str(root / "db.sqlite"), "--out", str(root / "report"),
-                 "--denoisers", "identity", "--metrics", "cvvdp,noisebase"])
+    code = main(
+        [
+            "benchmark",
+            "--data",
+            str(data),
+            "--db",
+            str(root / "db.sqlite"),
+            "--out",
+            str(root / "report"),
+            "--denoisers",
+            "identity",
+            "--metrics",
+            "cvvdp,noisebase",
+        ]
+    )
     assert code == 0
     return root / "report"
 
 
 def test_flicker_table_shows_cvvdp_beside_the_scale_free_score(report):
     md = (report / "report.md").read_text()
-    flicker = md[md.index("## Temporal flicker"):]
+    flicker = md[md.index("## Temporal flicker") :]
     header = next(line for line in flicker.splitlines() if line.startswith("| denoiser"))
     columns = [c.strip() for c in header.strip("|").split("|")]
     lead = [c for c in columns if not c.startswith("temporal\\_relmse")][1]

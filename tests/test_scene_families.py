@@ -11,8 +11,7 @@ import numpy as np
 import pytest
 from pxr import Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
-from denoisebench.scenes import EFFECTS, METADATA_KEY, get_family, list_families
-from denoisebench.scenes import camera_paths
+from denoisebench.scenes import EFFECTS, METADATA_KEY, camera_paths, get_family, list_families
 from denoisebench.scenes.authoring import STAGE_FILENAME
 
 FRAMES = 4
@@ -206,11 +205,15 @@ def test_textures_exist_beside_the_stage(authored, name):
                 assert asset.startswith("textures/") and asset.endswith(".png"), asset
                 assert (root / asset).is_file(), asset
                 referenced.add(asset)
-    on_disk = {f"textures/{p.name}" for p in (root / "textures").glob("*.png")} if (root / "textures").exists() else set()
+    on_disk = (
+        {f"textures/{p.name}" for p in (root / "textures").glob("*.png")} if (root / "textures").exists() else set()
+    )
     assert on_disk == referenced
     if "textures" in get_family(name).effects:
         assert any(
-            prim.GetAttribute("info:id").Get() == "UsdUVTexture" for prim in stage.Traverse() if prim.IsA(UsdShade.Shader)
+            prim.GetAttribute("info:id").Get() == "UsdUVTexture"
+            for prim in stage.Traverse()
+            if prim.IsA(UsdShade.Shader)
         )
 
 
@@ -290,7 +293,9 @@ def test_single_frame_and_bad_arguments(tmp_path):
 def test_aspect_sets_vertical_aperture(tmp_path):
     stage = _open(get_family("cornell").author(tmp_path, seed=0, frames=2, width=320, height=240))
     cam = _camera(stage)
-    assert cam.GetHorizontalApertureAttr().Get() / cam.GetVerticalApertureAttr().Get() == pytest.approx(320 / 240, rel=1e-5)
+    assert cam.GetHorizontalApertureAttr().Get() / cam.GetVerticalApertureAttr().Get() == pytest.approx(
+        320 / 240, rel=1e-5
+    )
 
 
 # --------------------------------------------------------------------------- family promises
@@ -300,7 +305,11 @@ def _lens(stage: Usd.Stage) -> tuple[float, float]:
     """(horizontal field of view in degrees, thin-lens radius in meters) per UsdGeomCamera units."""
     cam = _camera(stage)
     mpu = UsdGeom.GetStageMetersPerUnit(stage)
-    focal, aperture, fstop = cam.GetFocalLengthAttr().Get(), cam.GetHorizontalApertureAttr().Get(), cam.GetFStopAttr().Get()
+    focal, aperture, fstop = (
+        cam.GetFocalLengthAttr().Get(),
+        cam.GetHorizontalApertureAttr().Get(),
+        cam.GetFStopAttr().Get(),
+    )
     fov = math.degrees(2 * math.atan(0.5 * aperture / focal))
     radius = focal * 0.1 * mpu / (2 * fstop) if fstop > 0 else 0.0
     return fov, radius
@@ -346,7 +355,8 @@ def test_fireflies_family_has_small_intense_light_and_glossy_metal(authored):
     stage = _open(authored["glossy_fireflies"])
     mpu = UsdGeom.GetStageMetersPerUnit(stage)
     small = [
-        UsdLux.SphereLight(p) for p in stage.Traverse()
+        UsdLux.SphereLight(p)
+        for p in stage.Traverse()
         if p.IsA(UsdLux.SphereLight) and UsdLux.SphereLight(p).GetRadiusAttr().Get() * mpu < 0.03
     ]
     assert small
@@ -354,7 +364,8 @@ def test_fireflies_family_has_small_intense_light_and_glossy_metal(authored):
         assert light.GetTreatAsPointAttr().Get() is False
         assert light.GetIntensityAttr().Get() * 2 ** light.GetExposureAttr().Get() >= 1e4
     glossy = [
-        m for m in _bound_materials(stage)
+        m
+        for m in _bound_materials(stage)
         if _value(_surface(m), "metallic") > 0.5 and 0.05 <= _value(_surface(m), "roughness") < 0.4
     ]
     assert glossy
@@ -371,7 +382,10 @@ def test_families_exercise_z_up_centimeters_and_geom_subsets(authored):
             if prim.IsA(UsdGeom.Mesh):
                 subsets = UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets()
                 if subsets:
-                    mats = {str(UsdShade.MaterialBindingAPI(s.GetPrim()).ComputeBoundMaterial()[0].GetPath()) for s in subsets}
+                    mats = {
+                        str(UsdShade.MaterialBindingAPI(s.GetPrim()).ComputeBoundMaterial()[0].GetPath())
+                        for s in subsets
+                    }
                     assert len(mats) >= 2
                     with_subsets.append(name)
     assert with_subsets

@@ -49,7 +49,11 @@ def _sequence(scene: str, scale: float, spp: int, frames: int = 8, size: int = 2
         motion = np.zeros((size, size, 2), np.float32)
         motion[..., 0] = 1.0  # the camera pans: the point at x was at x + 1 in the previous frame
         var = (0.01 * ref) ** 2  # a reference 1 % noisy
-        out.append(Frame({"color": noisy, "motion": motion}, spp, scene, t, ref, meta={"reference_buffers": {"color_var": var}}))
+        out.append(
+            Frame(
+                {"color": noisy, "motion": motion}, spp, scene, t, ref, meta={"reference_buffers": {"color_var": var}}
+            )
+        )
     return Sequence(scene, spp, out)
 
 
@@ -101,7 +105,11 @@ def test_floors_and_corrected_values_travel_through_the_store(measured):
     for metric in ("relmse", "mse", "temporal_relmse"):
         cell = row.metrics[metric]
         assert cell.floor is not None and cell.floor > 0, metric
-        assert cell.corrected == pytest.approx(cell.mean - cell.floor, rel=1e-9) if cell.rule == "mean" else cell.corrected < cell.mean
+        assert (
+            cell.corrected == pytest.approx(cell.mean - cell.floor, rel=1e-9)
+            if cell.rule == "mean"
+            else cell.corrected < cell.mean
+        )
     assert row.metrics["hfen"].floor is None  # not an MSE-family score
     frames = store.frames("run1")
     assert all("relmse" in f["floors"] and "relmse" in f["ref_se"] for f in frames if f["status"] == "ok")
@@ -133,8 +141,10 @@ def test_bootstrap_interval_widens_with_the_reference_uncertainty():
 
 
 def _unit(label, scene, value, se, frames=2):
-    records = [FrameRecord(i, "ok", None, 1.0, 0.1, 1.1, 0, {"relmse": value}, {"relmse": 0.001}, {"relmse": se})
-               for i in range(frames)]
+    records = [
+        FrameRecord(i, "ok", None, 1.0, 0.1, 1.1, 0, {"relmse": value}, {"relmse": 0.001}, {"relmse": se})
+        for i in range(frames)
+    ]
     return UnitRecord(label, scene, 1, "ok", None, records)
 
 
@@ -142,8 +152,12 @@ def test_pairs_within_the_reference_noise_are_marked_not_distinguishable(tmp_pat
     # a and b differ by 0.0005 with a per-frame reference se of 0.002: not resolvable; c is far off
     units = []
     for scene in ("s1", "s2"):
-        units += [_unit(NOISY, scene, 0.5, 0.002), _unit("a", scene, 0.0500, 0.002), _unit("b", scene, 0.0505, 0.002),
-                  _unit("c", scene, 0.0800, 0.002)]
+        units += [
+            _unit(NOISY, scene, 0.5, 0.002),
+            _unit("a", scene, 0.0500, 0.002),
+            _unit("b", scene, 0.0505, 0.002),
+            _unit("c", scene, 0.0800, 0.002),
+        ]
     store, run_id = _store_with_units(tmp_path / "r.sqlite", units, (NOISY, "a", "b", "c"))
     data = analysis.RunData(store, run_id)
     pairs = {(p.a, p.b) for p in analysis.indistinguishable_pairs(data, analysis.summary_table(data))}
@@ -151,8 +165,9 @@ def test_pairs_within_the_reference_noise_are_marked_not_distinguishable(tmp_pat
     assert not {("a", "c"), ("b", "c"), (NOISY, "a")} & pairs
     # resolution: 1.96 × sqrt(Σ (se_a + se_b)²) / scenes, with the scene se = frame se / sqrt(2 frames)
     se = 0.002 / math.sqrt(2)
-    assert agg.reference_resolution("mean", {"s1": 0.05, "s2": 0.05}, {"s1": se, "s2": se}, {"s1": 0.05, "s2": 0.05},
-                                    {"s1": se, "s2": se}) == pytest.approx(agg.Z95 * math.sqrt(2 * (2 * se) ** 2) / 2)
+    assert agg.reference_resolution(
+        "mean", {"s1": 0.05, "s2": 0.05}, {"s1": se, "s2": se}, {"s1": 0.05, "s2": 0.05}, {"s1": se, "s2": se}
+    ) == pytest.approx(agg.Z95 * math.sqrt(2 * (2 * se) ** 2) / 2)
 
 
 def test_a_version_1_database_stays_readable_and_is_migrated_when_written(tmp_path):
@@ -168,7 +183,7 @@ def test_a_version_1_database_stays_readable_and_is_migrated_when_written(tmp_pa
         conn.execute("UPDATE schema_version SET version = 1")
     with ResultsStore(path, readonly=True) as old:
         assert old.version == 1
-        (frame, *_), = [old.frames("run1")[:1]]
+        ((frame, *_),) = [old.frames("run1")[:1]]
         assert frame["metrics"]["relmse"] == 0.5 and frame["floors"] == {}
         assert old.strip("run1", NOISY, "s1", 1) is None and old.integrity_problems() == []
         assert all(d["trained_on"] == [] for d in old.denoisers("run1"))
@@ -192,8 +207,9 @@ def test_strips_cut_the_same_crop_for_every_unit_and_show_consecutive_frames(mea
     assert a is not None and b is not None
     assert (a["top"], a["left"], a["side"]) == (b["top"], b["left"], b["side"])
     assert a["crops"].shape == (strips.STRIP_FRAMES, a["side"], a["side"], 3)
-    from PIL import Image
     import io
+
+    from PIL import Image
 
     png = Image.open(io.BytesIO(strips.strip_png(a["crops"], scale=2)))
     assert png.size == (strips.STRIP_FRAMES * (2 * a["side"] + 2) - 2, 2 * a["side"])
@@ -230,14 +246,18 @@ def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
 
     from denoisebench.dataset import open_dataset
     from denoisebench.dataset.synthetic import make_synthetic_dataset
-    from denoisebench.leaderboard.report import write_report
     from denoisebench.leaderboard.benchmark_run import run_benchmark
+    from denoisebench.leaderboard.report import write_report
     from denoisebench.leaderboard.runner import BenchmarkConfig
 
     data = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=1, frames=4, height=16, width=16, spp=(1, 4)))
     with ResultsStore(tmp_path / "r.sqlite") as store:
-        plan = run_benchmark(data, BenchmarkConfig(["cross_bilateral_fast"], [1, 4], split="all", metrics=["relmse"]),
-                             store, progress=False)
+        plan = run_benchmark(
+            data,
+            BenchmarkConfig(["cross_bilateral_fast"], [1, 4], split="all", metrics=["relmse"]),
+            store,
+            progress=False,
+        )
         index = write_report(store, plan.run_id, data, tmp_path / "report")
     results = json.loads((tmp_path / "report" / "results.json").read_text())
     for row in results["summary"]:
@@ -252,7 +272,9 @@ def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
     markdown = (tmp_path / "report" / "report.md").read_text()
     assert "relmse floor" in markdown and "temporal\\_relmse ↓" in markdown
     html = index.read_text()
-    assert html.count('alt="frames of ') == 3 and html.count('alt="animated crop of ') == 3  # noisy, denoiser, reference
+    assert (
+        html.count('alt="frames of ') == 3 and html.count('alt="animated crop of ') == 3
+    )  # noisy, denoiser, reference
 
 
 def test_the_leaderboard_command_ranks_a_linear_flicker_score_per_scene_against_the_input(tmp_path):

@@ -20,7 +20,9 @@ SMALL = ["--batch-size", "2", "--crop", "16", "--quiet"]
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
     # 5 scenes: 3 train, 1 val, 1 test (manifest.assign_splits).
-    return make_synthetic_dataset(tmp_path_factory.mktemp("syn") / "data", scenes=5, frames=3, height=20, width=20, spp=(2,))
+    return make_synthetic_dataset(
+        tmp_path_factory.mktemp("syn") / "data", scenes=5, frames=3, height=20, width=20, spp=(2,)
+    )
 
 
 def train(*args):
@@ -78,7 +80,9 @@ def test_ship_writes_weights_and_a_card_that_replays_the_commands(data, tmp_path
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "denoisebench.cli", *map(str, args)], capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "denoisebench.cli", *map(str, args)], capture_output=True, text=True, timeout=300
+    )
 
 
 def test_bad_input_exits_2_with_one_line(data, tmp_path, capsys):
@@ -87,7 +91,10 @@ def test_bad_input_exits_2_with_one_line(data, tmp_path, capsys):
     (tmp_path / "junk.pt").write_bytes(b"junk")
     cases = [
         (["--model", "kpcn", "--data", data, "--resume", ckpt, "--out", tmp_path / "k.pt"], "not 'kpcn'"),
-        (["--model", "dpcn", "--data", data, "--resume", tmp_path / "junk.pt", "--out", tmp_path / "k.pt"], "not a loadable"),
+        (
+            ["--model", "dpcn", "--data", data, "--resume", tmp_path / "junk.pt", "--out", tmp_path / "k.pt"],
+            "not a loadable",
+        ),
         (["--model", "dpcn", "--data", data, "--spp", "64", "--out", tmp_path / "k.pt"], "not rendered"),
     ]
     capsys.readouterr()
@@ -115,16 +122,24 @@ def test_set_overrides_a_configuration_key_and_the_checkpoint_loads_as_trained(d
     capsys.readouterr()
     assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out) == 0
     assert load_checkpoint(out)["config"]["residual"] is False
-    assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out,
-                 "--set", "residual=false") == 0
-    assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out,
-                 "--set", "residual=true") == 2
+    assert (
+        train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out, "--set", "residual=false")
+        == 0
+    )
+    assert (
+        train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out, "--set", "residual=true")
+        == 2
+    )
     assert "trained with config" in capsys.readouterr().err
-    assert train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out, "--config", "paper") == 2
+    assert (
+        train("--model", "rae", "--data", data, "--steps", 1, "--resume", out, "--out", out, "--config", "paper") == 2
+    )
     assert "trained with config" in capsys.readouterr().err
-    for bad, message in ((["--set", "no_such_key=1"], "not a rae configuration key"),
-                         (["--set", "residual"], "expects KEY=VALUE"),
-                         (["--set", "residual=3"], "expected a value like")):
+    for bad, message in (
+        (["--set", "no_such_key=1"], "not a rae configuration key"),
+        (["--set", "residual"], "expects KEY=VALUE"),
+        (["--set", "residual=3"], "expected a value like"),
+    ):
         assert train("--model", "rae", "--data", data, "--steps", 1, "--out", tmp_path / "x.pt", *bad) == 2
         err = capsys.readouterr().err
         assert message in err and len(err.strip().splitlines()) == 1, err
@@ -144,22 +159,30 @@ def test_steps_0_scores_shipped_weights_on_another_dataset_and_keeps_their_prove
     assert train("--model", "dpcn", "--data", other, "--steps", 1, "--resume", shipped, "--out", tmp_path / "x.pt") == 2
     assert "--steps 0 scores them" in capsys.readouterr().err and not (tmp_path / "x.pt").exists()
     rescored = tmp_path / "rescored.pt"
-    assert train("--model", "dpcn", "--data", other, "--steps", 0, "--resume", shipped, "--out", rescored,
-                 "--ship", second) == 0
+    assert (
+        train(
+            "--model", "dpcn", "--data", other, "--steps", 0, "--resume", shipped, "--out", rescored, "--ship", second
+        )
+        == 0
+    )
     before, after = load_checkpoint(shipped)["meta"], load_checkpoint(second / "dpcn_small.pt")["meta"]
     for key in ("dataset_hash", "train_scenes", "val_scenes", "validation", "stages", "steps", "seconds"):
         assert after[key] == before[key], key
     assert after["evaluated_on"]["dataset_hash"] == open_dataset(other).config_hash != before["dataset_hash"]
     assert after["evaluated_on"]["validation"]["scenes"] == open_dataset(other).split("val")
-    torch.testing.assert_close(load_checkpoint(second / "dpcn_small.pt")["state_dict"],
-                               load_checkpoint(shipped)["state_dict"])
+    torch.testing.assert_close(
+        load_checkpoint(second / "dpcn_small.pt")["state_dict"], load_checkpoint(shipped)["state_dict"]
+    )
     card = (second / "dpcn_small.md").read_text()
     assert f"dataset config hash `{before['dataset_hash']}`" in card
     assert f"Scored on another dataset than the training one: config hash `{open_dataset(other).config_hash}`" in card
     assert f"test (held-out) scenes: {', '.join(open_dataset(other).split('test'))}" in card
     seen = sorted(set(open_dataset(other).split("test")) & set(before["train_scenes"]))  # synthetic names repeat
-    assert (f"share a name (family and seed) with a training scene: {', '.join(seen)}." if seen
-            else "None of its test scenes shares a name") in card
+    assert (
+        f"share a name (family and seed) with a training scene: {', '.join(seen)}."
+        if seen
+        else "None of its test scenes shares a name"
+    ) in card
     assert after["commands"][-1] in card and "--steps 0" in after["commands"][-1]
     assert "not the one they were trained on" in card and "[95% CI" in card
 
@@ -171,7 +194,9 @@ def test_init_from_fine_tunes_on_another_dataset_and_the_card_lists_both_runs(da
     ck, first, second = tmp_path / "ck.pt", tmp_path / "ship1", tmp_path / "ship2"
     first.mkdir(), second.mkdir()
     # weights of another shape than today's small configuration (as the first shipped dpcn_small.pt)
-    assert train("--model", "dpcn", "--data", data, "--steps", 2, "--out", ck, "--ship", first, "--set", "layers=3") == 0
+    assert (
+        train("--model", "dpcn", "--data", data, "--steps", 2, "--out", ck, "--ship", first, "--set", "layers=3") == 0
+    )
     shipped = first / "dpcn_small.pt"
     capsys.readouterr()
     refused = [
@@ -187,8 +212,27 @@ def test_init_from_fine_tunes_on_another_dataset_and_the_card_lists_both_runs(da
         assert message in err and len(err.strip().splitlines()) == 1, err
         assert not (tmp_path / "x.pt").exists()
     tuned = tmp_path / "tuned.pt"
-    assert train("--model", "dpcn", "--data", other, "--init-from", shipped, "--steps", 2, "--lr", "1e-4",
-                 "--loss", "relmse", "--out", tuned, "--ship", second) == 0
+    assert (
+        train(
+            "--model",
+            "dpcn",
+            "--data",
+            other,
+            "--init-from",
+            shipped,
+            "--steps",
+            2,
+            "--lr",
+            "1e-4",
+            "--loss",
+            "relmse",
+            "--out",
+            tuned,
+            "--ship",
+            second,
+        )
+        == 0
+    )
     before, after = load_checkpoint(shipped)["meta"], load_checkpoint(tuned)["meta"]
     assert after["steps"] == 4 and after["dataset_hash"] == open_dataset(other).config_hash != before["dataset_hash"]
     assert after["train_scenes"] == open_dataset(other).split("train")
@@ -197,10 +241,17 @@ def test_init_from_fine_tunes_on_another_dataset_and_the_card_lists_both_runs(da
     assert run["commands"] == before["commands"] and run["validation"] == before["validation"]
     assert [s["steps"] for s in run["stages"]] == [2] and run["stages"][0]["dataset_hash"] == before["dataset_hash"]
     (stage,) = after["stages"]
-    assert (stage["from_step"], stage["steps"], stage["loss"], stage["dataset_hash"]) == (2, 2, "relmse", after["dataset_hash"])
+    assert (stage["from_step"], stage["steps"], stage["loss"], stage["dataset_hash"]) == (
+        2,
+        2,
+        "relmse",
+        after["dataset_hash"],
+    )
     assert "--init-from" in after["commands"][-1] and len(after["commands"]) == 1
-    assert not torch.equal(load_checkpoint(tuned)["state_dict"]["diffuse.0.weight"],
-                           load_checkpoint(shipped)["state_dict"]["diffuse.0.weight"])
+    assert not torch.equal(
+        load_checkpoint(tuned)["state_dict"]["diffuse.0.weight"],
+        load_checkpoint(shipped)["state_dict"]["diffuse.0.weight"],
+    )
     card = (second / "dpcn_small.md").read_text()
     assert f"`{before['dataset_hash']}`" in card and f"dataset config hash `{after['dataset_hash']}`" in card
     assert before["commands"][0] in card and after["commands"][-1] in card
@@ -208,8 +259,11 @@ def test_init_from_fine_tunes_on_another_dataset_and_the_card_lists_both_runs(da
     assert "`--init-from` keeps a checkpoint's shape" in card and "'layers': 3" in card
     assert "1. run 1, steps 0–2" in card and "2. run 2, steps 2–4" in card and "fine-tuned from run 1" in card
     seen = sorted(set(open_dataset(other).split("test")) & (set(before["train_scenes"]) | set(after["train_scenes"])))
-    assert (f"share a name (family and seed) with a training scene: {', '.join(seen)}." if seen
-            else "None of its test scenes shares a name") in card
+    assert (
+        f"share a name (family and seed) with a training scene: {', '.join(seen)}."
+        if seen
+        else "None of its test scenes shares a name"
+    ) in card
     # and resuming the fine-tune on its own data continues it, earlier runs kept
     assert train("--model", "dpcn", "--data", other, "--resume", tuned, "--steps", 1, "--out", tuned) == 0
     again = load_checkpoint(tuned)["meta"]
@@ -220,8 +274,14 @@ def test_init_from_on_the_same_dataset_lists_its_generate_command_once(data, tmp
     ck, tuned, shipped = tmp_path / "ck.pt", tmp_path / "tuned.pt", tmp_path / "ship"
     shipped.mkdir()
     assert train("--model", "lbf", "--data", data, "--steps", 2, "--out", ck) == 0
-    assert train("--model", "lbf", "--data", data, "--init-from", ck, "--steps", 2, "--out", tuned, "--ship", shipped) == 0
+    assert (
+        train("--model", "lbf", "--data", data, "--init-from", ck, "--steps", 2, "--out", tuned, "--ship", shipped) == 0
+    )
     card = (shipped / "lbf_small.md").read_text()
     block = card.split("```sh")[1].split("```")[0].strip().splitlines()
-    assert [line.split()[0] for line in block] == ["#", "denoisebench", "denoisebench"]  # synthetic data: no generate-dataset
+    assert [line.split()[0] for line in block] == [
+        "#",
+        "denoisebench",
+        "denoisebench",
+    ]  # synthetic data: no generate-dataset
     assert "--init-from" in block[2] and "1. run 1, steps 0–2" in card and "2. run 2, steps 2–4" in card

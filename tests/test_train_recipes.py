@@ -28,7 +28,9 @@ torch.set_num_threads(1)
 
 @pytest.fixture(scope="module")
 def data(tmp_path_factory):
-    return make_synthetic_dataset(tmp_path_factory.mktemp("syn") / "data", scenes=4, frames=2, height=16, width=16, spp=(2,))
+    return make_synthetic_dataset(
+        tmp_path_factory.mktemp("syn") / "data", scenes=4, frames=2, height=16, width=16, spp=(2,)
+    )
 
 
 # ------------------------------------------------------------------------------------------ device, threads
@@ -38,12 +40,48 @@ def test_device_auto_follows_torch_and_cuda_without_a_gpu_is_bad_input(data, tmp
     expected = "cuda" if torch.cuda.is_available() else "cpu"
     assert resolve_device("auto").type == expected and resolve_device("cpu").type == "cpu"
     out = tmp_path / "d.pt"
-    assert main(["train", "--model", "dpcn", "--data", str(data), "--steps", "1", "--out", str(out), "--device", "cpu", *SMALL]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "dpcn",
+                "--data",
+                str(data),
+                "--steps",
+                "1",
+                "--out",
+                str(out),
+                "--device",
+                "cpu",
+                *SMALL,
+            ]
+        )
+        == 0
+    )
     meta = load_checkpoint(out)["meta"]
     assert meta["devices"] == ["cpu"] and meta["stages"][0]["device"] == "cpu"
     if not torch.cuda.is_available():
         capsys.readouterr()
-        assert main(["train", "--model", "dpcn", "--data", str(data), "--steps", "1", "--out", str(out), "--device", "cuda", *SMALL]) == 2
+        assert (
+            main(
+                [
+                    "train",
+                    "--model",
+                    "dpcn",
+                    "--data",
+                    str(data),
+                    "--steps",
+                    "1",
+                    "--out",
+                    str(out),
+                    "--device",
+                    "cuda",
+                    *SMALL,
+                ]
+            )
+            == 2
+        )
         err = capsys.readouterr().err.strip()
         assert "no CUDA device" in err and len(err.splitlines()) == 1
 
@@ -51,11 +89,45 @@ def test_device_auto_follows_torch_and_cuda_without_a_gpu_is_bad_input(data, tmp
 def test_threads_up_to_the_core_count(data, tmp_path, capsys):
     out = tmp_path / "t.pt"
     capsys.readouterr()
-    assert main(["train", "--model", "dpcn", "--data", str(data), "--steps", "1", "--out", str(out),
-                 "--threads", str(max_threads() + 1), *SMALL]) == 2
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "dpcn",
+                "--data",
+                str(data),
+                "--steps",
+                "1",
+                "--out",
+                str(out),
+                "--threads",
+                str(max_threads() + 1),
+                *SMALL,
+            ]
+        )
+        == 2
+    )
     assert "core count" in capsys.readouterr().err
-    assert main(["train", "--model", "dpcn", "--data", str(data), "--steps", "1", "--out", str(out),
-                 "--threads", str(max_threads()), *SMALL]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "dpcn",
+                "--data",
+                str(data),
+                "--steps",
+                "1",
+                "--out",
+                str(out),
+                "--threads",
+                str(max_threads()),
+                *SMALL,
+            ]
+        )
+        == 0
+    )
     assert load_checkpoint(out)["meta"]["threads"] == [max_threads()]
 
 
@@ -72,15 +144,57 @@ def test_lr_schedules():
 
 def test_val_every_schedule_and_stages_are_recorded(data, tmp_path):
     out = tmp_path / "k.pt"
-    assert main(["train", "--model", "kpcn", "--data", str(data), "--steps", "4", "--out", str(out), "--val-every", "2",
-                 "--lr-schedule", "cosine", "--lr", "0.002", *SMALL]) == 0
-    assert main(["train", "--model", "kpcn", "--data", str(data), "--steps", "2", "--out", str(out), "--resume", str(out),
-                 "--lr", "0.0005", *SMALL]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "kpcn",
+                "--data",
+                str(data),
+                "--steps",
+                "4",
+                "--out",
+                str(out),
+                "--val-every",
+                "2",
+                "--lr-schedule",
+                "cosine",
+                "--lr",
+                "0.002",
+                *SMALL,
+            ]
+        )
+        == 0
+    )
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "kpcn",
+                "--data",
+                str(data),
+                "--steps",
+                "2",
+                "--out",
+                str(out),
+                "--resume",
+                str(out),
+                "--lr",
+                "0.0005",
+                *SMALL,
+            ]
+        )
+        == 0
+    )
     meta = load_checkpoint(out)["meta"]
     assert [s for s, _ in meta["validation_history"]] == [2]  # the end of each command validates into "validation"
     stages = meta["stages"]
     assert [(s["from_step"], s["steps"], s["lr"], s["lr_schedule"]) for s in stages] == [
-        (0, 4, 0.002, "cosine"), (4, 2, 0.0005, "constant")]
+        (0, 4, 0.002, "cosine"),
+        (4, 2, 0.0005, "constant"),
+    ]
     assert "--lr-schedule cosine" in meta["commands"][0] and "--val-every 2" in meta["commands"][0]
 
 
@@ -93,8 +207,9 @@ def test_dpcn_and_kpcn_share_every_configuration():
     assert pcn.receptive_field(pcn.PAPER_CONFIG) == 37  # 9 layers of 5×5: radius 18
     for name in pcn.DPCN_CONFIGS:
         d, k = build_model("dpcn", name), build_model("kpcn", name)
-        assert [m.weight.shape[:1] + m.weight.shape[2:] for m in d.diffuse if isinstance(m, torch.nn.Conv2d)][:-1] == \
-               [m.weight.shape[:1] + m.weight.shape[2:] for m in k.diffuse if isinstance(m, torch.nn.Conv2d)][:-1]
+        assert [m.weight.shape[:1] + m.weight.shape[2:] for m in d.diffuse if isinstance(m, torch.nn.Conv2d)][:-1] == [
+            m.weight.shape[:1] + m.weight.shape[2:] for m in k.diffuse if isinstance(m, torch.nn.Conv2d)
+        ][:-1]
 
 
 def test_paper_configuration_is_xavier_initialised():
@@ -130,8 +245,10 @@ def test_exposure_loss_is_scale_invariant_where_the_log_loss_is_not(mode):
     g = torch.Generator().manual_seed(3)
     torch.manual_seed(0)
     net = build_model(mode, "small")
-    batch = {name: torch.rand(2, 3, 12, 12, generator=g) * 2.0
-             for name in ("color", "diffuse", "specular", "reference", "reference_diffuse", "reference_specular")}
+    batch = {
+        name: torch.rand(2, 3, 12, 12, generator=g) * 2.0
+        for name in ("color", "diffuse", "specular", "reference", "reference_diffuse", "reference_specular")
+    }
     batch["albedo"] = torch.rand(2, 3, 12, 12, generator=g)
     dark = {name: value * 1e-3 if name != "albedo" else value for name, value in batch.items()}
     with torch.no_grad():
@@ -151,20 +268,92 @@ def test_exposure_loss_is_scale_invariant_where_the_log_loss_is_not(mode):
 
 def test_exposure_loss_trains_dpcn_through_the_cli(data, tmp_path, capsys):
     out = tmp_path / "e.pt"
-    assert main(["train", "--model", "dpcn", "--data", str(data), "--steps", "2", "--out", str(out), "--loss", "exposure", *SMALL]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "dpcn",
+                "--data",
+                str(data),
+                "--steps",
+                "2",
+                "--out",
+                str(out),
+                "--loss",
+                "exposure",
+                *SMALL,
+            ]
+        )
+        == 0
+    )
     meta = load_checkpoint(out)["meta"]
     assert meta["loss"] == "exposure" and meta["skipped_steps"] == 0 and math.isfinite(meta["last_loss"])
     capsys.readouterr()
-    assert main(["train", "--model", "lbf", "--data", str(data), "--steps", "1", "--out", str(out), "--loss", "exposure", *SMALL]) == 2
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "lbf",
+                "--data",
+                str(data),
+                "--steps",
+                "1",
+                "--out",
+                str(out),
+                "--loss",
+                "exposure",
+                *SMALL,
+            ]
+        )
+        == 2
+    )
     assert "unknown loss" in capsys.readouterr().err
 
 
 def test_lobes_loss_trains_through_the_cli_and_is_refused_for_rae(data, tmp_path, capsys):
     out = tmp_path / "p.pt"
-    assert main(["train", "--model", "kpcn", "--data", str(data), "--steps", "1", "--out", str(out), "--loss", "lobes", *SMALL]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "kpcn",
+                "--data",
+                str(data),
+                "--steps",
+                "1",
+                "--out",
+                str(out),
+                "--loss",
+                "lobes",
+                *SMALL,
+            ]
+        )
+        == 0
+    )
     assert load_checkpoint(out)["meta"]["loss"] == "lobes"
     capsys.readouterr()
-    assert main(["train", "--model", "rae", "--data", str(data), "--steps", "1", "--out", str(out), "--loss", "lobes", *SMALL]) == 2
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "rae",
+                "--data",
+                str(data),
+                "--steps",
+                "1",
+                "--out",
+                str(out),
+                "--loss",
+                "lobes",
+                *SMALL,
+            ]
+        )
+        == 2
+    )
     assert "unknown loss" in capsys.readouterr().err
 
 
@@ -184,8 +373,28 @@ def test_pcn_convergence_bench_runs_a_few_steps(data, tmp_path):
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
     out = tmp_path / "curves"
-    assert bench.main(["--data", str(data), "--out", str(out), "--steps", "4", "--val-every", "2", "--batch-size", "2",
-                       "--crop", "12", "--val-frames", "1", "--quiet"]) == 0
+    assert (
+        bench.main(
+            [
+                "--data",
+                str(data),
+                "--out",
+                str(out),
+                "--steps",
+                "4",
+                "--val-every",
+                "2",
+                "--batch-size",
+                "2",
+                "--crop",
+                "12",
+                "--val-frames",
+                "1",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     import json
 
     result = json.loads((out / "curves.json").read_text())
@@ -308,8 +517,27 @@ def test_play_backward_reverses_about_half_the_windows(data):
 
 def test_rae_paper_recipe_trains_with_its_crop_cap_and_backward_play(data, tmp_path):
     out = tmp_path / "rae.pt"
-    assert main(["train", "--model", "rae", "--data", str(data), "--config", "paper", "--steps", "1", "--out", str(out),
-                 "--batch-size", "1", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "rae",
+                "--data",
+                str(data),
+                "--config",
+                "paper",
+                "--steps",
+                "1",
+                "--out",
+                str(out),
+                "--batch-size",
+                "1",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     meta = load_checkpoint(out)["meta"]
     assert meta["crop"] == 16  # the recipe's 128 px, capped by the 16 px scenes
     assert meta["play_backward"] is True and "--crop" not in meta["commands"][0]
@@ -345,14 +573,35 @@ def test_log_depth_var_follows_the_depth_transform():
     logged = feature_stack(buffers, like, log_depth_var=True)[:, -1]
     torch.testing.assert_close(raw, torch.log1p(torch.full((1, 4, 4), 2.0)))
     torch.testing.assert_close(logged, torch.log1p(torch.full((1, 4, 4), 2.0 / 100.0)))  # var / (1 + d)²
-    assert pcn.DPCN_CONFIGS["small"]["log_depth_var"] and not build_model("kpcn", {**pcn.SMALL_CONFIG, "log_depth_var": False}).log_depth_var
+    assert (
+        pcn.DPCN_CONFIGS["small"]["log_depth_var"]
+        and not build_model("kpcn", {**pcn.SMALL_CONFIG, "log_depth_var": False}).log_depth_var
+    )
 
 
 def test_peers_option_checks_its_names(data, tmp_path, capsys):
     out = tmp_path / "x.pt"
     capsys.readouterr()
-    assert main(["train", "--model", "lbf", "--data", str(data), "--steps", "0", "--out", str(out), "--evaluate",
-                 "--peers", "lbf", *SMALL]) == 2
+    assert (
+        main(
+            [
+                "train",
+                "--model",
+                "lbf",
+                "--data",
+                str(data),
+                "--steps",
+                "0",
+                "--out",
+                str(out),
+                "--evaluate",
+                "--peers",
+                "lbf",
+                *SMALL,
+            ]
+        )
+        == 2
+    )
     assert "--peers" in capsys.readouterr().err
 
 

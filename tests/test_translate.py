@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from denoisebench.errors import UserInputError
-from denoisebench.generator.mitsuba_scene import build_mitsuba_scene, sensor_dict
-from denoisebench.generator.translate import scene_bounds, translate_stage, translate_usd
+from denoisebench.generator.render.scene import build_mitsuba_scene, sensor_dict
+from denoisebench.generator.usd.translate import scene_bounds, translate_stage, translate_usd
 from denoisebench.mitsuba_runtime import load_mitsuba
 
 DATA = Path(__file__).parent / "data" / "usd"
@@ -75,7 +75,11 @@ def test_geom_subsets_split_materials_and_keep_every_triangle(zup):
 
 
 def test_texture_resolves_beside_the_stage(zup):
-    bitmaps = [b["bsdf"]["base_color"] for b in zup.scene_dict["bsdfs"].values() if b.get("bsdf", {}).get("base_color", {}).get("type") == "bitmap"]
+    bitmaps = [
+        b["bsdf"]["base_color"]
+        for b in zup.scene_dict["bsdfs"].values()
+        if b.get("bsdf", {}).get("base_color", {}).get("type") == "bitmap"
+    ]
     assert len(bitmaps) == 1
     # Decoded at translation (through USD's resolver), image row 0 = the top: red on top, blue below.
     # The PNG holds (230, 20, 20) and (20, 20, 230); sRGB decoding gives 0.79130 and 0.0069954.
@@ -98,8 +102,16 @@ def test_lights_radiance_and_kinds(zup, yup):
     np.testing.assert_allclose(bulb["emitter"]["radiance"], np.array([1, 0.9, 0.8]) * 50 * 2.0, rtol=1e-6)
     assert bulb["radius"] == pytest.approx(0.1)
     disk = _records(zup, "/World/Lights/Fill")[0]
-    area = 0.5 * np.linalg.norm(np.cross(disk["positions"][disk["faces"][:, 1]] - disk["positions"][disk["faces"][:, 0]],
-                                         disk["positions"][disk["faces"][:, 2]] - disk["positions"][disk["faces"][:, 0]]), axis=1).sum()
+    area = (
+        0.5
+        * np.linalg.norm(
+            np.cross(
+                disk["positions"][disk["faces"][:, 1]] - disk["positions"][disk["faces"][:, 0]],
+                disk["positions"][disk["faces"][:, 2]] - disk["positions"][disk["faces"][:, 0]],
+            ),
+            axis=1,
+        ).sum()
+    )
     assert area == pytest.approx(math.pi * 0.2**2, rel=0.01)
     sun = [e for e in zup.scene_dict["emitters"] if e["type"] == "directional"][0]
     assert np.linalg.norm(sun["direction"]) == pytest.approx(1.0)
@@ -107,8 +119,10 @@ def test_lights_radiance_and_kinds(zup, yup):
     sky = [e for e in yup.scene_dict["emitters"] if e["type"] == "constant"][0]
     np.testing.assert_allclose(sky["radiance"], [0.3, 0.35, 0.5], rtol=1e-6)
     softbox = _records(yup, "/World/Softbox")[0]
-    normal = np.cross(softbox["positions"][softbox["faces"][0, 1]] - softbox["positions"][softbox["faces"][0, 0]],
-                      softbox["positions"][softbox["faces"][0, 2]] - softbox["positions"][softbox["faces"][0, 0]])
+    normal = np.cross(
+        softbox["positions"][softbox["faces"][0, 1]] - softbox["positions"][softbox["faces"][0, 0]],
+        softbox["positions"][softbox["faces"][0, 2]] - softbox["positions"][softbox["faces"][0, 0]],
+    )
     assert normal[1] < 0  # rotated -90° about X: emits downward
 
 
@@ -126,7 +140,14 @@ def test_lens_and_shutter(yup):
 def test_effects_inferred_and_declared(zup, yup):
     assert set(zup.effects_inferred) == {"glossy", "textures", "area_lights"}
     assert zup.effects_declared == () and zup.effects_mismatch == {}
-    assert set(yup.effects_inferred) == {"depth_of_field", "motion_blur", "specular", "transmission", "area_lights", "environment"}
+    assert set(yup.effects_inferred) == {
+        "depth_of_field",
+        "motion_blur",
+        "specular",
+        "transmission",
+        "area_lights",
+        "environment",
+    }
     assert yup.effects_mismatch == {}
     assert yup.family == "handwritten" and yup.seed == 0
 
@@ -140,8 +161,11 @@ def test_effects_mismatch_is_reported(tmp_path):
 
 def _render(translated, frame=0, width=32, height=24, spp=16, depth=3):
     mi = load_mitsuba()
-    scene = build_mitsuba_scene(translated, sensor=sensor_dict(translated.camera, frame, width, height, spp),
-                                integrator={"type": "path", "max_depth": depth})
+    scene = build_mitsuba_scene(
+        translated,
+        sensor=sensor_dict(translated.camera, frame, width, height, spp),
+        integrator={"type": "path", "max_depth": depth},
+    )
     return np.array(mi.render(scene, spp=spp, seed=1))
 
 
@@ -217,7 +241,11 @@ def test_zup_centimeter_stage_renders_like_its_yup_meter_twin(tmp_path):
         floor = UsdGeom.Cube.Define(stage, "/Floor")
         floor.CreateSizeAttr(1.0)
         floor.AddTranslateOp().Set(point(0, -0.05, 0))
-        floor.AddScaleOp().Set(Gf.Vec3f(4 * scale, 0.1 * scale, 4 * scale) if up == UsdGeom.Tokens.y else Gf.Vec3f(4 * scale, 4 * scale, 0.1 * scale))
+        floor.AddScaleOp().Set(
+            Gf.Vec3f(4 * scale, 0.1 * scale, 4 * scale)
+            if up == UsdGeom.Tokens.y
+            else Gf.Vec3f(4 * scale, 4 * scale, 0.1 * scale)
+        )
         light = UsdLux.SphereLight.Define(stage, "/Bulb")
         light.CreateRadiusAttr(0.2 * scale)
         light.CreateIntensityAttr(20.0)
@@ -246,6 +274,7 @@ def test_zup_centimeter_stage_renders_like_its_yup_meter_twin(tmp_path):
 
 
 # ---- bad input ----------------------------------------------------------------------------------
+
 
 @pytest.mark.parametrize(
     "name, message",

@@ -16,7 +16,6 @@ import sqlite3
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 from denoisebench import cli
@@ -24,10 +23,10 @@ from denoisebench.dataset import bounds, open_dataset
 from denoisebench.dataset.errors import DatasetError
 from denoisebench.dataset.exr_io import encode_exr, load_exr
 from denoisebench.dataset.synthetic import make_synthetic_dataset
+from denoisebench.errors import UserInputError
 from denoisebench.leaderboard.report import csv_cell
 from denoisebench.leaderboard.store import ResultsStore
 from denoisebench.outputs import check_writable_dir, check_writable_file
-from denoisebench.errors import UserInputError
 
 REF = "synthetic_000/reference/frame_0000.exr"
 
@@ -45,8 +44,23 @@ def dataset(genuine, tmp_path) -> Path:
 
 
 def _bench(dataset: Path, db: Path, *extra: str) -> int:
-    return cli.main(["benchmark", "--data", str(dataset), "--db", str(db), "--split", "all", "--metrics", "relmse",
-                     "--denoisers", "identity", "--no-report", *extra])
+    return cli.main(
+        [
+            "benchmark",
+            "--data",
+            str(dataset),
+            "--db",
+            str(db),
+            "--split",
+            "all",
+            "--metrics",
+            "relmse",
+            "--denoisers",
+            "identity",
+            "--no-report",
+            *extra,
+        ]
+    )
 
 
 def _error_line(capsys) -> str:
@@ -90,7 +104,7 @@ def test_scaled_reference_is_refused_before_the_first_unit_and_no_verify_is_reco
 
 def test_corrupt_exr_is_found_up_front(dataset, tmp_path, capsys):
     late = dataset / "synthetic_001/spp0001/frame_0001.exr"  # the last scene's last frame
-    late.write_bytes(late.read_bytes()[: 200])
+    late.write_bytes(late.read_bytes()[:200])
     db = tmp_path / "b.sqlite"
     assert _bench(dataset, db) == 2
     assert "synthetic_001/spp0001/frame_0001.exr" in _error_line(capsys)
@@ -134,8 +148,21 @@ def test_unwritable_outputs_are_exit_2_before_measuring(dataset, tmp_path, capsy
     (tmp_path / "file").write_text("not a folder")
     target = where if where.startswith("/") else str(tmp_path / where)
     db = tmp_path / "ok.sqlite" if option == "--out" else Path(target)
-    argv = ["benchmark", "--data", str(dataset), "--split", "all", "--denoisers", "identity", "--metrics", "relmse",
-            "--db", str(db), "--out", target if option == "--out" else str(tmp_path / "rep")]
+    argv = [
+        "benchmark",
+        "--data",
+        str(dataset),
+        "--split",
+        "all",
+        "--denoisers",
+        "identity",
+        "--metrics",
+        "relmse",
+        "--db",
+        str(db),
+        "--out",
+        target if option == "--out" else str(tmp_path / "rep"),
+    ]
     assert cli.main(argv) == 2
     line = _error_line(capsys)
     assert option in line and "Traceback" not in line
@@ -174,8 +201,25 @@ def test_generate_bounds_are_exit_2_in_a_moment(tmp_path, capsys, argv, fragment
 
 def test_generate_out_under_a_file_is_exit_2(tmp_path, capsys):
     (tmp_path / "file").write_text("x")
-    code = cli.main(["generate", "--out", str(tmp_path / "file" / "g"), "--families", "cornell", "--frames", "1",
-                     "--width", "8", "--height", "8", "--spp", "1", "--ref-spp", "4"])
+    code = cli.main(
+        [
+            "generate",
+            "--out",
+            str(tmp_path / "file" / "g"),
+            "--families",
+            "cornell",
+            "--frames",
+            "1",
+            "--width",
+            "8",
+            "--height",
+            "8",
+            "--spp",
+            "1",
+            "--ref-spp",
+            "4",
+        ]
+    )
     assert code == 2 and "--out" in _error_line(capsys)
 
 
@@ -189,8 +233,16 @@ def test_memory_estimate_grows_with_per_sample_data():
 @pytest.mark.parametrize(
     "value, expected",
     [
-        ("=HYPERLINK(\"http://x\")", "'=HYPERLINK(\"http://x\")"), ("+1", "'+1"), ("-2+3", "'-2+3"), ("@SUM(A1)", "'@SUM(A1)"),
-        ("\tx", "'\tx"), ("\rx", "'\rx"), ("cross_bilateral", "cross_bilateral"), ("", ""), (3, 3), (None, None),
+        ("=HYPERLINK(\"http://x\")", "'=HYPERLINK(\"http://x\")"),
+        ("+1", "'+1"),
+        ("-2+3", "'-2+3"),
+        ("@SUM(A1)", "'@SUM(A1)"),
+        ("\tx", "'\tx"),
+        ("\rx", "'\rx"),
+        ("cross_bilateral", "cross_bilateral"),
+        ("", ""),
+        (3, 3),
+        (None, None),
     ],
 )
 def test_csv_cells_that_a_spreadsheet_would_evaluate_are_quoted(value, expected):

@@ -12,7 +12,6 @@ from __future__ import annotations
 import csv
 import io
 import sqlite3
-import sys
 import textwrap
 import time
 from pathlib import Path
@@ -23,7 +22,7 @@ import pytest
 from denoisebench import cli
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.synthetic import make_synthetic_dataset
-from denoisebench.denoisers.isolation import IsolatedDenoiser, Limits, WorkerFailure, isolated
+from denoisebench.denoisers.isolation import IsolatedDenoiser, Limits, isolated
 from denoisebench.denoisers.registry import UnknownOptionError
 from denoisebench.denoisers.runner import PUBLIC_META, run_denoisers, run_sequence, sanitize_frame
 from denoisebench.denoisers.synthetic import synthetic_sequence
@@ -138,7 +137,9 @@ def on_path(plugin_dir, monkeypatch):
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory) -> Path:
-    return make_synthetic_dataset(tmp_path_factory.mktemp("ds") / "ds", scenes=2, frames=2, height=16, width=16, spp=(1,))
+    return make_synthetic_dataset(
+        tmp_path_factory.mktemp("ds") / "ds", scenes=2, frames=2, height=16, width=16, spp=(1,)
+    )
 
 
 def test_policy_isolates_everything_but_builtins():
@@ -176,7 +177,8 @@ def test_misbehaving_plugin_fails_with_its_reason_and_the_caller_survives(on_pat
 def test_crashed_worker_is_replaced_at_the_next_sequence(on_path, tmp_path):
     flag = tmp_path / "crashed_once"
     module = tmp_path / "crash_once.py"
-    module.write_text(textwrap.dedent(f'''
+    module.write_text(
+        textwrap.dedent(f'''
         import os
         import numpy as np
         class CrashOnce:
@@ -186,7 +188,8 @@ def test_crashed_worker_is_replaced_at_the_next_sequence(on_path, tmp_path):
                     open({str(flag)!r}, "w").close()
                     os._exit(7)
                 return np.array(frame.color, np.float32)
-    '''))
+    ''')
+    )
     denoiser = IsolatedDenoiser(f"{module}:CrashOnce")
     first = run_sequence(denoiser, synthetic_sequence(frames=2, height=8, width=8))
     assert first[0].error.startswith("worker exited with status 7") and "earlier in this sequence" in first[1].error
@@ -243,10 +246,28 @@ def _frames_by_denoiser(db: Path) -> dict:
 def test_benchmark_survives_every_misbehaving_plugin_and_a_rerun_completes(dataset, on_path, tmp_path, capsys):
     db, out = tmp_path / "r.sqlite", tmp_path / "report"
     argv = [
-        "benchmark", "--data", str(dataset), "--db", str(db), "--out", str(out), "--split", "all", "--metrics", "relmse",
-        "--denoisers", "identity", "--time-limit", "5", "--memory-limit", "400",
-        *[arg for attr in ("Exits", "HardExit", "Segfault", "Sleeps", "Hog", "Mutator", "Peek", "Honest")
-          for arg in ("--denoiser", f"evil_plugins:{attr}")],
+        "benchmark",
+        "--data",
+        str(dataset),
+        "--db",
+        str(db),
+        "--out",
+        str(out),
+        "--split",
+        "all",
+        "--metrics",
+        "relmse",
+        "--denoisers",
+        "identity",
+        "--time-limit",
+        "5",
+        "--memory-limit",
+        "400",
+        *[
+            arg
+            for attr in ("Exits", "HardExit", "Segfault", "Sleeps", "Hog", "Mutator", "Peek", "Honest")
+            for arg in ("--denoiser", f"evil_plugins:{attr}")
+        ],
     ]
     started = time.monotonic()
     assert cli.main(argv) == 0
@@ -277,7 +298,10 @@ def test_check_plugin_contains_an_exiting_plugin_and_fails_a_mutating_one(on_pat
     assert cli.main(["check-plugin", "evil_plugins:HardExit", "--case", "tiny", "--json"]) == 1
     assert "worker exited with status 3" in capsys.readouterr().out
     # x100 of the input: with copies the check compares against the genuine input, and fails it
-    assert cli.main(["check-plugin", "evil_plugins:Mutator", "--case", "black_frame", "--case", "fireflies", "--json"]) == 1
+    assert (
+        cli.main(["check-plugin", "evil_plugins:Mutator", "--case", "black_frame", "--case", "fireflies", "--json"])
+        == 1
+    )
     out = capsys.readouterr().out
     assert '"case": "fireflies"' in out and "robust mean" in out
 
@@ -311,8 +335,10 @@ def test_pickled_pipe_fallback_keeps_the_contract(on_path, monkeypatch):
 
 def test_output_larger_than_the_frame_is_refused_without_reading_it(tmp_path):
     module = tmp_path / "huge_output.py"
-    module.write_text("import numpy as np\nclass Huge:\n    name = 'huge'\n"
-                      "    def denoise(self, frame):\n        return np.zeros((512, 512, 3), np.float64)\n")
+    module.write_text(
+        "import numpy as np\nclass Huge:\n    name = 'huge'\n"
+        "    def denoise(self, frame):\n        return np.zeros((512, 512, 3), np.float64)\n"
+    )
     denoiser = IsolatedDenoiser(f"{module}:Huge")
     (result,) = run_sequence(denoiser, synthetic_sequence(frames=1, height=4, width=4))
     assert result.status == "failed" and "(512, 512, 3)" in result.error

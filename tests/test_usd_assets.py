@@ -19,15 +19,17 @@ from PIL import Image
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, UsdUtils
 
 from denoisebench.errors import UserInputError
-from denoisebench.generator.translate import translate_usd
+from denoisebench.generator.usd.translate import translate_usd
 
 
 def run_cli(*args):
-    return subprocess.run([sys.executable, "-m", "denoisebench.cli", *map(str, args)],
-                          capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "denoisebench.cli", *map(str, args)], capture_output=True, text=True, timeout=300
+    )
 
 
 # ------------------------------------------------------------------ authoring helpers
+
 
 def new_stage(path: Path, up="Y", meters=1.0, frames=None):
     stage = Usd.Stage.CreateNew(str(path))
@@ -53,7 +55,9 @@ def add_quad(stage, path, size=2.0, z=0.0, st_name="st", st=((0, 0), (1, 0), (1,
     mesh.CreatePointsAttr([(-h, -h, z), (h, -h, z), (h, h, z), (-h, h, z)])
     mesh.CreateFaceVertexCountsAttr([4])
     mesh.CreateFaceVertexIndicesAttr([0, 1, 2, 3])
-    primvar = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(st_name, Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+    primvar = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar(
+        st_name, Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex
+    )
     primvar.Set(list(st))
     return mesh
 
@@ -114,6 +118,7 @@ def lit_box_stage(path: Path, up="Y", meters=1.0, camera=True, light=True):
 
 # ------------------------------------------------------------------ cameras and lights on demand
 
+
 def test_no_camera_refusal_names_both_options_and_camera_path_is_honoured(tmp_path):
     path = lit_box_stage(tmp_path / "s.usda", camera=False)
     with pytest.raises(UserInputError, match=r"--camera PATH.*--auto-camera"):
@@ -146,7 +151,9 @@ def test_auto_camera_frames_the_bounds_for_any_up_axis_and_unit(tmp_path):
     """The same box on a Y-up meter stage and a Z-up centimeter stage gets the same camera in Mitsuba
     space (upAxis and metersPerUnit honoured); every box corner is in view at every frame; the camera
     orbits the box centre by 2° per frame at a constant distance, over --frames frames."""
-    corners = np.array([[3 + dx * 0.5, 1 + dy * 1.0, -2 + dz * 0.5] for dx in (-1, 1) for dy in (-1, 1) for dz in (-1, 1)])
+    corners = np.array(
+        [[3 + dx * 0.5, 1 + dy * 1.0, -2 + dz * 0.5] for dx in (-1, 1) for dy in (-1, 1) for dz in (-1, 1)]
+    )
     tracks = []
     for up, meters in (("Y", 1.0), ("Z", 0.01)):
         path = lit_box_stage(tmp_path / f"{up}.usda", up, meters, camera=False)
@@ -202,6 +209,7 @@ def test_generate_writes_the_auto_camera_and_lights_into_the_copied_stage(tmp_pa
 
 # ------------------------------------------------------------------ UsdLux point and spot lights
 
+
 def _light_stage(path, configure):
     stage = lit_box_stage(path, light=False)
     stage = Usd.Stage.Open(str(path))
@@ -221,7 +229,11 @@ def test_treat_as_point_and_zero_radius_sphere_lights_are_point_lights(tmp_path)
         b.CreateRadiusAttr(0.0)
         b.CreateIntensityAttr(12.0)
         b.CreateNormalizeAttr(True)
-    assert UsdLux.SphereLight(Usd.Stage.CreateInMemory().DefinePrim("/x", "SphereLight")).GetTreatAsPointAttr().GetName() == "treatAsPoint"
+
+    assert (
+        UsdLux.SphereLight(Usd.Stage.CreateInMemory().DefinePrim("/x", "SphereLight")).GetTreatAsPointAttr().GetName()
+        == "treatAsPoint"
+    )
     emitters = {e["prim"]: e for e in _light_stage(tmp_path / "p.usda", configure).scene_dict["emitters"]}
     assert emitters["/A"]["type"] == "point" and emitters["/B"]["type"] == "point"
     np.testing.assert_allclose(emitters["/A"]["position"], [1, 2, 3])
@@ -232,9 +244,9 @@ def test_treat_as_point_and_zero_radius_sphere_lights_are_point_lights(tmp_path)
 
 @pytest.mark.slow
 def test_shaping_cone_becomes_a_spot_and_lights_only_inside_its_cone(tmp_path):
-    from denoisebench.generator.feature_renderer import render_frame
-    from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
-    from denoisebench.generator.render_plan import RenderOptions, make_render_plan
+    from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
+    from denoisebench.generator.render.frame import render_frame
+    from denoisebench.generator.render.scene import build_mitsuba_scene
 
     path = tmp_path / "spot.usda"
     stage = new_stage(path)
@@ -257,8 +269,9 @@ def test_shaping_cone_becomes_a_spot_and_lights_only_inside_its_cone(tmp_path):
     assert any("shaping:focus" in w for w in translated.warnings)
     assert floor
     plan = make_render_plan(translated.effects, RenderOptions(max_depth=2))
-    image = render_frame(build_mitsuba_scene(translated), translated.camera, 0, plan, width=32, height=32, spp=4,
-                         seed=0, reference=True).buffers["color"][..., 0]
+    image = render_frame(
+        build_mitsuba_scene(translated), translated.camera, 0, plan, width=32, height=32, spp=4, seed=0, reference=True
+    ).buffers["color"][..., 0]
     # The cone (30°) meets the floor within tan(30°) = 0.58 m of its centre: 0.58 / 4 of the half-width.
     x = (np.arange(32) + 0.5) / 16 - 1
     radius_m = np.hypot(*np.meshgrid(x, x)) * 4.0
@@ -270,11 +283,15 @@ def test_distant_light_angle_is_documented(tmp_path):
     def configure(stage):
         UsdLux.DistantLight.Define(stage, "/Sun").CreateAngleAttr(0.53)
         UsdLux.DistantLight.Define(stage, "/Overcast").CreateAngleAttr(20.0)
+
     warnings = _light_stage(tmp_path / "d.usda", configure).warnings
-    assert [w for w in warnings if "angle" in w] == ["/Overcast: DistantLight angle 20° rendered as a delta light (hard shadows)"]
+    assert [w for w in warnings if "angle" in w] == [
+        "/Overcast: DistantLight angle 20° rendered as a delta light (hard shadows)"
+    ]
 
 
 # ------------------------------------------------------------------ textures
+
 
 def _png(path: Path, array) -> Path:
     Image.fromarray(np.asarray(array, dtype=np.uint8)).save(path)
@@ -290,17 +307,35 @@ def test_packed_channels_varname_and_fallback_on_unreadable_textures(tmp_path):
     add_camera(stage)
     UsdLux.DomeLight.Define(stage, "/Dome")
     mesh = add_quad(stage, "/Quad", st_name="st0", st=((0, 0), (2, 0), (2, 2), (0, 2)))
-    UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set([(9, 9)] * 4)
-    bind(mesh, textured_material(stage, "/Looks/Orm", packed, {
-        "roughness": ("g", Sdf.ValueTypeNames.Float), "metallic": ("b", Sdf.ValueTypeNames.Float)}, varname="st0"))
+    UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex).Set(
+        [(9, 9)] * 4
+    )
+    bind(
+        mesh,
+        textured_material(
+            stage,
+            "/Looks/Orm",
+            packed,
+            {"roughness": ("g", Sdf.ValueTypeNames.Float), "metallic": ("b", Sdf.ValueTypeNames.Float)},
+            varname="st0",
+        ),
+    )
     corrupt = tmp_path / "corrupt.png"
     corrupt.write_bytes(b"\x89PNG\r\n\x1a\n this is not an image")
     cmyk = tmp_path / "cmyk.jpg"
     Image.new("CMYK", (4, 4), (0, 255, 255, 0)).save(cmyk)
     for name, image in (("Corrupt", corrupt), ("Missing", tmp_path / "nope.png")):
         quad = add_quad(stage, f"/{name}")
-        bind(quad, textured_material(stage, f"/Looks/{name}", image, {"diffuseColor": ("rgb", Sdf.ValueTypeNames.Color3f)},
-                                     extra={"diffuseColor": (Sdf.ValueTypeNames.Color3f, Gf.Vec3f(0.1, 0.2, 0.3))}))
+        bind(
+            quad,
+            textured_material(
+                stage,
+                f"/Looks/{name}",
+                image,
+                {"diffuseColor": ("rgb", Sdf.ValueTypeNames.Color3f)},
+                extra={"diffuseColor": (Sdf.ValueTypeNames.Color3f, Gf.Vec3f(0.1, 0.2, 0.3))},
+            ),
+        )
     quad = add_quad(stage, "/Cmyk")
     bind(quad, textured_material(stage, "/Looks/Cmyk", cmyk, {"diffuseColor": ("rgb", Sdf.ValueTypeNames.Color3f)}))
     stage.GetRootLayer().Save()
@@ -319,18 +354,27 @@ def test_packed_channels_varname_and_fallback_on_unreadable_textures(tmp_path):
     # A CMYK JPEG (Mitsuba's reader: "Unsupported number of components"): a warning, the default grey.
     assert sum("/Looks/Cmyk/Texture" in w and "cannot be read" in w for w in translated.warnings) == 1
     assert bsdfs[records["/Cmyk"]["bsdf"]]["bsdf"]["base_color"]["type"] == "rgb"
-    from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
+    from denoisebench.generator.render.scene import build_mitsuba_scene
 
     build_mitsuba_scene(translated)
 
 
 def _albedo(translated, frame=0, size=16, spp=4):
-    from denoisebench.generator.feature_renderer import render_frame
-    from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
-    from denoisebench.generator.render_plan import make_render_plan
+    from denoisebench.generator.contract.render_plan import make_render_plan
+    from denoisebench.generator.render.frame import render_frame
+    from denoisebench.generator.render.scene import build_mitsuba_scene
 
-    out = render_frame(build_mitsuba_scene(translated, frame=frame), translated.camera, frame, make_render_plan(translated.effects),
-                       width=size, height=size, spp=spp, seed=0, _jitter=False)
+    out = render_frame(
+        build_mitsuba_scene(translated, frame=frame),
+        translated.camera,
+        frame,
+        make_render_plan(translated.effects),
+        width=size,
+        height=size,
+        spp=spp,
+        seed=0,
+        _jitter=False,
+    )
     return out.buffers
 
 
@@ -347,8 +391,16 @@ def test_transform2d_shifts_the_texture_and_alpha_cutouts_open_holes(tmp_path):
     add_camera(stage, position=(0, 0, 2), focal=18.0)  # fov_x 90°: the 4 m quad at z=0 fills the view
     UsdLux.DomeLight.Define(stage, "/Dome")
     shifted = add_quad(stage, "/Shifted", size=4.0, z=0.0)
-    bind(shifted, textured_material(stage, "/Looks/Shifted", texture, {"diffuseColor": ("rgb", Sdf.ValueTypeNames.Color3f)},
-                                    transform={"translation": Gf.Vec2f(0.5, 0.0)}))
+    bind(
+        shifted,
+        textured_material(
+            stage,
+            "/Looks/Shifted",
+            texture,
+            {"diffuseColor": ("rgb", Sdf.ValueTypeNames.Color3f)},
+            transform={"translation": Gf.Vec2f(0.5, 0.0)},
+        ),
+    )
     stage.GetRootLayer().Save()
     albedo = _albedo(translate_usd(path))["albedo"]
     assert albedo[8, 2, 2] > 0.9 and albedo[8, 2, 0] < 0.05  # left is blue now
@@ -366,12 +418,21 @@ def test_transform2d_shifts_the_texture_and_alpha_cutouts_open_holes(tmp_path):
     wall_material.CreateSurfaceOutput().ConnectToSource(surface.ConnectableAPI(), "surface")
     bind(wall, wall_material)
     cut = add_quad(stage, "/Cut", size=4.0, z=0.0)
-    bind(cut, textured_material(stage, "/Looks/Cut", texture, {
-        "diffuseColor": ("rgb", Sdf.ValueTypeNames.Color3f), "opacity": ("a", Sdf.ValueTypeNames.Float)},
-        extra={"opacityThreshold": (Sdf.ValueTypeNames.Float, 0.5)}))
+    bind(
+        cut,
+        textured_material(
+            stage,
+            "/Looks/Cut",
+            texture,
+            {"diffuseColor": ("rgb", Sdf.ValueTypeNames.Color3f), "opacity": ("a", Sdf.ValueTypeNames.Float)},
+            extra={"opacityThreshold": (Sdf.ValueTypeNames.Float, 0.5)},
+        ),
+    )
     stage.GetRootLayer().Save()
     translated = translate_usd(path)
-    cut_bsdf = translated.scene_dict["bsdfs"][[r for r in translated.scene_dict["shapes"] if r["name"] == "/Cut"][0]["bsdf"]]
+    cut_bsdf = translated.scene_dict["bsdfs"][
+        [r for r in translated.scene_dict["shapes"] if r["name"] == "/Cut"][0]["bsdf"]
+    ]
     assert cut_bsdf["type"] == "mask" and set(np.unique(cut_bsdf["opacity"]["data"])) == {0.0, 1.0}
     buffers = _albedo(translated)
     color, position = buffers["color"], buffers["position"]
@@ -391,7 +452,12 @@ def test_textures_inside_a_usdz_package_are_read_through_the_resolver(tmp_path):
     add_camera(stage)
     UsdLux.DomeLight.Define(stage, "/Dome")
     quad = add_quad(stage, "/Quad")
-    bind(quad, textured_material(stage, "/Looks/M", Path("./checker.png"), {"diffuseColor": ("rgb", Sdf.ValueTypeNames.Color3f)}))
+    bind(
+        quad,
+        textured_material(
+            stage, "/Looks/M", Path("./checker.png"), {"diffuseColor": ("rgb", Sdf.ValueTypeNames.Color3f)}
+        ),
+    )
     stage.GetRootLayer().Save()
     package = tmp_path / "asset.usdz"
     assert UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(str(folder / "asset.usda")), str(package))
@@ -410,6 +476,7 @@ def test_textures_inside_a_usdz_package_are_read_through_the_resolver(tmp_path):
 
 # ------------------------------------------------------------------ robustness
 
+
 def test_unsupported_only_stage_and_usd_diagnostics(tmp_path, capfd):
     path = tmp_path / "curves.usda"
     stage = new_stage(path)
@@ -424,7 +491,10 @@ def test_unsupported_only_stage_and_usd_diagnostics(tmp_path, capfd):
     result = run_cli("scenes", "preview", path, "--out", tmp_path / "p.png", "--width", 8, "--height", 8, "--spp", 1)
     assert result.returncode == 2 and "Traceback" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
 
-    text = path.read_text().replace('def BasisCurves "Hair"', 'def Xform "Ref" (prepend references = [@./missing_a.usda@, @./missing_b.usda@]) {}\ndef BasisCurves "Hair"')
+    text = path.read_text().replace(
+        'def BasisCurves "Hair"',
+        'def Xform "Ref" (prepend references = [@./missing_a.usda@, @./missing_b.usda@]) {}\ndef BasisCurves "Hair"',
+    )
     text += '\ndef Cube "Box" {}\n'
     path = tmp_path / "with_references.usda"  # a new file: the open layer above is cached by USD
     path.write_text(text)
@@ -437,7 +507,8 @@ def test_unsupported_only_stage_and_usd_diagnostics(tmp_path, capfd):
 
 
 def test_preview_prints_warnings_before_rendering(tmp_path, monkeypatch):
-    from denoisebench.generator import feature_renderer, preview
+    from denoisebench.generator import preview
+    from denoisebench.generator.render import frame as feature_renderer
 
     path = lit_box_stage(tmp_path / "s.usda")
     stage = Usd.Stage.Open(str(path))
@@ -451,12 +522,14 @@ def test_preview_prints_warnings_before_rendering(tmp_path, monkeypatch):
 
     monkeypatch.setattr(feature_renderer, "render_frame", failing_render)
     with pytest.raises(RuntimeError):
-        preview.render_preview(path, width=8, height=8, spp=1,
-                               before_render=lambda t: events.append(("warnings", tuple(t.warnings))))
+        preview.render_preview(
+            path, width=8, height=8, spp=1, before_render=lambda t: events.append(("warnings", tuple(t.warnings)))
+        )
     assert events[0][0] == "warnings" and any("BasisCurves" in w for w in events[0][1]) and events[1] == "render"
 
 
 # ------------------------------------------------------------------ moving objects
+
 
 def moving_box_stage(path: Path, frames=3, shift=0.25, turn=8.0):
     """Static camera, a textured box translating along +x and turning about y, a static wall behind."""
@@ -549,13 +622,20 @@ def test_generate_refuses_a_bare_stage_naming_the_options(tmp_path):
 
 
 def test_what_mitsuba_refuses_is_skipped_with_a_warning_never_a_crash(tmp_path):
-    from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
+    from denoisebench.generator.render.scene import build_mitsuba_scene
 
     translated = translate_usd(lit_box_stage(tmp_path / "s.usda"))
     (key,) = translated.scene_dict["bsdfs"]
     translated.scene_dict["bsdfs"][key] = {"type": "no_such_bsdf_plugin"}
-    translated.scene_dict["emitters"].append({"type": "envmap", "data": np.zeros((0, 0, 3), np.float32), "scale": 1.0,
-                                              "rotation": np.eye(3).tolist(), "prim": "/BrokenDome"})
+    translated.scene_dict["emitters"].append(
+        {
+            "type": "envmap",
+            "data": np.zeros((0, 0, 3), np.float32),
+            "scale": 1.0,
+            "rotation": np.eye(3).tolist(),
+            "prim": "/BrokenDome",
+        }
+    )
     scene = build_mitsuba_scene(translated)
     assert len(scene.shapes()) == 1 and len(scene.emitters()) == 1
     assert any(w.startswith(f"{key}: Mitsuba refuses the material") for w in translated.warnings)

@@ -57,16 +57,16 @@ Features the frame lacks are skipped, so the filter also runs on color alone.
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from concurrent.futures import ThreadPoolExecutor
-from typing import Iterable, Mapping, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 from scipy import ndimage
 
+from denoisebench.baselines.threads import available_threads
 from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.protocol import DenoiserBase
-
-from .threads import available_threads
 
 DEFAULT_FEATURE_SIGMAS: dict[str, float] = {
     "albedo": 0.1,
@@ -77,9 +77,16 @@ DEFAULT_FEATURE_SIGMAS: dict[str, float] = {
 }
 
 PRESETS: dict[str, dict] = {
-    "fast": dict(radius=5, sigma_spatial=2.5, separable=True, sigma_color=6.0, features=("albedo", "normal"), guide_dims=3),
+    "fast": dict(
+        radius=5, sigma_spatial=2.5, separable=True, sigma_color=6.0, features=("albedo", "normal"), guide_dims=3
+    ),
     "balanced": dict(
-        radius=7, sigma_spatial=3.5, separable=True, sigma_color=6.0, features=("albedo", "normal", "depth"), guide_dims=None
+        radius=7,
+        sigma_spatial=3.5,
+        separable=True,
+        sigma_color=6.0,
+        features=("albedo", "normal", "depth"),
+        guide_dims=None,
     ),
     "high": dict(
         radius=8,
@@ -350,7 +357,9 @@ def ring_support(guide: Guide, sigma_spatial: float) -> np.ndarray:
     return den - 1.0  # the pixel's own weight
 
 
-def suppress_unsupported(color: np.ndarray, guide: Guide, sigma_spatial: float, threshold: float) -> tuple[np.ndarray, int]:
+def suppress_unsupported(
+    color: np.ndarray, guide: Guide, sigma_spatial: float, threshold: float
+) -> tuple[np.ndarray, int]:
     """``color`` (H×W×3) with its unsupported bright pixels replaced by their 3×3 median; and how many.
 
     A pixel is unsupported when the filter's weights to its 8 neighbours sum to less than

@@ -107,18 +107,17 @@ are kept in :attr:`RandomParameterFilter.last_weights` for inspection and tests.
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from typing import Mapping, Sequence
 
 import numpy as np
 import torch
 
+from denoisebench.baselines.threads import available_threads
 from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.lens_sampling import square_to_disk_concentric
 from denoisebench.denoisers.protocol import DenoiserBase
-
-from .threads import available_threads
 
 DEFAULT_FEATURES = ("position", "normal", "albedo", "position2", "normal2")
 CLUSTER_FEATURES = ("normal", "albedo")
@@ -189,8 +188,9 @@ def _code_block(codes: torch.Tensor, columns: Sequence[int], bins: int) -> torch
     return codes.index_select(2, picks)
 
 
-def mutual_information_codes(codes_a: torch.Tensor, codes_b: torch.Tensor, total: torch.Tensor,
-                             bins: int) -> torch.Tensor:
+def mutual_information_codes(
+    codes_a: torch.Tensor, codes_b: torch.Tensor, total: torch.Tensor, bins: int
+) -> torch.Tensor:
     """n×A×B MI (nats) from one-hot blocks (n×M×(A·bins), n×M×(B·bins), see :func:`one_hot_codes`)
     and the cluster sizes ``total`` (n, float32, ≥ 1); see :func:`mutual_information`."""
     n = codes_a.shape[0]
@@ -221,8 +221,9 @@ def mutual_information_codes(codes_a: torch.Tensor, codes_b: torch.Tensor, total
     return (h_a.unsqueeze(2) + h_b.unsqueeze(1) - h_ab).clamp_(min=0.0)
 
 
-def mutual_information(quantised: torch.Tensor, mask: torch.Tensor, bins: int, a: Sequence[int],
-                       b: Sequence[int]) -> torch.Tensor:
+def mutual_information(
+    quantised: torch.Tensor, mask: torch.Tensor, bins: int, a: Sequence[int], b: Sequence[int]
+) -> torch.Tensor:
     """n×A×B: MI (nats) between channel a[i] and channel b[j] in each of n neighbourhoods.
 
     ``quantised`` (n×M×D integers in [0, bins)) holds each neighbourhood's samples, ``mask`` (n×M
@@ -322,8 +323,16 @@ def _mirror_table(size: int, reach: int) -> np.ndarray:
     return _mirror(np.arange(-reach, size + reach), size)
 
 
-def _draw(rng: np.random.Generator | None, pool, ys: np.ndarray, xs: np.ndarray, spp: int, height: int, width: int,
-          pick: np.ndarray | None = None) -> np.ndarray:
+def _draw(
+    rng: np.random.Generator | None,
+    pool,
+    ys: np.ndarray,
+    xs: np.ndarray,
+    spp: int,
+    height: int,
+    width: int,
+    pick: np.ndarray | None = None,
+) -> np.ndarray:
     """n×M flat sample indices ((s·H + y)·W + x): P's own S samples first, then the draws of a
     pattern of ``pool`` picked at random per pixel (or given: ``pick``, n pattern numbers), mirrored
     at the border, never P itself."""
@@ -377,8 +386,17 @@ def _normalise(gathered: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return centred * inv
 
 
-def _statistics(flat: np.ndarray, layout: _Layout, ys: np.ndarray, xs: np.ndarray, shape, pool,
-                pass_index: int, bins: int, rng: np.random.Generator):
+def _statistics(
+    flat: np.ndarray,
+    layout: _Layout,
+    ys: np.ndarray,
+    xs: np.ndarray,
+    shape,
+    pool,
+    pass_index: int,
+    bins: int,
+    rng: np.random.Generator,
+):
     """α (n×3), β (n×F), W^r_c (n), per-feature-channel W^r (n×F), kept share (n) at pixels (ys, xs)."""
     spp, height, width = shape
     index = _draw(rng, pool, ys, xs, spp, height, width)
@@ -397,8 +415,16 @@ def _statistics(flat: np.ndarray, layout: _Layout, ys: np.ndarray, xs: np.ndarra
         x_block = codes[:, :, : layout.features.stop * bins]
         pr_block = codes[:, :, layout.position.start * bins : layout.random.stop * bins]
         mi_x = mutual_information_codes(x_block, pr_block, total, bins).double().numpy()  # n×X×(2 + R)
-        mi_f = mutual_information_codes(codes[:, :, layout.features.start * bins : layout.features.stop * bins],
-                                        codes[:, :, : layout.color.stop * bins], total, bins).double().numpy()
+        mi_f = (
+            mutual_information_codes(
+                codes[:, :, layout.features.start * bins : layout.features.stop * bins],
+                codes[:, :, : layout.color.stop * bins],
+                total,
+                bins,
+            )
+            .double()
+            .numpy()
+        )
     d_r = mi_x[:, :, 2:].sum(2)
     d_p = mi_x[:, :, :2].sum(2)
     d_cf = mi_f.sum(2)  # n×F: features against the colour channels
@@ -419,8 +445,17 @@ def _statistics(flat: np.ndarray, layout: _Layout, ys: np.ndarray, xs: np.ndarra
     return alpha, beta, w_rc, w_r[:, 3:], kept
 
 
-def _filter(flat_t: torch.Tensor, layout: _Layout, ys: np.ndarray, xs: np.ndarray, shape, box: int, pool,
-            scale: torch.Tensor, pick: np.ndarray) -> torch.Tensor:
+def _filter(
+    flat_t: torch.Tensor,
+    layout: _Layout,
+    ys: np.ndarray,
+    xs: np.ndarray,
+    shape,
+    box: int,
+    pool,
+    scale: torch.Tensor,
+    pick: np.ndarray,
+) -> torch.Tensor:
     """S×n×3: one pass's new colours of the samples of pixels (ys, xs); ``scale`` (n×K, K = colour and
     feature columns) holds α/2σ_c² on colour columns and β/2σ_f² on feature columns.
 
@@ -484,7 +519,9 @@ class RPFSettings:
     stat_samples: int = 128  # the same cap for the statistics
     stat_stride_divisor: float = 4.0  # statistics every max(min_stat_stride, round(b / this)) pixels (0: every pixel)
     min_stat_stride: int = 2  # statistics grid at least this coarse where within half the box (see the docstring)
-    refine_passes: int = 2  # in this many first passes, pixels whose own samples straddle surfaces get their own statistics
+    refine_passes: int = (
+        2  # in this many first passes, pixels whose own samples straddle surfaces get their own statistics
+    )
     refine_samples: int = 48  # ... from this many draws (capped by stat_samples)
     bins: int = 6
     sigma8_squared: float = SIGMA8_SQUARED
@@ -493,7 +530,13 @@ class RPFSettings:
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if self.max_samples < 1 or self.stat_samples < 2 or self.refine_samples < 2 or self.bins < 2 or not self.sigma8_squared > 0:
+        if (
+            self.max_samples < 1
+            or self.stat_samples < 2
+            or self.refine_samples < 2
+            or self.bins < 2
+            or not self.sigma8_squared > 0
+        ):
             raise ValueError("max_samples must be >= 1, stat_samples >= 2, bins >= 2 and sigma8_squared > 0")
         if self.stat_stride_divisor < 0 or self.min_stat_stride < 1 or self.refine_passes < 0:
             raise ValueError("stat_stride_divisor must be >= 0, min_stat_stride >= 1 and refine_passes >= 0")
@@ -572,7 +615,9 @@ def _map_chunks(function, count: int, workers: int) -> list:
     return [function(k) for k in range(count)]
 
 
-def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSettings()) -> tuple[np.ndarray, RPFWeights]:
+def rpf_filter(
+    samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSettings()
+) -> tuple[np.ndarray, RPFWeights]:
     """Filter per-sample data (name → S×H×W×C, needs ``color``); returns (H×W×3 float32, weights)."""
     table, layout = _sample_table(samples, settings.features)
     spp, height, width, dims = table.shape
@@ -606,8 +651,17 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
 
             def stats(k: int):
                 ys, xs = np.meshgrid(chunks[k], gx, indexing="ij")
-                return _statistics(flat, layout, ys.ravel(), xs.ravel(), shape, stat_pool, t, settings.bins,
-                                   np.random.default_rng(seeds[k]))
+                return _statistics(
+                    flat,
+                    layout,
+                    ys.ravel(),
+                    xs.ravel(),
+                    shape,
+                    stat_pool,
+                    t,
+                    settings.bins,
+                    np.random.default_rng(seeds[k]),
+                )
 
             parts = _map_chunks(stats, len(chunks), _workers())
             alpha, beta, w_rc, w_rf, kept = (np.concatenate([p[i] for p in parts]) for i in range(5))
@@ -620,16 +674,30 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
                 on_grid[np.ix_(gy, gx)] = True
                 todo = np.flatnonzero((straddling & ~on_grid).ravel())
                 refine_total = min(stat_total, max(settings.refine_samples, spp))
-                refine_pool = stat_pool if refine_total == stat_total else _pattern_pool(
-                    np.random.default_rng([settings.seed, t, 5]), spp, box, refine_total, height, width)
+                refine_pool = (
+                    stat_pool
+                    if refine_total == stat_total
+                    else _pattern_pool(
+                        np.random.default_rng([settings.seed, t, 5]), spp, box, refine_total, height, width
+                    )
+                )
                 per = max(1, _STAT_CELLS // max(1, refine_total * dims))
                 pieces = [todo[i : i + per] for i in range(0, todo.size, per)]
                 refine_seeds = np.random.SeedSequence([settings.seed, t, 4]).spawn(max(1, len(pieces)))
 
                 def refine(k: int):
                     ys, xs = np.divmod(pieces[k], width)
-                    return _statistics(flat, layout, ys, xs, shape, refine_pool, t, settings.bins,
-                                       np.random.default_rng(refine_seeds[k]))
+                    return _statistics(
+                        flat,
+                        layout,
+                        ys,
+                        xs,
+                        shape,
+                        refine_pool,
+                        t,
+                        settings.bins,
+                        np.random.default_rng(refine_seeds[k]),
+                    )
 
                 if pieces:
                     extra = _map_chunks(refine, len(pieces), _workers())
@@ -643,7 +711,9 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
             scale[:, layout.features] = beta * shrink[:, None]
             filter_total = min(paper, max(settings.max_samples, spp))
             rows = max(1, _FILTER_PAIRS // max(1, width * spp * filter_total))
-            filter_pool = _pattern_pool(np.random.default_rng([settings.seed, t, 1]), spp, box, filter_total, height, width)
+            filter_pool = _pattern_pool(
+                np.random.default_rng([settings.seed, t, 1]), spp, box, filter_total, height, width
+            )
             columns = np.r_[0 : layout.features.stop, layout.position.start : layout.position.stop]
             flat_t = torch.from_numpy(np.ascontiguousarray(flat[:, columns]))
             scale_t = torch.from_numpy(scale)
@@ -656,8 +726,17 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
                 y1 = min(height, y0 + rows)
                 ys, xs = np.meshgrid(np.arange(y0, y1), np.arange(width), indexing="ij")
                 with torch.no_grad():
-                    out = _filter(flat_t, layout, ys.ravel(), xs.ravel(), shape, box, filter_pool,
-                                  scale_t[y0 * width : y1 * width], picks[y0 * width : y1 * width])
+                    out = _filter(
+                        flat_t,
+                        layout,
+                        ys.ravel(),
+                        xs.ravel(),
+                        shape,
+                        box,
+                        filter_pool,
+                        scale_t[y0 * width : y1 * width],
+                        picks[y0 * width : y1 * width],
+                    )
                 new_color[:, y0:y1] = out.numpy().reshape(spp, y1 - y0, width, 3)
 
             _map_chunks(run_filter, -(-height // rows), _workers())
@@ -666,15 +745,19 @@ def rpf_filter(samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSet
             offset = layout.features.start
             weights.boxes.append(box)
             weights.alpha.append(alpha.mean(1).reshape(height, width).astype(np.float32))
-            weights.beta.append({
-                name: beta[:, s.start - offset : s.stop - offset].mean(-1).reshape(height, width).astype(np.float32)
-                for name, s in layout.feature_groups.items()
-            })
+            weights.beta.append(
+                {
+                    name: beta[:, s.start - offset : s.stop - offset].mean(-1).reshape(height, width).astype(np.float32)
+                    for name, s in layout.feature_groups.items()
+                }
+            )
             groups = {"color": w_rc.reshape(height, width).astype(np.float32)}
-            groups.update({
-                name: w_rf[:, s.start - offset : s.stop - offset].mean(-1).reshape(height, width).astype(np.float32)
-                for name, s in layout.feature_groups.items()
-            })
+            groups.update(
+                {
+                    name: w_rf[:, s.start - offset : s.stop - offset].mean(-1).reshape(height, width).astype(np.float32)
+                    for name, s in layout.feature_groups.items()
+                }
+            )
             weights.w_random.append(groups)
             weights.cluster.append(kept.reshape(height, width).astype(np.float32))
     finally:

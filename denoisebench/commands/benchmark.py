@@ -63,27 +63,47 @@ def _options(items: list[str]) -> dict[str, dict]:
 def add_arguments(parser) -> None:
     parser.add_argument("--data", required=True, help="dataset folder (with dataset.json)")
     parser.add_argument(
-        "--denoisers", default=None,
-        help="comma-separated built-in/entry-point names, or 'all' (default all, or none when --denoiser is given)"
+        "--denoisers",
+        default=None,
+        help="comma-separated built-in/entry-point names, or 'all' (default all, or none when --denoiser is given)",
     )
     parser.add_argument(
-        "--denoiser", action="append", default=[], metavar="MODULE:ATTR",
+        "--denoiser",
+        action="append",
+        default=[],
+        metavar="MODULE:ATTR",
         help="a plugin denoiser as module:attr or path/to/file.py:attr (repeatable; added to --denoisers)",
     )
-    parser.add_argument("--option", action="append", default=[], metavar="SPEC:KEY=VALUE", help="constructor option of a denoiser")
-    parser.add_argument("--spp", default=None, help="input spp to benchmark, e.g. 1,4,16 (default: every spp of the split)")
-    parser.add_argument("--split", default="test", choices=("train", "val", "test", "all"),
-                        help="dataset split, or all for every scene of a benchmark-only dataset (default test)")
-    parser.add_argument("--metrics", default="",
-                        help="comma-separated metrics or metric sets (noisebase: Noisebase's definitions, "
-                             "nb_*); default every registered metric outside the sets; relmse and flip always")
+    parser.add_argument(
+        "--option", action="append", default=[], metavar="SPEC:KEY=VALUE", help="constructor option of a denoiser"
+    )
+    parser.add_argument(
+        "--spp", default=None, help="input spp to benchmark, e.g. 1,4,16 (default: every spp of the split)"
+    )
+    parser.add_argument(
+        "--split",
+        default="test",
+        choices=("train", "val", "test", "all"),
+        help="dataset split, or all for every scene of a benchmark-only dataset (default test)",
+    )
+    parser.add_argument(
+        "--metrics",
+        default="",
+        help="comma-separated metrics or metric sets (noisebase: Noisebase's definitions, "
+        "nb_*); default every registered metric outside the sets; relmse and flip always",
+    )
     parser.add_argument("--out", default="report", help="report folder (default report)")
     parser.add_argument("--db", default="benchmark.sqlite", help="results database (default benchmark.sqlite)")
     parser.add_argument("--executor", default="local", choices=("local", "ray"), help="where units run (default local)")
-    parser.add_argument("--new-run", action="store_true", help="measure everything again as a new run instead of resuming")
+    parser.add_argument(
+        "--new-run", action="store_true", help="measure everything again as a new run instead of resuming"
+    )
     parser.add_argument("--no-report", action="store_true", help="only measure; write no report")
-    parser.add_argument("--no-verify", action="store_true",
-                        help="skip the sha256 check of the dataset's files before the run (recorded in the run)")
+    parser.add_argument(
+        "--no-verify",
+        action="store_true",
+        help="skip the sha256 check of the dataset's files before the run (recorded in the run)",
+    )
     from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
 
     add_isolation_arguments(parser)

@@ -35,7 +35,10 @@ EPILOG = """examples:
 def add_arguments(parser) -> None:
     parser.add_argument("spec", nargs="?", help="denoiser: built-in name, entry-point name or MODULE:ATTR")
     parser.add_argument(
-        "--option", action="append", default=[], metavar="KEY=VALUE",
+        "--option",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
         help="constructor keyword (VALUE parsed as JSON when it parses, else a string); repeatable",
     )
     parser.add_argument("--case", action="append", default=None, metavar="NAME", help="run only this case; repeatable")
@@ -77,7 +80,13 @@ def _table(label: str, outcomes) -> str:
     rows = [("case", "result", "seconds", "sanitised", "detail")]
     for outcome in outcomes:
         rows.append(
-            (outcome.case, "pass" if outcome.passed else "FAIL", f"{outcome.seconds:.3f}", str(outcome.sanitized), outcome.reason)
+            (
+                outcome.case,
+                "pass" if outcome.passed else "FAIL",
+                f"{outcome.seconds:.3f}",
+                str(outcome.sanitized),
+                outcome.reason,
+            )
         )
     widths = [max(len(row[i]) for row in rows) for i in range(4)]
     lines = [f"check-plugin {label}"]

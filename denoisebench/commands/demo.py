@@ -48,12 +48,17 @@ EPILOG = """example:
 def add_arguments(parser) -> None:
     parser.add_argument("--out", default="demo_out", help="output folder (default demo_out)")
     parser.add_argument("--seed", type=int, default=1, help="seed of the previewed scenes (default 1)")
-    parser.add_argument("--dataset-seed", type=int, default=None,
-                        help=f"seed of the benchmark dataset (default {DEMO_DATASET_SEED}: scenes the shipped weights never saw)")
+    parser.add_argument(
+        "--dataset-seed",
+        type=int,
+        default=None,
+        help=f"seed of the benchmark dataset (default {DEMO_DATASET_SEED}: scenes the shipped weights never saw)",
+    )
     parser.add_argument("--size", type=int, default=192, help="preview width and height (default 192)")
     parser.add_argument("--spp", type=int, default=64, help="preview samples per pixel (default 64)")
-    parser.add_argument("--quick", action="store_true",
-                        help="a smaller dataset stage (64x64, 2 families, 4 frames) for a fast look")
+    parser.add_argument(
+        "--quick", action="store_true", help="a smaller dataset stage (64x64, 2 families, 4 frames) for a fast look"
+    )
 
 
 def run(args) -> int:
@@ -81,7 +86,6 @@ def run(args) -> int:
     return _report_stage(out)
 
 
-
 def _dataset_stage(out: Path, args) -> None:
     """Generate a small dataset with the local executor (resumes when run again), print where it is."""
     from denoisebench.commands.generate import print_summary
@@ -92,9 +96,20 @@ def _dataset_stage(out: Path, args) -> None:
     size, frames = (64, 4) if args.quick else (DEMO_SIZE, DEMO_FRAMES)
     seed = DEMO_DATASET_SEED if args.dataset_seed is None else args.dataset_seed
     # Per-sample data so that rpf, which filters samples, runs beside the others.
-    request = GenerateRequest(out=out, families=families, scenes=1, frames=frames, width=size, height=size,
-                              spp=(1, 4), ref_spp=DEMO_REF_SPP, ref_error=DEMO_REF_ERROR, samples=True, seed=seed,
-                              force=True)
+    request = GenerateRequest(
+        out=out,
+        families=families,
+        scenes=1,
+        frames=frames,
+        width=size,
+        height=size,
+        spp=(1, 4),
+        ref_spp=DEMO_REF_SPP,
+        ref_error=DEMO_REF_ERROR,
+        samples=True,
+        seed=seed,
+        force=True,
+    )
     print_summary(generate_dataset(request, LocalExecutor()))
     print(f"dataset: {out} (open it with denoisebench.dataset.open_dataset)")
 
@@ -107,6 +122,18 @@ def _report_stage(out: Path) -> int:
     if not (data / "dataset.json").is_file():
         print("report: skipped (no demo dataset)")
         return 0
-    return main(["benchmark", "--data", str(data), "--denoisers", "all", "--split", "all",
-                 "--db", str(out / "benchmark.sqlite"),
-                 "--out", str(out / "report")])
+    return main(
+        [
+            "benchmark",
+            "--data",
+            str(data),
+            "--denoisers",
+            "all",
+            "--split",
+            "all",
+            "--db",
+            str(out / "benchmark.sqlite"),
+            "--out",
+            str(out / "report"),
+        ]
+    )

@@ -78,36 +78,72 @@ def _defaults() -> tuple[float, int]:
 
 def add_arguments(parser) -> None:
     parser.add_argument("--out", required=True, help="dataset folder (created; resumed when it exists)")
-    parser.add_argument("--families", default=None,
-                        help="comma-separated scene families, or 'all' (default: all, or none with --usd)")
-    parser.add_argument("--scenes", type=int, default=1, help="scenes per family, seeds --seed, --seed+1, ... (default 1)")
+    parser.add_argument(
+        "--families", default=None, help="comma-separated scene families, or 'all' (default: all, or none with --usd)"
+    )
+    parser.add_argument(
+        "--scenes", type=int, default=1, help="scenes per family, seeds --seed, --seed+1, ... (default 1)"
+    )
     parser.add_argument("--frames", type=int, default=8, help="frames per family scene (default 8)")
     parser.add_argument("--width", type=int, default=128, help="image width in pixels (default 128)")
     parser.add_argument("--height", type=int, default=128, help="image height in pixels (default 128)")
     parser.add_argument("--spp", default="1,4,16", help="noisy sample counts, comma-separated (default 1,4,16)")
-    parser.add_argument("--ref-spp", type=int, default=None,
-                        help="cap of reference samples per pixel (default %d); with --ref-error 0: exactly this many"
-                             % _defaults()[1])
-    parser.add_argument("--ref-error", type=float, default=None, metavar="E",
-                        help="render references until their noise floor (a perfect denoiser's relMSE) is <= E "
-                             "(default %g); 0: no adaptation" % _defaults()[0])
-    parser.add_argument("--max-depth", type=int, default=None, metavar="N",
-                        help="restrict path depth (Mitsuba's convention: 2 = direct light only; -1 = unbounded); "
-                             "default: full transport, or the stage's own denoisebench maxDepth")
+    parser.add_argument(
+        "--ref-spp",
+        type=int,
+        default=None,
+        help="cap of reference samples per pixel (default %d); with --ref-error 0: exactly this many" % _defaults()[1],
+    )
+    parser.add_argument(
+        "--ref-error",
+        type=float,
+        default=None,
+        metavar="E",
+        help="render references until their noise floor (a perfect denoiser's relMSE) is <= E "
+        "(default %g); 0: no adaptation" % _defaults()[0],
+    )
+    parser.add_argument(
+        "--max-depth",
+        type=int,
+        default=None,
+        metavar="N",
+        help="restrict path depth (Mitsuba's convention: 2 = direct light only; -1 = unbounded); "
+        "default: full transport, or the stage's own denoisebench maxDepth",
+    )
     parser.add_argument("--samples", action="store_true", help="also write per-sample data (large)")
-    parser.add_argument("--seed", type=int, default=0, help="dataset seed: scene seeds, render seeds, splits (default 0)")
-    parser.add_argument("--usd", action="append", default=[], metavar="FILE",
-                        help="render your own USD stage too (repeatable; .usda/.usdc/.usd/.usdz)")
-    parser.add_argument("--camera", default=None, metavar="PATH", help="camera prim of the --usd stages (default: the first)")
-    parser.add_argument("--auto-camera", action="store_true",
-                        help="frame --usd stages with a slow orbiting camera over --frames frames (for stages without one)")
-    parser.add_argument("--default-light", action="store_true",
-                        help="light --usd stages that have no light: a uniform dome plus a key distant light")
-    parser.add_argument("--executor", choices=("local", "ray"), default="local",
-                        help="local: this process, all cores (default); ray: spread frames over a Ray cluster")
+    parser.add_argument(
+        "--seed", type=int, default=0, help="dataset seed: scene seeds, render seeds, splits (default 0)"
+    )
+    parser.add_argument(
+        "--usd",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="render your own USD stage too (repeatable; .usda/.usdc/.usd/.usdz)",
+    )
+    parser.add_argument(
+        "--camera", default=None, metavar="PATH", help="camera prim of the --usd stages (default: the first)"
+    )
+    parser.add_argument(
+        "--auto-camera",
+        action="store_true",
+        help="frame --usd stages with a slow orbiting camera over --frames frames (for stages without one)",
+    )
+    parser.add_argument(
+        "--default-light",
+        action="store_true",
+        help="light --usd stages that have no light: a uniform dome plus a key distant light",
+    )
+    parser.add_argument(
+        "--executor",
+        choices=("local", "ray"),
+        default="local",
+        help="local: this process, all cores (default); ray: spread frames over a Ray cluster",
+    )
     parser.add_argument("--ray-address", default=None, help="Ray cluster address (default: start a local cluster)")
-    parser.add_argument("--ray-cpus-per-task", type=int, default=1,
-                        help="CPUs (and Dr.Jit threads) per Ray task (default 1)")
+    parser.add_argument(
+        "--ray-cpus-per-task", type=int, default=1, help="CPUs (and Dr.Jit threads) per Ray task (default 1)"
+    )
     parser.add_argument("--force", action="store_true", help="overwrite a dataset made with another config")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -159,15 +195,24 @@ def print_summary(summary) -> None:
         f" ({summary.samples_per_second:.3g} samples/s), {summary.wall_seconds:.1f} s wall; dataset {state}"
     )
     if summary.too_noisy:
-        print(f"warning: {summary.too_noisy} frame(s) have a reference not 4x less noisy than their inputs "
-              f"(reference_too_noisy in dataset.json); raise --ref-spp", file=sys.stderr)
+        print(
+            f"warning: {summary.too_noisy} frame(s) have a reference not 4x less noisy than their inputs "
+            f"(reference_too_noisy in dataset.json); raise --ref-spp",
+            file=sys.stderr,
+        )
     if summary.at_cap:
-        print(f"warning: {len(summary.at_cap)} reference(s) stopped at the --ref-spp cap before reaching --ref-error: "
-              f"{_first_names(summary.at_cap)} (reference_adaptive in dataset.json)", file=sys.stderr)
+        print(
+            f"warning: {len(summary.at_cap)} reference(s) stopped at the --ref-spp cap before reaching --ref-error: "
+            f"{_first_names(summary.at_cap)} (reference_adaptive in dataset.json)",
+            file=sys.stderr,
+        )
     if summary.rising:
-        print(f"warning: {len(summary.rising)} reference(s) have a noise-floor estimate still rising with spp "
-              f"(fireflies not yet resolved; their floor is a lower bound): {_first_names(summary.rising)} "
-              f"(floor_growth in dataset.json)", file=sys.stderr)
+        print(
+            f"warning: {len(summary.rising)} reference(s) have a noise-floor estimate still rising with spp "
+            f"(fireflies not yet resolved; their floor is a lower bound): {_first_names(summary.rising)} "
+            f"(floor_growth in dataset.json)",
+            file=sys.stderr,
+        )
     for failure in summary.failures:
         print(f"failed: scene {failure.scene} frame {failure.frame}: {failure.message}", file=sys.stderr)
 
@@ -182,8 +227,11 @@ def run(args) -> int:
 
     check_writable_dir(request.out, "--out")  # one line and exit 2, not a traceback after set-up
     if request.ref_spp < REFERENCE_SPP_FACTOR * max(request.spp):
-        print(f"warning: --ref-spp {request.ref_spp} is below {REFERENCE_SPP_FACTOR}x the largest --spp "
-              f"({max(request.spp)}): references will likely be flagged too noisy", file=sys.stderr)
+        print(
+            f"warning: --ref-spp {request.ref_spp} is below {REFERENCE_SPP_FACTOR}x the largest --spp "
+            f"({max(request.spp)}): references will likely be flagged too noisy",
+            file=sys.stderr,
+        )
     executor = make_executor(args.executor, args.ray_address, cpus_per_task=args.ray_cpus_per_task)
     try:
         summary = generate_dataset(request, executor, progress=not args.quiet)

@@ -15,7 +15,11 @@ EPILOG = """examples:
 
 def add_arguments(parser) -> None:
     parser.add_argument("--db", default="benchmark.sqlite", help="results database (default benchmark.sqlite)")
-    parser.add_argument("--metric", default="relmse", help="metric to rank by (default relmse); combined over scenes by the metric's aggregation rule")
+    parser.add_argument(
+        "--metric",
+        default="relmse",
+        help="metric to rank by (default relmse); combined over scenes by the metric's aggregation rule",
+    )
     parser.add_argument("--spp", type=int, default=None, help="input spp (default the lowest measured)")
     parser.add_argument(
         "--dataset", default=None, help="dataset hash prefix or folder (default the dataset of the newest run)"

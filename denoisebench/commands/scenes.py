@@ -1,11 +1,11 @@
 """Scene families and stages: list the families, author one as USD, preview a stage.
 
-  list                      families with their effects
-  make FAMILY --seed N --out DIR
-                            author DIR/scene.usda (+ DIR/textures/)
-  preview FILE.usda --out preview.png [--frame i]
-                            a quick Mitsuba render of a stage, tone-mapped to PNG
-  check FILE.usda           translate a stage and print its effects, render plan and warnings
+list                      families with their effects
+make FAMILY --seed N --out DIR
+                          author DIR/scene.usda (+ DIR/textures/)
+preview FILE.usda --out preview.png [--frame i]
+                          a quick Mitsuba render of a stage, tone-mapped to PNG
+check FILE.usda           translate a stage and print its effects, render plan and warnings
 """
 
 from __future__ import annotations
@@ -27,11 +27,19 @@ EPILOG = """examples:
 
 
 def _add_stage_options(parser) -> None:
-    parser.add_argument("--camera", default=None, metavar="PATH", help="camera prim to render (default: the first camera)")
-    parser.add_argument("--auto-camera", action="store_true",
-                        help="frame the stage's bounds with a slow orbiting camera (for stages without a camera)")
-    parser.add_argument("--default-light", action="store_true",
-                        help="light a stage that has no light: a uniform dome plus a key distant light")
+    parser.add_argument(
+        "--camera", default=None, metavar="PATH", help="camera prim to render (default: the first camera)"
+    )
+    parser.add_argument(
+        "--auto-camera",
+        action="store_true",
+        help="frame the stage's bounds with a slow orbiting camera (for stages without a camera)",
+    )
+    parser.add_argument(
+        "--default-light",
+        action="store_true",
+        help="light a stage that has no light: a uniform dome plus a key distant light",
+    )
 
 
 def translate_options(args, frames: int = 8) -> dict:
@@ -59,9 +67,14 @@ def add_arguments(parser) -> None:
     preview.add_argument("--width", type=int, default=256)
     preview.add_argument("--height", type=int, default=256)
     preview.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
-    preview.add_argument("--max-depth", type=int, default=None, metavar="N",
-                         help="restrict path depth (Mitsuba's convention: 2 = direct light only; -1 = unbounded); "
-                              "default: full transport, or the stage's own denoisebench maxDepth")
+    preview.add_argument(
+        "--max-depth",
+        type=int,
+        default=None,
+        metavar="N",
+        help="restrict path depth (Mitsuba's convention: 2 = direct light only; -1 = unbounded); "
+        "default: full transport, or the stage's own denoisebench maxDepth",
+    )
     _add_stage_options(preview)
     check = actions.add_parser("check", help="translate a stage; print effects, render plan and warnings")
     check.add_argument("usd", help="a .usda/.usdc/.usd/.usdz file")
@@ -114,26 +127,39 @@ def _preview(args) -> int:
 
     if args.width < 1 or args.height < 1 or args.spp < 1:
         raise UserInputError("--width, --height and --spp must be positive")
-    image, translated = render_preview(args.usd, frame=args.frame, width=args.width, height=args.height, spp=args.spp,
-                                       max_depth=args.max_depth, translate_options=translate_options(args),
-                                       before_render=_report_warnings)
+    image, translated = render_preview(
+        args.usd,
+        frame=args.frame,
+        width=args.width,
+        height=args.height,
+        spp=args.spp,
+        max_depth=args.max_depth,
+        translate_options=translate_options(args),
+        before_render=_report_warnings,
+    )
     print(write_png(tone_map_preview(image), args.out))
     return 0
 
 
 def _check(args) -> int:
-    from denoisebench.generator.render_plan import make_render_plan
-    from denoisebench.generator.translate import translate_usd
+    from denoisebench.generator.contract.render_plan import make_render_plan
+    from denoisebench.generator.usd.translate import translate_usd
 
     translated = translate_usd(args.usd, **translate_options(args))
     _report_warnings(translated)
     plan = make_render_plan(translated.effects, stage_max_depth=translated.max_depth)
-    print(json.dumps({
-        "family": translated.family or None,
-        "frames": translated.camera.frames,
-        "camera": translated.camera.prim_path,
-        "effects_declared": list(translated.effects_declared),
-        "effects_inferred": list(translated.effects_inferred),
-        "render_plan": plan.to_dict(),
-    }, indent=2, sort_keys=True))
+    print(
+        json.dumps(
+            {
+                "family": translated.family or None,
+                "frames": translated.camera.frames,
+                "camera": translated.camera.prim_path,
+                "effects_declared": list(translated.effects_declared),
+                "effects_inferred": list(translated.effects_inferred),
+                "render_plan": plan.to_dict(),
+            },
+            indent=2,
+            sort_keys=True,
+        )
+    )
     return 0

@@ -58,51 +58,102 @@ def _spp(text: str | None):
 def add_arguments(parser) -> None:
     parser.add_argument("--model", required=True, choices=MODELS, help="which network to train")
     parser.add_argument("--data", required=True, help="dataset folder (dataset.json inside)")
-    parser.add_argument("--config", default="small", choices=("small", "paper"),
-                        help="network size: small (trains on a CPU) or paper (default small)")
-    parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="overrides",
-                        help="replace one key of the configuration for this run, e.g. residual=false "
-                             "(repeatable; VALUE is JSON; the checkpoint records the result)")
+    parser.add_argument(
+        "--config",
+        default="small",
+        choices=("small", "paper"),
+        help="network size: small (trains on a CPU) or paper (default small)",
+    )
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        dest="overrides",
+        help="replace one key of the configuration for this run, e.g. residual=false "
+        "(repeatable; VALUE is JSON; the checkpoint records the result)",
+    )
     parser.add_argument("--steps", type=int, default=500, help="optimisation steps to add (default 500)")
     parser.add_argument("--out", default=None, help="checkpoint to write (default checkpoints/MODEL_CONFIG.pt)")
-    parser.add_argument("--resume", default=None, metavar="CKPT", help="continue from this checkpoint; with --steps 0 also shipped weights, to score them "
-                             "(--evaluate/--ship) on another dataset")
-    parser.add_argument("--init-from", default=None, metavar="CKPT",
-                        help="fine-tune: start from this checkpoint's weights (shipped weights too) and step count "
-                        "with a fresh optimiser, on --data (which may differ from the checkpoint's)")
+    parser.add_argument(
+        "--resume",
+        default=None,
+        metavar="CKPT",
+        help="continue from this checkpoint; with --steps 0 also shipped weights, to score them "
+        "(--evaluate/--ship) on another dataset",
+    )
+    parser.add_argument(
+        "--init-from",
+        default=None,
+        metavar="CKPT",
+        help="fine-tune: start from this checkpoint's weights (shipped weights too) and step count "
+        "with a fresh optimiser, on --data (which may differ from the checkpoint's)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="initialisation and batch-order seed (default 0)")
     parser.add_argument("--batch-size", type=int, default=8, help="crops per step (default 8)")
-    parser.add_argument("--crop", type=int, default=None,
-                        help="crop side in pixels, capped by the smallest train scene (default: the recipe's, "
-                        "rae paper 128; else 32)")
-    parser.add_argument("--play-backward", action=argparse.BooleanOptionalAction, default=None,
-                        help="rae: play each training window backwards half the time (default: on in both "
-                        "configurations' recipes)")
+    parser.add_argument(
+        "--crop",
+        type=int,
+        default=None,
+        help="crop side in pixels, capped by the smallest train scene (default: the recipe's, rae paper 128; else 32)",
+    )
+    parser.add_argument(
+        "--play-backward",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="rae: play each training window backwards half the time (default: on in both configurations' recipes)",
+    )
     parser.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
     parser.add_argument("--spp", default=None, help="train on these noisy spp only, e.g. 4 (default all)")
-    parser.add_argument("--sequence-length", type=int, default=7, help="frames per training window, rae only (default 7)")
-    parser.add_argument("--loss", default=None, choices=("log", "relative", "relmse", "lobes", "exposure"),
-                        help="spatial loss: log = L1 of log(1+x); relative adds |p-r|/(r+0.01); relmse = "
-                        "(p-r)^2/(r^2+0.01); lobes = separate diffuse/specular L1 (dpcn/kpcn); exposure = log "
-                        "after dividing by the input's exposure, so dark scenes count (dpcn/kpcn) "
-                        "(default: the configuration's recipe, else log)")
-    parser.add_argument("--lr-schedule", default="constant", choices=("constant", "cosine", "step"),
-                        help="learning rate over this command's steps: constant, cosine (to lr/100) or "
-                        "step (x0.1 at 1/2 and 3/4) (default constant)")
-    parser.add_argument("--val-every", type=int, default=0,
-                        help="also validate every N steps (recorded in the checkpoint; default 0: only at the end)")
-    parser.add_argument("--device", default="auto", choices=("auto", "cpu", "cuda"),
-                        help="auto: CUDA when torch sees a GPU, else CPU (default auto)")
-    parser.add_argument("--workers", type=int, default=None,
-                        help="data loader processes (default 0 on the CPU, up to 4 on CUDA)")
+    parser.add_argument(
+        "--sequence-length", type=int, default=7, help="frames per training window, rae only (default 7)"
+    )
+    parser.add_argument(
+        "--loss",
+        default=None,
+        choices=("log", "relative", "relmse", "lobes", "exposure"),
+        help="spatial loss: log = L1 of log(1+x); relative adds |p-r|/(r+0.01); relmse = "
+        "(p-r)^2/(r^2+0.01); lobes = separate diffuse/specular L1 (dpcn/kpcn); exposure = log "
+        "after dividing by the input's exposure, so dark scenes count (dpcn/kpcn) "
+        "(default: the configuration's recipe, else log)",
+    )
+    parser.add_argument(
+        "--lr-schedule",
+        default="constant",
+        choices=("constant", "cosine", "step"),
+        help="learning rate over this command's steps: constant, cosine (to lr/100) or "
+        "step (x0.1 at 1/2 and 3/4) (default constant)",
+    )
+    parser.add_argument(
+        "--val-every",
+        type=int,
+        default=0,
+        help="also validate every N steps (recorded in the checkpoint; default 0: only at the end)",
+    )
+    parser.add_argument(
+        "--device",
+        default="auto",
+        choices=("auto", "cpu", "cuda"),
+        help="auto: CUDA when torch sees a GPU, else CPU (default auto)",
+    )
+    parser.add_argument(
+        "--workers", type=int, default=None, help="data loader processes (default 0 on the CPU, up to 4 on CUDA)"
+    )
     parser.add_argument("--checkpoint-every", type=int, default=100, help="save every N steps (default 100)")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads, 1 to the core count (default 1)")
     parser.add_argument("--evaluate", action="store_true", help="also score on the test split against the --peers")
-    parser.add_argument("--peers", default="identity,cross_bilateral",
-                        help="denoisers --evaluate/--ship compare against, comma-separated (default identity,cross_bilateral; "
-                        "e.g. add oidn)")
-    parser.add_argument("--ship", default=None, metavar="DIR",
-                        help="implies --evaluate; write DIR/MODEL_CONFIG.pt (no optimiser state) and its model card DIR/MODEL_CONFIG.md")
+    parser.add_argument(
+        "--peers",
+        default="identity,cross_bilateral",
+        help="denoisers --evaluate/--ship compare against, comma-separated (default identity,cross_bilateral; "
+        "e.g. add oidn)",
+    )
+    parser.add_argument(
+        "--ship",
+        default=None,
+        metavar="DIR",
+        help="implies --evaluate; write DIR/MODEL_CONFIG.pt (no optimiser state) and its model card DIR/MODEL_CONFIG.md",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -165,8 +216,15 @@ def run(args) -> int:
         summary += "; no val split to validate on"
     print(summary)
     if args.evaluate or args.ship:
-        table = evaluate_on_split(meta["checkpoint"], args.model, args.data, split="test", threads=args.threads,
-                                  peers=peers, progress=not args.quiet)
+        table = evaluate_on_split(
+            meta["checkpoint"],
+            args.model,
+            args.data,
+            split="test",
+            threads=args.threads,
+            peers=peers,
+            progress=not args.quiet,
+        )
         print(json.dumps(table, indent=2))
         if args.ship:
             print(ship(meta["checkpoint"], args, table))
@@ -185,8 +243,14 @@ def ship(checkpoint: str, args, evaluation: dict) -> str:
     weights = strip_for_shipping(checkpoint, folder / f"{stem}.pt")
     payload = load_checkpoint(weights)
     card = render_card(
-        args.model, args.config, payload["config"], parameter_count(model_from_checkpoint(payload)),
-        weights.name, weights.stat().st_size, payload["meta"], evaluation,
+        args.model,
+        args.config,
+        payload["config"],
+        parameter_count(model_from_checkpoint(payload)),
+        weights.name,
+        weights.stat().st_size,
+        payload["meta"],
+        evaluation,
         list(payload["meta"].get("commands", [])),
         args.data,
         named_config=model_config(args.model, args.config),
@@ -195,8 +259,15 @@ def ship(checkpoint: str, args, evaluation: dict) -> str:
     return f"shipped {weights} ({weights.stat().st_size / 1024:.0f} KiB) and {folder / f'{stem}.md'}"
 
 
-def evaluate_on_split(checkpoint: str, model: str, data: str, split: str = "test", threads: int = 1,
-                      peers=("identity", "cross_bilateral"), progress: bool = True) -> dict:
+def evaluate_on_split(
+    checkpoint: str,
+    model: str,
+    data: str,
+    split: str = "test",
+    threads: int = 1,
+    peers=("identity", "cross_bilateral"),
+    progress: bool = True,
+) -> dict:
     """relMSE (mean over frames, every noisy spp) of the checkpoint and of ``peers`` on a split.
 
     Sequences go through :func:`~denoisebench.denoisers.runner.run_sequence` (reset, frames in
@@ -240,7 +311,9 @@ def evaluate_on_split(checkpoint: str, model: str, data: str, split: str = "test
         "scenes": scenes,
         "frames": len(scores[model]),
         "relmse": means,
-        "relmse_by_spp": {name: {str(s): float(np.mean(v)) for s, v in sorted(d.items())} for name, d in per_spp.items()},
+        "relmse_by_spp": {
+            name: {str(s): float(np.mean(v)) for s, v in sorted(d.items())} for name, d in per_spp.items()
+        },
         "ratio": {peer: means[model] / means[peer] for peer in peers},
         "relmse_ci95": intervals,
         "ratio_ci95": ratio_intervals,
@@ -252,8 +325,14 @@ def evaluate_on_split(checkpoint: str, model: str, data: str, split: str = "test
 BOOTSTRAP_RESAMPLES = 2000
 
 
-def bootstrap_over_scenes(scores: dict[str, list[float]], frame_scene: list[str], model: str, peers: list[str],
-                          resamples: int = BOOTSTRAP_RESAMPLES, seed: int = 0):
+def bootstrap_over_scenes(
+    scores: dict[str, list[float]],
+    frame_scene: list[str],
+    model: str,
+    peers: list[str],
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    seed: int = 0,
+):
     """95% percentile intervals of each denoiser's mean score and of ``model``/peer ratios of means.
 
     Frames of one scene are correlated (same geometry and light), so the resampled unit is the
@@ -266,8 +345,9 @@ def bootstrap_over_scenes(scores: dict[str, list[float]], frame_scene: list[str]
     index = {scene: i for i, scene in enumerate(scenes)}
     owner = np.array([index[s] for s in frame_scene])
     rng = np.random.default_rng(seed)
-    counts = np.stack([np.bincount(rng.integers(0, len(scenes), len(scenes)), minlength=len(scenes))
-                       for _ in range(resamples)])  # resamples × scenes: how often each scene is drawn
+    counts = np.stack(
+        [np.bincount(rng.integers(0, len(scenes), len(scenes)), minlength=len(scenes)) for _ in range(resamples)]
+    )  # resamples × scenes: how often each scene is drawn
     weights = counts[:, owner].astype(np.float64)  # resamples × frames
     means = {name: weights @ np.asarray(values, np.float64) / weights.sum(axis=1) for name, values in scores.items()}
     intervals = {name: [float(v) for v in np.percentile(m, [2.5, 97.5])] for name, m in means.items()}

@@ -5,12 +5,12 @@ Torch-free on import: ``CropDataset`` and ``SequenceCropDataset`` import torch o
 
 from __future__ import annotations
 
-from .errors import DatasetError
-from .exr_io import read_exr, read_samples_exr, write_exr
-from .frame import Frame, Sequence
-from .manifest import assign_splits, config_hash, manifest_without_timings, reference_quality
-from .reader import Dataset, SceneInfo, open_dataset
-from .writer import DatasetWriter
+from denoisebench.dataset.errors import DatasetError
+from denoisebench.dataset.exr_io import read_exr, read_samples_exr, write_exr
+from denoisebench.dataset.frame import Frame, Sequence
+from denoisebench.dataset.manifest import assign_splits, config_hash, manifest_without_timings, reference_quality
+from denoisebench.dataset.reader import Dataset, SceneInfo, open_dataset
+from denoisebench.dataset.writer import DatasetWriter
 
 __all__ = [
     "CropDataset",
@@ -34,7 +34,7 @@ __all__ = [
 
 def __getattr__(name: str):
     if name in ("CropDataset", "SequenceCropDataset"):
-        from . import torch_dataset
+        from denoisebench.dataset import torch_dataset
 
         return getattr(torch_dataset, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -21,8 +21,8 @@ What each buffer needs besides moving its pixels:
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 import numpy as np
 

@@ -126,7 +126,7 @@ def check_generate(*, width: int, height: int, scenes: int, frames: int, spp, re
 
 def check_scene_record(scene: str, record: dict) -> None:
     """A manifest's scene record within the bounds (a forged one is refused before it is read)."""
-    from .errors import DatasetError
+    from denoisebench.dataset.errors import DatasetError
 
     try:
         width, height, frames = int(record["width"]), int(record["height"]), int(record["frames"])
@@ -135,6 +135,8 @@ def check_scene_record(scene: str, record: dict) -> None:
         raise DatasetError(f"scene {scene!r}: malformed manifest record ({type(error).__name__}: {error})") from None
     try:
         check_size(width, height, f"scene {scene!r} size")
-        check_counts(scenes=1, frames=frames, spp=spp, ref_spp=int(record.get("ref_spp") or 0), option_prefix=f"scene {scene!r} ")
+        check_counts(
+            scenes=1, frames=frames, spp=spp, ref_spp=int(record.get("ref_spp") or 0), option_prefix=f"scene {scene!r} "
+        )
     except UserInputError as error:
         raise DatasetError(f"manifest out of bounds: {error}") from None

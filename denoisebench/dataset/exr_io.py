@@ -39,15 +39,15 @@ import hashlib
 import io
 import json
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 import OpenEXR
 
-from .atomic import atomic_write_bytes
-from .errors import DatasetError
+from denoisebench.dataset.atomic import atomic_write_bytes
+from denoisebench.dataset.errors import DatasetError
 
 #: Channel names of each known layer, in array order (variances use their base's names).
 CHANNEL_NAMES: dict[str, tuple[str, ...]] = {
@@ -326,9 +326,7 @@ def _layers(path: Path, channels: dict, what: str) -> dict[str, np.ndarray]:
         parts = groups[layer]
         base = CHANNEL_NAMES.get(layer.removesuffix("_var"))
         if base is not None and sorted(base) != sorted(parts):
-            raise DatasetError(
-                f"{what} {path}: layer {layer!r} has channels {sorted(parts)}, expected {list(base)}"
-            )
+            raise DatasetError(f"{what} {path}: layer {layer!r} has channels {sorted(parts)}, expected {list(base)}")
         array = np.stack([np.asarray(parts[c], dtype=np.float32) for c in _order(layer, list(parts))], axis=-1)
         bad = int(array.size - np.count_nonzero(np.isfinite(array)))
         if bad:
@@ -351,7 +349,9 @@ def _extra(path: Path, header: dict, what: str) -> dict:
 def _check_sha(path: Path, data: bytes, expect: str | None, what: str) -> str:
     digest = sha256_bytes(data)
     if expect is not None and digest != expect:
-        raise DatasetError(f"{what} {path} has sha256 {digest[:12]}…, the manifest says {expect[:12]}… (changed or corrupt)")
+        raise DatasetError(
+            f"{what} {path} has sha256 {digest[:12]}…, the manifest says {expect[:12]}… (changed or corrupt)"
+        )
     return digest
 
 

@@ -9,8 +9,8 @@ S×H×W×C arrays (S samples per pixel), including the random parameters ``pixel
 
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Iterator, Mapping
 
 import numpy as np
 
@@ -55,9 +55,7 @@ class Frame:
         height, width = self.buffers["color"].shape[:2]
         for name, array in self.buffers.items():
             if array.ndim != 3 or array.shape[:2] != (height, width):
-                raise ValueError(
-                    f"buffer {name!r} has shape {array.shape}, expected {height}×{width}×C like 'color'"
-                )
+                raise ValueError(f"buffer {name!r} has shape {array.shape}, expected {height}×{width}×C like 'color'")
             channels = expected_channels(name)
             if channels is not None and array.shape[2] != channels:
                 raise ValueError(f"buffer {name!r} has {array.shape[2]} channels, expected {channels}")

@@ -58,14 +58,14 @@ import json
 import math
 import os
 import platform
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Iterable, Mapping
 
 import numpy as np
 
-from .atomic import atomic_write_bytes
-from .errors import DatasetError
-from .exr_io import canonical_json
+from denoisebench.dataset.atomic import atomic_write_bytes
+from denoisebench.dataset.errors import DatasetError
+from denoisebench.dataset.exr_io import canonical_json
 
 SCHEMA = "denoisebench-dataset"
 SCHEMA_VERSION = 1
@@ -93,7 +93,6 @@ __all__ = [
     "manifest_bytes",
     "is_timing_key",
     "manifest_without_timings",
-    "DatasetWriter",
 ]
 
 
@@ -270,9 +269,7 @@ def load_manifest(path: str | os.PathLike) -> dict:
         raise DatasetError(f"{path} is not a denoisebench dataset manifest")
     version = manifest.get("schema_version")
     if version != SCHEMA_VERSION:
-        raise DatasetError(
-            f"{path} has schema version {version}; this denoisebench reads version {SCHEMA_VERSION}"
-        )
+        raise DatasetError(f"{path} has schema version {version}; this denoisebench reads version {SCHEMA_VERSION}")
     for key, kind in (("config", dict), ("config_hash", str), ("versions", dict), ("splits", dict), ("scenes", dict)):
         if not isinstance(manifest.get(key), kind):
             raise DatasetError(f"{path}: manifest field {key!r} is missing or not a {kind.__name__}")
@@ -300,4 +297,3 @@ def manifest_without_timings(manifest: Mapping | str | os.PathLike) -> dict:
     if not isinstance(manifest, Mapping):
         manifest = load_manifest(manifest)
     return _strip(copy.deepcopy(dict(manifest)))
-

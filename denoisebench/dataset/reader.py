@@ -25,17 +25,17 @@ file is opened; a path that escapes is a DatasetError naming it.
 from __future__ import annotations
 
 import os
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath, PureWindowsPath
-from typing import Iterable, Iterator
 
 import numpy as np
 
-from . import layout
-from .errors import DatasetError
-from .exr_io import load_exr, load_samples_exr
-from .frame import Frame, Sequence
-from .manifest import SPLITS, load_manifest
+from denoisebench.dataset import layout
+from denoisebench.dataset.errors import DatasetError
+from denoisebench.dataset.exr_io import load_exr, load_samples_exr
+from denoisebench.dataset.frame import Frame, Sequence
+from denoisebench.dataset.manifest import SPLITS, load_manifest
 
 
 @dataclass(frozen=True)
@@ -170,22 +170,27 @@ class Dataset:
         if not text or "\0" in text:
             raise DatasetError(f"{self.root}: {what} {relative!r} in the manifest is not a relative path")
         posix = PurePosixPath(text)
-        if posix.is_absolute() or PureWindowsPath(text).is_absolute() or PureWindowsPath(text).drive or ".." in posix.parts:
+        if (
+            posix.is_absolute()
+            or PureWindowsPath(text).is_absolute()
+            or PureWindowsPath(text).drive
+            or ".." in posix.parts
+        ):
             raise DatasetError(f"{self.root}: {what} {text!r} in the manifest leaves the dataset folder (refused)")
         full = self.root / posix
         root = self.root.resolve()
         resolved = full.resolve()
         if resolved != root and root not in resolved.parents:
-            raise DatasetError(f"{self.root}: {what} {text!r} resolves to {resolved}, outside the dataset folder (refused)")
+            raise DatasetError(
+                f"{self.root}: {what} {text!r} resolves to {resolved}, outside the dataset folder (refused)"
+            )
         return full
 
     # ------------------------------------------------------------------ loading
 
     def reference(self, scene: str, index: int) -> tuple[dict[str, np.ndarray], dict]:
         """The reference file's layers and its manifest record."""
-        record = self._frame_record(
-            scene, layout.REFERENCE, index, "reference", layout.reference_path(scene, index)
-        )
+        record = self._frame_record(scene, layout.REFERENCE, index, "reference", layout.reference_path(scene, index))
         what = f"scene {scene!r} frame {index} reference file"
         path = self.path(record.get("file"), what)
         contents = load_exr(path, record["sha256"] if self.verify else None, what=what)
@@ -226,8 +231,7 @@ class Dataset:
             absent = [b for b in wanted if b not in layers]
             if absent:
                 raise DatasetError(
-                    f"{what} {path} has no buffer(s) {', '.join(absent)} "
-                    f"(has {', '.join(sorted(layers))})"
+                    f"{what} {path} has no buffer(s) {', '.join(absent)} (has {', '.join(sorted(layers))})"
                 )
             layers = {b: layers[b] for b in wanted}
         meta = {k: record[k] for k in ("file", "seconds", "seconds_per_spp", "rel_se") if k in record}

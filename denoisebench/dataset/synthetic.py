@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import layout
-from .manifest import assign_splits
-from .writer import DatasetWriter
+from denoisebench.dataset import layout
+from denoisebench.dataset.manifest import assign_splits
+from denoisebench.dataset.writer import DatasetWriter
 
 
 def pattern(height: int, width: int, t: float, velocity: tuple[float, float], phase: float = 0.0) -> np.ndarray:

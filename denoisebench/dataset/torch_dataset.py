@@ -18,16 +18,15 @@ buffers needed, no per-sample data) and kept in a small per-worker LRU cache.
 
 from __future__ import annotations
 
-import os
 from collections import OrderedDict
-from typing import Iterable, Sequence as Seq
+from collections.abc import Iterable
 
 import numpy as np
 import torch
 
-from .augment import IDENTITY, random_transform, transform_buffers
-from .errors import DatasetError
-from .reader import Dataset, open_dataset
+from denoisebench.dataset.augment import IDENTITY, random_transform, transform_buffers
+from denoisebench.dataset.errors import DatasetError
+from denoisebench.dataset.reader import Dataset, open_dataset
 
 DEFAULT_BUFFERS = ("color", "color_var", "albedo", "normal", "depth")
 
@@ -84,9 +83,7 @@ class _CropBase(torch.utils.data.Dataset):
             if self.targets and not info.has_reference:
                 raise DatasetError(f"scene {name!r} has no reference frames; training needs them")
             if self.crop is not None and (self.crop < 1 or self.crop > min(info.height, info.width)):
-                raise DatasetError(
-                    f"crop {self.crop} does not fit scene {name!r} ({info.height}×{info.width})"
-                )
+                raise DatasetError(f"crop {self.crop} does not fit scene {name!r} ({info.height}×{info.width})")
 
     def set_epoch(self, epoch: int) -> None:
         """Draw new crops and augmentations (call once per epoch)."""
@@ -205,9 +202,7 @@ class SequenceCropDataset(_CropBase):
         self.play_backward = bool(play_backward)
         if self.frames < 1:
             raise ValueError(f"frames must be >= 1 (got {frames})")
-        super().__init__(
-            dataset, split, spp, crop, buffers, targets, augment, seed, cache_size or 2 * self.frames
-        )
+        super().__init__(dataset, split, spp, crop, buffers, targets, augment, seed, cache_size or 2 * self.frames)
         stride = max(1, int(stride))
         self.items = [
             (scene, s, start)

@@ -17,8 +17,8 @@ import hashlib
 import sys
 from dataclasses import dataclass
 
-from . import layout
-from .errors import DatasetError
+from denoisebench.dataset import layout
+from denoisebench.dataset.errors import DatasetError
 
 _CHUNK = 1 << 20
 
@@ -43,7 +43,9 @@ def run_files(dataset, scenes: list[str], spp: list[int], *, samples: bool = Tru
             key = layout.frame_key(index)
             ref = renders.get(layout.REFERENCE, {}).get(key)
             if ref is not None:
-                files.append(ListedFile(f"scene {scene!r} frame {index} reference file", ref.get("file"), ref.get("sha256")))
+                files.append(
+                    ListedFile(f"scene {scene!r} frame {index} reference file", ref.get("file"), ref.get("sha256"))
+                )
             for s in spp:
                 record = renders.get(layout.spp_key(s), {}).get(key)
                 if record is None:
@@ -69,10 +71,14 @@ def verify_files(dataset, files: list[ListedFile], *, progress: bool = True) -> 
     from tqdm import tqdm
 
     total = 0
-    for listed in tqdm(files, desc="verify: sha256 of dataset files", unit="file", file=sys.stderr, disable=not progress, leave=False):
+    for listed in tqdm(
+        files, desc="verify: sha256 of dataset files", unit="file", file=sys.stderr, disable=not progress, leave=False
+    ):
         path = dataset.path(listed.file, listed.what)
         if not isinstance(listed.sha256, str) or len(listed.sha256) != 64:
-            raise DatasetError(f"{listed.what} {path} has no sha256 in the manifest; cannot verify it (--no-verify skips the check)")
+            raise DatasetError(
+                f"{listed.what} {path} has no sha256 in the manifest; cannot verify it (--no-verify skips the check)"
+            )
         try:
             digest = file_sha256(path)
             total += path.stat().st_size

@@ -20,16 +20,16 @@ import json
 import math
 import os
 import shutil
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Mapping
 
 import numpy as np
 
-from . import layout
-from .atomic import is_temporary
-from .errors import DatasetError
-from .exr_io import canonical_json, sha256_file, write_exr
-from .manifest import (
+from denoisebench.dataset import layout
+from denoisebench.dataset.atomic import is_temporary
+from denoisebench.dataset.errors import DatasetError
+from denoisebench.dataset.exr_io import canonical_json, sha256_file, write_exr
+from denoisebench.dataset.manifest import (
     SPLITS,
     config_hash,
     load_manifest,
@@ -44,7 +44,17 @@ from .manifest import (
 REQUIRED_SCENE_KEYS = ("family", "seed", "frames", "width", "height", "spp")
 #: Keys the writer owns inside frame records (``extra`` may not override them).
 _RESERVED_RECORD_KEYS = frozenset(
-    {"file", "sha256", "spp", "seconds", "seconds_per_spp", "rel_se", "samples", "noisy_rel_se_max", "reference_too_noisy"}
+    {
+        "file",
+        "sha256",
+        "spp",
+        "seconds",
+        "seconds_per_spp",
+        "rel_se",
+        "samples",
+        "noisy_rel_se_max",
+        "reference_too_noisy",
+    }
 )
 
 
@@ -56,7 +66,13 @@ class DatasetWriter:
     ``versions_resumed``.
     """
 
-    def __init__(self, out_dir: str | os.PathLike, config: Mapping, versions: Mapping[str, str] | None = None, force: bool = False):
+    def __init__(
+        self,
+        out_dir: str | os.PathLike,
+        config: Mapping,
+        versions: Mapping[str, str] | None = None,
+        force: bool = False,
+    ):
         self.root = Path(out_dir)
         if self.root.exists() and not self.root.is_dir():
             raise DatasetError(f"{self.root} exists and is not a folder")

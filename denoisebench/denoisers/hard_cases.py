@@ -34,15 +34,14 @@ Notes:
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Callable, Iterable
 
 import numpy as np
 
 from denoisebench.dataset.frame import Frame, Sequence
-
-from .runner import DenoiseResult, run_sequence
-from .synthetic import make_scene, render
+from denoisebench.denoisers.runner import DenoiseResult, run_sequence
+from denoisebench.denoisers.synthetic import make_scene, render
 
 ENERGY_FACTOR = 4.0
 ROBUST_PERCENTILE = 99.0
@@ -103,7 +102,9 @@ def energy_reason(output: np.ndarray, noisy: np.ndarray) -> str | None:
 # frame builders
 
 
-def _frame(family: str = "shapes", width: int = BASE_SIZE, height: int = BASE_SIZE, spp: int = BASE_SPP, seed: int = 0) -> Frame:
+def _frame(
+    family: str = "shapes", width: int = BASE_SIZE, height: int = BASE_SIZE, spp: int = BASE_SPP, seed: int = 0
+) -> Frame:
     return render(make_scene(family, width, height, seed), spp, seed + 1, samples=True, reference_samples=4)
 
 
@@ -249,6 +250,8 @@ def run_case(denoiser: object, case: HardCase, *, name: str | None = None) -> Ca
     return outcome
 
 
-def check_denoiser(denoiser: object, names: Iterable[str] | None = None, *, name: str | None = None) -> list[CaseResult]:
+def check_denoiser(
+    denoiser: object, names: Iterable[str] | None = None, *, name: str | None = None
+) -> list[CaseResult]:
     """Every case (or those named) for one denoiser; failures are recorded, never raised."""
     return [run_case(denoiser, case, name=name) for case in hard_cases(names)]

@@ -61,7 +61,7 @@ from typing import Any
 
 import numpy as np
 
-from . import shared_frames
+from denoisebench.denoisers import shared_frames
 
 #: Seconds one call (load, reset or denoise) of an isolated denoiser may take.
 DEFAULT_TIME_LIMIT = 120.0
@@ -96,7 +96,7 @@ class Limits:
             raise UserInputError(f"--memory-limit must be > 0 MiB (got {self.memory_limit_mb})")
 
 
-_LIVE: set["IsolatedDenoiser"] = set()
+_LIVE: set[IsolatedDenoiser] = set()
 
 
 @atexit.register
@@ -181,7 +181,7 @@ class IsolatedDenoiser:
         try:
             header, _ = self._request(("load", self.spec, self.options, list(sys.path)), "load")
         except WorkerFailure as failure:
-            from .registry import DenoiserLoadError
+            from denoisebench.denoisers.registry import DenoiserLoadError
 
             raise DenoiserLoadError(f"cannot load {self.spec!r} in its worker: {failure}") from None
         if not header.get("ok"):
@@ -238,9 +238,11 @@ class IsolatedDenoiser:
                 raise WorkerFailure(self._kill(_exit_reason(code)))
             rss = _rss_mb(self._proc.pid)
             if rss is not None and rss > self.limits.memory_limit_mb:
-                raise WorkerFailure(self._kill(
-                    f"exceeded the memory limit ({rss:.0f} MiB > {self.limits.memory_limit_mb} MiB) in {what}; worker killed"
-                ))
+                raise WorkerFailure(
+                    self._kill(
+                        f"exceeded the memory limit ({rss:.0f} MiB > {self.limits.memory_limit_mb} MiB) in {what}; worker killed"
+                    )
+                )
             if time.monotonic() > deadline:
                 reason = f"exceeded the time limit ({limit:g} s per call) in {what}; worker killed, denoiser disabled for this run"
                 self._disabled = reason
@@ -253,7 +255,9 @@ class IsolatedDenoiser:
                 shape = tuple(int(n) for n in header.get("shape", ()))
                 declared = int(np.prod(shape, dtype=np.int64)) * np.dtype(str(header.get("dtype"))).itemsize
                 if declared > max_bytes:  # not read: the harness bounds what it takes in
-                    raise WorkerFailure(self._kill(f"returned shape {shape}, expected H×W×3 of the frame; worker killed"))
+                    raise WorkerFailure(
+                        self._kill(f"returned shape {shape}, expected H×W×3 of the frame; worker killed")
+                    )
             payload = self._conn.recv_bytes(max_bytes + 1) if header.get("payload") else None
         except (EOFError, OSError, ValueError, TypeError, UnicodeDecodeError) as error:
             code = None
@@ -262,7 +266,9 @@ class IsolatedDenoiser:
                     code = self._proc.wait(timeout=2)
                 except subprocess.TimeoutExpired:
                     code = None
-            reason = _exit_reason(code) if code is not None else f"malformed reply from the worker ({type(error).__name__})"
+            reason = (
+                _exit_reason(code) if code is not None else f"malformed reply from the worker ({type(error).__name__})"
+            )
             raise WorkerFailure(self._kill(reason)) from None
         return header, payload
 
@@ -352,7 +358,7 @@ def _rebuild(header: dict, payload: bytes | None, channel=None, descriptor=None)
 
 def _load_error(type_name: str, message: str, spec: str) -> Exception:
     """The parent-side exception for a load failure reported by a worker."""
-    from . import registry
+    from denoisebench.denoisers import registry
 
     kinds = {
         "UnknownDenoiserError": registry.UnknownDenoiserError,
@@ -366,7 +372,7 @@ def _load_error(type_name: str, message: str, spec: str) -> Exception:
 
 def isolated(spec: str, policy: str = DEFAULT_POLICY) -> bool:
     """Whether ``spec`` runs in a worker under ``policy``."""
-    from .registry import BUILTINS
+    from denoisebench.denoisers.registry import BUILTINS
 
     if policy not in POLICIES:
         from denoisebench.errors import UserInputError
@@ -383,7 +389,7 @@ def load(spec: str, options: dict | None = None, *, policy: str = DEFAULT_POLICY
     Raises what :func:`~.registry.load_denoiser` raises (UnknownDenoiserError, UnknownOptionError,
     DenoiserLoadError), also when the failure happened in a worker.
     """
-    from .registry import load_denoiser
+    from denoisebench.denoisers.registry import load_denoiser
 
     if isolated(spec, policy):
         return IsolatedDenoiser(spec.strip(), options, limits)
@@ -393,16 +399,24 @@ def load(spec: str, options: dict | None = None, *, policy: str = DEFAULT_POLICY
 def add_arguments(parser) -> None:
     """``--isolation``, ``--time-limit`` and ``--memory-limit`` on a command's parser."""
     parser.add_argument(
-        "--isolation", choices=POLICIES, default=DEFAULT_POLICY,
+        "--isolation",
+        choices=POLICIES,
+        default=DEFAULT_POLICY,
         help="which denoisers run in a worker process of their own: plugins (every non-built-in, default), "
         "all, or none (trusted code only)",
     )
     parser.add_argument(
-        "--time-limit", type=float, default=DEFAULT_TIME_LIMIT, metavar="SECONDS",
+        "--time-limit",
+        type=float,
+        default=DEFAULT_TIME_LIMIT,
+        metavar="SECONDS",
         help=f"per-call time limit of an isolated denoiser (default {DEFAULT_TIME_LIMIT:g})",
     )
     parser.add_argument(
-        "--memory-limit", type=int, default=DEFAULT_MEMORY_LIMIT_MB, metavar="MIB",
+        "--memory-limit",
+        type=int,
+        default=DEFAULT_MEMORY_LIMIT_MB,
+        metavar="MIB",
         help=f"resident-memory limit of an isolated denoiser's worker in MiB (default {DEFAULT_MEMORY_LIMIT_MB})",
     )
 

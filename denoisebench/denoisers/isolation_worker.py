@@ -39,10 +39,25 @@ def _load(conn, spec: str, options: dict, sys_path: list[str]):
         denoiser = load_denoiser(spec, **options)
         info = describe(denoiser, fallback_name=spec)
     except BaseException as error:  # noqa: BLE001 - every failure goes back as one line
-        _reply(conn, {"ok": False, "error_type": type(error).__name__, "error": str(error).strip().splitlines()[0] if str(error).strip() else one_line(error)})
+        _reply(
+            conn,
+            {
+                "ok": False,
+                "error_type": type(error).__name__,
+                "error": str(error).strip().splitlines()[0] if str(error).strip() else one_line(error),
+            },
+        )
         return None
-    _reply(conn, {"ok": True, "name": str(info.name), "needs": sorted(str(n) for n in info.needs), "temporal": bool(info.temporal),
-                  "trained_scenes": sorted(info.trained_scenes)})
+    _reply(
+        conn,
+        {
+            "ok": True,
+            "name": str(info.name),
+            "needs": sorted(str(n) for n in info.needs),
+            "temporal": bool(info.temporal),
+            "trained_scenes": sorted(info.trained_scenes),
+        },
+    )
     return denoiser
 
 

@@ -32,9 +32,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from denoisebench.denoisers.protocol import describe
 from denoisebench.errors import UserInputError, one_line
-
-from .protocol import describe
 
 ENTRY_POINT_GROUP = "denoisebench.denoisers"
 
@@ -137,7 +136,11 @@ def check_options(obj: Any, spec: str, options: dict[str, Any]) -> None:
         return
     if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters):
         return
-    known = [p.name for p in parameters if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)]
+    known = [
+        p.name
+        for p in parameters
+        if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    ]
     unknown = [key for key in options if key not in known]
     if unknown:
         raise UnknownOptionError(

@@ -32,16 +32,15 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
-from typing import Iterable, Mapping
 
 import numpy as np
 
 from denoisebench.dataset.frame import Frame, Sequence
+from denoisebench.denoisers.isolation import IsolatedDenoiser, WorkerFailure
+from denoisebench.denoisers.protocol import describe
 from denoisebench.errors import one_line
-
-from .isolation import IsolatedDenoiser, WorkerFailure
-from .protocol import describe
 
 STATUS_OK = "ok"
 STATUS_FAILED = "failed"

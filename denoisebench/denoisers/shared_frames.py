@@ -68,12 +68,17 @@ class FrameChannel:
         output_offset = offset
         self._ensure(output_offset + output_capacity)
         for start, array in arrays:
-            np.frombuffer(self._map, dtype=array.dtype, count=array.size, offset=start).reshape(array.shape)[...] = array
+            np.frombuffer(self._map, dtype=array.dtype, count=array.size, offset=start).reshape(array.shape)[...] = (
+                array
+            )
         return {
             "size": self.size,
             "entries": entries,
             "has_samples": frame.samples is not None,
-            "spp": int(frame.spp), "scene": str(frame.scene), "index": int(frame.index), "meta": dict(frame.meta),
+            "spp": int(frame.spp),
+            "scene": str(frame.scene),
+            "index": int(frame.index),
+            "meta": dict(frame.meta),
             "output_offset": output_offset,
             "output_capacity": output_capacity,
         }
@@ -83,7 +88,9 @@ class FrameChannel:
         count = int(np.prod(shape, dtype=np.int64))
         if count * dtype.itemsize > descriptor["output_capacity"]:
             return None
-        return np.frombuffer(self._map, dtype=dtype, count=count, offset=descriptor["output_offset"]).reshape(shape).copy()
+        return (
+            np.frombuffer(self._map, dtype=dtype, count=count, offset=descriptor["output_offset"]).reshape(shape).copy()
+        )
 
     def close(self) -> None:
         if self._map is not None:
@@ -123,8 +130,13 @@ class WorkerView:
             array.flags.writeable = False
             groups[group][name] = array
         return Frame(
-            buffers=groups["buffers"], spp=descriptor["spp"], scene=descriptor["scene"], index=descriptor["index"],
-            reference=None, samples=groups["samples"] if descriptor["has_samples"] else None, meta=descriptor["meta"],
+            buffers=groups["buffers"],
+            spp=descriptor["spp"],
+            scene=descriptor["scene"],
+            index=descriptor["index"],
+            reference=None,
+            samples=groups["samples"] if descriptor["has_samples"] else None,
+            meta=descriptor["meta"],
         )
 
     def write_output(self, descriptor: dict, array: np.ndarray) -> bool:
@@ -132,5 +144,7 @@ class WorkerView:
         if array.nbytes > descriptor["output_capacity"]:
             return False
         data = self._mapped(descriptor["size"])
-        np.frombuffer(data, dtype=array.dtype, count=array.size, offset=descriptor["output_offset"]).reshape(array.shape)[...] = array
+        np.frombuffer(data, dtype=array.dtype, count=array.size, offset=descriptor["output_offset"]).reshape(
+            array.shape
+        )[...] = array
         return True

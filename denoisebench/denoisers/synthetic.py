@@ -29,8 +29,7 @@ import numpy as np
 from scipy.stats import gamma as gamma_distribution
 
 from denoisebench.dataset.frame import Frame, Sequence
-
-from .lens_sampling import square_to_disk_concentric
+from denoisebench.denoisers.lens_sampling import square_to_disk_concentric
 
 FAMILIES = ("shapes", "textured", "glossy", "depth_of_field", "motion_blur")
 
@@ -250,9 +249,7 @@ def render(
     time = rng.random((spp, h, w, 1)) if motion else None
     x = (grid_x[None] + pixel[..., 0] + offset[0]).reshape(-1)
     y = (grid_y[None] + pixel[..., 1] + offset[1]).reshape(-1)
-    values = _evaluate(
-        scene, x, y, _disk(lens).reshape(-1, 2) if dof else None, time.reshape(-1) if motion else None
-    )
+    values = _evaluate(scene, x, y, _disk(lens).reshape(-1, 2) if dof else None, time.reshape(-1) if motion else None)
     per_sample = {name: value.reshape(spp, h, w, -1) for name, value in values.items()}
     g_d = rng.gamma(scene.diffuse_shape, 1.0 / scene.diffuse_shape, (spp, h, w, 1))
     g_s = rng.gamma(scene.specular_shape, 1.0 / scene.specular_shape, (spp, h, w, 1))
@@ -285,8 +282,11 @@ def render(
         # the uniform numbers that drew the noise (g = Gamma quantile of u), as a renderer's bounce
         # random numbers drive its path noise: U the diffuse factor's, V the specular factor's
         sample_data["bounce"] = np.concatenate(
-            [gamma_distribution.cdf(g_d, scene.diffuse_shape, scale=1.0 / scene.diffuse_shape),
-             gamma_distribution.cdf(g_s, scene.specular_shape, scale=1.0 / scene.specular_shape)], axis=-1
+            [
+                gamma_distribution.cdf(g_d, scene.diffuse_shape, scale=1.0 / scene.diffuse_shape),
+                gamma_distribution.cdf(g_s, scene.specular_shape, scale=1.0 / scene.specular_shape),
+            ],
+            axis=-1,
         ).astype(np.float32)
 
     # ---- reference: noise-free integrand over rotated Halton points
@@ -331,7 +331,9 @@ def synthetic_frame(
     reference_samples: int = 16,
 ) -> Frame:
     """One noisy frame of a random scene of ``family`` (see :data:`FAMILIES`)."""
-    return render(make_scene(family, width, height, seed), spp, seed + 1, samples=samples, reference_samples=reference_samples)
+    return render(
+        make_scene(family, width, height, seed), spp, seed + 1, samples=samples, reference_samples=reference_samples
+    )
 
 
 def synthetic_sequence(
@@ -351,6 +353,8 @@ def synthetic_sequence(
     for i in range(frames):
         frame = render(scene, spp, seed + 101 * (i + 1), samples=samples, index=i, offset=(pan[0] * i, pan[1] * i))
         if i > 0:
-            frame.buffers["motion"] = np.broadcast_to(np.array([pan[0], pan[1]], np.float32), frame.color.shape[:2] + (2,)).copy()
+            frame.buffers["motion"] = np.broadcast_to(
+                np.array([pan[0], pan[1]], np.float32), frame.color.shape[:2] + (2,)
+            ).copy()
         out.append(frame)
     return Sequence(scene=out[0].scene, spp=spp, frames=out)

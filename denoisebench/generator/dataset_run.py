@@ -33,8 +33,8 @@ from denoisebench.dataset.writer import DatasetWriter
 from denoisebench.errors import UserInputError
 from denoisebench.generator import dataset_scenes as scenes_mod
 from denoisebench.generator.dataset_scenes import SceneSpec
-from denoisebench.generator.reference_render import GROWTH_WARNING
-from denoisebench.generator.sequence import missing_jobs, write_rendered
+from denoisebench.generator.frame_jobs import missing_jobs, write_rendered
+from denoisebench.generator.render.reference import GROWTH_WARNING
 
 CONFIG_KIND = "denoisebench.generate"
 #: The reference should have this many times the noisy inputs' largest spp (rel_se falls as 1/sqrt(spp),
@@ -65,7 +65,7 @@ class GenerateRequest:
     ref_error: float | None = DEFAULT_REF_ERROR  # None: one reference render at ref_spp
     max_depth: int | None = None  # the user's transport restriction (None: full transport / stage's own)
     camera: str | None = None  # --camera PATH for the --usd stages
-    auto_camera: bool = False  # --auto-camera: frame --usd stages with an orbiting camera (usd_additions.py)
+    auto_camera: bool = False  # --auto-camera: frame --usd stages with an orbiting camera (usd/additions.py)
     default_light: bool = False  # --default-light: light --usd stages that have no light
 
     def stage_options(self) -> dict:
@@ -107,12 +107,19 @@ def check_request(request: GenerateRequest) -> None:
         raise UserInputError("nothing to generate: give --families and/or --usd")
     from denoisebench.dataset import bounds  # documented upper bounds and a memory estimate, before any allocation
 
-    bounds.check_generate(width=request.width, height=request.height, scenes=request.scenes, frames=request.frames,
-                          spp=request.spp, ref_spp=request.ref_spp, samples=request.samples)
+    bounds.check_generate(
+        width=request.width,
+        height=request.height,
+        scenes=request.scenes,
+        frames=request.frames,
+        spp=request.spp,
+        ref_spp=request.ref_spp,
+        samples=request.samples,
+    )
     if request.ref_error is not None and not (0 < request.ref_error < float("inf")):
         raise UserInputError(f"--ref-error must be a positive number (got {request.ref_error})")
     if request.max_depth is not None:
-        from denoisebench.generator.render_plan import check_max_depth
+        from denoisebench.generator.contract.render_plan import check_max_depth
 
         try:
             check_max_depth(request.max_depth, "--max-depth")
@@ -152,9 +159,17 @@ def dataset_config(request: GenerateRequest) -> dict:
         "samples": bool(request.samples),
         "seed": request.seed,
         "usd": [{"path": str(Path(p).resolve()), "sha256": _file_sha256(Path(p))} for p in request.usd],
-        **({"usd_options": {"camera": request.camera, "auto_camera": request.auto_camera,
-                            "default_light": request.default_light}}
-           if request.camera or request.auto_camera or request.default_light else {}),
+        **(
+            {
+                "usd_options": {
+                    "camera": request.camera,
+                    "auto_camera": request.auto_camera,
+                    "default_light": request.default_light,
+                }
+            }
+            if request.camera or request.auto_camera or request.default_light
+            else {}
+        ),
     }
 
 
@@ -207,21 +222,29 @@ def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -
 
 def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names: list[str]) -> list[SceneSpec]:
     """Author / copy every scene into OUT and record it with the writer."""
-    from denoisebench.generator.render_plan import RenderOptions, make_render_plan
-    from denoisebench.generator.translate import translate_usd
+    from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
+    from denoisebench.generator.usd.translate import translate_usd
     from denoisebench.scenes import get_family
 
     entries = []
     for family, seed, name in scenes_mod.family_scene_names(list(request.families), request.scenes, request.seed):
         folder = writer.scene_dir(name)
-        files = scenes_mod.author_family_scene(get_family(family), folder, seed, request.frames, request.width, request.height)
-        entries.append(SceneSpec(name, family, seed, family, str(folder.resolve()), files,
-                                 scenes_mod.render_seed(request.seed, name)))
+        files = scenes_mod.author_family_scene(
+            get_family(family), folder, seed, request.frames, request.width, request.height
+        )
+        entries.append(
+            SceneSpec(
+                name, family, seed, family, str(folder.resolve()), files, scenes_mod.render_seed(request.seed, name)
+            )
+        )
     for path, name in zip(request.usd, user_names):
         folder = writer.scene_dir(name)
         files = scenes_mod.copy_user_stage(path, folder, request.stage_options())
-        entries.append(SceneSpec(name, "usd", 0, str(path), str(folder.resolve()), files,
-                                 scenes_mod.render_seed(request.seed, name)))
+        entries.append(
+            SceneSpec(
+                name, "usd", 0, str(path), str(folder.resolve()), files, scenes_mod.render_seed(request.seed, name)
+            )
+        )
     options = RenderOptions(**render_options(request))
     for spec in entries:
         translated = translate_usd(spec.usd_path)
@@ -231,7 +254,7 @@ def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names:
 
 
 def render_options(request: GenerateRequest) -> dict:
-    """The :class:`~denoisebench.generator.render_plan.RenderOptions` fields a request sets (picklable)."""
+    """The :class:`~denoisebench.generator.contract.render_plan.RenderOptions` fields a request sets (picklable)."""
     return {"per_sample": bool(request.samples), "max_depth": request.max_depth}
 
 
@@ -242,7 +265,9 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
     log = log or (lambda line: print(line, file=sys.stderr))
     started = time.perf_counter()
     validate_request(request)
-    family_names = {name for _, _, name in scenes_mod.family_scene_names(list(request.families), request.scenes, request.seed)}
+    family_names = {
+        name for _, _, name in scenes_mod.family_scene_names(list(request.families), request.scenes, request.seed)
+    }
     user_names = scenes_mod.user_scene_names(list(request.usd), family_names)
 
     writer = DatasetWriter(request.out, dataset_config(request), render_versions(), force=request.force)
@@ -252,8 +277,9 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
     jobs = []
     for spec in specs:
         stage_key = writer.manifest["scenes"][spec.name]["stage_sha256"]
-        jobs.extend(missing_jobs(writer, spec.name, stage_key, str(spec.usd_path), spec.render_seed, options,
-                                 request.ref_error))
+        jobs.extend(
+            missing_jobs(writer, spec.name, stage_key, str(spec.usd_path), spec.render_seed, options, request.ref_error)
+        )
     summary = GenerateSummary(out=Path(request.out), scenes=len(specs))
     total_frames = sum(writer.manifest["scenes"][s.name]["frames"] for s in specs)
     summary.skipped = total_frames - len(jobs)
@@ -261,8 +287,15 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
         log(f"resuming {request.out}: {summary.skipped} of {total_frames} frame(s) already done")
 
     scene_order = {spec.name: k + 1 for k, spec in enumerate(specs)}
-    bar = tqdm(total=total_frames, initial=summary.skipped, unit="frame", desc="generate", file=sys.stderr,
-               disable=not progress, dynamic_ncols=True)
+    bar = tqdm(
+        total=total_frames,
+        initial=summary.skipped,
+        unit="frame",
+        desc="generate",
+        file=sys.stderr,
+        disable=not progress,
+        dynamic_ncols=True,
+    )
     try:
         for outcome in executor.run(jobs, by_name):
             bar.set_postfix_str(f"scene {scene_order[outcome.scene]}/{len(specs)} {outcome.scene}")
@@ -281,7 +314,9 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
         bar.close()
     # stratified by family: every family of >= 3 scenes lands in train, val and test
     families = {name: spec.family for name, spec in by_name.items()}
-    writer.finalize(assign_splits(list(by_name), request.seed, families=families), allow_incomplete=bool(summary.failures))
+    writer.finalize(
+        assign_splits(list(by_name), request.seed, families=families), allow_incomplete=bool(summary.failures)
+    )
     summary.complete = bool(writer.manifest["complete"])
     for name, scene in writer.manifest["scenes"].items():
         for frame, record in sorted(scene["renders"].get(layout.REFERENCE, {}).items()):

@@ -17,7 +17,7 @@ Names and seeds are deterministic:
 Notes:
     ``--camera``/``--auto-camera``/``--default-light`` (:data:`StageOptions`) are written into the
     copied ``scene.usda`` (the camera path as ``customLayerData["denoisebench"]["camera"]``, the
-    auto camera and default lights as prims, see usd_additions.py), so the dataset's stage is
+    auto camera and default lights as prims, see usd/additions.py), so the dataset's stage is
     exactly what was rendered. A ``.usdz`` package is copied whole as ``package.usdz`` and
     ``scene.usda`` sublayers it, repeating its root layer's upAxis, metersPerUnit, time codes and
     default prim (sublayers do not carry those).
@@ -45,11 +45,16 @@ USD_SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
 PACKAGE_NAME = "package.usdz"
 
 
-def stage_options(camera: str | None = None, auto_camera: bool = False, default_light: bool = False,
-                  frames: int = 8) -> dict:
+def stage_options(
+    camera: str | None = None, auto_camera: bool = False, default_light: bool = False, frames: int = 8
+) -> dict:
     """The keywords of ``translate_usd`` that ``generate`` applies to every ``--usd`` stage."""
-    return {"camera_path": camera, "auto_camera": bool(auto_camera), "default_light": bool(default_light),
-            "frames": int(frames)}
+    return {
+        "camera_path": camera,
+        "auto_camera": bool(auto_camera),
+        "default_light": bool(default_light),
+        "frames": int(frames),
+    }
 
 
 @dataclass(frozen=True)
@@ -159,7 +164,9 @@ def user_stage_dependencies(path: Path) -> list[tuple[Path, str]]:
                 f"{path}: depends on {absolute}, outside the stage's folder; move it under {root} to generate from it"
             ) from None
         if relative == layout.SCENE_USD:
-            raise UserInputError(f"{path}: a dependency is named {layout.SCENE_USD}, which the dataset reserves for the stage")
+            raise UserInputError(
+                f"{path}: a dependency is named {layout.SCENE_USD}, which the dataset reserves for the stage"
+            )
         out.append((absolute, relative))
     return sorted(set(out), key=lambda item: item[1])
 
@@ -173,8 +180,16 @@ def _package_wrapper(path: Path) -> str:
         raise UserInputError(f"{path}: cannot open USD package")
     layer = Sdf.Layer.CreateAnonymous(".usda")
     layer.subLayerPaths.append(f"./{PACKAGE_NAME}")
-    for key in ("upAxis", "metersPerUnit", "startTimeCode", "endTimeCode", "timeCodesPerSecond",
-                "framesPerSecond", "defaultPrim", "customLayerData"):
+    for key in (
+        "upAxis",
+        "metersPerUnit",
+        "startTimeCode",
+        "endTimeCode",
+        "timeCodesPerSecond",
+        "framesPerSecond",
+        "defaultPrim",
+        "customLayerData",
+    ):
         if source.pseudoRoot.HasInfo(key):
             layer.pseudoRoot.SetInfo(key, source.pseudoRoot.GetInfo(key))
     return layer.ExportToString()
@@ -204,7 +219,9 @@ def copy_user_stage(path: str | Path, scene_dir: Path, options: dict | None = No
         dependencies_out = tuple(relative for _, relative in dependencies)
     atomic_write_bytes(scene_dir / layout.SCENE_USD, text.encode("utf-8"))
     if options and (options.get("camera_path") or options.get("auto_camera") or options.get("default_light")):
-        atomic_write_bytes(scene_dir / layout.SCENE_USD, _with_additions(scene_dir / layout.SCENE_USD, options).encode("utf-8"))
+        atomic_write_bytes(
+            scene_dir / layout.SCENE_USD, _with_additions(scene_dir / layout.SCENE_USD, options).encode("utf-8")
+        )
     return (layout.SCENE_USD,) + dependencies_out
 
 
@@ -212,7 +229,7 @@ def _with_additions(stage_path: Path, options: dict) -> str:
     """The copied root layer's text with the camera choice, auto camera and default lights authored into it."""
     from pxr import Sdf, Usd
 
-    from denoisebench.generator.translate import apply_additions
+    from denoisebench.generator.usd.translate import apply_additions
     from denoisebench.scenes.effects import METADATA_KEY
 
     cached = Sdf.Layer.Find(str(stage_path))
@@ -221,8 +238,13 @@ def _with_additions(stage_path: Path, options: dict) -> str:
     stage = Usd.Stage.Open(str(stage_path))
     layer = stage.GetRootLayer()
     stage.SetEditTarget(layer)
-    camera = apply_additions(stage, options.get("camera_path"), bool(options.get("auto_camera")),
-                             bool(options.get("default_light")), int(options.get("frames", 8)))
+    camera = apply_additions(
+        stage,
+        options.get("camera_path"),
+        bool(options.get("auto_camera")),
+        bool(options.get("default_light")),
+        int(options.get("frames", 8)),
+    )
     if camera:
         data = dict(layer.customLayerData)
         meta = dict(data.get(METADATA_KEY, {}) or {})
@@ -239,7 +261,7 @@ def check_user_stage(path: str | Path, options: dict | None = None):
     light (unless ``default_light``), with nothing renderable, or a dependency outside the stage's
     folder is a UserInputError (one line naming the file).
     """
-    from denoisebench.generator.translate import translate_usd
+    from denoisebench.generator.usd.translate import translate_usd
 
     path = Path(path)
     if not path.is_file():

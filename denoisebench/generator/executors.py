@@ -1,7 +1,7 @@
 """Where frame jobs run: in this process (local) or spread over a Ray cluster.
 
-Both executors take the same :class:`~denoisebench.generator.sequence.FrameJob` list and yield one
-outcome per job, a :class:`~denoisebench.generator.sequence.RenderedJob` or a :class:`JobFailure`,
+Both executors take the same :class:`~denoisebench.generator.frame_jobs.FrameJob` list and yield one
+outcome per job, a :class:`~denoisebench.generator.frame_jobs.RenderedJob` or a :class:`JobFailure`,
 as the jobs finish; the caller writes results with the one dataset writer it owns. A failing job
 never stops the others.
 
@@ -22,12 +22,12 @@ Notes:
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
-from typing import Iterable, Iterator, Mapping
 
 from denoisebench.errors import UserInputError, one_line
 from denoisebench.generator.dataset_scenes import SceneSpec, read_stage_files
-from denoisebench.generator.sequence import FrameJob, RenderedJob, render_job
+from denoisebench.generator.frame_jobs import FrameJob, RenderedJob, render_job
 
 EXECUTORS = ("local", "ray")
 
@@ -94,7 +94,9 @@ class RayExecutor:
                 else:
                     ray.init(num_cpus=num_cpus, **kwargs)
             except (ConnectionError, ValueError, RuntimeError) as error:
-                raise UserInputError(f"cannot start or reach a Ray cluster at {address or 'local'}: {one_line(error)}") from None
+                raise UserInputError(
+                    f"cannot start or reach a Ray cluster at {address or 'local'}: {one_line(error)}"
+                ) from None
             self._started = True
         self.cpus_per_task = int(cpus_per_task)
         self._remote = ray.remote(num_cpus=self.cpus_per_task, max_retries=1)(_run_guarded)

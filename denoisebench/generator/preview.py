@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from denoisebench.errors import UserInputError
-from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
-from denoisebench.generator.render_plan import RenderOptions, make_render_plan
-from denoisebench.generator.translate import translate_usd
+from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
+from denoisebench.generator.render.scene import build_mitsuba_scene
+from denoisebench.generator.usd.translate import translate_usd
 
 
 def tone_map_preview(image: np.ndarray) -> np.ndarray:
@@ -33,9 +33,17 @@ def tone_map_preview(image: np.ndarray) -> np.ndarray:
     return (np.clip(srgb, 0, 1) * 255 + 0.5).astype(np.uint8)
 
 
-def render_preview(usd_path: str | Path, frame: int = 0, width: int = 256, height: int = 256, spp: int = 64,
-                   seed: int = 0, max_depth: int | None = None, translate_options: dict | None = None,
-                   before_render=None) -> tuple[np.ndarray, "object"]:
+def render_preview(
+    usd_path: str | Path,
+    frame: int = 0,
+    width: int = 256,
+    height: int = 256,
+    spp: int = 64,
+    seed: int = 0,
+    max_depth: int | None = None,
+    translate_options: dict | None = None,
+    before_render=None,
+) -> tuple[np.ndarray, object]:
     """(linear HDR image H×W×3, translated scene) of ``usd_path`` at ``frame``.
 
     ``max_depth``: the user's transport restriction (None: the stage's own, else full transport).
@@ -49,7 +57,7 @@ def render_preview(usd_path: str | Path, frame: int = 0, width: int = 256, heigh
     translated = translate_usd(usd_path, **(translate_options or {}))
     if not 0 <= frame < translated.camera.frames:
         raise UserInputError(f"--frame {frame} is out of range: the stage has {translated.camera.frames} frame(s)")
-    from denoisebench.generator.feature_renderer import render_frame
+    from denoisebench.generator.render.frame import render_frame
 
     plan = make_render_plan(translated.effects, options, stage_max_depth=translated.max_depth)
     try:
@@ -57,8 +65,9 @@ def render_preview(usd_path: str | Path, frame: int = 0, width: int = 256, heigh
     finally:
         if before_render is not None:
             before_render(translated)
-    rendered = render_frame(scene, translated.camera, frame, plan, width=width, height=height, spp=spp,
-                            seed=seed, reference=True)
+    rendered = render_frame(
+        scene, translated.camera, frame, plan, width=width, height=height, spp=spp, seed=seed, reference=True
+    )
     return rendered.buffers["color"], translated
 
 

@@ -100,8 +100,13 @@ def bootstrap_mean(terms, ses=None) -> tuple[float | None, float | None]:
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # few scenes: scipy warns that the distribution is degenerate
-            result = bootstrap((data,), np.mean, n_resamples=BOOTSTRAP_RESAMPLES, method="percentile",
-                               rng=np.random.default_rng(BOOTSTRAP_SEED))
+            result = bootstrap(
+                (data,),
+                np.mean,
+                n_resamples=BOOTSTRAP_RESAMPLES,
+                method="percentile",
+                rng=np.random.default_rng(BOOTSTRAP_SEED),
+            )
         return float(result.confidence_interval.low), float(result.confidence_interval.high)
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     index = rng.integers(0, data.size, size=(BOOTSTRAP_RESAMPLES, data.size))

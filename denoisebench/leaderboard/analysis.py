@@ -37,9 +37,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import aggregate as agg
-from .aggregate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401 (re-exported)
-from .runner import FLICKER_METRICS, FLICKER_PREFIX, NOISY
+from denoisebench.leaderboard import aggregate as agg
+from denoisebench.leaderboard.aggregate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401 (re-exported)
+from denoisebench.leaderboard.runner import FLICKER_METRICS, FLICKER_PREFIX, NOISY
 
 ERROR_METRICS = ("relmse", "flip")
 #: Assumed slope of log(error) vs log(spp) when only one input spp was measured.
@@ -103,14 +103,22 @@ class RunData:
 
     def ok_frames(self, label: str, spp: int, scene: str | None = None) -> list[dict]:
         return [
-            f for f in self.frames
-            if f["denoiser"] == label and f["spp"] == spp and f["status"] == "ok" and (scene is None or f["scene"] == scene)
+            f
+            for f in self.frames
+            if f["denoiser"] == label
+            and f["spp"] == spp
+            and f["status"] == "ok"
+            and (scene is None or f["scene"] == scene)
         ]
 
     def scene_mean(self, label: str, spp: int, scene: str, metric: str) -> float | None:
         """Mean of a frame metric over the frames of one scene, or the scene's temporal value."""
         if metric in self.sequence_metric_names and metric not in self.frame_metric_names:
-            values = [s["value"] for s in self.sequences if (s["denoiser"], s["spp"], s["scene"], s["metric"]) == (label, spp, scene, metric)]
+            values = [
+                s["value"]
+                for s in self.sequences
+                if (s["denoiser"], s["spp"], s["scene"], s["metric"]) == (label, spp, scene, metric)
+            ]
         else:
             values = [f["metrics"].get(metric) for f in self.ok_frames(label, spp, scene)]
         values = _finite(values)
@@ -119,7 +127,11 @@ class RunData:
     def scene_floor(self, label: str, spp: int, scene: str, metric: str) -> tuple[float | None, float | None]:
         """(floor, ref_se) of a metric on one scene: frames' mean floor, se of the frames' mean."""
         if metric in self.sequence_metric_names and metric not in self.frame_metric_names:
-            rows = [s for s in self.sequences if (s["denoiser"], s["spp"], s["scene"], s["metric"]) == (label, spp, scene, metric)]
+            rows = [
+                s
+                for s in self.sequences
+                if (s["denoiser"], s["spp"], s["scene"], s["metric"]) == (label, spp, scene, metric)
+            ]
             floors, ses = _finite(r.get("floor") for r in rows), _finite(r.get("ref_se") for r in rows)
         else:
             frames = self.ok_frames(label, spp, scene)
@@ -148,7 +160,9 @@ class RunData:
         return values, floors, ses
 
     def unit_ok(self, label: str, spp: int, scene: str) -> bool:
-        return any(u["status"] == "ok" for u in self.units if (u["denoiser"], u["spp"], u["scene"]) == (label, spp, scene))
+        return any(
+            u["status"] == "ok" for u in self.units if (u["denoiser"], u["spp"], u["scene"]) == (label, spp, scene)
+        )
 
 
 def summary_table(data: RunData) -> list[SummaryRow]:
@@ -163,11 +177,22 @@ def summary_table(data: RunData) -> list[SummaryRow]:
             for metric in data.frame_metric_names + data.sequence_metric_names:
                 cells[metric] = metric_cell(data, label, spp, metric, ok_scenes)
             frames = [f for s in ok_scenes for f in data.ok_frames(label, spp, s)]
-            mean = lambda key: float(np.mean(_finite(f[key] for f in frames))) if _finite(f[key] for f in frames) else None  # noqa: E731
-            rows.append(SummaryRow(
-                label, spp, cells, mean("denoise_seconds"), mean("total_seconds"), mean("render_seconds"), len(frames),
-                sum(u["status"] != "ok" for u in units), sorted({u["error"] for u in units if u["error"]}),
-            ))
+            mean = lambda key: (
+                float(np.mean(_finite(f[key] for f in frames))) if _finite(f[key] for f in frames) else None
+            )  # noqa: E731
+            rows.append(
+                SummaryRow(
+                    label,
+                    spp,
+                    cells,
+                    mean("denoise_seconds"),
+                    mean("total_seconds"),
+                    mean("render_seconds"),
+                    len(frames),
+                    sum(u["status"] != "ok" for u in units),
+                    sorted({u["error"] for u in units if u["error"]}),
+                )
+            )
     return rows
 
 
@@ -206,8 +231,11 @@ def indistinguishable_pairs(data: RunData, summary: list[SummaryRow]) -> list[In
     the scenes both measured (:func:`.aggregate.reference_resolution`, conservative).
     """
     found = []
-    metrics = [m for m in data.frame_metric_names + data.sequence_metric_names
-               if any(c.metrics.get(m) is not None and c.metrics[m].floor is not None for c in summary)]
+    metrics = [
+        m
+        for m in data.frame_metric_names + data.sequence_metric_names
+        if any(c.metrics.get(m) is not None and c.metrics[m].floor is not None for c in summary)
+    ]
     for spp in data.spp:
         rows = [r for r in summary if r.spp == spp and r.failed_units == 0]
         for metric in metrics:
@@ -215,7 +243,7 @@ def indistinguishable_pairs(data: RunData, summary: list[SummaryRow]) -> list[In
             per = {r.denoiser: data.per_scene(r.denoiser, spp, metric) for r in rows}
             labels = [r.denoiser for r in rows if per[r.denoiser][0]]
             for i, a in enumerate(labels):
-                for b in labels[i + 1:]:
+                for b in labels[i + 1 :]:
                     (va, _, sa), (vb, _, sb) = per[a], per[b]
                     resolution = agg.reference_resolution(rule, va, sa, vb, sb)
                     if resolution is None:
@@ -332,7 +360,9 @@ def accuracy_time(data: RunData, summary: list[SummaryRow], metric: str, referen
         if cell is None or cell.mean is None or row.total_seconds is None:
             continue
         if cell.mean <= 0 or row.total_seconds <= 0:
-            hidden.append(f"{row.denoiser} at {row.spp} spp ({metric} {cell.mean:.3g}, {row.total_seconds:.3g} s): not positive, off a log axis")
+            hidden.append(
+                f"{row.denoiser} at {row.spp} spp ({metric} {cell.mean:.3g}, {row.total_seconds:.3g} s): not positive, off a log axis"
+            )
             continue
         points.append(Point(row.denoiser, row.spp, row.total_seconds, cell.mean))
     pareto_front(points)
@@ -353,7 +383,11 @@ def readings(at: AccuracyTime) -> list[str]:
     if at.fit is None:
         return [f"No noisy-input curve for {at.metric}: the inputs' error does not fall with spp (or no render times)."]
     fit = at.fit
-    measured = f"{fit.measured_spp[0]}–{fit.measured_spp[-1]} spp" if len(fit.measured_spp) > 1 else f"{fit.measured_spp[0]} spp"
+    measured = (
+        f"{fit.measured_spp[0]}–{fit.measured_spp[-1]} spp"
+        if len(fit.measured_spp) > 1
+        else f"{fit.measured_spp[0]} spp"
+    )
     sentences = []
     best: dict[str, tuple[float, str]] = {}
     noisy_error = {p.spp: p.error for p in at.points if p.denoiser == NOISY}
@@ -369,16 +403,22 @@ def readings(at: AccuracyTime) -> list[str]:
         ratio = p.seconds / seconds_eq
         notes = []
         if spp_eq > fit.measured_spp[-1]:
-            notes.append(f"extrapolated from the noisy inputs at {measured}" + (", slope assumed" if fit.assumed_slope else ""))
+            notes.append(
+                f"extrapolated from the noisy inputs at {measured}" + (", slope assumed" if fit.assumed_slope else "")
+            )
         if at.reference_spp and spp_eq > at.reference_spp:
             notes.append(f"beyond the {at.reference_spp}-spp reference, whose own noise then dominates the score")
         note = f" ({'; '.join(notes)})" if notes else ""
         if ratio <= 1:
-            text = (f"{p.denoiser} at {p.spp} spp matches {spp_eq:,.0f}-spp rendering in {at.metric} "
-                    f"at {_ratio_text(ratio)} of its time ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame){note}.")
+            text = (
+                f"{p.denoiser} at {p.spp} spp matches {spp_eq:,.0f}-spp rendering in {at.metric} "
+                f"at {_ratio_text(ratio)} of its time ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame){note}."
+            )
         else:
-            text = (f"{p.denoiser} at {p.spp} spp reaches the {at.metric} of {spp_eq:,.0f}-spp rendering but takes "
-                    f"{ratio:.2g}× as long ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame): rendering more samples is cheaper{note}.")
+            text = (
+                f"{p.denoiser} at {p.spp} spp reaches the {at.metric} of {spp_eq:,.0f}-spp rendering but takes "
+                f"{ratio:.2g}× as long ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame): rendering more samples is cheaper{note}."
+            )
         score = -math.log(ratio)
         if p.denoiser not in best or score > best[p.denoiser][0]:
             best[p.denoiser] = (score, text)
@@ -414,7 +454,8 @@ def effect_breakdown(data: RunData, scene_effects: dict[str, list[str]], metric:
                 for key in ["overall", *scene_effects.get(scene, [])]:
                     shares.setdefault(key, []).append(mine / noisy)
         table[label] = {
-            key: (float(np.exp(np.mean(np.log(shares[key])))) if shares.get(key) else None) for key in ["overall", *effects]
+            key: (float(np.exp(np.mean(np.log(shares[key])))) if shares.get(key) else None)
+            for key in ["overall", *effects]
         }
     return {"metric": metric, "effects": effects, "table": table}
 

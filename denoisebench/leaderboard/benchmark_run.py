@@ -12,9 +12,8 @@ import sys
 
 from denoisebench.dataset import Dataset
 from denoisebench.errors import UserInputError
-
-from .runner import BenchmarkConfig, RunPlan, prepare_run, run_local
-from .store import ResultsStore, UnitRecord
+from denoisebench.leaderboard.runner import BenchmarkConfig, RunPlan, prepare_run, run_local
+from denoisebench.leaderboard.store import ResultsStore, UnitRecord
 
 #: Executors ``run_benchmark`` accepts.
 EXECUTORS = ("local", "ray")
@@ -34,24 +33,33 @@ def run_benchmark(
     plan = prepare_run(dataset, config, store, progress=progress)
     for label, scenes in plan.trained_on().items():
         shown = ", ".join(scenes[:6]) + (f" and {len(scenes) - 6} more" if len(scenes) > 6 else "")
-        print(f"warning: {label} was trained on {len(scenes)} of this run's {len(plan.scenes)} scene(s) ({shown}): "
-              "its scores there are not held-out (the report marks them)", file=sys.stderr)
+        print(
+            f"warning: {label} was trained on {len(scenes)} of this run's {len(plan.scenes)} scene(s) ({shown}): "
+            "its scores there are not held-out (the report marks them)",
+            file=sys.stderr,
+        )
     done = len(store.done_units(plan.run_id))
     bar = tqdm(
-        total=plan.total_units, initial=min(done, plan.total_units), desc="benchmark: denoisers × sequences",
-        unit="seq", file=sys.stderr, disable=not progress,
+        total=plan.total_units,
+        initial=min(done, plan.total_units),
+        desc="benchmark: denoisers × sequences",
+        unit="seq",
+        file=sys.stderr,
+        disable=not progress,
     )
 
     def on_unit(unit: UnitRecord, written: bool) -> None:
         bar.update(1)
         if unit.status != "ok" and written:
-            bar.write(f"warning: {unit.denoiser} failed on {unit.scene} at {unit.spp} spp: {unit.error}", file=sys.stderr)
+            bar.write(
+                f"warning: {unit.denoiser} failed on {unit.scene} at {unit.spp} spp: {unit.error}", file=sys.stderr
+            )
 
     try:
         if executor == "local":
             run_local(dataset, plan, store, on_unit)
         elif executor == "ray":
-            from .ray_executor import run_ray  # imports Ray itself only when called
+            from denoisebench.leaderboard.ray_executor import run_ray  # imports Ray itself only when called
 
             run_ray(dataset, plan, store, config, on_unit)
         else:

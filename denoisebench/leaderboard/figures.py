@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import io
 
-from .analysis import AccuracyTime
-from .runner import NOISY
+from denoisebench.leaderboard.analysis import AccuracyTime
+from denoisebench.leaderboard.runner import NOISY
 
 NOISY_COLOR = "#444444"
 
@@ -55,10 +55,25 @@ def _accuracy_axis(ax, at: AccuracyTime, palette: dict[str, str]) -> None:
 
     noisy = sorted((p for p in at.points if p.denoiser == NOISY), key=lambda p: p.spp)
     if noisy:
-        ax.plot([p.seconds for p in noisy], [p.error for p in noisy], "-o", color=NOISY_COLOR, lw=2, ms=5,
-                label="noisy input (render more samples)", zorder=3)
+        ax.plot(
+            [p.seconds for p in noisy],
+            [p.error for p in noisy],
+            "-o",
+            color=NOISY_COLOR,
+            lw=2,
+            ms=5,
+            label="noisy input (render more samples)",
+            zorder=3,
+        )
         for p in noisy:
-            ax.annotate(f"{p.spp}", (p.seconds, p.error), textcoords="offset points", xytext=(4, 4), fontsize=7, color=NOISY_COLOR)
+            ax.annotate(
+                f"{p.spp}",
+                (p.seconds, p.error),
+                textcoords="offset points",
+                xytext=(4, 4),
+                fontsize=7,
+                color=NOISY_COLOR,
+            )
     if at.fit is not None and noisy:
         # from the largest measured spp to the reference's (or 16× further), along the fitted time line
         spps = np.geomspace(noisy[-1].spp, max(at.reference_spp or noisy[-1].spp * 16, noisy[-1].spp * 1.01), 20)
@@ -68,18 +83,58 @@ def _accuracy_axis(ax, at: AccuracyTime, palette: dict[str, str]) -> None:
     labels = list(dict.fromkeys(p.denoiser for p in at.points if p.denoiser != NOISY))
     for label in labels:
         mine = sorted((p for p in at.points if p.denoiser == label), key=lambda p: p.spp)
-        ax.plot([p.seconds for p in mine], [p.error for p in mine], "-o", color=palette.get(label), ms=5, lw=1, label=label, zorder=4)
+        ax.plot(
+            [p.seconds for p in mine],
+            [p.error for p in mine],
+            "-o",
+            color=palette.get(label),
+            ms=5,
+            lw=1,
+            label=label,
+            zorder=4,
+        )
         for p in mine:
-            ax.annotate(f"{p.spp}", (p.seconds, p.error), textcoords="offset points", xytext=(4, -9), fontsize=6, color=palette.get(label))
+            ax.annotate(
+                f"{p.spp}",
+                (p.seconds, p.error),
+                textcoords="offset points",
+                xytext=(4, -9),
+                fontsize=6,
+                color=palette.get(label),
+            )
     front = sorted((p for p in at.points if p.pareto), key=lambda p: p.seconds)
     if front:
-        ax.step([p.seconds for p in front], [p.error for p in front], where="post", color="#d62728", lw=0.8, alpha=0.6, zorder=1)
-        ax.scatter([p.seconds for p in front], [p.error for p in front], s=110, facecolors="none", edgecolors="#d62728",
-                   lw=1.2, label="Pareto front", zorder=5)
+        ax.step(
+            [p.seconds for p in front],
+            [p.error for p in front],
+            where="post",
+            color="#d62728",
+            lw=0.8,
+            alpha=0.6,
+            zorder=1,
+        )
+        ax.scatter(
+            [p.seconds for p in front],
+            [p.error for p in front],
+            s=110,
+            facecolors="none",
+            edgecolors="#d62728",
+            lw=1.2,
+            label="Pareto front",
+            zorder=5,
+        )
     if at.reference_seconds:
         ax.axvline(at.reference_seconds, color="#888888", ls=":", lw=1.2)
-        ax.text(at.reference_seconds, 0.98, f" reference\n {at.reference_spp} spp", transform=ax.get_xaxis_transform(),
-                va="top", ha="left", fontsize=7, color="#666666")
+        ax.text(
+            at.reference_seconds,
+            0.98,
+            f" reference\n {at.reference_spp} spp",
+            transform=ax.get_xaxis_transform(),
+            va="top",
+            ha="left",
+            fontsize=7,
+            color="#666666",
+        )
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("seconds per frame (render at input spp + denoise)")
@@ -95,7 +150,15 @@ def accuracy_time_figure(panels: list[AccuracyTime], palette: dict[str, str]) ->
         _accuracy_axis(ax, at, palette)
         ax.set_title(f"{at.metric} against time")
     handles, labels = axes[0][0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=min(5, len(labels)), fontsize=8, frameon=False, bbox_to_anchor=(0.5, -0.02 - 0.035 * (len(labels) // 5)))
+    fig.legend(
+        handles,
+        labels,
+        loc="lower center",
+        ncol=min(5, len(labels)),
+        fontsize=8,
+        frameon=False,
+        bbox_to_anchor=(0.5, -0.02 - 0.035 * (len(labels) // 5)),
+    )
     fig.tight_layout(rect=(0, 0.08 + 0.035 * (len(labels) // 5), 1, 1))
     return _save(fig)
 
@@ -108,7 +171,9 @@ FLICKER_LABELS = {
 }
 
 
-def flicker_figure(series: dict[str, dict[int, dict[str, list[float | None]]]], palette: dict[str, str]) -> tuple[bytes, str]:
+def flicker_figure(
+    series: dict[str, dict[int, dict[str, list[float | None]]]], palette: dict[str, str]
+) -> tuple[bytes, str]:
     """Per-frame flicker (frame t against t−1, mean over scenes): one column per input spp, one row
     per metric (``series``: {metric: {spp: {denoiser: values of frames 1, 2, ...}}})."""
     plt = _plt()

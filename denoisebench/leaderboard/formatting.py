@@ -4,11 +4,23 @@ from __future__ import annotations
 
 import math
 
-from .runner import NOISY
+from denoisebench.leaderboard.runner import NOISY
 
 #: Metrics shown in the summary tables, in this order.
-LEAD_METRICS = ("relmse", "flip", "ssim", "psnr", "smape", "deltae2000", "grad_l1", "hfen", "temporal_relmse", "tpsnr",
-                "temporal_l1", "temporal_l1_warped")
+LEAD_METRICS = (
+    "relmse",
+    "flip",
+    "ssim",
+    "psnr",
+    "smape",
+    "deltae2000",
+    "grad_l1",
+    "hfen",
+    "temporal_relmse",
+    "tpsnr",
+    "temporal_l1",
+    "temporal_l1_warped",
+)
 
 
 #: Left out of the summary tables to keep them readable (still in results.json/csv; the temporal
@@ -65,11 +77,18 @@ def _metric_columns(rows, metrics: list[str]) -> tuple[list[str], list]:
 def summary_rows(report: dict, spp: int) -> tuple[list[str], list[list[str]]]:
     """(header, rows) of the summary table at ``spp``: noisy first, then by relMSE."""
     # the tables show the lead metrics; results.json/results.csv hold every one
-    metrics = [m for m in LEAD_METRICS if m in report["frame_metrics"] + report["sequence_metrics"] and m not in HIDDEN_IN_TABLES]
+    metrics = [
+        m
+        for m in LEAD_METRICS
+        if m in report["frame_metrics"] + report["sequence_metrics"] and m not in HIDDEN_IN_TABLES
+    ]
     rows = [r for r in report["summary"] if r.spp == spp]
     headings, makers = _metric_columns(rows, metrics)
     header = ["denoiser", *headings, "denoise s/frame", "total s/frame", "frames"]
-    key = lambda r: (r.denoiser != NOISY, r.metrics.get("relmse").mean if r.metrics.get("relmse") and r.metrics["relmse"].mean is not None else math.inf)  # noqa: E731
+    key = lambda r: (
+        r.denoiser != NOISY,
+        r.metrics.get("relmse").mean if r.metrics.get("relmse") and r.metrics["relmse"].mean is not None else math.inf,
+    )  # noqa: E731
     body = []
     for r in sorted(rows, key=key):
         name = r.denoiser + (f" ({r.failed_units} failed)" if r.failed_units else "")
@@ -99,20 +118,24 @@ def not_held_out_lines(report: dict) -> list[str]:
     for d in report.get("denoisers", []):
         scenes = d.get("trained_on") or []
         if scenes:
-            lines.append(f"{d['label']} was trained on {len(scenes)} of the {len(report['scenes'])} scene(s) scored here "
-                         f"({', '.join(scenes)}): its scores are not held-out there and flatter it.")
+            lines.append(
+                f"{d['label']} was trained on {len(scenes)} of the {len(report['scenes'])} scene(s) scored here "
+                f"({', '.join(scenes)}): its scores are not held-out there and flatter it."
+            )
     return lines
 
 
 def indistinguishable_lines(report: dict) -> list[str]:
     """One sentence per pair of denoisers the reference cannot tell apart (analysis.indistinguishable_pairs)."""
-    from .aggregate import rule_of
+    from denoisebench.leaderboard.aggregate import rule_of
 
     lines = []
     for p in report.get("indistinguishable", []):
         scale = "" if rule_of(p.metric) == "mean" else " in log ratio"
-        lines.append(f"{p.spp} spp, {p.metric}: {p.a} and {p.b} are not distinguishable at this reference quality "
-                     f"(difference {num(p.difference)}{scale}; the reference resolves ±{num(p.resolution)}).")
+        lines.append(
+            f"{p.spp} spp, {p.metric}: {p.a} and {p.b} are not distinguishable at this reference quality "
+            f"(difference {num(p.difference)}{scale}; the reference resolves ±{num(p.resolution)})."
+        )
     return lines
 
 
@@ -126,7 +149,9 @@ def effect_rows(report: dict) -> tuple[list[str], list[list[str]], dict[str, str
         present = {e: values.get(e) for e in names if values.get(e) is not None}
         if present:
             worst[label] = max(present, key=present.get)
-        rows.append([label, *(("—" if values.get(k) is None else f"{100 * values[k]:.3g}%") for k in ["overall", *names])])
+        rows.append(
+            [label, *(("—" if values.get(k) is None else f"{100 * values[k]:.3g}%") for k in ["overall", *names])]
+        )
     return header, rows, worst
 
 
@@ -136,8 +161,15 @@ def stability_rows(table: dict[str, list[dict]]) -> tuple[list[str], list[list[s
     rows = []
     for label, results in table.items():
         by_case = {r["case"]: r for r in results}
-        rows.append([
-            label,
-            *(("ok" if by_case[c]["status"] == "ok" else f"FAILED: {by_case[c].get('detail', '')}") if c in by_case else "—" for c in cases),
-        ])
+        rows.append(
+            [
+                label,
+                *(
+                    ("ok" if by_case[c]["status"] == "ok" else f"FAILED: {by_case[c].get('detail', '')}")
+                    if c in by_case
+                    else "—"
+                    for c in cases
+                ),
+            ]
+        )
     return ["denoiser", *cases], rows

@@ -65,7 +65,9 @@ def worst_windows(error_map: np.ndarray, size: int, count: int = 2) -> list[tupl
         top, left = cy - half, cx - half
         found.append((top, left))
         # forbid centres whose window would overlap this one
-        valid[max(0, top - size + 1 + half) : top + size + half, max(0, left - size + 1 + half) : left + size + half] = -np.inf
+        valid[
+            max(0, top - size + 1 + half) : top + size + half, max(0, left - size + 1 + half) : left + size + half
+        ] = -np.inf
     return found
 
 

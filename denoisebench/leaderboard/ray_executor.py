@@ -16,16 +16,22 @@ Notes
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from denoisebench.dataset import Dataset
-
-from .runner import NOISY, BenchmarkConfig, RunPlan, measure_group, pending_groups
-from .store import ResultsStore, UnitRecord
+from denoisebench.leaderboard.runner import NOISY, BenchmarkConfig, RunPlan, measure_group, pending_groups
+from denoisebench.leaderboard.store import ResultsStore, UnitRecord
 
 
 def _measure_remote(
-    root: str, plan: RunPlan, options: dict, scene: str, spp: int, labels: list[str], isolation: str = "plugins", limits=None
+    root: str,
+    plan: RunPlan,
+    options: dict,
+    scene: str,
+    spp: int,
+    labels: list[str],
+    isolation: str = "plugins",
+    limits=None,
 ) -> list[UnitRecord]:
     from denoisebench.dataset import open_dataset
     from denoisebench.denoisers import isolation as isolation_mod
@@ -36,7 +42,9 @@ def _measure_remote(
         if d.label in labels and d.label != NOISY:
             try:
                 # plugins in worker processes of their own here too (a Ray task is no sandbox)
-                instances[d.label] = isolation_mod.load(d.spec, options.get(d.spec, {}), policy=isolation, limits=limits)
+                instances[d.label] = isolation_mod.load(
+                    d.spec, options.get(d.spec, {}), policy=isolation, limits=limits
+                )
             except Exception as exc:  # noqa: BLE001 - recorded as the units' failure
                 errors[d.label] = f"load in worker: {exc}"
     units = list(measure_group(open_dataset(root), plan, scene, spp, [l for l in labels if l not in errors], instances))
@@ -46,7 +54,11 @@ def _measure_remote(
 
 
 def run_ray(
-    dataset: Dataset, plan: RunPlan, store: ResultsStore, config: BenchmarkConfig, on_unit: Callable[[UnitRecord, bool], None]
+    dataset: Dataset,
+    plan: RunPlan,
+    store: ResultsStore,
+    config: BenchmarkConfig,
+    on_unit: Callable[[UnitRecord, bool], None],
 ) -> None:
     import ray
 
@@ -54,9 +66,13 @@ def run_ray(
         ray.init(include_dashboard=False, log_to_driver=False, logging_level="ERROR")
     # instances stay in the driver; the plan travels without them
     light = RunPlan(
-        plan.run_id, plan.scenes, plan.spp,
+        plan.run_id,
+        plan.scenes,
+        plan.spp,
         [type(d)(d.label, d.spec, None, d.needs, d.temporal, d.load_error) for d in plan.denoisers],
-        plan.spatial, plan.temporal, plan.resumed,
+        plan.spatial,
+        plan.temporal,
+        plan.resumed,
     )
     task = ray.remote(_measure_remote)
     root = str(dataset.root.resolve())

@@ -34,10 +34,9 @@ import numpy as np
 
 from denoisebench.dataset import Dataset
 from denoisebench.dataset.atomic import atomic_write_bytes
-
-from . import analysis, figures, images, strips
-from .runner import NOISY
-from .store import ResultsStore
+from denoisebench.leaderboard import analysis, figures, images, strips
+from denoisebench.leaderboard.runner import NOISY
+from denoisebench.leaderboard.store import ResultsStore
 
 
 def _clean(value):
@@ -93,8 +92,11 @@ def _reference_info(dataset: Dataset, scenes: list[str]) -> dict:
         transport = _transport(info.record.get("plan") or {})
         if transport != "full transport":
             restricted[scene] = transport
-    line = "full transport" if not restricted else "restricted transport: " + "; ".join(
-        f"{scene} {what}" for scene, what in sorted(restricted.items()))
+    line = (
+        "full transport"
+        if not restricted
+        else "restricted transport: " + "; ".join(f"{scene} {what}" for scene, what in sorted(restricted.items()))
+    )
     spp = max(spps) if spps else None
     if used:
         low, high = min(used), max(used)
@@ -103,9 +105,15 @@ def _reference_info(dataset: Dataset, scenes: list[str]) -> dict:
             words += f", noise floor \u2264 {max(floors):.2g}"
     else:
         words = f"{spp} spp"
-    return {"seconds": float(np.mean(seconds)) if seconds else None, "spp": spp,
-            "transport": line, "restricted": restricted, "description": f"{words}, {line}",
-            "spp_used": [min(used), max(used)] if used else None, "floor_max": max(floors) if floors else None}
+    return {
+        "seconds": float(np.mean(seconds)) if seconds else None,
+        "spp": spp,
+        "transport": line,
+        "restricted": restricted,
+        "description": f"{words}, {line}",
+        "spp_used": [min(used), max(used)] if used else None,
+        "floor_max": max(floors) if floors else None,
+    }
 
 
 def _comparisons(store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: int) -> list[dict]:
@@ -128,7 +136,9 @@ def _comparisons(store: ResultsStore, data: analysis.RunData, dataset: Dataset, 
         frame = dataset.frame(scene, spp, frame_index, samples=False, buffers=["color"])
         reference = frame.reference
         denoised = [img for label, img in shown if label != NOISY] or [img for _, img in shown]
-        error = np.mean([relmse_map(img, reference).reshape(reference.shape[:2] + (-1,)).mean(axis=-1) for img in denoised], axis=0)
+        error = np.mean(
+            [relmse_map(img, reference).reshape(reference.shape[:2] + (-1,)).mean(axis=-1) for img in denoised], axis=0
+        )
         size = images.window_size(*reference.shape[:2])
         windows = images.worst_windows(error, size, count=2)
         scale = images.crop_scale(size)
@@ -136,18 +146,26 @@ def _comparisons(store: ResultsStore, data: analysis.RunData, dataset: Dataset, 
         entries = []
         for label, img in shown + [("reference", reference)]:
             frame_error = None if label == "reference" else float(np.mean(relmse_map(img, reference)))
-            entries.append({
-                "label": label,
-                "kind": "input" if label == NOISY else ("reference" if label == "reference" else "denoiser"),
-                "relmse": frame_error,
-                "image": images.data_uri(images.to_png(img, full_scale)),
-                "crops": [images.data_uri(images.to_png(images.crop(img, t, l, size), scale)) for t, l in windows],
-            })
-        out.append({
-            "scene": scene, "spp": spp, "frame": int(frame_index),
-            "width": int(reference.shape[1] * full_scale), "height": int(reference.shape[0] * full_scale),
-            "windows": [{"top": t, "left": l, "size": size} for t, l in windows], "entries": entries,
-        })
+            entries.append(
+                {
+                    "label": label,
+                    "kind": "input" if label == NOISY else ("reference" if label == "reference" else "denoiser"),
+                    "relmse": frame_error,
+                    "image": images.data_uri(images.to_png(img, full_scale)),
+                    "crops": [images.data_uri(images.to_png(images.crop(img, t, l, size), scale)) for t, l in windows],
+                }
+            )
+        out.append(
+            {
+                "scene": scene,
+                "spp": spp,
+                "frame": int(frame_index),
+                "width": int(reference.shape[1] * full_scale),
+                "height": int(reference.shape[0] * full_scale),
+                "windows": [{"top": t, "left": l, "size": size} for t, l in windows],
+                "entries": entries,
+            }
+        )
     return out
 
 
@@ -159,7 +177,7 @@ FLICKER_LEAD = ("temporal_relmse", "cvvdp", "tpsnr")
 def temporal_metric_order(names: list[str]) -> list[str]:
     """The flicker table's columns: FLICKER_LEAD, then other mean-aggregated (scale-free) metrics,
     then the rest (linear diagnostics such as temporal_l1), each group in name order."""
-    from .aggregate import rule_of
+    from denoisebench.leaderboard.aggregate import rule_of
 
     lead = [m for m in FLICKER_LEAD if m in names]
     rest = sorted(m for m in names if m not in lead)
@@ -188,29 +206,48 @@ def _strips(store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: 
             continue
         first = found[0][1]
         top, left, side, count = first["top"], first["left"], first["side"], len(first["crops"])
-        same = [(label, st) for label, st in found if (st["top"], st["left"], st["side"], st["first_frame"]) ==
-                (top, left, side, first["first_frame"])]
-        refs = np.stack([
-            dataset.frame(scene, spp, first["first_frame"] + i, samples=False, buffers=["color"]).reference[top : top + side, left : left + side]
-            for i in range(count)
-        ])
+        same = [
+            (label, st)
+            for label, st in found
+            if (st["top"], st["left"], st["side"], st["first_frame"]) == (top, left, side, first["first_frame"])
+        ]
+        refs = np.stack(
+            [
+                dataset.frame(scene, spp, first["first_frame"] + i, samples=False, buffers=["color"]).reference[
+                    top : top + side, left : left + side
+                ]
+                for i in range(count)
+            ]
+        )
         scale = max(1, 96 // side)
         entries = []
         for label, crops in [(label, st["crops"]) for label, st in same] + [("reference", refs)]:
-            entries.append({
-                "label": label,
-                "kind": "input" if label == NOISY else ("reference" if label == "reference" else "denoiser"),
-                "strip": images.data_uri(strips.strip_png(crops, scale)),
-                "animation": images.data_uri(strips.strip_apng(crops, scale)),
-            })
-        out.append({"scene": scene, "spp": spp, "first_frame": first["first_frame"], "frames": count,
-                    "window": {"top": top, "left": left, "side": side}, "entries": entries})
+            entries.append(
+                {
+                    "label": label,
+                    "kind": "input" if label == NOISY else ("reference" if label == "reference" else "denoiser"),
+                    "strip": images.data_uri(strips.strip_png(crops, scale)),
+                    "animation": images.data_uri(strips.strip_apng(crops, scale)),
+                }
+            )
+        out.append(
+            {
+                "scene": scene,
+                "spp": spp,
+                "first_frame": first["first_frame"],
+                "frames": count,
+                "window": {"top": top, "left": left, "side": side},
+                "entries": entries,
+            }
+        )
     return out
 
 
-def build_report(store: ResultsStore, run_id: str, dataset: Dataset, denoisers: dict[str, object] | None = None) -> dict:
+def build_report(
+    store: ResultsStore, run_id: str, dataset: Dataset, denoisers: dict[str, object] | None = None
+) -> dict:
     """Everything the report shows, as plain data (figures as PNG/SVG, images as data URIs)."""
-    from .stability import stability_table
+    from denoisebench.leaderboard.stability import stability_table
 
     data = analysis.RunData(store, run_id)
     summary = analysis.summary_table(data)
@@ -226,7 +263,8 @@ def build_report(store: ResultsStore, run_id: str, dataset: Dataset, denoisers: 
     scene_effects = _scene_effects(dataset, data.scenes)
     failures = [
         {"denoiser": u["denoiser"], "scene": u["scene"], "spp": u["spp"], "error": u["error"]}
-        for u in data.units if u["status"] != "ok"
+        for u in data.units
+        if u["status"] != "ok"
     ]
     return {
         "run": data.run,
@@ -257,37 +295,58 @@ def build_report(store: ResultsStore, run_id: str, dataset: Dataset, denoisers: 
 
 def results_json(report: dict) -> dict:
     """The machine-readable part of the report (no images)."""
-    return _clean({
-        "run": report["run"],
-        "denoisers": report["denoisers"],
-        "scenes": report["scenes"],
-        "scene_effects": report["scene_effects"],
-        "spp": report["spp"],
-        "reference": report["reference"],
-        "summary": [
-            {"denoiser": r.denoiser, "spp": r.spp, "frames": r.frames, "failed_units": r.failed_units, "errors": r.errors,
-             "denoise_seconds_per_frame": r.denoise_seconds, "total_seconds_per_frame": r.total_seconds,
-             "render_seconds_per_frame": r.render_seconds,
-             "metrics": {m: {"mean": c.mean, "ci95": [c.low, c.high], "scenes": c.scenes, "aggregate": c.rule,
-                             **({"floor": c.floor, "corrected": c.corrected} if c.floor is not None else {})}
-                         for m, c in r.metrics.items()}}
-            for r in report["summary"]
-        ],
-        "accuracy_time": [
-            {"metric": p.metric, "points": [vars(q) for q in p.points], "hidden": p.hidden,
-             "noisy_fit": vars(p.fit) if p.fit else None, "reference_seconds": p.reference_seconds,
-             "reference_spp": p.reference_spp}
-            for p in report["accuracy"]
-        ],
-        "readings": report["readings"],
-        "effects": report["effects"],
-        "flicker": report["flicker"],
-        "not_distinguishable": [vars(p) for p in report["indistinguishable"]],
-        "failures": report["failures"],
-        "stability": report["stability"],
-        "frames": report["frames"],
-        "sequence_metrics": report["sequences"],
-    })
+    return _clean(
+        {
+            "run": report["run"],
+            "denoisers": report["denoisers"],
+            "scenes": report["scenes"],
+            "scene_effects": report["scene_effects"],
+            "spp": report["spp"],
+            "reference": report["reference"],
+            "summary": [
+                {
+                    "denoiser": r.denoiser,
+                    "spp": r.spp,
+                    "frames": r.frames,
+                    "failed_units": r.failed_units,
+                    "errors": r.errors,
+                    "denoise_seconds_per_frame": r.denoise_seconds,
+                    "total_seconds_per_frame": r.total_seconds,
+                    "render_seconds_per_frame": r.render_seconds,
+                    "metrics": {
+                        m: {
+                            "mean": c.mean,
+                            "ci95": [c.low, c.high],
+                            "scenes": c.scenes,
+                            "aggregate": c.rule,
+                            **({"floor": c.floor, "corrected": c.corrected} if c.floor is not None else {}),
+                        }
+                        for m, c in r.metrics.items()
+                    },
+                }
+                for r in report["summary"]
+            ],
+            "accuracy_time": [
+                {
+                    "metric": p.metric,
+                    "points": [vars(q) for q in p.points],
+                    "hidden": p.hidden,
+                    "noisy_fit": vars(p.fit) if p.fit else None,
+                    "reference_seconds": p.reference_seconds,
+                    "reference_spp": p.reference_spp,
+                }
+                for p in report["accuracy"]
+            ],
+            "readings": report["readings"],
+            "effects": report["effects"],
+            "flicker": report["flicker"],
+            "not_distinguishable": [vars(p) for p in report["indistinguishable"]],
+            "failures": report["failures"],
+            "stability": report["stability"],
+            "frames": report["frames"],
+            "sequence_metrics": report["sequences"],
+        }
+    )
 
 
 #: First characters that make a spreadsheet read a cell as a formula (or that it strips first).
@@ -313,18 +372,44 @@ def results_csv(report: dict) -> str:
     metrics = report["frame_metrics"] + flicker
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(["run_id", "denoiser", "scene", "spp", "frame", "status", "error", "render_seconds",
-                     "denoise_seconds", "total_seconds", "sanitized", *metrics,
-                     *(f"{m}_{part}" for m in floored for part in ("floor", "corrected"))])
+    writer.writerow(
+        [
+            "run_id",
+            "denoiser",
+            "scene",
+            "spp",
+            "frame",
+            "status",
+            "error",
+            "render_seconds",
+            "denoise_seconds",
+            "total_seconds",
+            "sanitized",
+            *metrics,
+            *(f"{m}_{part}" for m in floored for part in ("floor", "corrected")),
+        ]
+    )
     for f in report["frames"]:
         values = [f["metrics"].get(m) for m in metrics]
         for m in floored:
             value, floor = f["metrics"].get(m), f.get("floors", {}).get(m)
             values += [floor, None if value is None or floor is None else value - floor]
-        writer.writerow([report["run"]["run_id"], csv_cell(f["denoiser"]), csv_cell(f["scene"]), f["spp"], f["frame"],
-                         f["status"], csv_cell(f["error"] or ""),
-                         f["render_seconds"], f["denoise_seconds"], f["total_seconds"], f["sanitized"],
-                         *("" if v is None else repr(float(v)) for v in values)])
+        writer.writerow(
+            [
+                report["run"]["run_id"],
+                csv_cell(f["denoiser"]),
+                csv_cell(f["scene"]),
+                f["spp"],
+                f["frame"],
+                f["status"],
+                csv_cell(f["error"] or ""),
+                f["render_seconds"],
+                f["denoise_seconds"],
+                f["total_seconds"],
+                f["sanitized"],
+                *("" if v is None else repr(float(v)) for v in values),
+            ]
+        )
     return buffer.getvalue()
 
 
@@ -332,15 +417,17 @@ def write_report(
     store: ResultsStore, run_id: str, dataset: Dataset, out_dir: str | Path, denoisers: dict[str, object] | None = None
 ) -> Path:
     """Write the report folder; return the path of index.html."""
-    from .report_html import render_html
-    from .report_markdown import render_markdown
+    from denoisebench.leaderboard.report_html import render_html
+    from denoisebench.leaderboard.report_markdown import render_markdown
 
     out = Path(out_dir)
     report = build_report(store, run_id, dataset, denoisers)
     for name, (png, svg) in report["figures"].items():
         atomic_write_bytes(out / "figures" / f"{name}.png", png)
         atomic_write_bytes(out / "figures" / f"{name}.svg", svg.encode("utf-8"))
-    atomic_write_bytes(out / "results.json", (json.dumps(results_json(report), indent=1, allow_nan=False) + "\n").encode("utf-8"))
+    atomic_write_bytes(
+        out / "results.json", (json.dumps(results_json(report), indent=1, allow_nan=False) + "\n").encode("utf-8")
+    )
     atomic_write_bytes(out / "results.csv", results_csv(report).encode("utf-8"))
     atomic_write_bytes(out / "report.md", render_markdown(report).encode("utf-8"))
     return atomic_write_bytes(out / "index.html", render_html(report).encode("utf-8"))

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from html import escape
 
-from . import formatting as fmt
+from denoisebench.leaderboard import formatting as fmt
 
 STYLE = """
 body{font:14px/1.45 system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:0;color:#1d1d1f;background:#fafafa}
@@ -110,7 +110,7 @@ def _table(header: list[str], rows: list[list[str]], row_classes: list[str] | No
 
 
 def _figure(report: dict, name: str, alt: str) -> str:
-    from .images import data_uri
+    from denoisebench.leaderboard.images import data_uri
 
     if name not in report["figures"]:
         return ""
@@ -137,14 +137,16 @@ def _accuracy(report: dict) -> str:
 
 
 def _results(report: dict) -> str:
-    parts = ['<p class="note">Scores combined over scenes by each metric\'s rule: scale-free scores by their mean; '
-             "linear-radiance ones (marked) by the geometric mean, or per scene relative to the noisy input (\u00d7 input: "
-             "the geometric-mean share of the input's score left), so that no single bright scene decides. A bootstrap "
-             "95&nbsp;% interval over scenes, which includes the reference's own uncertainty, is in brackets when there "
-             "are at least two scenes; \u2193 lower is better, \u2191 higher is better. Seconds are per frame. "
-             "<b>floor</b>: the score a perfect denoiser would get against this noisy reference (from its variance "
-             "buffer); <b>\u2212 floor</b>: the score corrected for it, an unbiased estimate of the error against the "
-             "noise-free image.</p>"]
+    parts = [
+        '<p class="note">Scores combined over scenes by each metric\'s rule: scale-free scores by their mean; '
+        "linear-radiance ones (marked) by the geometric mean, or per scene relative to the noisy input (\u00d7 input: "
+        "the geometric-mean share of the input's score left), so that no single bright scene decides. A bootstrap "
+        "95&nbsp;% interval over scenes, which includes the reference's own uncertainty, is in brackets when there "
+        "are at least two scenes; \u2193 lower is better, \u2191 higher is better. Seconds are per frame. "
+        "<b>floor</b>: the score a perfect denoiser would get against this noisy reference (from its variance "
+        "buffer); <b>\u2212 floor</b>: the score corrected for it, an unbiased estimate of the error against the "
+        "noise-free image.</p>"
+    ]
     parts += [f'<p class="error">Not held-out: {e(line)}</p>' for line in fmt.not_held_out_lines(report)]
     for spp in report["spp"]:
         header, rows = fmt.summary_rows(report, spp)
@@ -152,8 +154,11 @@ def _results(report: dict) -> str:
         parts.append(f"<h3>{spp} spp</h3>" + _table(header, rows, classes))
     lines = fmt.indistinguishable_lines(report)
     if lines:
-        parts.append("<h3>Not distinguishable at this reference quality</h3><ul class=\"readings\">"
-                     + "".join(f"<li>{e(line)}</li>" for line in lines) + "</ul>")
+        parts.append(
+            "<h3>Not distinguishable at this reference quality</h3><ul class=\"readings\">"
+            + "".join(f"<li>{e(line)}</li>" for line in lines)
+            + "</ul>"
+        )
     return "".join(parts)
 
 
@@ -167,23 +172,29 @@ def _effects(report: dict) -> str:
     def worst_cell(i, j):
         return "worst" if j >= 2 and worst.get(labels[i]) == names[j - 1] else ""
 
-    note = (f'<p class="note">Share of the noisy input\'s {e(report["effects"]["metric"])} left after denoising: geometric mean '
-            "over the scenes that exercise each effect and over spp (lower is better). Highlighted: the effect that costs "
-            "each denoiser most.</p>")
+    note = (
+        f'<p class="note">Share of the noisy input\'s {e(report["effects"]["metric"])} left after denoising: geometric mean '
+        "over the scenes that exercise each effect and over spp (lower is better). Highlighted: the effect that costs "
+        "each denoiser most.</p>"
+    )
     return note + _table(header, rows, cell_classes=worst_cell)
 
 
 def _strip_section(report: dict) -> str:
     if not report.get("strips"):
         return ""
-    parts = ['<h3>Frame strips</h3><p class="note">One crop (where the noisy input flickers most) of the first frames '
-             "of each sequence at the lowest input spp, frames left to right, and the same frames looping in place; "
-             "tone-mapped like the metrics. Flicker is a change from frame to frame that the reference's row does not "
-             "have.</p>"]
+    parts = [
+        '<h3>Frame strips</h3><p class="note">One crop (where the noisy input flickers most) of the first frames '
+        "of each sequence at the lowest input spp, frames left to right, and the same frames looping in place; "
+        "tone-mapped like the metrics. Flicker is a change from frame to frame that the reference's row does not "
+        "have.</p>"
+    ]
     for strip in report["strips"]:
         w = strip["window"]
-        parts.append(f'<h3>{e(strip["scene"])} \u2014 frames {strip["first_frame"]}\u2013{strip["first_frame"] + strip["frames"] - 1}, '
-                     f'{strip["spp"]} spp, crop at ({w["left"]}, {w["top"]}), {w["side"]} px</h3>')
+        parts.append(
+            f'<h3>{e(strip["scene"])} \u2014 frames {strip["first_frame"]}\u2013{strip["first_frame"] + strip["frames"] - 1}, '
+            f'{strip["spp"]} spp, crop at ({w["left"]}, {w["top"]}), {w["side"]} px</h3>'
+        )
         rows = "".join(
             f'<div class="tile {e(entry["kind"])}" style="display:flex;gap:8px;align-items:center;text-align:left">'
             f'<img alt="animated crop of {e(entry["label"])}" src="{entry["animation"]}">'
@@ -197,13 +208,15 @@ def _strip_section(report: dict) -> str:
 def _flicker(report: dict) -> str:
     if not report["flicker"]["series"]:
         return '<p class="note">Sequences of one frame: no flicker to measure.</p>' + _strip_section(report)
-    parts = [_figure(report, "flicker", "flicker per frame, one panel per input spp"),
-             '<p class="note">Temporal relMSE: the squared difference of the warped frame differences (motion '
-             "buffer, disocclusions masked) over the reference's local magnitude squared plus 0.01, scale-free like "
-             "relMSE; cvvdp: ColorVideoVDP's prediction, in JOD (10 = no visible difference), of how visible the "
-             "differences and flicker are on a 4K HDR monitor at 30 fps, the reference's typical surface shown at "
-             "100 cd/m²; tPSNR: PSNR of the tone-mapped frame differences. These lead; other temporal metrics follow, and "
-             "the linear temporal_l1 scores, kept as diagnostics, are shown relative to the noisy input.</p>"]
+    parts = [
+        _figure(report, "flicker", "flicker per frame, one panel per input spp"),
+        '<p class="note">Temporal relMSE: the squared difference of the warped frame differences (motion '
+        "buffer, disocclusions masked) over the reference's local magnitude squared plus 0.01, scale-free like "
+        "relMSE; cvvdp: ColorVideoVDP's prediction, in JOD (10 = no visible difference), of how visible the "
+        "differences and flicker are on a 4K HDR monitor at 30 fps, the reference's typical surface shown at "
+        "100 cd/m²; tPSNR: PSNR of the tone-mapped frame differences. These lead; other temporal metrics follow, and "
+        "the linear temporal_l1 scores, kept as diagnostics, are shown relative to the noisy input.</p>",
+    ]
     for spp in report["spp"]:
         header, rows = fmt.flicker_rows(report, spp)
         classes = ["input" if r[0] == "noisy" else "" for r in rows]
@@ -213,26 +226,37 @@ def _flicker(report: dict) -> str:
 
 def _tile(entry: dict, element_id: str) -> str:
     crops = "".join(f'<img alt="crop of {e(entry["label"])}" src="{c}">' for c in entry["crops"])
-    caption = e(entry["label"]) + (f"<br>relMSE {fmt.num(entry['relmse'])}" if entry["relmse"] is not None else "<br>&nbsp;")
-    return (f'<div class="tile {e(entry["kind"])}"><img id="{element_id}" alt="{e(entry["label"])}" src="{entry["image"]}">'
-            f'<div class="crops">{crops}</div><div>{caption}</div></div>')
+    caption = e(entry["label"]) + (
+        f"<br>relMSE {fmt.num(entry['relmse'])}" if entry["relmse"] is not None else "<br>&nbsp;"
+    )
+    return (
+        f'<div class="tile {e(entry["kind"])}"><img id="{element_id}" alt="{e(entry["label"])}" src="{entry["image"]}">'
+        f'<div class="crops">{crops}</div><div>{caption}</div></div>'
+    )
 
 
 def _comparisons(report: dict) -> str:
-    parts = ['<p class="note">The last frame of each test sequence at the lowest input spp (temporal denoisers have seen '
-             "the frames before it), tone-mapped like the metrics. Below each image: zoomed crops of the regions where the "
-             "denoisers' mean relMSE is worst. In the compare box, pick the left image, drag the wipe or the slider, or press "
-             "the button to flip between the left image and the reference.</p>"]
+    parts = [
+        '<p class="note">The last frame of each test sequence at the lowest input spp (temporal denoisers have seen '
+        "the frames before it), tone-mapped like the metrics. Below each image: zoomed crops of the regions where the "
+        "denoisers' mean relMSE is worst. In the compare box, pick the left image, drag the wipe or the slider, or press "
+        "the button to flip between the left image and the reference.</p>"
+    ]
     for n, comp in enumerate(report["comparisons"]):
         ids = [f"img-{n}-{i}" for i in range(len(comp["entries"]))]
         tiles = "".join(_tile(entry, ids[i]) for i, entry in enumerate(comp["entries"]))
         choices = [(ids[i], entry) for i, entry in enumerate(comp["entries"]) if entry["kind"] != "reference"]
         ref_id = ids[-1]
         # open on the denoiser closest to the reference in this frame
-        scored = [(entry["relmse"], k) for k, (_, entry) in enumerate(choices) if entry["kind"] == "denoiser" and entry["relmse"] is not None]
+        scored = [
+            (entry["relmse"], k)
+            for k, (_, entry) in enumerate(choices)
+            if entry["kind"] == "denoiser" and entry["relmse"] is not None
+        ]
         default = min(scored)[1] if scored else 0
         options = "".join(
-            f'<option value="{i}"{" selected" if k == default else ""}>{e(entry["label"])}</option>' for k, (i, entry) in enumerate(choices)
+            f'<option value="{i}"{" selected" if k == default else ""}>{e(entry["label"])}</option>'
+            for k, (i, entry) in enumerate(choices)
         )
         w, h = comp["width"], comp["height"]
         ref_src = comp["entries"][-1]["image"]
@@ -256,16 +280,22 @@ def _comparisons(report: dict) -> str:
 def _stability(report: dict) -> str:
     table = report["stability"]
     if table is None:
-        return ('<p class="note">The hard-case suite (<code>denoisebench.denoisers.hard_cases</code>) is not available in '
-                "this installation; this table appears when it is.</p>")
+        return (
+            '<p class="note">The hard-case suite (<code>denoisebench.denoisers.hard_cases</code>) is not available in '
+            "this installation; this table appears when it is.</p>"
+        )
     return _table(*fmt.stability_rows(table))
 
 
 def _failures(report: dict) -> str:
     parts = []
     if report["failures"]:
-        parts.append(_table(["denoiser", "scene", "spp", "error"],
-                            [[f["denoiser"], f["scene"], str(f["spp"]), f["error"] or ""] for f in report["failures"]]))
+        parts.append(
+            _table(
+                ["denoiser", "scene", "spp", "error"],
+                [[f["denoiser"], f["scene"], str(f["spp"]), f["error"] or ""] for f in report["failures"]],
+            )
+        )
     for d in report["denoisers"]:
         if d["load_error"]:
             parts.append(f'<p class="error">{e(d["spec"])} was not run: {e(d["load_error"])}</p>')
@@ -274,10 +304,12 @@ def _failures(report: dict) -> str:
 
 def render_html(report: dict) -> str:
     run = report["run"]
-    meta = (f"run {e(run['run_id'])} \u00b7 dataset {e(run['dataset_hash'][:12])} ({e(run['dataset_path'])}) \u00b7 split "
-            f"{e(run['config'].get('split'))} \u00b7 {len(report['scenes'])} scene(s) \u00b7 input spp "
-            f"{e(', '.join(map(str, report['spp'])))} \u00b7 reference {e(report['reference'].get('description', str(report['reference']['spp']) + ' spp'))} \u00b7 started "
-            f"{e(run['created_at'])}, finished {e(run['finished_at'] or 'not yet (partial results)')}")
+    meta = (
+        f"run {e(run['run_id'])} \u00b7 dataset {e(run['dataset_hash'][:12])} ({e(run['dataset_path'])}) \u00b7 split "
+        f"{e(run['config'].get('split'))} \u00b7 {len(report['scenes'])} scene(s) \u00b7 input spp "
+        f"{e(', '.join(map(str, report['spp'])))} \u00b7 reference {e(report['reference'].get('description', str(report['reference']['spp']) + ' spp'))} \u00b7 started "
+        f"{e(run['created_at'])}, finished {e(run['finished_at'] or 'not yet (partial results)')}"
+    )
     versions = ", ".join(f"{k} {v}" for k, v in sorted(run["versions"].items()))
     sections = [
         ("accuracy", "Accuracy against time", _accuracy(report)),

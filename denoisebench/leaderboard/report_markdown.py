@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import re
 
-from . import formatting as fmt
+from denoisebench.leaderboard import formatting as fmt
 
 _SPECIAL = re.compile(r"([\\`*_\[\]|<>#])")
 
@@ -49,12 +49,16 @@ def render_markdown(report: dict) -> str:
     for panel in report["accuracy"]:
         for hidden in panel.hidden:
             lines.append(f"- not drawn: {md(hidden)}")
-    lines += ["## Results", "",
-              "Scores combined over scenes by each metric's rule (scale-free ones by their mean; linear ones by the "
-              "geometric mean or relative to the noisy input, as marked), with a bootstrap 95 % interval over scenes "
-              "that includes the reference's uncertainty (↓ lower is better, ↑ higher). *floor*: the score of a perfect "
-              "denoiser against this noisy reference; *− floor*: the score corrected for it (unbiased against the "
-              "noise-free image).", ""]
+    lines += [
+        "## Results",
+        "",
+        "Scores combined over scenes by each metric's rule (scale-free ones by their mean; linear ones by the "
+        "geometric mean or relative to the noisy input, as marked), with a bootstrap 95 % interval over scenes "
+        "that includes the reference's uncertainty (↓ lower is better, ↑ higher). *floor*: the score of a perfect "
+        "denoiser against this noisy reference; *− floor*: the score corrected for it (unbiased against the "
+        "noise-free image).",
+        "",
+    ]
     lines += [f"> **Not held-out:** {md(line)}\n" for line in fmt.not_held_out_lines(report)]
     for spp in report["spp"]:
         header, rows = fmt.summary_rows(report, spp)
@@ -63,9 +67,13 @@ def render_markdown(report: dict) -> str:
     if pairs:
         lines += ["### Not distinguishable at this reference quality", ""] + [f"- {md(p)}" for p in pairs] + [""]
     header, rows, worst = fmt.effect_rows(report)
-    lines += ["## Per-effect breakdown", "",
-              f"Share of the noisy input's {report['effects']['metric']} left after denoising (geometric mean over the scenes "
-              "with the effect and over spp; lower is better).", ""]
+    lines += [
+        "## Per-effect breakdown",
+        "",
+        f"Share of the noisy input's {report['effects']['metric']} left after denoising (geometric mean over the scenes "
+        "with the effect and over spp; lower is better).",
+        "",
+    ]
     if report["effects"]["effects"]:
         lines += _table(header, rows)
         lines += [f"- {md(label)} suffers most from **{md(effect)}**" for label, effect in worst.items()] + [""]
@@ -73,10 +81,14 @@ def render_markdown(report: dict) -> str:
         lines += ["The scenes declare no effects.", ""]
     lines += ["## Temporal flicker", ""]
     if report["flicker"]["series"]:
-        lines += ["![flicker per frame](figures/flicker.png)", "",
-                  "Temporal relMSE (warped frame differences over the reference's local magnitude, scale-free), "
-                  "cvvdp (ColorVideoVDP, JOD: 10 = no visible difference, how visible the flicker is) and "
-                  "tPSNR lead; linear temporal scores follow relative to the noisy input.", ""]
+        lines += [
+            "![flicker per frame](figures/flicker.png)",
+            "",
+            "Temporal relMSE (warped frame differences over the reference's local magnitude, scale-free), "
+            "cvvdp (ColorVideoVDP, JOD: 10 = no visible difference, how visible the flicker is) and "
+            "tPSNR lead; linear temporal scores follow relative to the noisy input.",
+            "",
+        ]
         for spp in report["spp"]:
             header, rows = fmt.flicker_rows(report, spp)
             lines += [f"### {spp} spp", ""] + _table(header, rows)
@@ -84,12 +96,18 @@ def render_markdown(report: dict) -> str:
             lines += ["Frame strips of one crop per denoiser are in index.html.", ""]
     else:
         lines += ["Sequences of one frame: no flicker to measure.", ""]
-    lines += ["## Image comparisons", "", "Open index.html for the images, zoomed crops and the interactive compare.", ""]
+    lines += [
+        "## Image comparisons",
+        "",
+        "Open index.html for the images, zoomed crops and the interactive compare.",
+        "",
+    ]
     lines += ["## Hard-case stability", ""]
     lines += _stability(report["stability"])
     if report["failures"]:
         lines += ["## Failures", ""] + _table(
-            ["denoiser", "scene", "spp", "error"], [[f["denoiser"], f["scene"], str(f["spp"]), f["error"] or ""] for f in report["failures"]]
+            ["denoiser", "scene", "spp", "error"],
+            [[f["denoiser"], f["scene"], str(f["spp"]), f["error"] or ""] for f in report["failures"]],
         )
     not_loaded = [d for d in report["denoisers"] if d["load_error"]]
     if not_loaded:

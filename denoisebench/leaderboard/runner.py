@@ -36,16 +36,15 @@ from __future__ import annotations
 import hashlib
 import importlib.metadata
 import platform
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import Callable, Iterable
 
 import numpy as np
 
 from denoisebench.dataset import Dataset, DatasetError, layout, manifest_without_timings
 from denoisebench.dataset.exr_io import canonical_json
 from denoisebench.errors import UserInputError
-
-from .store import FrameRecord, ResultsStore, UnitRecord
+from denoisebench.leaderboard.store import FrameRecord, ResultsStore, UnitRecord
 
 NOISY = "noisy"
 #: Metrics the report leads with; always computed (temporal ones on sequences of ≥ 2 frames).
@@ -57,8 +56,18 @@ FLICKER_METRICS = ("temporal_relmse", "tpsnr")
 FLICKER_PREFIX = "flicker."
 #: Distributions whose versions a run records (those installed).
 VERSIONED = (
-    "denoisebench", "numpy", "scipy", "scikit-image", "colour-science", "flip-evaluator", "OpenEXR",
-    "torch", "pyoidn", "mitsuba", "usd-core", "ray",
+    "denoisebench",
+    "numpy",
+    "scipy",
+    "scikit-image",
+    "colour-science",
+    "flip-evaluator",
+    "OpenEXR",
+    "torch",
+    "pyoidn",
+    "mitsuba",
+    "usd-core",
+    "ray",
 )
 
 
@@ -160,7 +169,9 @@ def resolve_denoiser_specs(specs: Iterable[str]) -> list[str]:
     return out
 
 
-def load_denoisers(specs: list[str], options: dict[str, dict], *, isolation: str = "plugins", limits=None) -> list[LoadedDenoiser]:
+def load_denoisers(
+    specs: list[str], options: dict[str, dict], *, isolation: str = "plugins", limits=None
+) -> list[LoadedDenoiser]:
     """Construct each denoiser (isolated by ``isolation``). An unknown name or option is bad input;
     a load failure is recorded, not raised."""
     from denoisebench.denoisers import isolation as isolation_mod
@@ -251,7 +262,9 @@ def _flicker(outputs, refs, motion=None) -> list[dict[str, float]]:
     out = []
     for t in range(1, len(outputs)):
         pair_motion = None if motion is None else motion[t - 1 : t + 1]
-        results = compute_metrics(np.stack(outputs[t - 1 : t + 1]), np.stack(refs[t - 1 : t + 1]), list(FLICKER_METRICS), motion=pair_motion)
+        results = compute_metrics(
+            np.stack(outputs[t - 1 : t + 1]), np.stack(refs[t - 1 : t + 1]), list(FLICKER_METRICS), motion=pair_motion
+        )
         out.append({FLICKER_PREFIX + name: r.value for name, r in results.items()})
     return out
 
@@ -287,7 +300,9 @@ def measure_unit(label: str, denoiser: object | None, sequence, spatial: list[st
         record = FrameRecord(frame.index, "ok" if ok else "failed", error, render, seconds, total, sanitized)
         if ok:
             try:
-                record.metrics, record.floors, record.ref_se = _frame_metrics(output, frame.reference, spatial, _reference_variance(frame))
+                record.metrics, record.floors, record.ref_se = _frame_metrics(
+                    output, frame.reference, spatial, _reference_variance(frame)
+                )
             except ValueError as exc:  # a metric refusing this output is the denoiser's failure
                 record.status, record.error, ok = "failed", f"metrics: {exc}", False
         if ok:
@@ -302,12 +317,14 @@ def measure_unit(label: str, denoiser: object | None, sequence, spatial: list[st
     motion = np.stack([f.buffers["motion"] for f in frames]) if all(f.has("motion") for f in frames) else None
     ref_vars = [_reference_variance(f) for f in frames]
     ref_vars = None if any(v is None for v in ref_vars) else ref_vars
-    unit.sequence_metrics, unit.sequence_floors, unit.sequence_ref_se = _sequence_metrics(outputs, refs, motion, temporal, ref_vars)
+    unit.sequence_metrics, unit.sequence_floors, unit.sequence_ref_se = _sequence_metrics(
+        outputs, refs, motion, temporal, ref_vars
+    )
     unit.image_frame, unit.image = frames[-1].index, outputs[-1]
     if len(outputs) > 1:
         for record, values in zip(records[1:], _flicker(outputs, refs, motion)):
             record.metrics.update(values)
-        from .strips import cut
+        from denoisebench.leaderboard.strips import cut
 
         first, unit.strip_window, unit.strip = cut(outputs, [f.color for f in frames], refs, motion)
         unit.strip_first = frames[first].index
@@ -366,7 +383,11 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     scenes = dataset.scenes if config.split == "all" else dataset.split(config.split)
     if not scenes:
         raise UserInputError(f"{dataset.root}: split {config.split!r} has no scenes")
-    spp = sorted({int(s) for s in config.spp}) if config.spp else sorted(set.intersection(*(set(dataset.scene(s).spp) for s in scenes)))
+    spp = (
+        sorted({int(s) for s in config.spp})
+        if config.spp
+        else sorted(set.intersection(*(set(dataset.scene(s).spp) for s in scenes)))
+    )
     if not spp:
         raise UserInputError(f"{dataset.root}: the scenes of split {config.split!r} share no input spp")
     config.spp = spp
@@ -387,8 +408,16 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     plan = RunPlan(run_id, scenes, spp, denoisers, spatial, temporal, resumed=not created)
     seen = plan.trained_on()
     for d in denoisers:
-        store.add_denoiser(run_id, d.label, d.spec, "denoiser", d.needs, d.temporal, d.load_error,
-                           seen.get(d.label, []) if d.trained_scenes else None)
+        store.add_denoiser(
+            run_id,
+            d.label,
+            d.spec,
+            "denoiser",
+            d.needs,
+            d.temporal,
+            d.load_error,
+            seen.get(d.label, []) if d.trained_scenes else None,
+        )
     return plan
 
 
@@ -403,7 +432,9 @@ def pending_groups(plan: RunPlan, done: set[tuple[str, str, int]]) -> list[tuple
     return groups
 
 
-def measure_group(dataset: Dataset, plan: RunPlan, scene: str, spp: int, labels: list[str], instances: dict) -> Iterable[UnitRecord]:
+def measure_group(
+    dataset: Dataset, plan: RunPlan, scene: str, spp: int, labels: list[str], instances: dict
+) -> Iterable[UnitRecord]:
     """Load the sequence once and yield the unit of each label on it."""
     wants_samples = any("samples" in d.needs for d in plan.denoisers if d.label in labels)
     sequence = dataset.sequence(scene, spp, samples=wants_samples)
@@ -413,7 +444,9 @@ def measure_group(dataset: Dataset, plan: RunPlan, scene: str, spp: int, labels:
         yield measure_unit(label, instances.get(label), sequence, plan.spatial, plan.temporal)
 
 
-def run_local(dataset: Dataset, plan: RunPlan, store: ResultsStore, on_unit: Callable[[UnitRecord, bool], None]) -> None:
+def run_local(
+    dataset: Dataset, plan: RunPlan, store: ResultsStore, on_unit: Callable[[UnitRecord, bool], None]
+) -> None:
     instances = {d.label: d.instance for d in plan.denoisers if d.instance is not None}
     for scene, spp, _ in pending_groups(plan, store.done_units(plan.run_id)):
         # re-read what is done: another process may be working on the same run

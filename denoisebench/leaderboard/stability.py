@@ -33,8 +33,12 @@ def stability_table(denoisers: dict[str, object]) -> dict[str, list[dict]] | Non
             table[label] = [{"case": "(suite)", "status": "failed", "detail": f"{type(exc).__name__}: {exc}"}]
             continue
         table[label] = [
-            {"case": r.case, "status": "ok" if r.passed else "failed",
-             "detail": r.reason or (f"{r.sanitized} NaN/Inf replaced" if r.sanitized else ""), "seconds": r.seconds}
+            {
+                "case": r.case,
+                "status": "ok" if r.passed else "failed",
+                "detail": r.reason or (f"{r.sanitized} NaN/Inf replaced" if r.sanitized else ""),
+                "seconds": r.seconds,
+            }
             for r in results
         ]
     return table

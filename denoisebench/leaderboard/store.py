@@ -39,11 +39,11 @@ import json
 import os
 import sqlite3
 import zlib
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
@@ -158,7 +158,7 @@ _UNIT_TABLES = ("frames", "frame_metrics", "sequence_metrics", "images", "strips
 
 
 def utc_now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return datetime.now(UTC).isoformat(timespec="seconds")
 
 
 @dataclass
@@ -271,7 +271,9 @@ class ResultsStore:
         try:
             row = self.conn.execute("SELECT MAX(version) FROM schema_version").fetchone()
         except sqlite3.OperationalError:
-            raise UserInputError(f"{self.path} is not a denoisebench results database (no schema_version table)") from None
+            raise UserInputError(
+                f"{self.path} is not a denoisebench results database (no schema_version table)"
+            ) from None
         if row is None or row[0] not in READABLE_VERSIONS:
             raise UserInputError(
                 f"{self.path} has results schema version {row[0] if row else None}; "
@@ -295,7 +297,7 @@ class ResultsStore:
     def close(self) -> None:
         self.conn.close()
 
-    def __enter__(self) -> "ResultsStore":
+    def __enter__(self) -> ResultsStore:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -311,19 +313,43 @@ class ResultsStore:
                 return False
             conn.execute(
                 "INSERT INTO runs (run_id, dataset_hash, dataset_path, config, versions, created_at) VALUES (?, ?, ?, ?, ?, ?)",
-                (run_id, dataset_hash, dataset_path, json.dumps(config, sort_keys=True), json.dumps(versions, sort_keys=True), utc_now()),
+                (
+                    run_id,
+                    dataset_hash,
+                    dataset_path,
+                    json.dumps(config, sort_keys=True),
+                    json.dumps(versions, sort_keys=True),
+                    utc_now(),
+                ),
             )
             return True
 
-    def add_denoiser(self, run_id: str, label: str, spec: str, kind: str, needs, temporal: bool, load_error: str | None,
-                     trained_on=None) -> None:
+    def add_denoiser(
+        self,
+        run_id: str,
+        label: str,
+        spec: str,
+        kind: str,
+        needs,
+        temporal: bool,
+        load_error: str | None,
+        trained_on=None,
+    ) -> None:
         """``trained_on``: the run's scenes the denoiser was trained on (None: it declared none)."""
         with self.transaction() as conn:
             conn.execute(
                 "INSERT OR REPLACE INTO run_denoisers (run_id, label, spec, kind, needs, temporal, load_error, trained_on) "
                 "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                (run_id, label, spec, kind, json.dumps(sorted(needs)), int(bool(temporal)), load_error,
-                 None if trained_on is None else json.dumps(sorted(trained_on))),
+                (
+                    run_id,
+                    label,
+                    spec,
+                    kind,
+                    json.dumps(sorted(needs)),
+                    int(bool(temporal)),
+                    load_error,
+                    None if trained_on is None else json.dumps(sorted(trained_on)),
+                ),
             )
 
     def finish_run(self, run_id: str) -> None:
@@ -345,17 +371,29 @@ class ResultsStore:
 
     def runs(self, dataset_hash: str | None = None) -> list[dict]:
         """Every run (newest first), optionally only those on one dataset."""
-        query = "SELECT run_id FROM runs" + (" WHERE dataset_hash = ?" if dataset_hash else "") + " ORDER BY created_at DESC, run_id"
+        query = (
+            "SELECT run_id FROM runs"
+            + (" WHERE dataset_hash = ?" if dataset_hash else "")
+            + " ORDER BY created_at DESC, run_id"
+        )
         return [self.run(r[0]) for r in self.conn.execute(query, (dataset_hash,) if dataset_hash else ())]
 
     def denoisers(self, run_id: str) -> list[dict]:
         rows = self.conn.execute(
             f"SELECT label, spec, kind, needs, temporal, load_error, {self._trained_column} FROM run_denoisers "
-            "WHERE run_id = ? ORDER BY rowid", (run_id,)
+            "WHERE run_id = ? ORDER BY rowid",
+            (run_id,),
         )
         return [
-            {"label": r[0], "spec": r[1], "kind": r[2], "needs": json.loads(r[3]), "temporal": bool(r[4]), "load_error": r[5],
-             "trained_on": json.loads(r[6]) if r[6] else []}
+            {
+                "label": r[0],
+                "spec": r[1],
+                "kind": r[2],
+                "needs": json.loads(r[3]),
+                "temporal": bool(r[4]),
+                "load_error": r[5],
+                "trained_on": json.loads(r[6]) if r[6] else [],
+            }
             for r in rows
         ]
 
@@ -385,19 +423,44 @@ class ResultsStore:
                 conn.execute(
                     "INSERT INTO frames (run_id, denoiser, scene, spp, frame, status, error, render_seconds, "
                     "denoise_seconds, total_seconds, sanitized) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                    (*key, f.frame, f.status, f.error, _finite_or_none(f.render_seconds),
-                     _finite_or_none(f.denoise_seconds), _finite_or_none(f.total_seconds), int(f.sanitized)),
+                    (
+                        *key,
+                        f.frame,
+                        f.status,
+                        f.error,
+                        _finite_or_none(f.render_seconds),
+                        _finite_or_none(f.denoise_seconds),
+                        _finite_or_none(f.total_seconds),
+                        int(f.sanitized),
+                    ),
                 )
                 conn.executemany(
                     "INSERT INTO frame_metrics (run_id, denoiser, scene, spp, frame, metric, value, floor, ref_se) "
                     "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                    [(*key, f.frame, name, _finite_or_none(value), _finite_or_none(f.floors.get(name)),
-                      _finite_or_none(f.ref_se.get(name))) for name, value in f.metrics.items()],
+                    [
+                        (
+                            *key,
+                            f.frame,
+                            name,
+                            _finite_or_none(value),
+                            _finite_or_none(f.floors.get(name)),
+                            _finite_or_none(f.ref_se.get(name)),
+                        )
+                        for name, value in f.metrics.items()
+                    ],
                 )
             conn.executemany(
                 "INSERT INTO sequence_metrics (run_id, denoiser, scene, spp, metric, value, floor, ref_se) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                [(*key, name, _finite_or_none(value), _finite_or_none(unit.sequence_floors.get(name)),
-                  _finite_or_none(unit.sequence_ref_se.get(name))) for name, value in unit.sequence_metrics.items()],
+                [
+                    (
+                        *key,
+                        name,
+                        _finite_or_none(value),
+                        _finite_or_none(unit.sequence_floors.get(name)),
+                        _finite_or_none(unit.sequence_ref_se.get(name)),
+                    )
+                    for name, value in unit.sequence_metrics.items()
+                ],
             )
             if unit.image is not None and unit.image_frame is not None:
                 height, width = unit.image.shape[:2]
@@ -410,14 +473,29 @@ class ResultsStore:
                 conn.execute(
                     "INSERT INTO strips (run_id, denoiser, scene, spp, first_frame, frames, top, left_px, side, data) "
                     "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                    (*key, int(unit.strip_first or 0), len(unit.strip), int(top), int(left), int(side),
-                     zlib.compress(np.ascontiguousarray(unit.strip, dtype="<f4").tobytes(), 6)),
+                    (
+                        *key,
+                        int(unit.strip_first or 0),
+                        len(unit.strip),
+                        int(top),
+                        int(left),
+                        int(side),
+                        zlib.compress(np.ascontiguousarray(unit.strip, dtype="<f4").tobytes(), 6),
+                    ),
                 )
             conn.execute(
                 "INSERT INTO units (run_id, denoiser, scene, spp, status, error, frames, frames_ok, denoise_seconds, "
                 "render_seconds, finished_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-                (*key, unit.status, unit.error, len(unit.frames), sum(f.status == "ok" for f in unit.frames),
-                 _finite_or_none(unit.denoise_seconds), _finite_or_none(unit.render_seconds), utc_now()),
+                (
+                    *key,
+                    unit.status,
+                    unit.error,
+                    len(unit.frames),
+                    sum(f.status == "ok" for f in unit.frames),
+                    _finite_or_none(unit.denoise_seconds),
+                    _finite_or_none(unit.render_seconds),
+                    utc_now(),
+                ),
             )
         return True
 
@@ -429,13 +507,34 @@ class ResultsStore:
             "FROM units WHERE run_id = ? ORDER BY denoiser, scene, spp",
             (run_id,),
         )
-        keys = ("denoiser", "scene", "spp", "status", "error", "frames", "frames_ok", "denoise_seconds", "render_seconds")
+        keys = (
+            "denoiser",
+            "scene",
+            "spp",
+            "status",
+            "error",
+            "frames",
+            "frames_ok",
+            "denoise_seconds",
+            "render_seconds",
+        )
         return [dict(zip(keys, r)) for r in rows]
 
     def frames(self, run_id: str) -> list[dict]:
         """Every frame row of ``run_id`` with its metrics as ``metrics: {name: value}``, and
         ``floors``/``ref_se`` ``{name: value}`` for the metrics that have them."""
-        keys = ("denoiser", "scene", "spp", "frame", "status", "error", "render_seconds", "denoise_seconds", "total_seconds", "sanitized")
+        keys = (
+            "denoiser",
+            "scene",
+            "spp",
+            "frame",
+            "status",
+            "error",
+            "render_seconds",
+            "denoise_seconds",
+            "total_seconds",
+            "sanitized",
+        )
         rows = {
             tuple(r[:4]): dict(zip(keys, r), metrics={}, floors={}, ref_se={})
             for r in self.conn.execute(
@@ -443,7 +542,8 @@ class ResultsStore:
             )
         }
         for denoiser, scene, spp, frame, metric, value, floor, se in self.conn.execute(
-            f"SELECT denoiser, scene, spp, frame, metric, value, {self._floor_columns} FROM frame_metrics WHERE run_id = ?", (run_id,)
+            f"SELECT denoiser, scene, spp, frame, metric, value, {self._floor_columns} FROM frame_metrics WHERE run_id = ?",
+            (run_id,),
         ):
             row = rows.get((denoiser, scene, spp, frame))
             if row is not None:

@@ -36,9 +36,8 @@ def strip_side(height: int, width: int) -> int:
 
 def choose_window(noisy: np.ndarray, refs: np.ndarray, motion: np.ndarray | None = None) -> tuple[int, int, int]:
     """(top, left, side) of the square where the noisy input's frame-to-frame error is largest."""
+    from denoisebench.leaderboard.images import worst_windows
     from denoisebench.metrics import temporal_relmse_map
-
-    from .images import worst_windows
 
     height, width = refs.shape[1:3]
     side = strip_side(height, width)

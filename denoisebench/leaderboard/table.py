@@ -22,10 +22,9 @@ import math
 from dataclasses import dataclass
 
 from denoisebench.errors import UserInputError
-
-from .aggregate import aggregate
-from .runner import NOISY
-from .store import ResultsStore
+from denoisebench.leaderboard.aggregate import aggregate
+from denoisebench.leaderboard.runner import NOISY
+from denoisebench.leaderboard.store import ResultsStore
 
 
 @dataclass
@@ -52,7 +51,11 @@ def pick_dataset(store: ResultsStore, dataset: str | None) -> str:
         raise UserInputError(f"{store.path} holds no runs")
     if dataset is None:
         return runs[0]["dataset_hash"]
-    matches = {r["dataset_hash"] for r in runs if r["dataset_hash"].startswith(dataset) or r["dataset_path"].rstrip("/") == dataset.rstrip("/")}
+    matches = {
+        r["dataset_hash"]
+        for r in runs
+        if r["dataset_hash"].startswith(dataset) or r["dataset_path"].rstrip("/") == dataset.rstrip("/")
+    }
     if len(matches) != 1:
         known = ", ".join(sorted({f"{r['dataset_hash'][:12]} ({r['dataset_path']})" for r in runs}))
         raise UserInputError(f"dataset {dataset!r} matches {len(matches)} datasets in {store.path}; known: {known}")
@@ -62,7 +65,11 @@ def pick_dataset(store: ResultsStore, dataset: str | None) -> str:
 def _per_scene(m, label: str, ok_frames: list[dict], sequences: list[dict]) -> dict[str, float]:
     """{scene: value} of one denoiser: its sequence value (temporal) or the mean over its frames."""
     if m.temporal:
-        return {s["scene"]: s["value"] for s in sequences if s["denoiser"] == label and s["metric"] == m.name and s["value"] is not None}
+        return {
+            s["scene"]: s["value"]
+            for s in sequences
+            if s["denoiser"] == label and s["metric"] == m.name and s["value"] is not None
+        }
     by_scene: dict[str, list] = {}
     for f in ok_frames:
         if f["denoiser"] == label:
@@ -108,14 +115,21 @@ def leaderboard(store: ResultsStore, metric: str = "relmse", spp: int | None = N
                 unmeasured.setdefault(label, Entry(label, None, len(ok), 0, None, None, run_id, run["created_at"]))
                 continue
             entries[label] = Entry(
-                label, value if not failed else None, len(ok), failed,
-                _mean(f["denoise_seconds"] for f in ok), _mean(f["total_seconds"] for f in ok),
-                run_id, run["created_at"],
+                label,
+                value if not failed else None,
+                len(ok),
+                failed,
+                _mean(f["denoise_seconds"] for f in ok),
+                _mean(f["total_seconds"] for f in ok),
+                run_id,
+                run["created_at"],
             )
     for label, entry in unmeasured.items():
         entries.setdefault(label, entry)
     sign = -1.0 if m.higher_is_better else 1.0
-    ranked = sorted(entries.values(), key=lambda e: (e.value is None, sign * e.value if e.value is not None else 0.0, e.denoiser))
+    ranked = sorted(
+        entries.values(), key=lambda e: (e.value is None, sign * e.value if e.value is not None else 0.0, e.denoiser)
+    )
     return m, spp, data_hash, ranked
 
 
@@ -136,16 +150,30 @@ def format_leaderboard(metric, spp: int, data_hash: str, entries: list[Entry]) -
     rows = []
     for rank, e in enumerate(entries, 1):
         value = _fmt(e.value) if e.value is not None else ("failed" if e.failed_units else "—")
-        rows.append([
-            str(rank) if e.value is not None else "-", e.denoiser, value, _fmt(e.denoise_seconds, 3),
-            _fmt(e.total_seconds, 3), str(e.frames), e.run_id[:8], e.created_at[:16].replace("T", " "),
-        ])
+        rows.append(
+            [
+                str(rank) if e.value is not None else "-",
+                e.denoiser,
+                value,
+                _fmt(e.denoise_seconds, 3),
+                _fmt(e.total_seconds, 3),
+                str(e.frames),
+                e.run_id[:8],
+                e.created_at[:16].replace("T", " "),
+            ]
+        )
     widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)]
     right = {0, 2, 3, 4, 5}
 
     def line(cells):
-        return "  ".join(c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths))).rstrip()
+        return "  ".join(
+            c.rjust(w) if i in right else c.ljust(w) for i, (c, w) in enumerate(zip(cells, widths))
+        ).rstrip()
 
-    out = [f"leaderboard: {metric.name} ({arrow}) at {spp} spp, dataset {data_hash[:12]}", line(header), line(["-" * w for w in widths])]
+    out = [
+        f"leaderboard: {metric.name} ({arrow}) at {spp} spp, dataset {data_hash[:12]}",
+        line(header),
+        line(["-" * w for w in widths]),
+    ]
     out += [line(r) for r in rows]
     return "\n".join(out)

@@ -65,8 +65,8 @@ from contextlib import contextmanager
 
 import numpy as np
 
-from .torch_threads import one_torch_thread
-from .validation import check_sequences
+from denoisebench.metrics.torch_threads import one_torch_thread
+from denoisebench.metrics.validation import check_sequences
 
 __all__ = [
     "DISPLAY",

@@ -13,13 +13,13 @@ frames' as independent (sqrt of the summed squares over the frame count).
 from __future__ import annotations
 
 import time
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Iterable
 
 import numpy as np
 
-from .registry import Metric, default_metric_names, expand_metric_names, get_metric
-from .validation import check_pair, check_sequences
+from denoisebench.metrics.registry import Metric, default_metric_names, expand_metric_names, get_metric
+from denoisebench.metrics.validation import check_pair, check_sequences
 
 __all__ = ["MetricResult", "compute_metrics"]
 
@@ -90,8 +90,7 @@ def _select(names: Iterable[str] | str | None, sequence: bool, context: dict) ->
     if names is None:
         chosen = [get_metric(n) for n in default_metric_names()]  # opt-in sets (noisebase) left out
         chosen = [
-            m for m in chosen
-            if not m.temporal or (sequence and all(context.get(k) is not None for k in m.requires))
+            m for m in chosen if not m.temporal or (sequence and all(context.get(k) is not None for k in m.requires))
         ]
     else:
         chosen = [get_metric(n) for n in expand_metric_names(names)]  # set names expand
@@ -182,4 +181,3 @@ def _floor(m: Metric, pred, ref, ref_var, sequence: bool, context: dict) -> tupl
     floors = np.array([float(x[0]) for x in parts])
     ses = np.array([float(x[1]) for x in parts])
     return float(floors.mean()), float(np.sqrt(np.sum(np.square(ses))) / len(parts))
-

@@ -60,8 +60,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .spatial import EPS_RELMSE
-from .validation import check_pair
+from denoisebench.metrics.spatial import EPS_RELMSE
+from denoisebench.metrics.validation import check_pair
 
 #: relmse_floor adds its second-order terms only where v ≤ this × (r² + 0.01) (relative noise ≲ 30 %).
 SECOND_ORDER_LIMIT = 0.1
@@ -95,7 +95,9 @@ def as_variance(ref_var, shape: tuple[int, ...], name: str = "ref_var") -> np.nd
     return v
 
 
-def squared_error_floor(diff: np.ndarray, var: np.ndarray, denom: np.ndarray | float, *, valid=None, correlation: float = 1.0) -> Floor:
+def squared_error_floor(
+    diff: np.ndarray, var: np.ndarray, denom: np.ndarray | float, *, valid=None, correlation: float = 1.0
+) -> Floor:
     """Floor and se of ``mean(diff² / denom)`` where ``diff`` carries reference noise of variance ``var``.
 
     ``valid`` (broadcastable bool) selects the values counted; ``correlation`` multiplies the
@@ -137,8 +139,11 @@ def relmse_floor(pred, ref, ref_var) -> Floor:
         return first
     # the reference's noise in the denominator (module Notes): E[d²] = e² + v, E[d·r] = e·R − v
     r2 = np.square(r)
-    second = (v * np.square(d) * (4.0 * r2 - denom) / denom**3 + 4.0 * v * (d * r + v) / np.square(denom)
-              - np.square(v) * (13.0 * r2 + EPS_RELMSE) / denom**3)
+    second = (
+        v * np.square(d) * (4.0 * r2 - denom) / denom**3
+        + 4.0 * v * (d * r + v) / np.square(denom)
+        - np.square(v) * (13.0 * r2 + EPS_RELMSE) / denom**3
+    )
     # the expansion holds only where the reference's noise is small against its value (module Notes)
     second = np.where(v <= SECOND_ORDER_LIMIT * denom, second, 0.0)
     return Floor(first.floor + float(np.mean(second)), first.se)

@@ -24,9 +24,19 @@ import math
 
 import numpy as np
 
-from .validation import Checked, check_pair
+from denoisebench.metrics.validation import Checked, check_pair
 
-__all__ = ["HFEN_SIGMA", "HFEN_SIZE", "EPS_HFEN", "grad_l1", "grad_l1_map", "hfen", "hfen_map", "laplacian_of_gaussian", "WORST"]
+__all__ = [
+    "HFEN_SIGMA",
+    "HFEN_SIZE",
+    "EPS_HFEN",
+    "grad_l1",
+    "grad_l1_map",
+    "hfen",
+    "hfen_map",
+    "laplacian_of_gaussian",
+    "WORST",
+]
 
 HFEN_SIGMA = 1.5
 HFEN_SIZE = 15  # kernel width, as in Ravishankar & Bresler 2011 (fspecial('log', 15, 1.5))

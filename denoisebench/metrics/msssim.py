@@ -27,9 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .tonemap import tonemap
-from .torch_threads import one_torch_thread
-from .validation import check_pair
+from denoisebench.metrics.tonemap import tonemap
+from denoisebench.metrics.torch_threads import one_torch_thread
+from denoisebench.metrics.validation import check_pair
 
 __all__ = ["WEIGHTS", "WIN_SIZE", "WIN_SIGMA", "WORST", "msssim", "msssim_scales", "ms_ssim_tensor"]
 
@@ -45,7 +45,7 @@ def msssim_scales(height: int, width: int, win_size: int = WIN_SIZE) -> int:
     if side < win_size:
         raise ValueError(f"MS-SSIM needs images of at least {win_size}×{win_size} px, got {height}×{width}")
     n = 1
-    while n < len(WEIGHTS) and side > (win_size - 1) * 2 ** n:
+    while n < len(WEIGHTS) and side > (win_size - 1) * 2**n:
         n += 1
     return n
 

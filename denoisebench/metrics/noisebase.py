@@ -46,9 +46,9 @@ import math
 
 import numpy as np
 
-from .msssim import ms_ssim_tensor
-from .torch_threads import one_torch_thread
-from .validation import check_pair, check_sequences
+from denoisebench.metrics.msssim import ms_ssim_tensor
+from denoisebench.metrics.torch_threads import one_torch_thread
+from denoisebench.metrics.validation import check_pair, check_sequences
 
 __all__ = [
     "ACES_INPUT",
@@ -67,16 +67,20 @@ __all__ = [
     "NOISEBASE_METRICS",
 ]
 
-ACES_INPUT = np.array([
-    [0.59719, 0.35458, 0.04823],
-    [0.07600, 0.90834, 0.01566],
-    [0.02840, 0.13383, 0.83777],
-])
-ACES_OUTPUT = np.array([
-    [1.60475, -0.53108, -0.07367],
-    [-0.10208, 1.10813, -0.00605],
-    [-0.00327, -0.07276, 1.07602],
-])
+ACES_INPUT = np.array(
+    [
+        [0.59719, 0.35458, 0.04823],
+        [0.07600, 0.90834, 0.01566],
+        [0.02840, 0.13383, 0.83777],
+    ]
+)
+ACES_OUTPUT = np.array(
+    [
+        [1.60475, -0.53108, -0.07367],
+        [-0.10208, 1.10813, -0.00605],
+        [-0.00327, -0.07276, 1.07602],
+    ]
+)
 GAMMA = 2.2
 FLIP_PPD = (0.7 * 3840 / 0.7) * math.pi / 180
 RMAE_EPS = 0.01
@@ -110,7 +114,7 @@ def nb_encode(rgb: np.ndarray) -> np.ndarray:
 def nb_luminance(encoded: np.ndarray) -> np.ndarray:
     """Their ``srgb_to_lum``: ``0.2126 R^2.2 + 0.7152 G^2.2 + 0.0722 B^2.2`` of encoded values, float32."""
     e = np.power(np.asarray(encoded, dtype=np.float32), np.float32(2.2))
-    return (np.float32(0.2126) * e[..., 0] + np.float32(0.7152) * e[..., 1] + np.float32(0.0722) * e[..., 2])
+    return np.float32(0.2126) * e[..., 0] + np.float32(0.7152) * e[..., 1] + np.float32(0.0722) * e[..., 2]
 
 
 def _psnr(p: np.ndarray, r: np.ndarray) -> float:
@@ -176,8 +180,13 @@ def nb_flip(pred, ref) -> float:
     import flip_evaluator
 
     error_map, _, _ = flip_evaluator.evaluate(
-        np.ascontiguousarray(nb_encode(c.ref)), np.ascontiguousarray(nb_encode(c.pred)), "LDR",
-        inputsRGB=True, applyMagma=False, computeMeanError=False, parameters={"ppd": FLIP_PPD},
+        np.ascontiguousarray(nb_encode(c.ref)),
+        np.ascontiguousarray(nb_encode(c.pred)),
+        "LDR",
+        inputsRGB=True,
+        applyMagma=False,
+        computeMeanError=False,
+        parameters={"ppd": FLIP_PPD},
     )
     return float(np.mean(error_map, dtype=np.float64))
 

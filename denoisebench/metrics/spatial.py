@@ -51,8 +51,8 @@ import warnings
 
 import numpy as np
 
-from .tonemap import reinhard, tonemap
-from .validation import Checked, check_pair
+from denoisebench.metrics.tonemap import reinhard, tonemap
+from denoisebench.metrics.validation import Checked, check_pair
 
 __all__ = [
     "EPS_RELMSE",
@@ -102,6 +102,7 @@ WORST: dict[str, float] = {
 
 
 # --------------------------------------------------------------------------- pixel-wise errors
+
 
 def _pixelwise_map(c: Checked, per_value, worst: float) -> np.ndarray:
     """H×W map of ``per_value(p, r)`` averaged over channels; ``worst`` where pred is non-finite."""
@@ -181,6 +182,7 @@ def l1_map(pred, ref) -> np.ndarray:
 
 # --------------------------------------------------------------------------- tone-mapped scores
 
+
 def psnr(pred, ref) -> float:
     """PSNR in dB of the tone-mapped images, peak 1: ``10·log10(1 / MSE)``. Higher is better.
 
@@ -245,6 +247,7 @@ def ssim_map(pred, ref) -> np.ndarray:
 
 # --------------------------------------------------------------------------- HDR-FLIP
 
+
 @functools.cache
 def _flip_xmax() -> float:
     """FLIP's ``xMax`` (tone-mapped 0.85 pre-image, ACES): start exposure of a luminance-1 image."""
@@ -286,9 +289,7 @@ def _flip(c: Checked, ppd) -> np.ndarray:
     r = _flip_input(c.ref)
     p = _flip_input(c.pred)
     params = _flip_parameters(r, ppd)
-    error_map, _, _ = flip_evaluator.evaluate(
-        r, p, "HDR", applyMagma=False, computeMeanError=False, parameters=params
-    )
+    error_map, _, _ = flip_evaluator.evaluate(r, p, "HDR", applyMagma=False, computeMeanError=False, parameters=params)
     return error_map[..., 0]
 
 
@@ -313,6 +314,7 @@ def flip_map(pred, ref, ppd: float | None = None) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------- ΔE2000
+
 
 @functools.cache
 def _colour():

@@ -63,9 +63,9 @@ import math
 
 import numpy as np
 
-from .floors import Floor, as_variance, squared_error_floor
-from .tonemap import tonemap
-from .validation import Checked, as_depth, as_mask, as_motion, check_sequences
+from denoisebench.metrics.floors import Floor, as_variance, squared_error_floor
+from denoisebench.metrics.tonemap import tonemap
+from denoisebench.metrics.validation import Checked, as_depth, as_mask, as_motion, check_sequences
 
 __all__ = [
     "DEPTH_TOLERANCE",
@@ -96,6 +96,7 @@ WORST: dict[str, float] = {
 
 
 # --------------------------------------------------------------------------- warping
+
 
 def _taps(motion: np.ndarray):
     """Bilinear taps of the previous positions: (i0, i1, j0, j1, fy, fx, inside)."""
@@ -182,6 +183,7 @@ def disocclusion_mask(
 
 # --------------------------------------------------------------------------- helpers
 
+
 def _context(c: Checked, motion, depth, masks, tol):
     n, h, w = c.pred.shape[:3]
     mask = None if masks is None else as_mask(masks, n, (h, w))
@@ -222,9 +224,7 @@ def _pooled(maps: np.ndarray, valid: np.ndarray) -> float:
     return float(maps[valid].mean()) if count < valid.size else float(maps.mean())
 
 
-def warped_valid_masks(
-    motion, depth=None, masks=None, depth_tolerance: float = DEPTH_TOLERANCE
-) -> np.ndarray:
+def warped_valid_masks(motion, depth=None, masks=None, depth_tolerance: float = DEPTH_TOLERANCE) -> np.ndarray:
     """(T−1)×H×W masks of the pixels ``temporal_l1_warped`` counts, from T motion buffers."""
     mot = np.asarray(motion, dtype=np.float64)
     if mot.ndim != 4 or mot.shape[3] != 2 or mot.shape[0] < 2:
@@ -244,6 +244,7 @@ def warped_valid_masks(
 
 
 # --------------------------------------------------------------------------- metrics
+
 
 def temporal_l1(pred_seq, ref_seq, *, masks=None) -> float:
     """Mean |(p_t − p_{t−1}) − (r_t − r_{t−1})| over pairs, pixels, channels (linear). Lower is better."""

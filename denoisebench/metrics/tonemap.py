@@ -23,9 +23,7 @@ import numpy as np
 
 __all__ = ["reinhard", "srgb_oetf", "tonemap", "TONEMAP_DESCRIPTION"]
 
-TONEMAP_DESCRIPTION = (
-    "clamp negatives to 0, Reinhard c/(1+c) per channel, then the sRGB OETF; output in [0, 1)"
-)
+TONEMAP_DESCRIPTION = "clamp negatives to 0, Reinhard c/(1+c) per channel, then the sRGB OETF; output in [0, 1)"
 
 
 def reinhard(x: np.ndarray) -> np.ndarray:

@@ -88,9 +88,7 @@ def count_nonfinite(a: np.ndarray) -> int:
 
 def _check(pred: np.ndarray, ref: np.ndarray, what: str) -> Checked:
     if pred.shape != ref.shape:
-        raise ValueError(
-            f"prediction {what} has shape {pred.shape} but reference {what} has shape {ref.shape}"
-        )
+        raise ValueError(f"prediction {what} has shape {pred.shape} but reference {what} has shape {ref.shape}")
     ref_bad = count_nonfinite(ref)
     if ref_bad:
         raise ValueError(f"reference {what} has {ref_bad} non-finite values (NaN/Inf): bad data")
@@ -152,4 +150,3 @@ def as_mask(masks, n: int, hw: tuple[int, int]) -> np.ndarray:
     if arr.shape != (n, *hw):
         raise ValueError(f"masks must have shape {hw} or {(n, *hw)}, got {arr.shape}")
     return arr
-

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import shlex
 
-from .provenance import all_train_scenes
+from denoisebench.models.provenance import all_train_scenes
 
 DESCRIPTIONS = {
     "dpcn": "Direct-prediction convolutional network after Bako et al. 2017: two branches (albedo-demodulated "
@@ -72,19 +72,32 @@ def _command_block(meta: dict, train_commands: list[str], data_dir: str) -> list
             made = run.get("dataset_hash")
         earlier += run.get("commands", [])
     elsewhere = meta.get("evaluated_on")
-    own = [] if made is not None and meta.get("dataset_hash") == made else [  # the training data, where it was made
-        generate_command(meta.get("dataset_config", {}), meta.get("dataset") or "DATA" if elsewhere else data_dir)]
+    own = (
+        []
+        if made is not None and meta.get("dataset_hash") == made
+        else [  # the training data, where it was made
+            generate_command(meta.get("dataset_config", {}), meta.get("dataset") or "DATA" if elsewhere else data_dir)
+        ]
+    )
     if not elsewhere:
         return [*earlier, *own, *train_commands]
-    return [*earlier, *own, *train_commands[:-1],
-            generate_command(elsewhere.get("dataset_config", {}), data_dir), *train_commands[-1:]]
+    return [
+        *earlier,
+        *own,
+        *train_commands[:-1],
+        generate_command(elsewhere.get("dataset_config", {}), data_dir),
+        *train_commands[-1:],
+    ]
 
 
 def _overlap_line(evaluation: dict, meta: dict) -> str:
     """Whether any test scene shares a name (family and seed) with a train scene of any run."""
     seen = sorted(set(evaluation["scenes"]) & all_train_scenes(meta))
-    return (f"Test scenes that share a name (family and seed) with a training scene: {', '.join(seen)}."
-            if seen else "None of its test scenes shares a name (family and seed) with a training scene.")
+    return (
+        f"Test scenes that share a name (family and seed) with a training scene: {', '.join(seen)}."
+        if seen
+        else "None of its test scenes shares a name (family and seed) with a training scene."
+    )
 
 
 def _earlier_run_lines(meta: dict) -> list[str]:
@@ -100,7 +113,9 @@ def _earlier_run_lines(meta: dict) -> list[str]:
             + (f"; its val relMSE {val['relmse']:.5f} (noisy {val['relmse_noisy']:.5f})" if val else "")
         )
     if lines:
-        lines.append(f"* run {len(lines) + 1} (this card's weights), fine-tuned from run {len(lines)} on the data below:")
+        lines.append(
+            f"* run {len(lines) + 1} (this card's weights), fine-tuned from run {len(lines)} on the data below:"
+        )
     return lines
 
 
@@ -108,12 +123,17 @@ def _scored_elsewhere_lines(elsewhere: dict, meta: dict, evaluation: dict) -> li
     """The scoring dataset's hash, val figure and whether its test scenes share names with training scenes."""
     if not elsewhere:
         return []
-    lines = ["", f"Scored on another dataset than the training one: config hash `{elsewhere.get('dataset_hash')}`, "
-             f"config `{elsewhere.get('dataset_config')}`."]
+    lines = [
+        "",
+        f"Scored on another dataset than the training one: config hash `{elsewhere.get('dataset_hash')}`, "
+        f"config `{elsewhere.get('dataset_config')}`.",
+    ]
     val = elsewhere.get("validation") or {}
     if val:
-        lines.append(f"On its val split: relMSE {val['relmse']:.5f} against the noisy input's {val['relmse_noisy']:.5f} "
-                     f"(ratio {val['relmse_ratio']:.3f}) over {val['frames']} frames.")
+        lines.append(
+            f"On its val split: relMSE {val['relmse']:.5f} against the noisy input's {val['relmse_noisy']:.5f} "
+            f"(ratio {val['relmse_ratio']:.3f}) over {val['frames']} frames."
+        )
     lines.append(_overlap_line(evaluation, meta))
     return lines
 
@@ -140,7 +160,9 @@ def _stage_lines(meta: dict) -> list[str]:
             f"* {meta.get('steps')} steps of batch {meta.get('batch_size')} × {meta.get('crop')}² crops"
             + f", spp {meta.get('spp')}, Adam lr {meta.get('lr')} (of the last command), seed {meta.get('seed')}, torch {meta.get('torch')}"
         ]
-    lines = [f"* {meta.get('steps')} steps in {len(stages)} stage(s), seed {meta.get('seed')}, torch {meta.get('torch')}:"]
+    lines = [
+        f"* {meta.get('steps')} steps in {len(stages)} stage(s), seed {meta.get('seed')}, torch {meta.get('torch')}:"
+    ]
     for number, (run, stage) in enumerate(stages, 1):
         lines.append(
             f"  {number}. {f'run {run}, ' if earlier else ''}steps {stage['from_step']}–{stage['from_step'] + stage['steps']}: batch {stage['batch_size']} × "
@@ -192,9 +214,12 @@ def render_card(
         f"* weights: `{file_name}` ({file_bytes / 1024:.0f} KiB, {parameters:,} parameters, float32); "
         "load with `load_denoiser(\"" + model + "\")` (default) or `--option checkpoint=PATH` for your own",
         f"* configuration `{config_name}`: `{config}`"
-        + ("" if named_config is None or named_config == config else
-           f" (the shape these weights were first trained in; today's `{config_name}` is `{named_config}`: "
-           "`--init-from` keeps a checkpoint's shape)"),
+        + (
+            ""
+            if named_config is None or named_config == config
+            else f" (the shape these weights were first trained in; today's `{config_name}` is `{named_config}`: "
+            "`--init-from` keeps a checkpoint's shape)"
+        ),
         f"* inputs: {', '.join(meta.get('buffers', []))} (+ color); trained against {', '.join(meta.get('targets', []))}",
         "",
         "## How it was made (exact commands)",
@@ -204,13 +229,23 @@ def render_card(
         "```",
         "",
         "The last command, run with `--ship denoisebench/models/weights`"
-        + ("" if list(evaluation["ratio"]) == ["identity", "cross_bilateral"] else f" `--peers {','.join(evaluation['ratio'])}`")
+        + (
+            ""
+            if list(evaluation["ratio"]) == ["identity", "cross_bilateral"]
+            else f" `--peers {','.join(evaluation['ratio'])}`"
+        )
         + " added, also scored the test split and wrote these weights (without optimiser state) and this card."
-        + (" It adds no steps (`--steps 0`): it validates and ships the checkpoint the command before it wrote."
-           if train_commands and " --steps 0 " in f"{train_commands[-1]} " and not scored_elsewhere else "")
-        + (" It adds no steps (`--steps 0`): it scores the weights the commands before it made on the val and test"
-           " splits of the dataset made by the second `generate-dataset` command, not the one they were trained on."
-           if scored_elsewhere else ""),
+        + (
+            " It adds no steps (`--steps 0`): it validates and ships the checkpoint the command before it wrote."
+            if train_commands and " --steps 0 " in f"{train_commands[-1]} " and not scored_elsewhere
+            else ""
+        )
+        + (
+            " It adds no steps (`--steps 0`): it scores the weights the commands before it made on the val and test"
+            " splits of the dataset made by the second `generate-dataset` command, not the one they were trained on."
+            if scored_elsewhere
+            else ""
+        ),
         "",
         *_earlier_run_lines(meta),
         f"* dataset config hash `{meta.get('dataset_hash')}`; config `{meta.get('dataset_config')}`",
@@ -239,20 +274,28 @@ def render_card(
         f"## Held-out scenes (test split: {evaluation['frames']} frames per denoiser, every spp)",
         "",
         "relMSE = mean((p−r)²/(r²+0.01)), linear HDR, mean over frames (`denoisebench.metrics`)"
-        + ("; intervals: 95% percentile bootstrap over the test scenes (each resampled scene brings all its frames)."
-           if evaluation.get("relmse_ci95") else "."),
+        + (
+            "; intervals: 95% percentile bootstrap over the test scenes (each resampled scene brings all its frames)."
+            if evaluation.get("relmse_ci95")
+            else "."
+        ),
         "",
         "| denoiser | relMSE | " + " | ".join(f"spp {s}" for s in evaluation["relmse_by_spp"][model]) + " |",
         "|---|---|" + "---|" * len(evaluation["relmse_by_spp"][model]),
     ]
     for name, value in relmse.items():
         by_spp = evaluation["relmse_by_spp"][name]
-        lines.append(f"| {name} | {value:.5f}{_interval(evaluation, 'relmse_ci95', name)} | "
-                     + " | ".join(f"{v:.5f}" for v in by_spp.values()) + " |")
+        lines.append(
+            f"| {name} | {value:.5f}{_interval(evaluation, 'relmse_ci95', name)} | "
+            + " | ".join(f"{v:.5f}" for v in by_spp.values())
+            + " |"
+        )
     lines += [""]
     for peer, ratio in evaluation["ratio"].items():
-        lines.append(f"* against {peer}: relMSE {ours:.5f} vs {relmse[peer]:.5f}, ratio {ratio:.3f} ({_pct(ours, relmse[peer])})"
-                     + _ratio_interval(evaluation, peer))
+        lines.append(
+            f"* against {peer}: relMSE {ours:.5f} vs {relmse[peer]:.5f}, ratio {ratio:.3f} ({_pct(ours, relmse[peer])})"
+            + _ratio_interval(evaluation, peer)
+        )
     lines += [
         "",
         "## Limits",

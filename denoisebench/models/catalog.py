@@ -8,13 +8,13 @@ on K-frame crop sequences. ``recipes`` holds each configuration's training defau
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 from torch import nn
 
-from . import lbf, pcn, rae
-from .features import OPTIONAL_BUFFERS
+from denoisebench.models import lbf, pcn, rae
+from denoisebench.models.features import OPTIONAL_BUFFERS
 
 
 @dataclass(frozen=True)
@@ -33,19 +33,43 @@ class ModelSpec:
 
 MODELS: dict[str, ModelSpec] = {
     # The paper's recipe: each branch trained on its own lobe with L1, no combined-colour loss.
-    "dpcn": ModelSpec("dpcn", pcn.make_dpcn, pcn.DPCN_CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS,
-                      recipes={"paper": {"loss": "lobes"}}),
-    "kpcn": ModelSpec("kpcn", pcn.make_kpcn, pcn.KPCN_CONFIGS, False, ("color", "diffuse", "specular"), OPTIONAL_BUFFERS,
-                      recipes={"paper": {"loss": "lobes"}}),
+    "dpcn": ModelSpec(
+        "dpcn",
+        pcn.make_dpcn,
+        pcn.DPCN_CONFIGS,
+        False,
+        ("color", "diffuse", "specular"),
+        OPTIONAL_BUFFERS,
+        recipes={"paper": {"loss": "lobes"}},
+    ),
+    "kpcn": ModelSpec(
+        "kpcn",
+        pcn.make_kpcn,
+        pcn.KPCN_CONFIGS,
+        False,
+        ("color", "diffuse", "specular"),
+        OPTIONAL_BUFFERS,
+        recipes={"paper": {"loss": "lobes"}},
+    ),
     # The paper's recipe: 128 px crops (where the scenes are that large), windows played both ways
     # (the small configuration plays both ways too).
     "rae": ModelSpec(
-        "rae", rae.make_rae, rae.CONFIGS, True, ("color",), ("albedo", "normal", "depth", "roughness", "position"),
+        "rae",
+        rae.make_rae,
+        rae.CONFIGS,
+        True,
+        ("color",),
+        ("albedo", "normal", "depth", "roughness", "position"),
         recipes={"paper": {"crop": 128, "play_backward": True}, "small": {"play_backward": True}},
     ),
     # The paper's loss, relative MSE of the filtered image, in every configuration.
     "lbf": ModelSpec(
-        "lbf", lbf.make_lbf, lbf.CONFIGS, False, ("color",), ("color_var", "albedo", "normal", "depth"),
+        "lbf",
+        lbf.make_lbf,
+        lbf.CONFIGS,
+        False,
+        ("color",),
+        ("color_var", "albedo", "normal", "depth"),
         recipes={"small": {"loss": "relmse"}, "paper": {"loss": "relmse"}},
     ),
 }

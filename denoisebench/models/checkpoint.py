@@ -27,8 +27,7 @@ import torch
 from torch import nn
 
 from denoisebench.errors import UserInputError
-
-from .catalog import MODELS, build_model
+from denoisebench.models.catalog import MODELS, build_model
 
 FORMAT = "denoisebench-checkpoint"
 VERSION = 1

@@ -26,10 +26,9 @@ import torch
 from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.protocol import DenoiserBase
 from denoisebench.denoisers.registry import DenoiserUnavailableError
-
-from .checkpoint import load_checkpoint, model_from_checkpoint
-from .features import exposure, frame_tensors, to_image
-from .provenance import all_train_scenes
+from denoisebench.models.checkpoint import load_checkpoint, model_from_checkpoint
+from denoisebench.models.features import exposure, frame_tensors, to_image
+from denoisebench.models.provenance import all_train_scenes
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
 
@@ -98,9 +97,13 @@ class PCNDenoiser(LearnedDenoiser):
             for left in range(0, width, self.tile):
                 y0, x0 = max(0, top - self.halo), max(0, left - self.halo)
                 y1, x1 = min(height, top + self.tile + self.halo), min(width, left + self.tile + self.halo)
-                part = self.model({k: v if k == "exposure" else v[..., y0:y1, x0:x1] for k, v in tensors.items()})["color"]
+                part = self.model({k: v if k == "exposure" else v[..., y0:y1, x0:x1] for k, v in tensors.items()})[
+                    "color"
+                ]
                 rows, cols = min(self.tile, height - top), min(self.tile, width - left)
-                out[..., top : top + rows, left : left + cols] = part[..., top - y0 : top - y0 + rows, left - x0 : left - x0 + cols]
+                out[..., top : top + rows, left : left + cols] = part[
+                    ..., top - y0 : top - y0 + rows, left - x0 : left - x0 + cols
+                ]
         return out
 
 
@@ -147,4 +150,3 @@ class LBFDenoiser(LearnedDenoiser):
     name = "lbf"
     model_name = "lbf"
     needs = frozenset({"color", "albedo", "normal", "depth"})
-

@@ -170,7 +170,9 @@ def feature_stack(buffers: dict[str, torch.Tensor], like: torch.Tensor, log_dept
     normal = _get(buffers, "normal", 3, like).clamp(-1.0, 1.0)
     depth = torch.log1p(raw_depth)
     aux = torch.cat([albedo, normal, depth], dim=1)
-    variances = [_variance_channel(_get(buffers, f"{name}_var", _CHANNELS[name], like)) for name in ("albedo", "normal")]
+    variances = [
+        _variance_channel(_get(buffers, f"{name}_var", _CHANNELS[name], like)) for name in ("albedo", "normal")
+    ]
     depth_var = _get(buffers, "depth_var", _CHANNELS["depth"], like)
     if log_depth_var:
         depth_var = depth_var.clamp_min(0.0) / (1.0 + raw_depth) ** 2

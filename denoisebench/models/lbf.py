@@ -59,7 +59,7 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .features import _get, albedo_factor, normalize_radiance, safe, to_log
+from denoisebench.models.features import _get, albedo_factor, normalize_radiance, safe, to_log
 
 #: Floor of the colour distance's noise normaliser (log-colour variance units).
 COLOR_VAR_EPS = 1e-3
@@ -194,8 +194,12 @@ class LBF(nn.Module):
     """
 
     def __init__(
-        self, radius: int = 5, hidden: list[int] | tuple[int, ...] = (10,), blocks: list[int] | tuple[int, ...] = (3, 7),
-        var_median: bool = False, demodulate: bool = False,
+        self,
+        radius: int = 5,
+        hidden: list[int] | tuple[int, ...] = (10,),
+        blocks: list[int] | tuple[int, ...] = (3, 7),
+        var_median: bool = False,
+        demodulate: bool = False,
     ):
         super().__init__()
         self.var_median = bool(var_median)
@@ -223,7 +227,9 @@ class LBF(nn.Module):
             starts = [INIT_BANDWIDTHS["alpha"], INIT_BANDWIDTHS["beta"]] + [INIT_BANDWIDTHS["gamma"]] * len(FEATURES)
             head.bias.copy_(torch.tensor([_softplus_inverse(_precision(s)) for s in starts]))
 
-    def precisions(self, buffers: dict[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, torch.Tensor], torch.Tensor]:
+    def precisions(
+        self, buffers: dict[str, torch.Tensor]
+    ) -> tuple[torch.Tensor, dict[str, torch.Tensor], torch.Tensor]:
         """(precisions, primary features, output scale) for raw buffers; with ``demodulate`` the scale
         is per pixel (exposure × albedo factor)."""
         buffers, scale = normalize_radiance(buffers)
@@ -265,8 +271,9 @@ def filter_image(primary: dict[str, torch.Tensor], precisions: torch.Tensor, rad
     normaliser = torch.zeros_like(var_i)
     size = 2 * radius + 1
     if not (torch.is_grad_enabled() and precisions.requires_grad):
-        return _filter_in_place(padded_guides, guides, padded_var, padded_color, alpha, beta, gammas, var_i,
-                                numerator, normaliser, radius)
+        return _filter_in_place(
+            padded_guides, guides, padded_var, padded_color, alpha, beta, gammas, var_i, numerator, normaliser, radius
+        )
     for dy in range(size):
         for dx in range(size):
             window = (slice(None), slice(None), slice(dy, dy + height), slice(dx, dx + width))
@@ -282,8 +289,9 @@ def filter_image(primary: dict[str, torch.Tensor], precisions: torch.Tensor, rad
     return numerator / normaliser
 
 
-def _filter_in_place(padded_guides, guides, padded_var, padded_color, alpha, beta, gammas, var_i,
-                     numerator, normaliser, radius):
+def _filter_in_place(
+    padded_guides, guides, padded_var, padded_color, alpha, beta, gammas, var_i, numerator, normaliser, radius
+):
     """:func:`filter_image`'s sums without autograd: the same arithmetic, buffers reused in place
     (inference; about half the time of the differentiable loop)."""
     height, width = var_i.shape[-2:]
@@ -310,7 +318,10 @@ def _filter_in_place(padded_guides, guides, padded_var, padded_color, alpha, bet
 
 
 def make_lbf(
-    radius: int = 5, hidden: list[int] | tuple[int, ...] = (10,), blocks: list[int] | tuple[int, ...] = (3, 7),
-    var_median: bool = False, demodulate: bool = False,
+    radius: int = 5,
+    hidden: list[int] | tuple[int, ...] = (10,),
+    blocks: list[int] | tuple[int, ...] = (3, 7),
+    var_median: bool = False,
+    demodulate: bool = False,
 ) -> LBF:
     return LBF(radius, hidden, blocks, var_median, demodulate)

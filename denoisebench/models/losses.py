@@ -37,7 +37,7 @@ import numpy as np
 import torch
 from torch.nn import functional as F
 
-from .features import safe, to_log
+from denoisebench.models.features import safe, to_log
 
 LOSS_WEIGHTS = {"spatial": 0.8, "gradient": 0.1, "temporal": 0.1}
 RELMSE_EPS = 0.01
@@ -116,15 +116,19 @@ def frame_weights(frames: int) -> torch.Tensor:
     return weights / weights.sum()
 
 
-def rae_sequence_loss(preds: list[torch.Tensor], refs: list[torch.Tensor], kind: str = "log") -> dict[str, torch.Tensor]:
+def rae_sequence_loss(
+    preds: list[torch.Tensor], refs: list[torch.Tensor], kind: str = "log"
+) -> dict[str, torch.Tensor]:
     """0.8·L_s + 0.1·L_g + 0.1·L_t, each a weighted sum over frames (L_t from the second frame on)."""
     weights = frame_weights(len(preds))
     spatial_fn = SPATIAL[kind]
     spatial = sum(w * spatial_fn(p, r) for w, p, r in zip(weights, preds, refs))
     gradient = sum(w * gradient_l1(p, r) for w, p, r in zip(weights, preds, refs))
-    temporal = sum(
-        weights[t] * temporal_l1(preds[t], preds[t - 1], refs[t], refs[t - 1]) for t in range(1, len(preds))
-    ) if len(preds) > 1 else torch.zeros(())
+    temporal = (
+        sum(weights[t] * temporal_l1(preds[t], preds[t - 1], refs[t], refs[t - 1]) for t in range(1, len(preds)))
+        if len(preds) > 1
+        else torch.zeros(())
+    )
     total = (
         LOSS_WEIGHTS["spatial"] * spatial + LOSS_WEIGHTS["gradient"] * gradient + LOSS_WEIGHTS["temporal"] * temporal
     )
@@ -149,7 +153,9 @@ def _exposed(out: dict[str, torch.Tensor], batch: dict[str, torch.Tensor]) -> tu
     return exposed_out, exposed_batch
 
 
-def pcn_loss(out: dict[str, torch.Tensor], batch: dict[str, torch.Tensor], kind: str = "log") -> dict[str, torch.Tensor]:
+def pcn_loss(
+    out: dict[str, torch.Tensor], batch: dict[str, torch.Tensor], kind: str = "log"
+) -> dict[str, torch.Tensor]:
     """Spatial loss (SPATIAL[kind]) on colour, plus log L1 on each branch against its reference lobe when the batch has it.
 
     ``kind="lobes"`` is Bako et al.'s recipe: only the two branch losses (L1 of log(1 + x) of each

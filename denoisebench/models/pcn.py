@@ -44,15 +44,22 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .features import LOG_MAX as LOG_MAX_OUTPUT
-from .features import PCN_INPUT_CHANNELS, from_log, normalize_radiance, pcn_inputs, safe
+from denoisebench.models.features import LOG_MAX as LOG_MAX_OUTPUT
+from denoisebench.models.features import PCN_INPUT_CHANNELS, from_log, normalize_radiance, pcn_inputs, safe
 
 #: Logits beyond this carry no extra information (exp(±50) spans every float32 ratio) and keep softmax finite.
 LOGIT_MAX = 50.0
 
 #: Bako et al.'s branch: 9 layers of 100 channels, 5×5, Xavier-initialised; 21×21 kernels for KPCN.
-PAPER_CONFIG = {"layers": 9, "channels": 100, "kernel": 5, "kernel_size": 21, "init": "xavier", "log_depth_var": True,
-                "bound_output": True}
+PAPER_CONFIG = {
+    "layers": 9,
+    "channels": 100,
+    "kernel": 5,
+    "kernel_size": 21,
+    "init": "xavier",
+    "log_depth_var": True,
+    "bound_output": True,
+}
 
 # DPCN and KPCN share every configuration (depth, width, receptive field, initialisation), so the
 # lecture's comparison (KPCN converges faster) compares the output form alone
@@ -90,8 +97,15 @@ PAPER_CONFIG = {"layers": 9, "channels": 100, "kernel": 5, "kernel_size": 21, "i
 # here, more than the shape. Those weights are shipped (dpcn_small.md lists both runs).
 # Torch's default initialisation in the small configuration (the shipped kpcn_small.pt's; on
 # the unit tests' toy batch Xavier's larger start made KPCN's first steps at lr 5e-3 overshoot).
-SMALL_CONFIG = {"layers": 6, "channels": 24, "kernel": 5, "kernel_size": 21, "head_kernel": 1, "log_depth_var": True,
-                "bound_output": True}
+SMALL_CONFIG = {
+    "layers": 6,
+    "channels": 24,
+    "kernel": 5,
+    "kernel_size": 21,
+    "head_kernel": 1,
+    "log_depth_var": True,
+    "bound_output": True,
+}
 
 DPCN_CONFIGS = {"paper": dict(PAPER_CONFIG), "small": dict(SMALL_CONFIG)}
 KPCN_CONFIGS = {"paper": dict(PAPER_CONFIG), "small": dict(SMALL_CONFIG)}
@@ -108,7 +122,12 @@ def receptive_field(config: dict) -> int:
 
 
 def conv_stack(
-    in_channels: int, out_channels: int, layers: int, channels: int, kernel: int, head_kernel: int | None = None,
+    in_channels: int,
+    out_channels: int,
+    layers: int,
+    channels: int,
+    kernel: int,
+    head_kernel: int | None = None,
     init: str = "default",
 ) -> nn.Sequential:
     """``layers`` convolutions with ReLU between (none after the last), 'same' zero padding.
@@ -203,8 +222,17 @@ class PCN(nn.Module):
     """
 
     def __init__(
-        self, mode: str, layers: int, channels: int, kernel: int, kernel_size: int = 21, head_kernel: int | None = None,
-        init: str = "default", log_depth_var: bool = False, bound_output: bool = False, log_offset: float = 0.0,
+        self,
+        mode: str,
+        layers: int,
+        channels: int,
+        kernel: int,
+        kernel_size: int = 21,
+        head_kernel: int | None = None,
+        init: str = "default",
+        log_depth_var: bool = False,
+        bound_output: bool = False,
+        log_offset: float = 0.0,
     ):
         super().__init__()
         #: DPCN: with log_offset ε > 0 the head outputs log(x + ε) of the normalised lobe instead of
@@ -243,7 +271,9 @@ class PCN(nn.Module):
                 for branch in (self.diffuse, self.specular):
                     branch[-1].bias[centre] += math.log(kernel_size * kernel_size - 1)
 
-    def _branch(self, net: nn.Module, inputs: torch.Tensor, noisy: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None]:
+    def _branch(
+        self, net: nn.Module, inputs: torch.Tensor, noisy: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
         out = net(inputs)
         if self.mode == "direct":
             if self.bound_output:
@@ -285,15 +315,32 @@ class PCN(nn.Module):
         return out
 
 
-def make_dpcn(layers: int, channels: int, kernel: int, kernel_size: int = 21, head_kernel: int | None = None,
-              init: str = "default", log_depth_var: bool = False, bound_output: bool = False,
-              log_offset: float = 0.0) -> PCN:
-    return PCN("direct", layers, channels, kernel, kernel_size, head_kernel, init, log_depth_var, bound_output,
-               log_offset)
+def make_dpcn(
+    layers: int,
+    channels: int,
+    kernel: int,
+    kernel_size: int = 21,
+    head_kernel: int | None = None,
+    init: str = "default",
+    log_depth_var: bool = False,
+    bound_output: bool = False,
+    log_offset: float = 0.0,
+) -> PCN:
+    return PCN(
+        "direct", layers, channels, kernel, kernel_size, head_kernel, init, log_depth_var, bound_output, log_offset
+    )
 
 
-def make_kpcn(layers: int, channels: int, kernel: int, kernel_size: int = 21, head_kernel: int | None = None,
-              init: str = "default", log_depth_var: bool = False, bound_output: bool = False) -> PCN:
+def make_kpcn(
+    layers: int,
+    channels: int,
+    kernel: int,
+    kernel_size: int = 21,
+    head_kernel: int | None = None,
+    init: str = "default",
+    log_depth_var: bool = False,
+    bound_output: bool = False,
+) -> PCN:
     # bound_output is accepted for the shared configurations and has no effect: a kernel's output is
     # already a convex combination of the noisy window
     return PCN("kernel", layers, channels, kernel, kernel_size, head_kernel, init, log_depth_var)

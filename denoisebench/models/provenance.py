@@ -56,18 +56,20 @@ def stages_from_commands(commands: list[str], meta: dict, default_loss) -> list[
         if steps <= 0:
             continue
         spp = flags.get("--spp")
-        stages.append({
-            "steps": steps,
-            "from_step": done,
-            "lr": float(flags.get("--lr", "0.001")),
-            "lr_schedule": flags.get("--lr-schedule", "constant"),
-            "loss": flags.get("--loss") or default_loss(flags.get("--config", "small")),
-            "batch_size": int(flags.get("--batch-size", meta.get("batch_size", 8))),
-            "crop": int(flags.get("--crop", meta.get("crop", 32))),
-            "spp": [int(s) for s in spp.split(",")] if spp else meta.get("spp"),
-            "device": flags.get("--device", "cpu"),
-            "threads": int(flags.get("--threads", "1")),
-        })
+        stages.append(
+            {
+                "steps": steps,
+                "from_step": done,
+                "lr": float(flags.get("--lr", "0.001")),
+                "lr_schedule": flags.get("--lr-schedule", "constant"),
+                "loss": flags.get("--loss") or default_loss(flags.get("--config", "small")),
+                "batch_size": int(flags.get("--batch-size", meta.get("batch_size", 8))),
+                "crop": int(flags.get("--crop", meta.get("crop", 32))),
+                "spp": [int(s) for s in spp.split(",")] if spp else meta.get("spp"),
+                "device": flags.get("--device", "cpu"),
+                "threads": int(flags.get("--threads", "1")),
+            }
+        )
         done += steps
     return stages
 
@@ -77,14 +79,18 @@ def run_record(meta: dict, checkpoint: str, default_loss) -> dict:
     commands = [c for c in meta.get("commands", []) if command_steps(c) > 0]
     stages = meta.get("stages") or stages_from_commands(commands, meta, default_loss)
     record = {key: meta[key] for key in DATA_FIELDS if key in meta}
-    record.update({
-        "checkpoint": str(checkpoint),
-        "steps": int(meta.get("steps", 0)),
-        "seconds": float(meta.get("seconds", 0.0)),
-        "commands": commands,
-        "stages": [dict(stage, dataset_hash=stage.get("dataset_hash", meta.get("dataset_hash"))) for stage in stages],
-        "validation": meta.get("validation"),
-    })
+    record.update(
+        {
+            "checkpoint": str(checkpoint),
+            "steps": int(meta.get("steps", 0)),
+            "seconds": float(meta.get("seconds", 0.0)),
+            "commands": commands,
+            "stages": [
+                dict(stage, dataset_hash=stage.get("dataset_hash", meta.get("dataset_hash"))) for stage in stages
+            ],
+            "validation": meta.get("validation"),
+        }
+    )
     return record
 
 

@@ -38,7 +38,14 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from .features import RAE_INPUT_CHANNELS, RAE_VIEW_INPUT_CHANNELS, exposure, from_log, normalize_radiance, rae_inputs
+from denoisebench.models.features import (
+    RAE_INPUT_CHANNELS,
+    RAE_VIEW_INPUT_CHANNELS,
+    exposure,
+    from_log,
+    normalize_radiance,
+    rae_inputs,
+)
 
 CONFIGS = {
     # The paper's encoder widths (32, 43, 57, 76, 101), a 144-channel bottleneck, its 7 inputs
@@ -47,8 +54,13 @@ CONFIGS = {
     # sequence_exposure: one exposure per sequence (its first lit frame's), so the normalisation
     # itself cannot flicker (the small configuration too, since its retraining; the weights shipped
     # at 0d282b3 record per-frame exposure in their checkpoint and keep it).
-    "paper": {"levels": [32, 43, 57, 76, 101], "bottleneck": 144, "demodulate": True, "view_normals": True,
-              "sequence_exposure": True},
+    "paper": {
+        "levels": [32, 43, 57, 76, 101],
+        "bottleneck": 144,
+        "demodulate": True,
+        "view_normals": True,
+        "sequence_exposure": True,
+    },
     # Residual: the direct form, same data and recipe, scored 0.087 relMSE on the held-out scenes
     # (painting unseen colours wrong, see Notes); the residual one 0.0317, 48% below
     # cross_bilateral (model card). Not demodulated: the direct form with it scored worse (0.101).
@@ -57,8 +69,13 @@ CONFIGS = {
     # `train --model rae --data /tmp/t19/data --steps 3000 --loss relative --lr-schedule cosine
     # --val-every 1500 --set residual=false`, reached val relMSE 0.0517 at 1500 steps and 0.0480 at
     # 3000, the residual one 0.0368 and 0.0351: residual kept, chosen on val.
-    "small": {"levels": [12, 18, 24, 32], "bottleneck": 40, "demodulate": False, "residual": True,
-              "sequence_exposure": True},
+    "small": {
+        "levels": [12, 18, 24, 32],
+        "bottleneck": 40,
+        "demodulate": False,
+        "residual": True,
+        "sequence_exposure": True,
+    },
 }
 
 
@@ -83,8 +100,13 @@ class RecurrentAutoencoder(nn.Module):
     """U-Net with a recurrent block at every encoder level and at the bottleneck."""
 
     def __init__(
-        self, levels: list[int], bottleneck: int, demodulate: bool = False, residual: bool = False,
-        view_normals: bool = False, sequence_exposure: bool = False,
+        self,
+        levels: list[int],
+        bottleneck: int,
+        demodulate: bool = False,
+        residual: bool = False,
+        view_normals: bool = False,
+        sequence_exposure: bool = False,
     ):
         super().__init__()
         if not levels:
@@ -169,7 +191,11 @@ class RecurrentAutoencoder(nn.Module):
 
 
 def make_rae(
-    levels: list[int], bottleneck: int, demodulate: bool = False, residual: bool = False, view_normals: bool = False,
+    levels: list[int],
+    bottleneck: int,
+    demodulate: bool = False,
+    residual: bool = False,
+    view_normals: bool = False,
     sequence_exposure: bool = False,
 ) -> RecurrentAutoencoder:
     return RecurrentAutoencoder(levels, bottleneck, demodulate, residual, view_normals, sequence_exposure)

@@ -54,12 +54,11 @@ import torch
 
 from denoisebench.dataset.reader import Dataset, open_dataset
 from denoisebench.errors import UserInputError
-
-from .catalog import build_model, get_spec, model_config
-from .checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
-from .features import frame_tensors
-from .losses import PCN_KINDS, SPATIAL, pcn_loss, rae_sequence_loss, relmse
-from .provenance import run_record
+from denoisebench.models.catalog import build_model, get_spec, model_config
+from denoisebench.models.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
+from denoisebench.models.features import frame_tensors
+from denoisebench.models.losses import PCN_KINDS, SPATIAL, pcn_loss, rae_sequence_loss, relmse
+from denoisebench.models.provenance import run_record
 
 
 @dataclass
@@ -78,7 +77,9 @@ class TrainOptions:
     lr: float = 1e-3
     spp: list[int] | None = None  # None: every noisy spp of the dataset
     sequence_length: int = 7
-    loss: str | None = None  # losses.SPATIAL name or one of losses.PCN_KINDS; None: the configuration's recipe, else "log"
+    loss: str | None = (
+        None  # losses.SPATIAL name or one of losses.PCN_KINDS; None: the configuration's recipe, else "log"
+    )
     val_every: int = 0  # 0: validate once, at the end
     val_frames: int = 8  # per val scene and spp
     checkpoint_every: int = 100
@@ -188,7 +189,9 @@ class _EpochItems(torch.utils.data.Dataset):
         return self.base[index]
 
 
-def _batch_plan(length: int, batch_size: int, seed: int, per_epoch: int, start: int, total: int) -> list[list[tuple[int, int]]]:
+def _batch_plan(
+    length: int, batch_size: int, seed: int, per_epoch: int, start: int, total: int
+) -> list[list[tuple[int, int]]]:
     """Batches of ``(epoch, index)`` for steps ``start`` to ``total``: batch *b* of epoch *e* is
     :func:`_batches`'s, so a resumed run continues with the batches the uninterrupted one had."""
     plan = []
@@ -279,7 +282,8 @@ def apply_overrides(spec, config: dict, overrides: dict) -> dict:
     for key, value in overrides.items():
         if key not in accepted:
             raise UserInputError(
-                f"--set {key}: not a {spec.name} configuration key (keys: {', '.join(sorted(accepted))})")
+                f"--set {key}: not a {spec.name} configuration key (keys: {', '.join(sorted(accepted))})"
+            )
         if key in config and config[key] is not None and isinstance(config[key], bool) != isinstance(value, bool):
             raise UserInputError(f"--set {key}={value!r}: expected a value like {config[key]!r}")
         out[key] = value
@@ -304,7 +308,14 @@ def _make_dataset(spec, ds, scenes, spp, options, buffers, targets):
         frames = min(options.sequence_length, min(ds.scene(s).frame_count for s in scenes))
         backward = bool(recipe_value(spec, options.config, "play_backward", options.play_backward, False))
         dataset = SequenceCropDataset(
-            ds, scenes, spp, frames=frames, crop=crop, buffers=buffers, targets=targets, seed=options.seed,
+            ds,
+            scenes,
+            spp,
+            frames=frames,
+            crop=crop,
+            buffers=buffers,
+            targets=targets,
+            seed=options.seed,
             play_backward=backward,
         )
         return dataset, crop, frames
@@ -320,7 +331,9 @@ def train(options: TrainOptions) -> dict:
         raise UserInputError(f"--steps must be >= 0 (got {options.steps})")
     loss_kind = resolve_loss(spec, options.config, options.loss)
     if options.lr_schedule not in LR_SCHEDULES:
-        raise UserInputError(f"unknown learning-rate schedule {options.lr_schedule!r}; schedules: {', '.join(LR_SCHEDULES)}")
+        raise UserInputError(
+            f"unknown learning-rate schedule {options.lr_schedule!r}; schedules: {', '.join(LR_SCHEDULES)}"
+        )
     device = resolve_device(options.device)
     threads = max(1, min(int(options.threads), max_threads()))
     torch.set_num_threads(threads)
@@ -351,12 +364,16 @@ def train(options: TrainOptions) -> dict:
             raise UserInputError(f"{options.resume}: trained with config {payload['config']}, not {config}")
         trained_on = payload["meta"].get("dataset_hash")
         if options.steps > 0 and trained_on not in (None, ds.config_hash):
-            raise UserInputError(f"{options.resume}: trained on another dataset (config hash {trained_on[:12]}…, "
-                                 f"this one {ds.config_hash[:12]}…); --resume continues a run on its own data: "
-                                 "--init-from fine-tunes the weights on this one, --steps 0 scores them")
+            raise UserInputError(
+                f"{options.resume}: trained on another dataset (config hash {trained_on[:12]}…, "
+                f"this one {ds.config_hash[:12]}…); --resume continues a run on its own data: "
+                "--init-from fine-tunes the weights on this one, --steps 0 scores them"
+            )
         if "optimizer" not in payload and options.steps > 0:
-            raise UserInputError(f"{options.resume}: has no optimiser state (shipped weights cannot be resumed; "
-                                 "--init-from fine-tunes them, --steps 0 scores them)")
+            raise UserInputError(
+                f"{options.resume}: has no optimiser state (shipped weights cannot be resumed; "
+                "--init-from fine-tunes them, --steps 0 scores them)"
+            )
         model = model_from_checkpoint(payload).to(device)
         optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
         if "optimizer" in payload:
@@ -366,8 +383,18 @@ def train(options: TrainOptions) -> dict:
         if options.steps == 0 and payload["meta"].get("dataset_hash") not in (None, ds.config_hash):
             rescoring = True
             meta = dict(payload["meta"])  # the training run's record stays as it was
-        kept = ("steps", "seconds", "skipped_steps", "history", "commands", "threads", "stages", "validation_history",
-                "devices", "earlier_runs")
+        kept = (
+            "steps",
+            "seconds",
+            "skipped_steps",
+            "history",
+            "commands",
+            "threads",
+            "stages",
+            "validation_history",
+            "devices",
+            "earlier_runs",
+        )
         meta.update({k: payload["meta"][k] for k in kept if k in payload["meta"]})
     elif options.init_from:
         payload = load_checkpoint(options.init_from, expect_model=spec.name)
@@ -376,23 +403,31 @@ def train(options: TrainOptions) -> dict:
         if options.overrides:
             raise UserInputError("--init-from keeps the checkpoint's configuration: --set cannot change it")
         if payload.get("config_name") not in (None, options.config):
-            raise UserInputError(f"{options.init_from}: weights of the {payload['config_name']!r} configuration; "
-                                 f"add --config {payload['config_name']}")
+            raise UserInputError(
+                f"{options.init_from}: weights of the {payload['config_name']!r} configuration; "
+                f"add --config {payload['config_name']}"
+            )
         config = payload["config"]  # the weights' own shape (the shipped dpcn_small.pt predates the small config)
         model = model_from_checkpoint(payload).to(device)
         optimizer = torch.optim.Adam(model.parameters(), lr=options.lr)
         earlier = payload["meta"]
-        meta.update({
-            "steps": int(earlier.get("steps", 0)),  # the batch order continues from here
-            "seconds": float(earlier.get("seconds", 0.0)),  # the weights' whole training time
-            "threads": list(earlier.get("threads", [])),
-            "devices": list(earlier.get("devices", [])),
-            "earlier_runs": [*earlier.get("earlier_runs", []), run_record(
-                earlier, options.init_from, lambda name: resolve_loss(spec, name, None))],
-        })
+        meta.update(
+            {
+                "steps": int(earlier.get("steps", 0)),  # the batch order continues from here
+                "seconds": float(earlier.get("seconds", 0.0)),  # the weights' whole training time
+                "threads": list(earlier.get("threads", [])),
+                "devices": list(earlier.get("devices", [])),
+                "earlier_runs": [
+                    *earlier.get("earlier_runs", []),
+                    run_record(earlier, options.init_from, lambda name: resolve_loss(spec, name, None)),
+                ],
+            }
+        )
 
     dataset, crop, frames = _make_dataset(spec, ds, train_scenes, spp, options, buffers, targets)
-    out = Path(options.out or f"checkpoints/{spec.name}_{options.config if isinstance(options.config, str) else 'custom'}.pt")
+    out = Path(
+        options.out or f"checkpoints/{spec.name}_{options.config if isinstance(options.config, str) else 'custom'}.pt"
+    )
     data_fields = {
         "dataset": str(Path(options.data).resolve()),
         "dataset_hash": ds.config_hash,
@@ -425,10 +460,14 @@ def train(options: TrainOptions) -> dict:
     if int(meta["steps"]) > 0 and not meta.get("commands") and options.resume:
         # A checkpoint from before commands were recorded: rebuild its command from its metadata.
         earlier = TrainOptions(
-            model=spec.name, data=options.data, config=payload.get("config_name") or options.config,
-            steps=int(meta["steps"]), seed=int(payload["meta"].get("seed", 0)),
+            model=spec.name,
+            data=options.data,
+            config=payload.get("config_name") or options.config,
+            steps=int(meta["steps"]),
+            seed=int(payload["meta"].get("seed", 0)),
             batch_size=int(payload["meta"].get("batch_size", options.batch_size)),
-            crop=int(payload["meta"].get("crop", crop)), lr=float(payload["meta"].get("lr", options.lr)),
+            crop=int(payload["meta"].get("crop", crop)),
+            lr=float(payload["meta"].get("lr", options.lr)),
             sequence_length=int(payload["meta"].get("sequence_length", options.sequence_length)),
         )
         meta["commands"] = [command_line(earlier, str(options.resume))]
@@ -439,13 +478,25 @@ def train(options: TrainOptions) -> dict:
         meta["devices"] = sorted(set(meta.get("devices", [])) | {device.type})
         # One record per command (stage) of a multi-stage run: what the card lists.
         meta.setdefault("stages", []).append(
-            {"steps": int(options.steps), "from_step": int(meta["steps"]), "lr": options.lr, "lr_schedule": options.lr_schedule,
-             "loss": loss_kind, "batch_size": options.batch_size, "crop": crop, "spp": spp, "device": device.type,
-             "threads": threads, "dataset_hash": ds.config_hash}
+            {
+                "steps": int(options.steps),
+                "from_step": int(meta["steps"]),
+                "lr": options.lr,
+                "lr_schedule": options.lr_schedule,
+                "loss": loss_kind,
+                "batch_size": options.batch_size,
+                "crop": crop,
+                "spp": spp,
+                "device": device.type,
+                "threads": threads,
+                "dataset_hash": ds.config_hash,
+            }
         )
     start_step, total = int(meta["steps"]), int(meta["steps"]) + int(options.steps)
     per_epoch = len(_batches(len(dataset), options.batch_size, options.seed, 0))
-    workers = options.workers if options.workers is not None else (min(4, max_threads()) if device.type == "cuda" else 0)
+    workers = (
+        options.workers if options.workers is not None else (min(4, max_threads()) if device.type == "cuda" else 0)
+    )
     model.train()
     started = time.perf_counter()
     bar = tqdm(total=options.steps, desc=f"train {spec.name}", unit="step", disable=not options.progress)
@@ -513,15 +564,29 @@ def strip_for_shipping(src: str | Path, dst: str | Path) -> Path:
     payload = load_checkpoint(src)
     model = model_from_checkpoint(payload)
     meta = {k: v for k, v in payload["meta"].items() if k != "history"}
-    return save_checkpoint(dst, payload["model"], payload["config"], model, meta, config_name=payload.get("config_name"))
+    return save_checkpoint(
+        dst, payload["model"], payload["config"], model, meta, config_name=payload.get("config_name")
+    )
 
 
 def command_line(options: TrainOptions, out: str) -> str:
     """The ``denoisebench train`` command that runs ``options`` (recorded in the checkpoint for model cards)."""
     import shlex
 
-    parts = ["denoisebench", "train", "--model", options.model, "--data", str(options.data),
-             "--config", str(options.config), "--steps", str(options.steps), "--out", out]
+    parts = [
+        "denoisebench",
+        "train",
+        "--model",
+        options.model,
+        "--data",
+        str(options.data),
+        "--config",
+        str(options.config),
+        "--steps",
+        str(options.steps),
+        "--out",
+        out,
+    ]
     if options.resume:
         parts += ["--resume", str(options.resume)]
     if options.init_from:

@@ -168,7 +168,9 @@ class SceneBuilder:
         shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(_r(metallic))
         shader.CreateInput("ior", Sdf.ValueTypeNames.Float).Set(_r(ior))
         shader.CreateInput("opacity", Sdf.ValueTypeNames.Float).Set(_r(opacity))
-        shader.CreateInput("emissiveColor", Sdf.ValueTypeNames.Color3f).Set(_color(emissive if emissive is not None else 0.0))
+        shader.CreateInput("emissiveColor", Sdf.ValueTypeNames.Color3f).Set(
+            _color(emissive if emissive is not None else 0.0)
+        )
         mat.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
         if diffuse_texture or roughness_texture:
             reader = UsdShade.Shader.Define(self.stage, f"{path}/StReader")
@@ -226,7 +228,9 @@ class SceneBuilder:
         if data.normals is not None:
             nrm = np.round(np.asarray(data.normals, dtype=np.float64), _DECIMALS) + 0.0
             mesh.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(nrm.astype(np.float32)))
-            mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex if data.normals_interpolation == "vertex" else UsdGeom.Tokens.faceVarying)
+            mesh.SetNormalsInterpolation(
+                UsdGeom.Tokens.vertex if data.normals_interpolation == "vertex" else UsdGeom.Tokens.faceVarying
+            )
         if data.st is not None:
             interp = UsdGeom.Tokens.vertex if data.st_interpolation == "vertex" else UsdGeom.Tokens.faceVarying
             pv = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, interp)
@@ -236,7 +240,9 @@ class SceneBuilder:
         self.bind(mesh, material)
         return mesh
 
-    def subset(self, mesh: UsdGeom.Mesh, name: str, faces, material: UsdShade.Material, family_type: str = "nonOverlapping") -> UsdGeom.Subset:
+    def subset(
+        self, mesh: UsdGeom.Mesh, name: str, faces, material: UsdShade.Material, family_type: str = "nonOverlapping"
+    ) -> UsdGeom.Subset:
         """A ``materialBind`` GeomSubset of ``mesh``'s faces, bound to ``material``.
 
         ``family_type`` is "nonOverlapping" (faces outside every subset keep the mesh's own
@@ -269,7 +275,9 @@ class SceneBuilder:
         c.CreateExtentAttr(Vt.Vec3fArray([_vec3f([-h] * 3), _vec3f([h] * 3)]))
         return c
 
-    def cylinder(self, name, radius, height, axis, material, translate=None, rotate=None, scale=None) -> UsdGeom.Cylinder:
+    def cylinder(
+        self, name, radius, height, axis, material, translate=None, rotate=None, scale=None
+    ) -> UsdGeom.Cylinder:
         c = self._gprim(UsdGeom.Cylinder, name, material, translate, rotate, scale)
         c.CreateRadiusAttr(_r(radius))
         c.CreateHeightAttr(_r(height))
@@ -279,7 +287,9 @@ class SceneBuilder:
         c.CreateExtentAttr(Vt.Vec3fArray([_vec3f(-ext), _vec3f(ext)]))
         return c
 
-    def plane(self, name, width, length, axis, material, translate=None, rotate=None, scale=None, double_sided=True) -> UsdGeom.Plane:
+    def plane(
+        self, name, width, length, axis, material, translate=None, rotate=None, scale=None, double_sided=True
+    ) -> UsdGeom.Plane:
         p = self._gprim(UsdGeom.Plane, name, material, translate, rotate, scale, double_sided=double_sided)
         p.CreateWidthAttr(_r(width))
         p.CreateLengthAttr(_r(length))
@@ -303,7 +313,9 @@ class SceneBuilder:
         """Matrix placing a light (or anything facing −Z) at ``eye`` facing ``target``."""
         return look_at(eye, target, self.up)
 
-    def rect_light(self, name, width, height, intensity, color=(1, 1, 1), exposure=0.0, translate=None, rotate=None, matrix=None):
+    def rect_light(
+        self, name, width, height, intensity, color=(1, 1, 1), exposure=0.0, translate=None, rotate=None, matrix=None
+    ):
         light = self._light(UsdLux.RectLight, name, intensity, color, exposure, translate, rotate, matrix)
         light.CreateWidthAttr(_r(width))
         light.CreateHeightAttr(_r(height))
@@ -315,7 +327,9 @@ class SceneBuilder:
         light.CreateTreatAsPointAttr(False)
         return light
 
-    def disk_light(self, name, radius, intensity, color=(1, 1, 1), exposure=0.0, translate=None, rotate=None, matrix=None):
+    def disk_light(
+        self, name, radius, intensity, color=(1, 1, 1), exposure=0.0, translate=None, rotate=None, matrix=None
+    ):
         light = self._light(UsdLux.DiskLight, name, intensity, color, exposure, translate, rotate, matrix)
         light.CreateRadiusAttr(_r(radius))
         return light

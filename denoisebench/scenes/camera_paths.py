@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+
 def _unit(v) -> np.ndarray:
     v = np.asarray(v, dtype=np.float64)
     n = float(np.linalg.norm(v))

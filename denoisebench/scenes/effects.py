@@ -2,7 +2,7 @@
 
 A scene family declares its effects in the stage's ``customLayerData`` (see :data:`METADATA_KEY`);
 the translator also infers them from the stage and reports a mismatch. Extend the vocabulary
-deliberately, with a test: the render plan (``denoisebench.generator.render_plan``) decides what to
+deliberately, with a test: the render plan (``denoisebench.generator.contract.render_plan``) decides what to
 simulate from these names.
 """
 

@@ -28,7 +28,7 @@ class MeshData:
     def triangles(self) -> int:
         return int(np.sum(self.counts - 2))
 
-    def transformed(self, scale=(1.0, 1.0, 1.0), translate=(0.0, 0.0, 0.0)) -> "MeshData":
+    def transformed(self, scale=(1.0, 1.0, 1.0), translate=(0.0, 0.0, 0.0)) -> MeshData:
         """A copy with points scaled then translated (normals rescaled for non-uniform scale)."""
         s = np.asarray(scale, dtype=np.float64)
         pts = self.points * s + np.asarray(translate, dtype=np.float64)
@@ -62,7 +62,9 @@ def quad(corners, st=((0, 0), (1, 0), (1, 1), (0, 1))) -> MeshData:
     p = np.asarray(corners, dtype=np.float64)
     n = np.cross(p[1] - p[0], p[3] - p[0])
     n /= np.linalg.norm(n)
-    return MeshData(p, np.array([4]), np.arange(4), np.repeat(n[None], 4, axis=0), "vertex", np.asarray(st, dtype=np.float64))
+    return MeshData(
+        p, np.array([4]), np.arange(4), np.repeat(n[None], 4, axis=0), "vertex", np.asarray(st, dtype=np.float64)
+    )
 
 
 def grid(size_u: float, size_v: float, nu: int, nv: int, axis: str = "y", st_repeat: float = 1.0) -> MeshData:
@@ -143,7 +145,15 @@ def box_shared(size=(1.0, 1.0, 1.0)) -> MeshData:
             idx.append(int(np.argmin(np.abs(corners - p).sum(axis=1))))
             nrm.append(n)
             st.append(uv)
-    return MeshData(corners * half, np.full(6, 4), np.asarray(idx), np.asarray(nrm), "faceVarying", np.asarray(st, dtype=np.float64), "faceVarying")
+    return MeshData(
+        corners * half,
+        np.full(6, 4),
+        np.asarray(idx),
+        np.asarray(nrm),
+        "faceVarying",
+        np.asarray(st, dtype=np.float64),
+        "faceVarying",
+    )
 
 
 def uv_sphere(radius: float, segments: int = 24, rings: int = 12, center=(0.0, 0.0, 0.0), up: str = "y") -> MeshData:
@@ -175,7 +185,9 @@ def uv_sphere(radius: float, segments: int = 24, rings: int = 12, center=(0.0, 0
                 faces.append([a, a + row, a + row + 1, a + 1])
     counts = np.asarray([len(f) for f in faces])
     indices = np.asarray([i for f in faces for i in f])
-    return MeshData(np.asarray(pts), counts, indices, np.asarray(nrm), "vertex", np.asarray(st, dtype=np.float64), "vertex")
+    return MeshData(
+        np.asarray(pts), counts, indices, np.asarray(nrm), "vertex", np.asarray(st, dtype=np.float64), "vertex"
+    )
 
 
 def strip(p0, p1, width: float, side) -> MeshData:
@@ -219,4 +231,12 @@ def grass_blades(rng: np.random.Generator, count: int, area: float, height: floa
         b = base
         idx += [b + 0, b + 1, b + 3, b + 2, b + 2, b + 3, b + 5, b + 4, b + 4, b + 5, b + 6]
         base += len(ring)
-    return MeshData(np.concatenate(pts), np.asarray(counts), np.asarray(idx), np.concatenate(nrm), "vertex", np.concatenate(st).astype(np.float64), "vertex")
+    return MeshData(
+        np.concatenate(pts),
+        np.asarray(counts),
+        np.asarray(idx),
+        np.concatenate(nrm),
+        "vertex",
+        np.concatenate(st).astype(np.float64),
+        "vertex",
+    )

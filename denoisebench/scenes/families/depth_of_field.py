@@ -37,13 +37,24 @@ def build(b: SceneBuilder, rng: np.random.Generator) -> None:
                 b.cube(f"Cube{k}_{j}", c, mat, translate=(x, c / 2, zz), rotate=(0.0, rng.uniform(0.0, 90.0), 0.0))
             else:
                 hgt = rng.uniform(0.3, 0.6) * scale
-                b.cylinder(f"Cylinder{k}_{j}", rng.uniform(0.03, 0.06) * scale, hgt, "Y", mat, translate=(x, hgt / 2, zz))
+                b.cylinder(
+                    f"Cylinder{k}_{j}", rng.uniform(0.03, 0.06) * scale, hgt, "Y", mat, translate=(x, hgt / 2, zz)
+                )
 
     # Small emissive balls far behind: bokeh discs when out of focus.
     for i in range(int(rng.integers(10, 17))):
-        glow = b.material(f"Glow{i}", diffuse=(0.0, 0.0, 0.0), roughness=1.0,
-                          emissive=rng.uniform(4.0, 12.0) * np.array([1.0, rng.uniform(0.5, 0.9), rng.uniform(0.2, 0.6)]))
-        b.sphere(f"Bokeh{i}", rng.uniform(0.03, 0.06), glow, translate=(rng.uniform(-3.0, 3.0), rng.uniform(0.4, 2.5), rng.uniform(-16.0, -12.0)))
+        glow = b.material(
+            f"Glow{i}",
+            diffuse=(0.0, 0.0, 0.0),
+            roughness=1.0,
+            emissive=rng.uniform(4.0, 12.0) * np.array([1.0, rng.uniform(0.5, 0.9), rng.uniform(0.2, 0.6)]),
+        )
+        b.sphere(
+            f"Bokeh{i}",
+            rng.uniform(0.03, 0.06),
+            glow,
+            translate=(rng.uniform(-3.0, 3.0), rng.uniform(0.4, 2.5), rng.uniform(-16.0, -12.0)),
+        )
 
     # Key light overhead and a fill from behind the camera.
     b.disk_light("Key", 1.0, intensity=rng.uniform(6.0, 10.0), matrix=b.aim((0.0, 5.0, -3.0), (0.0, 0.0, -3.0)))
@@ -57,4 +68,6 @@ def build(b: SceneBuilder, rng: np.random.Generator) -> None:
     poses = camera_paths.truck((-0.1, eye_y, 3.0), (0.1, eye_y, 3.0), (0.0, -tilt, -1.0), b.frames, b.up)
     # Focus distance is measured along the view axis: the row's z distance / cos(tilt angle).
     focus = distances[focus_row] / np.cos(np.arctan(tilt))
-    b.camera(poses, focal_length_mm=65.0, fstop=rng.uniform(1.2, MAX_FSTOP), focus_distance=focus, clipping=(0.05, 100.0))
+    b.camera(
+        poses, focal_length_mm=65.0, fstop=rng.uniform(1.2, MAX_FSTOP), focus_distance=focus, clipping=(0.05, 100.0)
+    )

@@ -23,12 +23,19 @@ def build(b: SceneBuilder, rng: np.random.Generator) -> None:
     shelf_w = rng.uniform(1.6, 2.2)
     shelf_x = rng.uniform(-0.8, 0.2)
     b.cube("Shelf", 1.0, wood, translate=(shelf_x, 1.0, -1.55), scale=(shelf_w, 2.0, 0.35))
-    b.rect_light("HiddenLight", shelf_w * 0.7, 0.35, intensity=rng.uniform(30.0, 50.0),
-                 color=(1.0, rng.uniform(0.75, 0.85), rng.uniform(0.55, 0.65)),
-                 matrix=b.aim((shelf_x, 1.6, -1.74), (shelf_x, 1.6, -3.0)))
+    b.rect_light(
+        "HiddenLight",
+        shelf_w * 0.7,
+        0.35,
+        intensity=rng.uniform(30.0, 50.0),
+        color=(1.0, rng.uniform(0.75, 0.85), rng.uniform(0.55, 0.65)),
+        matrix=b.aim((shelf_x, 1.6, -1.74), (shelf_x, 1.6, -3.0)),
+    )
 
     # Furniture: a table, a low sofa, a ball.
-    cloth = b.material("Cloth", diffuse=(rng.uniform(0.1, 0.5), rng.uniform(0.1, 0.4), rng.uniform(0.2, 0.5)), roughness=1.0)
+    cloth = b.material(
+        "Cloth", diffuse=(rng.uniform(0.1, 0.5), rng.uniform(0.1, 0.4), rng.uniform(0.2, 0.5)), roughness=1.0
+    )
     tx, tz = rng.uniform(-0.4, 0.4), rng.uniform(-0.2, 0.4)
     b.cube("TableTop", 1.0, wood, translate=(tx, 0.72, tz), scale=(1.2, 0.05, 0.7))
     for i, (sx, sz) in enumerate(((-1, -1), (1, -1), (1, 1), (-1, 1))):

@@ -38,14 +38,25 @@ def build(b: SceneBuilder, rng: np.random.Generator) -> None:
     # The fireflies' source: one or two tiny, intense sphere lights behind the objects.
     for k in range(int(rng.integers(1, 3))):
         radius = rng.uniform(0.01, 0.025)
-        b.sphere_light(f"TinyLight{k}", radius, intensity=rng.uniform(2.0e4, 6.0e4),
-                       color=(1.0, rng.uniform(0.85, 0.95), rng.uniform(0.7, 0.85)),
-                       translate=(rng.uniform(-1.5, 1.5), rng.uniform(0.8, 1.8), rng.uniform(-2.8, -1.8)))
+        b.sphere_light(
+            f"TinyLight{k}",
+            radius,
+            intensity=rng.uniform(2.0e4, 6.0e4),
+            color=(1.0, rng.uniform(0.85, 0.95), rng.uniform(0.7, 0.85)),
+            translate=(rng.uniform(-1.5, 1.5), rng.uniform(0.8, 1.8), rng.uniform(-2.8, -1.8)),
+        )
     # A weak fill so the diffuse parts are not black.
     b.rect_light("Fill", 2.0, 1.0, intensity=rng.uniform(0.4, 0.8), matrix=b.aim((0.0, 3.0, 3.0), (0.0, 0.3, 0.0)))
 
     # Partial orbit around the arc.
     start = 90.0 + rng.uniform(-15.0, 15.0)
-    poses = camera_paths.orbit((0.0, 0.3, 0.0), rng.uniform(3.6, 4.2), rng.uniform(0.5, 0.9), start,
-                               rng.choice([-1.0, 1.0]) * rng.uniform(12.0, 20.0), b.frames, b.up)
+    poses = camera_paths.orbit(
+        (0.0, 0.3, 0.0),
+        rng.uniform(3.6, 4.2),
+        rng.uniform(0.5, 0.9),
+        start,
+        rng.choice([-1.0, 1.0]) * rng.uniform(12.0, 20.0),
+        b.frames,
+        b.up,
+    )
     b.camera(poses, focal_length_mm=32.0, clipping=(0.05, 50.0))

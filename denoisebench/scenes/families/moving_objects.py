@@ -59,15 +59,25 @@ def build(b: SceneBuilder, rng: np.random.Generator) -> None:
     slide = rng.choice([-1.0, 1.0]) * rng.uniform(*SLIDE_PER_FRAME)
     start = -slide * (b.frames - 1) / 2.0
     turn = rng.choice([-1.0, 1.0]) * rng.uniform(6.0, 12.0)
-    box_tex = b.texture("slider", textures.stripes(128, int(rng.integers(4, 8)), rng.uniform(0.6, 1.0, 3), rng.uniform(0.0, 0.2, 3), angle_deg=30.0))
-    box = b.mesh("Slider", geometry.box(size=(0.8, 0.8, 0.8)), b.material("Slider", roughness=0.6, diffuse_texture=box_tex))
+    box_tex = b.texture(
+        "slider",
+        textures.stripes(
+            128, int(rng.integers(4, 8)), rng.uniform(0.6, 1.0, 3), rng.uniform(0.0, 0.2, 3), angle_deg=30.0
+        ),
+    )
+    box = b.mesh(
+        "Slider", geometry.box(size=(0.8, 0.8, 0.8)), b.material("Slider", roughness=0.6, diffuse_texture=box_tex)
+    )
     _animate(box, [(start + slide * f, 0.4, -1.4) for f in frames], [turn * f for f in frames])
 
     # Ball: in front of the pillars, diagonal travel, rolling about the vertical axis.
     radius = rng.uniform(0.25, 0.35)
     ball_tex = b.texture("ball", textures.stripes(128, 8, (0.95, 0.35, 0.1), (0.1, 0.1, 0.4), angle_deg=90.0))
-    ball = b.mesh("Ball", geometry.uv_sphere(radius, segments=32, rings=16),
-                  b.material("Ball", roughness=0.4, diffuse_texture=ball_tex))
+    ball = b.mesh(
+        "Ball",
+        geometry.uv_sphere(radius, segments=32, rings=16),
+        b.material("Ball", roughness=0.4, diffuse_texture=ball_tex),
+    )
     travel = np.array([-slide * 0.8, 0.0, 0.12])
     ball_start = np.array([slide * 0.8 * (b.frames - 1) / 2.0, radius, 0.5])
     roll = np.degrees(np.linalg.norm(travel) / radius)
@@ -75,7 +85,11 @@ def build(b: SceneBuilder, rng: np.random.Generator) -> None:
 
     # Spinner: rotation only, on the right.
     spin = rng.choice([-1.0, 1.0]) * rng.uniform(8.0, 15.0)
-    spinner = b.mesh("Spinner", geometry.box(size=(0.5, 1.0, 0.5)), b.material("Spinner", diffuse=rng.uniform(0.2, 0.8, 3), roughness=0.5))
+    spinner = b.mesh(
+        "Spinner",
+        geometry.box(size=(0.5, 1.0, 0.5)),
+        b.material("Spinner", diffuse=rng.uniform(0.2, 0.8, 3), roughness=0.5),
+    )
     _animate(spinner, [(2.0, 0.5, 0.2)] * b.frames, [spin * f for f in frames])
 
     # Overhead soft light and a small fill.

@@ -32,8 +32,14 @@ def build(b: SceneBuilder, rng: np.random.Generator) -> None:
         else:
             r = rng.uniform(0.3, 0.5)
             stretch = rng.uniform(1.5, 2.5)
-            b.mesh(f"Pebble{i}", geometry.uv_sphere(r, 24, 12), mat, translate=(x, r * 0.7, z),
-                   rotate=(0.0, rng.uniform(0.0, 180.0), 0.0), scale=(stretch, 0.7, 1.0))
+            b.mesh(
+                f"Pebble{i}",
+                geometry.uv_sphere(r, 24, 12),
+                mat,
+                translate=(x, r * 0.7, z),
+                rotate=(0.0, rng.uniform(0.0, 180.0), 0.0),
+                scale=(stretch, 0.7, 1.0),
+            )
     stone = b.material("Stone", diffuse=(0.45, 0.43, 0.4), roughness=0.9)
     for i in range(int(rng.integers(3, 6))):
         r = rng.uniform(0.1, 0.25)
@@ -44,11 +50,23 @@ def build(b: SceneBuilder, rng: np.random.Generator) -> None:
     sky = b.texture("sky", textures.sky_latlong(512, 256, sun_az, sun_el, sun_radius_deg=3.0))
     b.dome_light("Sky", intensity=rng.uniform(0.8, 1.2), texture=sky)
     el, az = np.deg2rad(sun_el), np.deg2rad(sun_az)
-    b.distant_light("Sun", 0.53, intensity=rng.uniform(3.0, 5.0), color=(1.0, 0.94, 0.82),
-                    direction=-np.array([np.cos(el) * np.cos(az), np.sin(el), np.cos(el) * np.sin(az)]))
+    b.distant_light(
+        "Sun",
+        0.53,
+        intensity=rng.uniform(3.0, 5.0),
+        color=(1.0, 0.94, 0.82),
+        direction=-np.array([np.cos(el) * np.cos(az), np.sin(el), np.cos(el) * np.sin(az)]),
+    )
 
     # Handheld orbit: a slow arc with a walking wobble.
-    base = camera_paths.orbit((0.0, 0.5, 0.0), rng.uniform(5.5, 7.0), rng.uniform(1.2, 2.0), rng.uniform(0.0, 360.0),
-                              rng.choice([-1.0, 1.0]) * rng.uniform(10.0, 20.0), b.frames, b.up)
+    base = camera_paths.orbit(
+        (0.0, 0.5, 0.0),
+        rng.uniform(5.5, 7.0),
+        rng.uniform(1.2, 2.0),
+        rng.uniform(0.0, 360.0),
+        rng.choice([-1.0, 1.0]) * rng.uniform(10.0, 20.0),
+        b.frames,
+        b.up,
+    )
     poses = camera_paths.handheld_shake(base, rng, translate_amp=0.03, rotate_amp_deg=0.4)
     b.camera(poses, focal_length_mm=35.0, clipping=(0.05, 200.0))

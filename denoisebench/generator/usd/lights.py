@@ -30,11 +30,12 @@ the color by ``UsdLux.BlackbodyTemperatureAsRgb(colorTemperature)``.
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
-from denoisebench.generator.usd_geometry import area_of, mesh_entry, tessellate_plane
-from denoisebench.generator.usd_stage import check_finite
-from denoisebench.generator.usd_textures import read_environment
+from denoisebench.generator.usd.geometry import area_of, mesh_entry, tessellate_plane
+from denoisebench.generator.usd.stage import check_finite
+from denoisebench.generator.usd.textures import read_environment
 
 #: Widest DistantLight ``angle`` (degrees) rendered as a delta light without a warning.
 SUN_ANGLE_LIMIT = 1.0
@@ -122,7 +123,9 @@ def read_light(prim, to_world: np.ndarray, warnings: list[str]) -> tuple[list[di
         radius = float(_input(light, "radius", path, 0.5))
         scale = float(np.cbrt(abs(np.linalg.det(to_world[:3, :3]))))
         world_radius = radius * scale
-        as_point = bool(_input(light, "treatAsPoint", path, False, prefix="")) or bool(_input(light, "treatAsPoint", path, False))
+        as_point = bool(_input(light, "treatAsPoint", path, False, prefix="")) or bool(
+            _input(light, "treatAsPoint", path, False)
+        )
         if as_point or world_radius <= 0:
             # A point light carrying the sphere's power: flux L·π·4πr² = 4π·I  →  I = π r² L.
             if normalize or world_radius <= 0:
@@ -140,7 +143,9 @@ def read_light(prim, to_world: np.ndarray, warnings: list[str]) -> tuple[list[di
             warnings.append(f"{path}: DistantLight angle {angle:g}° rendered as a delta light (hard shadows)")
         direction = to_world[:3, :3] @ np.array([0.0, 0.0, -1.0])
         direction /= max(np.linalg.norm(direction), 1e-20)
-        return [], [{"type": "directional", "direction": direction.tolist(), "irradiance": radiance.tolist(), "prim": path}]
+        return [], [
+            {"type": "directional", "direction": direction.tolist(), "irradiance": radiance.tolist(), "prim": path}
+        ]
     # DomeLight
     texture = _input(light, "texture:file", path)
     rotation = to_world[:3, :3] / np.maximum(np.linalg.norm(to_world[:3, :3], axis=0), 1e-20)
@@ -149,10 +154,19 @@ def read_light(prim, to_world: np.ndarray, warnings: list[str]) -> tuple[list[di
         if image is not None:
             tint = radiance / max(float(radiance.max()), 1e-20)
             if not np.allclose(tint, 1.0):
-                warnings.append(f"{path}: DomeLight color tint with a texture is not supported; its luminance scale is used")
-            return [], [{"type": "envmap", "data": image, "scale": float(radiance.max()), "rotation": rotation.tolist(), "prim": path}]
+                warnings.append(
+                    f"{path}: DomeLight color tint with a texture is not supported; its luminance scale is used"
+                )
+            return [], [
+                {
+                    "type": "envmap",
+                    "data": image,
+                    "scale": float(radiance.max()),
+                    "rotation": rotation.tolist(),
+                    "prim": path,
+                }
+            ]
     return [], [{"type": "constant", "radiance": radiance.tolist(), "prim": path}]
-
 
 
 def _point_or_spot(prim, light, to_world, intensity, shaped, path, warnings) -> dict:
@@ -182,5 +196,11 @@ def _point_or_spot(prim, light, to_world, intensity, shaped, path, warnings) -> 
     up = np.cross(forward, right)
     frame = np.eye(4)
     frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = right, up, forward, position
-    return {"type": "spot", "to_world": frame.tolist(), "intensity": intensity.tolist(), "prim": path,
-            "cutoff_angle": angle, "beam_width": angle * min(1.0 - softness, 0.999)}  # equal angles: 1/0 in Mitsuba
+    return {
+        "type": "spot",
+        "to_world": frame.tolist(),
+        "intensity": intensity.tolist(),
+        "prim": path,
+        "cutoff_angle": angle,
+        "beam_width": angle * min(1.0 - softness, 0.999),
+    }  # equal angles: 1/0 in Mitsuba

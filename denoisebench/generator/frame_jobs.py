@@ -11,7 +11,7 @@ the seed of every render is the scene's ``render_seed``. The same job gives bit-
 in any process, which is what makes resuming and the Ray executor byte-identical to a plain run.
 
 References: with ``ref_error`` (``--ref-error``) a frame's reference is adaptive
-(:mod:`~denoisebench.generator.reference_render`): rounds with fresh, deterministic seeds until its
+(:mod:`~denoisebench.generator.render.reference`): rounds with fresh, deterministic seeds until its
 estimated noise floor is at most ``ref_error``, with ``ref_spp`` as the cap; the manifest records
 the spp used, the seconds and the floor (``reference_adaptive``). Without it, one render at
 ``ref_spp``. Either way the plan comes from the job's options and the stage's own ``maxDepth``.
@@ -48,7 +48,7 @@ class FrameJob:
 
     ``stage_key`` is the scene's stage digest (workers cache the loaded scene under it);
     ``usd_path`` is where the stage is on the driver's disk (used when the stage files are not
-    shipped with the job); ``options`` are :class:`~denoisebench.generator.render_plan.RenderOptions`
+    shipped with the job); ``options`` are :class:`~denoisebench.generator.contract.render_plan.RenderOptions`
     fields.
     """
 
@@ -90,13 +90,14 @@ class _LoadedScene:
     """A translated stage, its render plan and its Mitsuba scene, ready to render."""
 
     def __init__(self, usd_path: Path, options: dict):
-        from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
-        from denoisebench.generator.render_plan import RenderOptions, make_render_plan
-        from denoisebench.generator.translate import translate_usd
+        from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
+        from denoisebench.generator.render.scene import build_mitsuba_scene
+        from denoisebench.generator.usd.translate import translate_usd
 
         self.translated = translate_usd(usd_path)
-        self.plan = make_render_plan(self.translated.effects, RenderOptions(**options),
-                                     stage_max_depth=self.translated.max_depth)
+        self.plan = make_render_plan(
+            self.translated.effects, RenderOptions(**options), stage_max_depth=self.translated.max_depth
+        )
         self.scene = build_mitsuba_scene(self.translated)
         self._frame_scene: tuple = (0, self.scene)
 
@@ -104,7 +105,7 @@ class _LoadedScene:
         """The Mitsuba scene of ``frame``: the one scene, or for moving objects that frame's (the last kept)."""
         if not self.translated.moving:
             return self.scene
-        from denoisebench.generator.mitsuba_scene import build_mitsuba_scene
+        from denoisebench.generator.render.scene import build_mitsuba_scene
 
         if self._frame_scene[0] != frame:
             self._frame_scene = (frame, build_mitsuba_scene(self.translated, frame=frame))
@@ -138,7 +139,7 @@ def sweep_stale_stage_dirs(root: Path | None = None) -> int:
     the folders of dead pids. Folders of live processes (this one included) are left alone."""
     removed = 0
     for folder in Path(root or tempfile.gettempdir()).glob(f"{_STAGE_PREFIX}*-*-*"):
-        parts = folder.name[len(_STAGE_PREFIX):].split("-")
+        parts = folder.name[len(_STAGE_PREFIX) :].split("-")
         if len(parts) != 3 or not parts[1].isdigit() or not folder.is_dir() or _pid_alive(int(parts[1])):
             continue
         shutil.rmtree(folder, ignore_errors=True)
@@ -178,17 +179,26 @@ def _timed_render(loaded: _LoadedScene, job: FrameJob, spp: int, reference: bool
     ``seed``: the sampler seed (default: the job's ``render_seed``; adaptive reference rounds pass their own)."""
     import drjit as dr
 
-    from denoisebench.generator.feature_renderer import render_frame
+    from denoisebench.generator.render.frame import render_frame
 
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     dr.kernel_history()  # drains (and so clears) the history of earlier launches
-    out = render_frame(loaded.scene_at(job.frame), loaded.translated.camera, job.frame, loaded.plan, width=job.width,
-                       height=job.height, spp=spp, seed=job.render_seed if seed is None else seed,
-                       reference=reference)
-    compile_ms = sum(float(entry.get("backend_time", 0.0)) for entry in dr.kernel_history() if not entry.get("cache_hit"))
+    out = render_frame(
+        loaded.scene_at(job.frame),
+        loaded.translated.camera,
+        job.frame,
+        loaded.plan,
+        width=job.width,
+        height=job.height,
+        spp=spp,
+        seed=job.render_seed if seed is None else seed,
+        reference=reference,
+    )
+    compile_ms = sum(
+        float(entry.get("backend_time", 0.0)) for entry in dr.kernel_history() if not entry.get("cache_hit")
+    )
     compile_seconds = min(compile_ms / 1000.0, out.seconds)
-    return Render(spp, out.buffers, None if reference else out.samples, out.seconds - compile_seconds,
-                       compile_seconds)
+    return Render(spp, out.buffers, None if reference else out.samples, out.seconds - compile_seconds, compile_seconds)
 
 
 def render_job(job: FrameJob, stage_files: dict[str, bytes] | None = None) -> RenderedJob:
@@ -206,11 +216,12 @@ def _render_reference(loaded: _LoadedScene, job: FrameJob) -> Render:
     """The frame's reference: one render at ``ref_spp``, or adaptive rounds when ``ref_error`` is set."""
     if job.ref_error is None:
         return _timed_render(loaded, job, job.ref_spp, reference=True)
-    from denoisebench.generator.reference_render import render_adaptive, round_seed
+    from denoisebench.generator.render.reference import render_adaptive, round_seed
 
     def render_round(index: int, round_spp: int):
-        render = _timed_render(loaded, job, round_spp, reference=True,
-                               seed=round_seed(job.render_seed, job.frame, index))
+        render = _timed_render(
+            loaded, job, round_spp, reference=True, seed=round_seed(job.render_seed, job.frame, index)
+        )
         return render.buffers, render.seconds, render.compile_seconds
 
     outcome = render_adaptive(render_round, job.ref_spp, job.ref_error)
@@ -219,26 +230,41 @@ def _render_reference(loaded: _LoadedScene, job: FrameJob) -> Render:
 
 def write_rendered(writer, result: RenderedJob) -> int:
     """Record every render of ``result`` with ``writer``; return the number of files' worth written."""
+
     def extra(render: Render) -> dict:
         return {"camera_pose": result.pose, "jit_compile_seconds": render.compile_seconds}
 
     for render in result.noisy:
-        writer.write_frame(result.scene, result.frame, render.spp, render.buffers, render.samples,
-                           seconds=render.seconds, extra=extra(render))
+        writer.write_frame(
+            result.scene,
+            result.frame,
+            render.spp,
+            render.buffers,
+            render.samples,
+            seconds=render.seconds,
+            extra=extra(render),
+        )
     if result.reference is not None:
         ref = result.reference
         more = extra(ref)
         if ref.adaptive is not None:
             more["reference_adaptive"] = ref.adaptive
         writer.write_reference(
-            result.scene, result.frame, ref.buffers["color"], ref.buffers["color_var"], ref.seconds,
-            spp=ref.spp, buffers={k: ref.buffers[k] for k in REFERENCE_EXTRA if k in ref.buffers}, extra=more,
+            result.scene,
+            result.frame,
+            ref.buffers["color"],
+            ref.buffers["color_var"],
+            ref.seconds,
+            spp=ref.spp,
+            buffers={k: ref.buffers[k] for k in REFERENCE_EXTRA if k in ref.buffers},
+            extra=more,
         )
     return len(result.noisy) + (result.reference is not None)
 
 
-def missing_jobs(writer, scene: str, stage_key: str, usd_path: str, render_seed: int, options: dict,
-                 ref_error: float | None = None) -> list[FrameJob]:
+def missing_jobs(
+    writer, scene: str, stage_key: str, usd_path: str, render_seed: int, options: dict, ref_error: float | None = None
+) -> list[FrameJob]:
     """The jobs still needed for ``scene`` (frames whose every file is intact are skipped)."""
     record = writer.manifest["scenes"][scene]
     jobs = []
@@ -248,7 +274,19 @@ def missing_jobs(writer, scene: str, stage_key: str, usd_path: str, render_seed:
         if ref_spp and writer.is_done(scene, frame, layout.REFERENCE):
             ref_spp = None
         if spp or ref_spp:
-            jobs.append(FrameJob(scene, frame, stage_key, usd_path, spp, ref_spp, record["width"], record["height"],
-                                 render_seed, dict(options), ref_error))
+            jobs.append(
+                FrameJob(
+                    scene,
+                    frame,
+                    stage_key,
+                    usd_path,
+                    spp,
+                    ref_spp,
+                    record["width"],
+                    record["height"],
+                    render_seed,
+                    dict(options),
+                    ref_error,
+                )
+            )
     return jobs
-

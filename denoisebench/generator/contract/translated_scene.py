@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from denoisebench.generator.camera_track import CameraTrack
+from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.scenes.effects import DECLARED_ONLY, validate_effects
 
 
@@ -27,7 +27,7 @@ class TranslatedScene:
         source: path of the stage file, when it came from one.
         family, seed: denoisebench metadata when a scene family authored the stage.
         max_depth: the stage's own path-depth restriction, ``customLayerData["denoisebench"]["maxDepth"]``
-            (None when absent: full transport; see :mod:`~denoisebench.generator.render_plan`).
+            (None when absent: full transport; see :mod:`~denoisebench.generator.contract.render_plan`).
     """
 
     scene_dict: dict

@@ -1,8 +1,8 @@
 """Render one frame's buffers (DESIGN.md, "Buffers") in one pass with our own Dr.Jit path tracer.
 
 :func:`render_frame` is what the dataset writer calls. It generates camera rays itself
-(:mod:`~denoisebench.generator.render_camera`: box pixel filter, pinhole or thin lens, camera motion
-blur) and traces them with :mod:`~denoisebench.generator.render_integrator`, an unbiased estimator
+(:mod:`~denoisebench.generator.render.camera`: box pixel filter, pinhole or thin lens, camera motion
+blur) and traces them with :mod:`~denoisebench.generator.render.integrator`, an unbiased estimator
 of the image Mitsuba's ``path`` integrator renders at the same ``max_depth``, which also yields the
 diffuse/specular split and every feature. One kernel per pass computes all of it: each lane loops over
 samples of its pixel keeping running (Welford) moments, and when a small image gives a pixel several
@@ -47,9 +47,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from denoisebench.generator.camera_track import CameraTrack
-from denoisebench.generator.render_camera import CameraSwitches, DrCamera, camera_setup, camera_switches, camera_values
-from denoisebench.generator.render_integrator import (
+from denoisebench.generator.contract.camera_track import CameraTrack
+from denoisebench.generator.contract.render_plan import RenderPlan
+from denoisebench.generator.render.camera import CameraSwitches, DrCamera, camera_setup, camera_switches, camera_values
+from denoisebench.generator.render.integrator import (
+    NULL_SKIPS,
     KernelOptions,
     moment_layout,
     pixel_moments,
@@ -57,9 +59,7 @@ from denoisebench.generator.render_integrator import (
     scene_has_delta_only_bsdf,
     scene_has_null_bsdf,
     scene_has_object_motion,
-    NULL_SKIPS,
 )
-from denoisebench.generator.render_plan import RenderPlan
 from denoisebench.mitsuba_runtime import load_mitsuba
 
 #: Most paths traced by one kernel launch (bounds per-sample memory and the length of one launch).
@@ -138,7 +138,16 @@ def _render_pass(scene, seed, row0, camera_values: dict, config: _PassConfig):
     if config.sample_channels:
         targets = {k: (dr.zeros(mi.Float, count * pixels * c), c) for k, c in config.sample_channels}
     moments_dr = render_moments(
-        mi, scene, sampler, cam, config.opts, px, py, lane_count, stat_channels, targets,
+        mi,
+        scene,
+        sampler,
+        cam,
+        config.opts,
+        px,
+        py,
+        lane_count,
+        stat_channels,
+        targets,
         lambda s: (group + s * groups_o) * pixels_o + pixel,  # sample index within the pass, then pixel
     )
     if groups > 1:
@@ -335,8 +344,9 @@ def render_frame(
     if keep_samples:
         sample_channels = {k: c for k, c in SAMPLE_BUFFERS.items() if k in stat_channels}
         # light/bounce (listed by the plan when paths bounce) come with the second-hit channels below
-        sample_channels.update({k: RANDOM_PARAMETER_CHANNELS[k] for k in plan.random_parameters
-                                if k in RANDOM_PARAMETER_CHANNELS})
+        sample_channels.update(
+            {k: RANDOM_PARAMETER_CHANNELS[k] for k in plan.random_parameters if k in RANDOM_PARAMETER_CHANNELS}
+        )
         if opts.second_hit:
             sample_channels.update(SECOND_HIT_CHANNELS)
         samples = {k: np.zeros((spp, height, width, c), np.float32) for k, c in sample_channels.items()}
@@ -349,8 +359,9 @@ def render_frame(
     passes = _plan_passes(height, width, spp, max_paths_per_pass)
     for index, (row0, band, s0, count) in enumerate(passes):
         groups = max(1, min(count, -(-target_lanes // (band * width))))  # lanes per pixel (each loops over samples)
-        config = _PassConfig(opts, switches, tuple(stat_channels.items()), tuple(sample_channels.items()),
-                             band, width, count, groups)
+        config = _PassConfig(
+            opts, switches, tuple(stat_channels.items()), tuple(sample_channels.items()), band, width, count, groups
+        )
         seed_dr = dr.opaque(mi.UInt32, derive_seed(seed, frame, spp, stream, index))
         packed, targets = _compiled_pass(scene, config)(scene, seed_dr, dr.opaque(mi.UInt32, row0), values, config)
         host = np.asarray(packed, dtype=np.float32).reshape(band, width, layout["stride"])  # one copy
@@ -372,4 +383,3 @@ def render_frame(
         buffers["motion"] = np.zeros((height, width, 2), np.float32)
         buffers["motion_var"] = np.zeros((height, width, 2), np.float32)
     return RenderedFrame(buffers=buffers, samples=samples, seconds=_time.perf_counter() - start, spp=spp)
-

@@ -10,7 +10,7 @@ holds exactly the camera and lights that were rendered, and re-translating it ne
   stage units and stage axes; the camera is authored in that same space, so ``upAxis`` and
   ``metersPerUnit`` are honoured by construction (the translator maps both to Mitsuba later).
 * lens: 35 mm focal length over a 36 mm horizontal aperture (fov_x ≈ 54.4°; only the ratio
-  matters, see usd_camera.py), vertical aperture 36 mm too, no depth of field, no shutter.
+  matters, see usd/camera.py), vertical aperture 36 mm too, no depth of field, no shutter.
 * path: a slow orbit around the bounds' centre at the bounding sphere's radius R: distance
   ``R / sin(fov_x / 2) · 1.1`` (the sphere fills the width with 10 % margin; in images wider than
   tall the sphere's top and bottom may be cut), elevation 20° above the up axis' horizon,
@@ -61,7 +61,9 @@ def stage_bounds(stage, time: float = 0.0) -> tuple[np.ndarray, np.ndarray] | No
     """World-space (stage units) axis-aligned bounds of the renderable geometry, or None if empty."""
     from pxr import Usd, UsdGeom
 
-    cache = UsdGeom.BBoxCache(Usd.TimeCode(time), [UsdGeom.Tokens.default_, UsdGeom.Tokens.render], useExtentsHint=False)
+    cache = UsdGeom.BBoxCache(
+        Usd.TimeCode(time), [UsdGeom.Tokens.default_, UsdGeom.Tokens.render], useExtentsHint=False
+    )
     lows, highs = [], []
     for prim in stage.Traverse():
         if not prim.IsA(UsdGeom.Gprim):
@@ -93,7 +95,7 @@ def _look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray):
 
 def orbit_frames(stage, frames: int) -> list[float]:
     """The time codes the camera is sampled at (the stage's own range, or 0..frames-1 authored now)."""
-    from denoisebench.generator.usd_stage import frame_range
+    from denoisebench.generator.usd.stage import frame_range
 
     if stage.HasAuthoredTimeCodeRange():
         return frame_range(stage)
@@ -125,7 +127,9 @@ def add_auto_camera(stage, frames: int = 8) -> str:
     elevation = math.radians(ORBIT_ELEVATION_DEGREES)
     for index, time in enumerate(times):
         azimuth = math.radians(ORBIT_START_DEGREES + ORBIT_DEGREES_PER_FRAME * index)
-        direction = math.cos(elevation) * (math.cos(azimuth) * right + math.sin(azimuth) * forward) + math.sin(elevation) * up
+        direction = (
+            math.cos(elevation) * (math.cos(azimuth) * right + math.sin(azimuth) * forward) + math.sin(elevation) * up
+        )
         op.Set(_look_at(center + distance * direction, center, up), time)
     return CAMERA_PATH
 
@@ -144,7 +148,9 @@ def add_default_lights(stage) -> str:
     up, right, forward = _axes(stage)
     azimuth = math.radians(ORBIT_START_DEGREES + 45.0)
     elevation = math.radians(45.0)
-    toward_light = math.cos(elevation) * (math.cos(azimuth) * right + math.sin(azimuth) * forward) + math.sin(elevation) * up
+    toward_light = (
+        math.cos(elevation) * (math.cos(azimuth) * right + math.sin(azimuth) * forward) + math.sin(elevation) * up
+    )
     # A DistantLight shines along its local −Z: place its +Z toward the light.
     key.MakeMatrixXform().Set(_look_at(toward_light, np.zeros(3), up))
     return LIGHTS_PATH

@@ -14,8 +14,8 @@ import math
 import numpy as np
 
 from denoisebench.errors import UserInputError
-from denoisebench.generator.camera_track import CameraTrack
-from denoisebench.generator.usd_stage import check_finite, stage_meters_per_unit, to_numpy
+from denoisebench.generator.contract.camera_track import CameraTrack
+from denoisebench.generator.usd.stage import check_finite, stage_meters_per_unit, to_numpy
 
 
 def find_camera(stage, camera_path: str | None = None):
@@ -29,8 +29,10 @@ def find_camera(stage, camera_path: str | None = None):
         return prim
     cameras = [p for p in Usd.PrimRange(stage.GetPseudoRoot()) if p.IsA(UsdGeom.Camera) and p.IsActive()]
     if not cameras:
-        raise UserInputError(f"{stage.GetRootLayer().realPath or 'stage'}: no camera (UsdGeom.Camera) in the stage; "
-                             "name one with --camera PATH or frame the stage with --auto-camera")
+        raise UserInputError(
+            f"{stage.GetRootLayer().realPath or 'stage'}: no camera (UsdGeom.Camera) in the stage; "
+            "name one with --camera PATH or frame the stage with --auto-camera"
+        )
     return cameras[0]
 
 

@@ -142,10 +142,9 @@ class RenderPlan:
         return out
 
     @classmethod
-    def from_dict(cls, data: dict) -> "RenderPlan":
+    def from_dict(cls, data: dict) -> RenderPlan:
         fields = {k: tuple(v) if isinstance(v, list) else v for k, v in data.items()}
         return cls(**fields)
-
 
     @property
     def transport_restricted(self) -> bool:
@@ -156,8 +155,9 @@ class RenderPlan:
         """One line for reports: ``full transport (...)`` or the restriction and who asked for it."""
         if not self.transport_restricted:
             return f"full transport (unbounded depth, Russian roulette from depth {self.rr_depth})"
-        who = {"user": "the user (--max-depth)", "stage": "the stage's metadata"}.get(self.max_depth_source,
-                                                                                     self.max_depth_source)
+        who = {"user": "the user (--max-depth)", "stage": "the stage's metadata"}.get(
+            self.max_depth_source, self.max_depth_source
+        )
         return f"restricted transport: max_depth {self.max_depth}, set by {who}"
 
 

@@ -32,8 +32,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from denoisebench.generator.camera_track import CameraTrack
-from denoisebench.generator.render_plan import RenderPlan
+from denoisebench.generator.contract.camera_track import CameraTrack
+from denoisebench.generator.contract.render_plan import RenderPlan
 
 
 @dataclass(frozen=True)
@@ -104,7 +104,9 @@ def camera_setup(camera: CameraTrack, frame: int, plan: RenderPlan, width: int, 
             **common,
         )
     quat_a, quat_b, trans, scale = _pose_tables(camera)
-    return CameraSetup(static_pose=None, prev_pose=None, quat_a=quat_a, quat_b=quat_b, trans=trans, scale=scale, **common)
+    return CameraSetup(
+        static_pose=None, prev_pose=None, quat_a=quat_a, quat_b=quat_b, trans=trans, scale=scale, **common
+    )
 
 
 def _pose_tables(camera: CameraTrack):
@@ -126,8 +128,22 @@ def _pose_tables(camera: CameraTrack):
 MIN_TABLE_ROWS = 64
 
 #: Per-frame numbers of the camera, in the order of the packed ``scalars`` array of :func:`camera_values`.
-_SCALARS = ("tan_x", "tan_y", "inv_w", "inv_h", "width", "height", "aperture", "focus", "near", "far",
-            "time_center", "time_span", "frame_time", "last_frame")
+_SCALARS = (
+    "tan_x",
+    "tan_y",
+    "inv_w",
+    "inv_h",
+    "width",
+    "height",
+    "aperture",
+    "focus",
+    "near",
+    "far",
+    "time_center",
+    "time_span",
+    "frame_time",
+    "last_frame",
+)
 
 
 @dataclass(frozen=True)
@@ -326,7 +342,11 @@ class DrCamera:
         dr = self.dr
         c0, c1, c2, origin = pose
         q = p - origin * w
-        return (dr.dot(c0, q) / dr.squared_norm(c0), dr.dot(c1, q) / dr.squared_norm(c1), dr.dot(c2, q) / dr.squared_norm(c2))
+        return (
+            dr.dot(c0, q) / dr.squared_norm(c0),
+            dr.dot(c1, q) / dr.squared_norm(c1),
+            dr.dot(c2, q) / dr.squared_norm(c2),
+        )
 
     def project(self, pose, p, w):
         """Film position (pixels, x right, y down) of a point/direction, and whether it is in front."""

@@ -22,8 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from denoisebench.errors import UserInputError
-from denoisebench.generator.camera_track import CameraTrack
-from denoisebench.generator.translated_scene import TranslatedScene
+from denoisebench.generator.contract.camera_track import CameraTrack
+from denoisebench.generator.contract.translated_scene import TranslatedScene
 from denoisebench.mitsuba_runtime import load_mitsuba
 
 
@@ -73,8 +73,12 @@ def _build_mesh(mi, record: dict, bsdf, emitter, frame: int | None = None):
             if "frame_normals" in record:
                 normals = record["frame_normals"][frame]
     mesh = mi.Mesh(
-        record["name"], len(positions), len(faces), props,
-        has_vertex_normals="normals" in record, has_vertex_texcoords="uvs" in record,
+        record["name"],
+        len(positions),
+        len(faces),
+        props,
+        has_vertex_normals="normals" in record,
+        has_vertex_texcoords="uvs" in record,
     )
     params = mi.traverse(mesh)
     params["vertex_positions"] = mi.Float(positions.reshape(-1))
@@ -92,12 +96,25 @@ def _build_mesh(mi, record: dict, bsdf, emitter, frame: int | None = None):
 def _emitter_dict(mi, record: dict) -> dict:
     kind = record["type"]
     if kind == "point":
-        return {"type": "point", "position": record["position"], "intensity": {"type": "rgb", "value": record["intensity"]}}
+        return {
+            "type": "point",
+            "position": record["position"],
+            "intensity": {"type": "rgb", "value": record["intensity"]},
+        }
     if kind == "spot":
-        return {"type": "spot", "to_world": _transform(mi, record["to_world"]), "cutoff_angle": record["cutoff_angle"],
-                "beam_width": record["beam_width"], "intensity": {"type": "rgb", "value": record["intensity"]}}
+        return {
+            "type": "spot",
+            "to_world": _transform(mi, record["to_world"]),
+            "cutoff_angle": record["cutoff_angle"],
+            "beam_width": record["beam_width"],
+            "intensity": {"type": "rgb", "value": record["intensity"]},
+        }
     if kind == "directional":
-        return {"type": "directional", "direction": record["direction"], "irradiance": {"type": "rgb", "value": record["irradiance"]}}
+        return {
+            "type": "directional",
+            "direction": record["direction"],
+            "irradiance": {"type": "rgb", "value": record["irradiance"]},
+        }
     if kind == "envmap":
         rotation = np.eye(4)
         rotation[:3, :3] = np.asarray(record["rotation"])
@@ -162,8 +179,9 @@ def _short(error: Exception) -> str:
     return " ".join(str(error).split())[:160]
 
 
-def sensor_dict(camera: CameraTrack, frame: int, width: int, height: int, spp: int, seed: int = 0,
-                aperture_scale: float = 1.0) -> dict:
+def sensor_dict(
+    camera: CameraTrack, frame: int, width: int, height: int, spp: int, seed: int = 0, aperture_scale: float = 1.0
+) -> dict:
     """A Mitsuba perspective/thin-lens sensor matching ``camera`` at ``frame`` (box filter, independent sampler)."""
     mi = load_mitsuba()
     sensor = {
@@ -173,7 +191,13 @@ def sensor_dict(camera: CameraTrack, frame: int, width: int, height: int, spp: i
         "near_clip": camera.near_clip,
         "far_clip": camera.far_clip,
         "to_world": _transform(mi, camera.mitsuba_to_world(frame)),
-        "film": {"type": "hdrfilm", "width": width, "height": height, "rfilter": {"type": "box"}, "pixel_format": "rgb"},
+        "film": {
+            "type": "hdrfilm",
+            "width": width,
+            "height": height,
+            "rfilter": {"type": "box"},
+            "pixel_format": "rgb",
+        },
         "sampler": {"type": "independent", "sample_count": spp, "seed": seed},
     }
     if sensor["type"] == "thinlens":
@@ -182,8 +206,9 @@ def sensor_dict(camera: CameraTrack, frame: int, width: int, height: int, spp: i
     return sensor
 
 
-def build_mitsuba_scene(translated: TranslatedScene, sensor: dict | None = None, integrator: dict | None = None,
-                        frame: int = 0):
+def build_mitsuba_scene(
+    translated: TranslatedScene, sensor: dict | None = None, integrator: dict | None = None, frame: int = 0
+):
     """``mi.Scene`` of a translated stage at ``frame`` (matters for moving scenes), optionally with a sensor and an integrator."""
     mi = load_mitsuba()
     objects = scene_objects(translated, frame)
@@ -196,4 +221,6 @@ def build_mitsuba_scene(translated: TranslatedScene, sensor: dict | None = None,
     try:
         return mi.load_dict(objects)
     except Exception as error:
-        raise UserInputError(f"{translated.source or 'stage'}: Mitsuba cannot build the scene ({_short(error)})") from None
+        raise UserInputError(
+            f"{translated.source or 'stage'}: Mitsuba cannot build the scene ({_short(error)})"
+        ) from None

@@ -27,12 +27,12 @@ later, inside ``load_dict``, with a traceback).
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from denoisebench.generator.image_codec import decode_image
 
 CHANNELS = {"r": 0, "g": 1, "b": 2, "a": 3}
 
@@ -88,9 +88,13 @@ def usd_to_mitsuba_uv_matrix(scale, rotation_deg: float, translation) -> np.ndar
     """
     angle = math.radians(float(rotation_deg))
     cos, sin = math.cos(angle), math.sin(angle)
-    affine = np.array([[cos * scale[0], -sin * scale[1], translation[0]],
-                       [sin * scale[0], cos * scale[1], translation[1]],
-                       [0.0, 0.0, 1.0]])
+    affine = np.array(
+        [
+            [cos * scale[0], -sin * scale[1], translation[0]],
+            [sin * scale[0], cos * scale[1], translation[1]],
+            [0.0, 0.0, 1.0],
+        ]
+    )
     flip = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, 1.0], [0.0, 0.0, 1.0]])
     return flip @ affine @ flip
 
@@ -108,7 +112,9 @@ def _coordinates(texture_shader, warnings: list[str], owner: str):
     if node is None:
         return None, matrix
     if not shader_id(node).startswith("UsdPrimvarReader"):
-        warnings.append(f"{texture_shader.GetPath()}: st driven by '{shader_id(node)}'; the mesh's st is used on {owner}")
+        warnings.append(
+            f"{texture_shader.GetPath()}: st driven by '{shader_id(node)}'; the mesh's st is used on {owner}"
+        )
         return None, matrix
     name = _input_value(node, "varname")
     return (str(name) if name else None), matrix
@@ -124,34 +130,10 @@ def _asset_bytes(resolved: str) -> bytes:
     return bytes(handle.GetBuffer())
 
 
-def _decode(data: bytes, suffix: str) -> np.ndarray:
-    """Image bytes → float32 H×W×C array of the stored values (0..1 for integer formats; no curve applied)."""
-    from denoisebench.mitsuba_runtime import load_mitsuba
-
-    mi = load_mitsuba()
-    handle, temporary = tempfile.mkstemp(prefix="denoisebench-texture-", suffix=suffix)
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(data)
-        bitmap = mi.Bitmap(temporary)
-    finally:
-        os.unlink(temporary)
-    bitmap.set_srgb_gamma(False)  # keep the stored numbers; the colour space is decided below
-    converted = bitmap.convert(component_format=mi.Struct.Type.Float32, srgb_gamma=False)
-    array = np.array(converted, dtype=np.float32)
-    if array.ndim == 2:
-        array = array[..., None]
-    if array.ndim != 3 or min(array.shape) < 1:
-        raise ValueError(f"decoded to an empty image {array.shape}")
-    if not np.all(np.isfinite(array)):
-        array = np.nan_to_num(array, nan=0.0, posinf=0.0, neginf=0.0)
-    return array
-
-
 def _read_rgba(resolved: str, fallback_suffix: str = "") -> tuple[np.ndarray, str]:
     """(RGBA pixels, file suffix) of a resolved image asset; raises whatever reading or decoding raises."""
     suffix = Path(resolved.rstrip("]").split("[")[-1]).suffix or fallback_suffix
-    return _expand(_decode(_asset_bytes(resolved), suffix)), suffix
+    return _expand(decode_image(_asset_bytes(resolved), suffix)), suffix
 
 
 def _expand(array: np.ndarray) -> np.ndarray:
@@ -203,15 +185,24 @@ def read_texture(texture_shader, output: str, want_color: bool, warnings: list[s
     bias = np.asarray(_input_value(texture_shader, "bias", (0, 0, 0, 0)), dtype=np.float32)
     pixels = pixels * scale + bias
     if want_color:
-        data = pixels[..., :3] if channel == "rgb" else np.repeat(pixels[..., CHANNELS[channel]: CHANNELS[channel] + 1], 3, -1)
+        data = (
+            pixels[..., :3]
+            if channel == "rgb"
+            else np.repeat(pixels[..., CHANNELS[channel] : CHANNELS[channel] + 1], 3, -1)
+        )
     else:
         index = 0 if channel == "rgb" else CHANNELS[channel]
-        data = pixels[..., index: index + 1]
+        data = pixels[..., index : index + 1]
     primvar, matrix = _coordinates(texture_shader, warnings, owner)
     wrap = str(_input_value(texture_shader, "wrapS", "repeat"))
     wrap_mode = {"repeat": "repeat", "mirror": "mirror", "clamp": "clamp", "black": "clamp"}.get(wrap, "repeat")
-    bitmap = {"type": "bitmap", "data": np.ascontiguousarray(data, dtype=np.float32), "raw": True,
-              "wrap_mode": wrap_mode, "filter_type": "bilinear"}
+    bitmap = {
+        "type": "bitmap",
+        "data": np.ascontiguousarray(data, dtype=np.float32),
+        "raw": True,
+        "wrap_mode": wrap_mode,
+        "filter_type": "bilinear",
+    }
     if matrix is not None:
         bitmap["to_uv"] = matrix.tolist()
     return TextureRead(bitmap=bitmap, primvar=primvar, source=asset.path)

@@ -17,7 +17,7 @@ emissiveColor       an ``area`` emitter on the shape with this radiance
 Opaque materials are wrapped in ``twosided``: USD renders single-sided gprims from both sides in
 practice, while Mitsuba's BSDFs are black from behind. Anything else (normal maps, displacement,
 occlusion, specular workflow, other shading models) is skipped with one warning naming the prim.
-Textures are decoded by :mod:`~denoisebench.generator.usd_textures` (channel choice, colour space,
+Textures are decoded by :mod:`~denoisebench.generator.usd.textures` (channel choice, colour space,
 ``UsdTransform2d``, ``.usdz`` packages, unreadable files → the input's own value and a warning).
 Texture coordinates: USD's ``st`` has v up from the image's bottom; the translator flips v for
 Mitsuba, whose bitmaps put (0, 0) at the top-left. The primvar a material's textures read
@@ -27,12 +27,13 @@ Mitsuba, whose bitmaps put (0, 0) at the top-left. The primvar a material's text
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+
 import numpy as np
 
-from denoisebench.generator.usd_stage import check_finite
-from denoisebench.generator.usd_textures import connected_shader as _connected_shader
-from denoisebench.generator.usd_textures import read_texture
-from denoisebench.generator.usd_textures import shader_id as _shader_id
+from denoisebench.generator.usd.stage import check_finite
+from denoisebench.generator.usd.textures import connected_shader as _connected_shader
+from denoisebench.generator.usd.textures import read_texture
+from denoisebench.generator.usd.textures import shader_id as _shader_id
 
 DEFAULT_GREY = (0.18, 0.18, 0.18)
 _SKIPPED_INPUTS = ("normal", "displacement", "occlusion")
@@ -57,7 +58,9 @@ class MaterialInfo:
 def default_material(display_color=None) -> MaterialInfo:
     """A grey (or displayColor) diffuse, as USD renderers show unbound gprims."""
     color = DEFAULT_GREY if display_color is None else tuple(float(c) for c in display_color)
-    return MaterialInfo(bsdf={"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": _rgb(color)}}, roughness=1.0)
+    return MaterialInfo(
+        bsdf={"type": "twosided", "bsdf": {"type": "diffuse", "reflectance": _rgb(color)}}, roughness=1.0
+    )
 
 
 def _rgb(values) -> dict:
@@ -142,7 +145,9 @@ def translate_material(material, warnings: list[str]) -> MaterialInfo:
         info.cutout = mask is not None
         opacity = 1.0
     elif opacity_texture:
-        warnings.append(f"{path}: textured opacity without opacityThreshold is not supported; constant {float(opacity):g} used")
+        warnings.append(
+            f"{path}: textured opacity without opacityThreshold is not supported; constant {float(opacity):g} used"
+        )
     info.opacity = float(np.clip(opacity, 0.0, 1.0))
     if info.opacity < 1.0:
         principled["spec_trans"] = 1.0 - info.opacity
@@ -175,8 +180,10 @@ def _use_texture(info: MaterialInfo, connection, want_color: bool, warnings: lis
     info.texture_files.append(texture.source)
     if texture.primvar:
         if info.uv_primvar and info.uv_primvar != texture.primvar:
-            warnings.append(f"{owner}: textures read primvars '{info.uv_primvar}' and '{texture.primvar}'; "
-                            f"'{info.uv_primvar}' is used for all")
+            warnings.append(
+                f"{owner}: textures read primvars '{info.uv_primvar}' and '{texture.primvar}'; "
+                f"'{info.uv_primvar}' is used for all"
+            )
         info.uv_primvar = info.uv_primvar or texture.primvar
     return texture.bitmap
 

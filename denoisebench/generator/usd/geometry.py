@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from denoisebench.errors import UserInputError
-from denoisebench.generator.usd_stage import check_finite, to_numpy
+from denoisebench.generator.usd.stage import check_finite, to_numpy
 
 
 def _transform_points(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
@@ -101,16 +101,22 @@ def _per_corner(values, interpolation, corner_point, corner_face, corner_index, 
     elif interpolation == "uniform":
         source, lookup = values, corner_face
     elif interpolation == "constant":
-        return np.broadcast_to(values.reshape(-1)[: values.shape[-1]] if values.ndim > 1 else values, (len(corner_point),) + values.shape[1:]).copy()
+        return np.broadcast_to(
+            values.reshape(-1)[: values.shape[-1]] if values.ndim > 1 else values,
+            (len(corner_point),) + values.shape[1:],
+        ).copy()
     else:
         raise UserInputError(f"{path}: {name} has unknown interpolation '{interpolation}'")
     if len(lookup) and lookup.max() >= len(source):
-        raise UserInputError(f"{path}: {name} has {len(source)} values, too few for its '{interpolation}' interpolation")
+        raise UserInputError(
+            f"{path}: {name} has {len(source)} values, too few for its '{interpolation}' interpolation"
+        )
     return source[lookup]
 
 
-def read_mesh(prim, to_world: np.ndarray, warnings: list[str], uv_name: str | None = None,
-              time: float = 0.0) -> tuple[dict, np.ndarray] | None:
+def read_mesh(
+    prim, to_world: np.ndarray, warnings: list[str], uv_name: str | None = None, time: float = 0.0
+) -> tuple[dict, np.ndarray] | None:
     """A UsdGeom.Mesh → (mesh record, source face id per triangle), or None when nothing is left.
 
     ``uv_name``: the primvar holding texture coordinates (the material's primvar reader
@@ -129,7 +135,9 @@ def read_mesh(prim, to_world: np.ndarray, warnings: list[str], uv_name: str | No
     points = check_finite(points, path, "points").reshape(-1, 3)
     indices = np.asarray(indices, dtype=np.int64)
     if len(indices) and (indices.min() < 0 or indices.max() >= len(points)):
-        raise UserInputError(f"{path}: faceVertexIndices reference point {int(indices.max())} but the mesh has {len(points)} points")
+        raise UserInputError(
+            f"{path}: faceVertexIndices reference point {int(indices.max())} but the mesh has {len(points)} points"
+        )
     corners, face_of = triangulate(counts, indices, path, warnings)
     if len(corners) == 0:
         warnings.append(f"{path}: no triangles after triangulation; skipped")
@@ -147,7 +155,9 @@ def read_mesh(prim, to_world: np.ndarray, warnings: list[str], uv_name: str | No
     if uv_name:
         uvs, uv_interp = _primvar(mesh, uv_name, path)
         if uvs is None:
-            warnings.append(f"{path}: texture coordinates primvars:{uv_name} (the material's varname) not found; st used")
+            warnings.append(
+                f"{path}: texture coordinates primvars:{uv_name} (the material's varname) not found; st used"
+            )
     if uvs is None:
         uvs, uv_interp = _primvar(mesh, "st", path)
     if uvs is None:
@@ -169,10 +179,20 @@ def read_mesh(prim, to_world: np.ndarray, warnings: list[str], uv_name: str | No
     else:
         positions = points[corner_point]
         triangles = np.arange(len(corner_point)).reshape(-1, 3)
-        vertex_normals = None if normals is None else _per_corner(
-            normals.reshape(-1, 3), normal_interp, corner_point, corner_face, corner_index, path, "normals")
-        vertex_uvs = None if uvs is None else _per_corner(
-            uvs.reshape(-1, 2), uv_interp, corner_point, corner_face, corner_index, path, "primvars:st")
+        vertex_normals = (
+            None
+            if normals is None
+            else _per_corner(
+                normals.reshape(-1, 3), normal_interp, corner_point, corner_face, corner_index, path, "normals"
+            )
+        )
+        vertex_uvs = (
+            None
+            if uvs is None
+            else _per_corner(
+                uvs.reshape(-1, 2), uv_interp, corner_point, corner_face, corner_index, path, "primvars:st"
+            )
+        )
 
     world_positions = _transform_points(to_world, positions)
     world_normals = _transform_normals(to_world, vertex_normals) if vertex_normals is not None else None
@@ -186,7 +206,7 @@ def read_mesh(prim, to_world: np.ndarray, warnings: list[str], uv_name: str | No
 
 def subset_records(prim, entry: dict, triangle_faces: np.ndarray):
     """Split a mesh record by its ``materialBind`` GeomSubsets → list of (record, subset prim or None)."""
-    from pxr import UsdGeom, UsdShade
+    from pxr import UsdShade
 
     subsets = UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets()
     if not subsets:
@@ -198,7 +218,9 @@ def subset_records(prim, entry: dict, triangle_faces: np.ndarray):
         mask = np.isin(triangle_faces, faces) & ~assigned
         assigned |= mask
         if mask.any():
-            out.append((_select_triangles(entry, mask, f"{entry['name']}/{subset.GetPrim().GetName()}"), subset.GetPrim()))
+            out.append(
+                (_select_triangles(entry, mask, f"{entry['name']}/{subset.GetPrim().GetName()}"), subset.GetPrim())
+            )
     if (~assigned).any():
         out.append((_select_triangles(entry, ~assigned, entry["name"]), None))
     return out
@@ -217,6 +239,7 @@ def _select_triangles(entry: dict, mask: np.ndarray, name: str) -> dict:
 
 
 # ---- primitives ---------------------------------------------------------------------------------
+
 
 def _axis_frame(axis: str) -> np.ndarray:
     """Rotation taking a +Z-aligned primitive to the given USD axis token."""
@@ -251,7 +274,11 @@ def tessellate_cylinder(radius_bottom: float, radius_top: float, height: float, 
         positions += [rim, center]
         normals += [np.tile([0.0, 0.0, sign], (segments + 1, 1))]
         c = offset + segments
-        cap = np.stack([np.full(segments, c), offset + j, offset + i], 1) if sign < 0 else np.stack([np.full(segments, c), offset + i, offset + j], 1)
+        cap = (
+            np.stack([np.full(segments, c), offset + j, offset + i], 1)
+            if sign < 0
+            else np.stack([np.full(segments, c), offset + i, offset + j], 1)
+        )
         faces.append(cap)
         offset += segments + 1
     rotation = _axis_frame(axis)
@@ -333,21 +360,36 @@ def read_primitive(prim, to_world: np.ndarray, warnings: list[str], analytic: bo
         if analytic and np.allclose(scale, scale[0], rtol=1e-6):
             rotation = to_world[:3, :3] / scale[0]
             if np.linalg.det(rotation) > 0:
-                return {"kind": "sphere", "name": path, "center": to_world[:3, 3].tolist(), "radius": radius * float(scale[0])}
+                return {
+                    "kind": "sphere",
+                    "name": path,
+                    "center": to_world[:3, 3].tolist(),
+                    "radius": radius * float(scale[0]),
+                }
         positions, faces, normals, uvs = tessellate_sphere(radius)
     elif prim.IsA(UsdGeom.Cube):
         positions, faces, normals, uvs = tessellate_cube(float(attr(UsdGeom.Cube(prim).GetSizeAttr, "size")))
     elif prim.IsA(UsdGeom.Cylinder):
         cylinder = UsdGeom.Cylinder(prim)
         radius = float(attr(cylinder.GetRadiusAttr, "radius"))
-        positions, faces, normals = tessellate_cylinder(radius, radius, float(attr(cylinder.GetHeightAttr, "height")), str(cylinder.GetAxisAttr().Get()))
+        positions, faces, normals = tessellate_cylinder(
+            radius, radius, float(attr(cylinder.GetHeightAttr, "height")), str(cylinder.GetAxisAttr().Get())
+        )
     elif prim.IsA(UsdGeom.Cone):
         cone = UsdGeom.Cone(prim)
-        positions, faces, normals = tessellate_cylinder(float(attr(cone.GetRadiusAttr, "radius")), 0.0, float(attr(cone.GetHeightAttr, "height")), str(cone.GetAxisAttr().Get()))
+        positions, faces, normals = tessellate_cylinder(
+            float(attr(cone.GetRadiusAttr, "radius")),
+            0.0,
+            float(attr(cone.GetHeightAttr, "height")),
+            str(cone.GetAxisAttr().Get()),
+        )
     elif prim.IsA(UsdGeom.Plane):
         plane = UsdGeom.Plane(prim)
         positions, faces, normals, uvs = tessellate_plane(
-            float(attr(plane.GetWidthAttr, "width")), float(attr(plane.GetLengthAttr, "length")), str(plane.GetAxisAttr().Get()))
+            float(attr(plane.GetWidthAttr, "width")),
+            float(attr(plane.GetLengthAttr, "length")),
+            str(plane.GetAxisAttr().Get()),
+        )
     else:
         return None
     if uvs is not None:

@@ -41,7 +41,7 @@ Features (the first vertex is the camera ray's first intersection):
   earlier than the ray's time, minus its projection at the ray's time (pixels, x right, y down).
   With ``KernelOptions.object_motion`` (scenes with moving objects) the point projected into the
   previous frame is where the hit surface point *was* one frame earlier: the mesh attribute
-  ``vertex_prev_position`` (mitsuba_scene.py) interpolated at the hit, exact for rigid and for
+  ``vertex_prev_position`` (render/scene.py) interpolated at the hit, exact for rigid and for
   per-vertex motion alike (both are affine within a triangle); analytic shapes are static.
 
 With ``KernelOptions.second_hit`` (per-sample data only; paths that bounce) a sample also carries
@@ -64,9 +64,9 @@ import functools
 import importlib
 from dataclasses import dataclass
 
-from denoisebench.generator.mitsuba_scene import PREVIOUS_POSITION
-from denoisebench.generator.render_camera import DrCamera
-from denoisebench.generator.render_plan import UNBOUNDED_DEPTH, paths_bounce
+from denoisebench.generator.contract.render_plan import UNBOUNDED_DEPTH, paths_bounce
+from denoisebench.generator.render.camera import DrCamera
+from denoisebench.generator.render.scene import PREVIOUS_POSITION
 
 
 @dataclass(frozen=True)
@@ -83,7 +83,9 @@ class KernelOptions:
     # Per-sample data for RPF: the first vertex's light and bounce random numbers and the second hit
     second_hit: bool = False
     object_motion: bool = False  # meshes carry vertex_prev_position: motion follows moving objects
-    null_skips: int = 0  # cut-outs (mask BSDFs): fully transparent surfaces the camera ray passes before its first vertex
+    null_skips: int = (
+        0  # cut-outs (mask BSDFs): fully transparent surfaces the camera ray passes before its first vertex
+    )
 
     @property
     def bounded(self) -> bool:
@@ -141,7 +143,9 @@ NULL_SKIPS = 4
 
 def scene_has_null_bsdf(mi, scene) -> bool:
     """True when some shape's BSDF has a null (pass-through) lobe: an opacity mask (cut-out)."""
-    return any(shape.bsdf() is not None and mi.has_flag(shape.bsdf().flags(), mi.BSDFFlags.Null) for shape in scene.shapes())
+    return any(
+        shape.bsdf() is not None and mi.has_flag(shape.bsdf().flags(), mi.BSDFFlags.Null) for shape in scene.shapes()
+    )
 
 
 def scene_has_object_motion(scene) -> bool:
@@ -246,7 +250,9 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
         p = dr.select(valid, si.p, mi.Point3f(0.0))
         out["position"] = p
         out["normal"] = dr.select(valid, si.sh_frame.n, mi.Normal3f(0.0))
-        out["depth"] = dr.select(valid, dr.dot(si.p - pose[3], camera.forward(pose)) / dr.norm(camera.forward(pose)), 0.0)
+        out["depth"] = dr.select(
+            valid, dr.dot(si.p - pose[3], camera.forward(pose)) / dr.norm(camera.forward(pose)), 0.0
+        )
         if opts.motion:
             prev = camera.previous_pose(time)
             target = dr.select(valid, si.p, ray.d)
@@ -285,8 +291,16 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
         sample2 = mi.Point2f(0.5)
     split = opts.lobe_split and opts.bounces
     val, pdf, bs, weight, val_diffuse, albedo, rough = dr.dispatch(
-        bsdf, functools.partial(_first_vertex_bsdf, split, opts.features),
-        ctx, ctx_diffuse, si, wo, sample1, sample2, active_em, valid,
+        bsdf,
+        functools.partial(_first_vertex_bsdf, split, opts.features),
+        ctx,
+        ctx_diffuse,
+        si,
+        wo,
+        sample1,
+        sample2,
+        active_em,
+        valid,
     )
     if opts.features:
         out["roughness"] = dr.select(valid, rough, 0.0)
@@ -359,9 +373,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
             active_em &= ds.pdf != 0.0
             wo = si.to_local(ds.d)
-            val, pdf, bs, weight = bsdf.eval_pdf_sample(
-                ctx, si, wo, sampler.next_1d(), sampler.next_2d(), active_next
-            )
+            val, pdf, bs, weight = bsdf.eval_pdf_sample(ctx, si, wo, sampler.next_1d(), sampler.next_2d(), active_next)
             mis_em = dr.select(ds.delta, 1.0, _mis_weight(dr, ds.pdf, pdf))
             rest = dr.select(active_em, rest + beta * val * em_weight * mis_em, rest)
 
@@ -380,12 +392,10 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             rr_continue = sampler.next_1d() < rr_prob
             beta = dr.select(rr_active, beta * dr.rcp(rr_prob), beta)
             active = active_next & (~rr_active | rr_continue) & (beta_max != 0.0)
-            return (sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active,
-                    *follow_state)
+            return (sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active, *follow_state)
 
         state = dr.while_loop(
-            state=(sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active,
-                   *follow_state),
+            state=(sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active, *follow_state),
             cond=cond,
             body=body,
             label="denoisebench feature path tracer",
@@ -408,13 +418,23 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     return out
 
 
-
 def _channel_type(mi, channels: int):
     return {1: mi.Float, 2: mi.Vector2f, 3: mi.Color3f}[channels]
 
 
-def render_moments(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pixel_y, count,
-                   names: dict, sample_targets: dict | None = None, sample_slot=None):
+def render_moments(
+    mi,
+    scene,
+    sampler,
+    camera: DrCamera,
+    opts: KernelOptions,
+    pixel_x,
+    pixel_y,
+    count,
+    names: dict,
+    sample_targets: dict | None = None,
+    sample_slot=None,
+):
     """Each lane traces ``count`` samples of pixel ``(pixel_x, pixel_y)`` in a loop, keeping running
     per-lane moments (Welford: mean and sum of squared deviations) of the buffers in ``names``
     (name → channels): one kernel yields per-pixel statistics without storing samples.

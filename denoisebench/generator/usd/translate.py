@@ -14,35 +14,54 @@ USD's own diagnostics (unresolved references, unknown schemas, ...) are caught w
 one warning per prim (``<prim>: USD: <first message> (+N more)``) instead of flooding stderr.
 The camera is ``camera_path``, else the stage metadata's ``camera`` (what ``generate --camera``
 writes into the copied stage), else the first camera; ``auto_camera``/``default_light`` author
-:mod:`~denoisebench.generator.usd_additions`' camera and lights into the stage's session layer.
+:mod:`~denoisebench.generator.usd.additions`' camera and lights into the stage's session layer.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import re
+from pathlib import Path
 
 import numpy as np
 
 from denoisebench.errors import UserInputError
-from denoisebench.generator import usd_geometry as geometry
-from denoisebench.generator.effects_inference import infer_effects
-from denoisebench.generator.render_plan import STAGE_MAX_DEPTH_KEY, check_max_depth
-from denoisebench.generator.translated_scene import TranslatedScene
-from denoisebench.generator.usd_camera import find_camera, read_camera
-from denoisebench.generator.usd_lights import read_light
-from denoisebench.generator.usd_materials import bound_material
-from denoisebench.generator.usd_stage import frame_range, open_stage, stage_to_mitsuba_matrix
+from denoisebench.generator.contract.render_plan import STAGE_MAX_DEPTH_KEY, check_max_depth
+from denoisebench.generator.contract.translated_scene import TranslatedScene
+from denoisebench.generator.usd import geometry
+from denoisebench.generator.usd.camera import find_camera, read_camera
+from denoisebench.generator.usd.effects import infer_effects
+from denoisebench.generator.usd.lights import read_light
+from denoisebench.generator.usd.materials import bound_material
+from denoisebench.generator.usd.stage import frame_range, open_stage, stage_to_mitsuba_matrix
 from denoisebench.scenes.effects import METADATA_KEY, validate_effects
 
 # Prim types that carry no geometry of their own and are silently traversed.
-_STRUCTURAL = {"", "Xform", "Scope", "Material", "Shader", "NodeGraph", "GeomSubset", "Camera", "RenderSettings",
-               "RenderProduct", "RenderVar", "SkelRoot", "Skeleton"}
+_STRUCTURAL = {
+    "",
+    "Xform",
+    "Scope",
+    "Material",
+    "Shader",
+    "NodeGraph",
+    "GeomSubset",
+    "Camera",
+    "RenderSettings",
+    "RenderProduct",
+    "RenderVar",
+    "SkelRoot",
+    "Skeleton",
+}
 
 
-def translate_usd(path: str | Path, camera_path: str | None = None, *, auto_camera: bool = False,
-                  default_light: bool = False, frames: int = 8, strict: bool = False) -> TranslatedScene:
+def translate_usd(
+    path: str | Path,
+    camera_path: str | None = None,
+    *,
+    auto_camera: bool = False,
+    default_light: bool = False,
+    frames: int = 8,
+    strict: bool = False,
+) -> TranslatedScene:
     """Open and translate a USD file (see the module docstring for the keyword options)."""
     from pxr import UsdUtils
 
@@ -62,7 +81,7 @@ def translate_usd(path: str | Path, camera_path: str | None = None, *, auto_came
 
 def apply_additions(stage, camera_path: str | None, auto_camera: bool, default_light: bool, frames: int) -> str | None:
     """Author ``--auto-camera`` / ``--default-light`` into the stage's current edit target; return the camera path."""
-    from denoisebench.generator.usd_additions import add_auto_camera, add_default_lights, stage_has_light
+    from denoisebench.generator.usd.additions import add_auto_camera, add_default_lights, stage_has_light
 
     if auto_camera:
         if camera_path:
@@ -152,8 +171,12 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
             parts = _gprim_parts(prim, to_mitsuba, frames[0], warnings, materials, analytic=not moving)
             if moving and parts:
                 # parts is already the first frame's (analytic=False when moving)
-                _attach_frames(prim, parts, [parts] + [_gprim_parts(prim, to_mitsuba, t, [], materials, analytic=False)
-                                                       for t in frames[1:]], warnings)
+                _attach_frames(
+                    prim,
+                    parts,
+                    [parts] + [_gprim_parts(prim, to_mitsuba, t, [], materials, analytic=False) for t in frames[1:]],
+                    warnings,
+                )
             for record, material in parts:
                 bind(record, material)
             continue
@@ -167,8 +190,10 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
         detail = f" (unsupported: {', '.join(skipped)})" if skipped else ""
         raise UserInputError(f"{source or 'stage'}: nothing renderable: no supported geometry{detail}")
     if strict and not lit:
-        raise UserInputError(f"{source or 'stage'}: no light in the stage; add one, or pass --default-light "
-                             "(a uniform dome and a key light)")
+        raise UserInputError(
+            f"{source or 'stage'}: no light in the stage; add one, or pass --default-light "
+            "(a uniform dome and a key light)"
+        )
     if not shapes and not emitters:
         warnings.append("stage has no supported geometry or lights: the image will be black")
     if not lit:
@@ -209,8 +234,10 @@ def _gprim_parts(prim, to_mitsuba, time: float, warnings: list[str], materials: 
         if translated is None:
             return []
         record, face_ids = translated
-        return [(part, bound_material(subset if subset is not None else prim, materials, warnings))
-                for part, subset in geometry.subset_records(prim, record, face_ids)]
+        return [
+            (part, bound_material(subset if subset is not None else prim, materials, warnings))
+            for part, subset in geometry.subset_records(prim, record, face_ids)
+        ]
     record = geometry.read_primitive(prim, to_world, warnings, analytic=analytic)
     return [] if record is None else [(record, bound_material(prim, materials, warnings))]
 
@@ -225,8 +252,12 @@ def _attach_frames(prim, parts, per_frame, warnings: list[str]) -> None:
         return
     for index, (record, _) in enumerate(parts):
         records = [frame_parts[index][0] for frame_parts in per_frame]
-        if any(r["kind"] != "mesh" or r["positions"].shape != record["positions"].shape
-               or not np.array_equal(r["faces"], record["faces"]) for r in records):
+        if any(
+            r["kind"] != "mesh"
+            or r["positions"].shape != record["positions"].shape
+            or not np.array_equal(r["faces"], record["faces"])
+            for r in records
+        ):
             warnings.append(f"{path}: topology changes over time; rendered at its first-frame pose")
             return
     for index, (record, _) in enumerate(parts):

@@ -1,0 +1,160 @@
+"""The whiteboard of parts, held by the code: who may import whom, and no import cycles.
+
+Reads every module's imports with ``ast`` (module level and inside functions alike: a lazy
+import is still an arrow) and checks them against the layering of ``docs/architecture.md``.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "denoisebench"
+
+#: Each stage and the stages it may import (besides itself and the package's top-level helpers).
+ALLOWED = {
+    "scenes": set(),
+    "generator": {"scenes", "dataset"},
+    "sampling": {"generator", "dataset", "scenes"},
+    "dataset": set(),
+    "denoisers": {"dataset"},
+    "baselines": {"dataset", "denoisers", "metrics"},
+    "models": {"dataset", "denoisers", "metrics", "baselines"},
+    "metrics": set(),
+    "leaderboard": {"dataset", "denoisers", "baselines", "models", "metrics", "sampling", "generator", "scenes"},
+}
+#: Top-level helper modules every stage may use (no stage of their own).
+HELPERS = {"errors", "mitsuba_runtime", "outputs", "progress"}
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _imports(path: Path) -> set[str]:
+    """Absolute names of the project modules that ``path`` imports (relative imports resolved)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    here = _module_name(path).split(".")
+    if path.name != "__init__.py":
+        here = here[:-1]
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names if alias.name.startswith("denoisebench"))
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = here[: len(here) - node.level + 1]
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            if module.startswith("denoisebench"):
+                found.add(module)
+                found.update(f"{module}.{alias.name}" for alias in node.names)
+    return found
+
+
+def _graph() -> dict[str, set[str]]:
+    modules = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+    graph = {}
+    for name, path in modules.items():
+        graph[name] = {m for m in _imports(path) if m in modules and m != name}
+    return graph
+
+
+def _stage(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else None
+
+
+def test_stages_import_only_to_their_left():
+    bad = []
+    for module, targets in _graph().items():
+        stage = _stage(module)
+        if stage not in ALLOWED:
+            continue
+        for target in targets:
+            other = _stage(target)
+            if other in (stage, None) or other in HELPERS or other in ALLOWED[stage]:
+                continue
+            if other in ALLOWED:
+                bad.append(f"{module} -> {target}")
+    assert not bad, "arrows against the data flow:\n" + "\n".join(sorted(bad))
+
+
+@pytest.mark.parametrize("side,other", [("usd", "render"), ("render", "usd")])
+def test_usd_and_render_meet_only_in_the_contract(side, other):
+    prefix, forbidden = f"denoisebench.generator.{side}", f"denoisebench.generator.{other}"
+    bad = sorted(
+        f"{module} -> {target}"
+        for module, targets in _graph().items()
+        if module.startswith(prefix)
+        for target in targets
+        if target.startswith(forbidden)
+    )
+    assert not bad, "\n".join(bad)
+
+
+def test_contract_imports_neither_side():
+    graph = _graph()
+    bad = sorted(
+        f"{module} -> {target}"
+        for module, targets in graph.items()
+        if module.startswith("denoisebench.generator.contract")
+        for target in targets
+        if target.startswith(("denoisebench.generator.usd", "denoisebench.generator.render"))
+    )
+    assert not bad, "\n".join(bad)
+    sources = "".join(p.read_text() for p in (PACKAGE / "generator" / "contract").glob("*.py"))
+    assert "import mitsuba" not in sources and "from pxr" not in sources and "import drjit" not in sources
+
+
+def test_usd_side_never_loads_mitsuba_and_render_side_never_loads_pxr():
+    for side, forbidden in (("usd", ("mitsuba", "drjit", "denoisebench.mitsuba_runtime")), ("render", ("pxr",))):
+        for path in (PACKAGE / "generator" / side).glob("*.py"):
+            tree = ast.parse(path.read_text())
+            for node in ast.walk(tree):
+                names = []
+                if isinstance(node, ast.Import):
+                    names = [a.name for a in node.names]
+                elif isinstance(node, ast.ImportFrom) and not node.level:
+                    names = [node.module or ""]
+                for name in names:
+                    assert not name.startswith(forbidden), f"{path.name} imports {name}"
+
+
+def test_no_import_cycles_between_modules_at_import_time():
+    """Module-level imports only (lazy ones inside functions cannot deadlock an import)."""
+    modules = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+    graph = {}
+    for name, path in modules.items():
+        tree = ast.parse(path.read_text())
+        top = ast.Module(body=[n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))], type_ignores=[])
+        found = set()
+        for node in top.body:
+            if isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                found.add(node.module)
+                found.update(f"{node.module}.{a.name}" for a in node.names)
+            elif isinstance(node, ast.Import):
+                found.update(a.name for a in node.names)
+        graph[name] = {m for m in found if m in modules and m != name}
+    state: dict[str, int] = {}
+    cycle: list[str] = []
+
+    def visit(node: str, trail: list[str]) -> bool:
+        state[node] = 1
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                cycle.extend(trail[trail.index(nxt) :] + [nxt] if nxt in trail else [node, nxt])
+                return True
+            if nxt not in state and visit(nxt, trail + [nxt]):
+                return True
+        state[node] = 2
+        return False
+
+    for module in sorted(graph):
+        if module not in state and visit(module, [module]):
+            break
+    assert not cycle, " -> ".join(cycle)
