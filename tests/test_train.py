@@ -69,6 +69,12 @@ def test_ship_writes_weights_and_a_card_that_replays_the_commands(data, tmp_path
     first, second, third = payload["meta"]["commands"]
     assert "--threads" not in first and second.endswith("--threads 2") and "--resume" in second
     assert all(c in card for c in (first, second, third)) and "1 and 2 CPU threads" in card
+    # the machine is the one each stage ran on, as recorded, not a fixed phrase
+    import os
+
+    assert payload["meta"]["machines"] == [f"a {os.cpu_count()}-core machine, no GPU"] * 2
+    assert f"CPU threads (see the commands) of a {os.cpu_count()}-core machine, no GPU" in card
+    assert "shared 2-core" not in card
     assert "--steps 0" in third and "It adds no steps" in card
     # two stages: the --steps 0 command trained nothing and is no stage
     assert [(s["from_step"], s["steps"]) for s in payload["meta"]["stages"]] == [(0, 1), (1, 1)]

@@ -51,23 +51,16 @@ Deviations (each with its reason; tests/test_baselines_classic.py shows what the
       describe a neighbourhood of σ_p = b/4 pixels, which a grid of about σ_p resolves; clustering,
       which keeps edges, is still done for every pixel in the filter. Measured: no worse than
       statistics at every pixel (slightly better: fewer, less noisy estimates), at 1/stride² of
-      their cost. ``min_stat_stride=3`` (tried as the default, not kept) coarsens boxes of 7-11 px
-      (the last pass at 128 px, b = 9 at 64 px), where the 2-px grid's statistics take a quarter of
-      the time: 128 px, 4 spp, 2 threads 37 → 34 s/MP and the same synthetic relMSE, but on the
-      rendered 64 px frames of the card dim_room 8 spp got 14% worse (3 seeds) and the lens response
-      of tests/test_baselines_rendered.py weakened (coupled/decoupled β 0.892 vs 0.883, 3 seeds).
-      A 3-px grid in a 3-px box is too coarse (a bounce-driven feature moved a pixel by 1% in
+      their cost. (``min_stat_stride=3``, the ``fast`` preset's, was tried as the default and not kept:
+      rpf_card.md gives the figures.) A 3-px grid in a 3-px box is too coarse (a bounce-driven feature moved a pixel by 1% in
       tests/test_baselines_rpf.py), hence the half-box cap on the floor.
       **Straddling pixels are refined** (``refine_passes``, ``refine_samples``): a pixel whose own
       samples straddle surfaces (3σ of its own clustering features above the tolerance 0.1 in some
       channel) clusters differently from its grid point, which may see one surface only and so no
       edge at all (α = β = 0 there: the pass blurs sky into the ground samples of a horizon pixel).
       In the first ``refine_passes`` (2) passes, whose grids are the coarsest (14 and 9 px at 128 px),
-      such pixels get statistics of their own from ``refine_samples`` (48) draws. Measured on rendered
-      64 px frames (motion_blur and depth_of_field seeds 40-41, 8 spp): motion_blur 0.0142 → 0.0123
-      (statistics at every pixel in every pass: 0.0124), depth_of_field 0.0439 → 0.0435; on the
-      card's ten families a geometric mean of 0.913 of before (baselines/rpf_card.md: tried variants
-      and their figures). Cost: 16-44% of the pixels of rendered frames straddle, and statistics
+      such pixels get statistics of their own from ``refine_samples`` (48) draws. It lowers relMSE on
+      rendered frames of every family (rpf_card.md, "Latest", with the variants tried). Cost: 16-44% of the pixels of rendered frames straddle, and statistics
       dominate, so the paper preset takes up to 2.4× as long on rendered 128 px frames; the ``fast``
       preset does not refine (0 passes) and keeps its speed.
     * **Clustering features** are the first-hit normal and albedo only. World position varies along

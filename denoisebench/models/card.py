@@ -138,6 +138,14 @@ def _scored_elsewhere_lines(elsewhere: dict, meta: dict, evaluation: dict) -> li
     return lines
 
 
+def _machine(meta: dict) -> str:
+    """The training machine as the checkpoint recorded it (``meta["machines"]``, one entry per stage)."""
+    machines = meta.get("machines") or []
+    if not machines:
+        return "a machine the checkpoint does not record"
+    return " and ".join(dict.fromkeys(machines))
+
+
 def _threads(used: list[int]) -> str:
     """'one CPU thread', 'two CPU threads', or '1 and 2 CPU threads' when the commands differed."""
     words = {1: "one", 2: "two"}
@@ -253,7 +261,7 @@ def render_card(
         f"* val scenes: {', '.join(meta.get('val_scenes', [])) or 'none'}; test (held-out) scenes: {', '.join(evaluation['scenes'])}",
         *_stage_lines(meta),
         *([f"* sequences of {meta.get('sequence_length')} frames"] if model == "rae" else []),
-        f"* training time: {meta.get('seconds', 0.0) / 60.0:.1f} min on {_threads(meta.get('threads', [1]))} of a shared 2-core machine"
+        f"* training time: {meta.get('seconds', 0.0) / 60.0:.1f} min on {_threads(meta.get('threads', [1]))} of {_machine(meta)}"
         + (f" ({meta.get('skipped_steps')} non-finite steps skipped)" if meta.get("skipped_steps") else ""),
         "",
         "## Validation (val split, whole frames, during training)",

@@ -67,34 +67,8 @@ PAPER_CONFIG = {
 # 5×5 layers give a 21-pixel receptive field, the 21×21 kernel's (five 3×3 layers saw 11 pixels
 # and could not tell which of the outer taps to trust). The 1×1 head keeps the 24 → 441 logits
 # layer cheap. The shipped dpcn_small.pt predates this (5 layers of 3×3, default init): its
-# checkpoint records that shape, so it still loads and scores as before. Retraining DPCN in this
-# configuration on the 40-scene full-transport set failed (8000 steps; the third run stopped at
-# 5600): with the relative loss its output settled too dark (held-out relMSE 0.374; a cornell test
-# frame at 0.29× the reference's mean: the relative L1 punishes overshoot on dark pixels more than
-# undershoot); with log L1 a few pixels per frame ran to the output clamp (relMSE 4e14 at lr 1e-3,
-# val 5e17 at lr 3e-4); with bound_output and log L1 (stopped at 5300 steps) val relMSE 1820, each
-# scene off by a factor of its own (median pixel 0.25× the reference on depth_of_field, 7× on
-# glossy_fireflies), while KPCN on the same data and configuration reached 0.0477. With the cap made
-# straight-through and the scale-invariant `exposure` loss (cosine schedule, val every 1000 steps):
-# at lr 1e-3 a loss spike near step 300 left the output ~10x too bright and the loss flat at 2.07
-# (val 683 at 1000 steps, stopped at 1700); at lr 3e-4 val 1.03 at 1000 steps, 1821 at 2000
-# (stopped at 2900); with --loss relmse at lr 3e-4 val 0.52, 428, 0.45 at 1000/2000/3000. The failure
-# is the same each time: whole dark regions of bright scenes (glass_env, glossy_fireflies: reference
-# 0.01, normalised ~0.03) come out at 1-40, allowed by a bright pixel within the cap's window. In
-# log(1 + x) a direct output has no relative precision near 0, where relMSE weighs most; KPCN's
-# convex combination of dark neighbours stays dark by construction. With log_offset 0.01 (head reads
-# log(x + 0.01)) and --loss relmse: at lr 3e-4 val 0.095 at 1000 steps, then the training loss blew up
-# near step 1400 (val 2.5 at 2000); at lr 1e-4 (3000 steps, then 4000 more on 2 threads) training
-# stayed stable, val 0.142 / 0.090 / 0.088 / 0.079 / 0.087 / 0.087 at 1000 / 2000 / 3000 / 4000 / 6000
-# / 7000 steps, still above the old weights' 0.064 on the same val split (KPCN 0.034); --loss relative
-# at lr 3e-4 diverged (val 0.158, then 0.53). What worked: fine-tuning the old weights (their own
-# shape, kept by `train --init-from`) on the 40-scene set, --loss relmse, lr 1e-4 cosine, 3000 steps:
-# val 0.0385 / 0.0343 / 0.0334 at 1000 / 2000 / 3000 (from 0.064), test 0.0343 [0.025-0.043] against
-# cross_bilateral 0.0634, OIDN 0.0524 and KPCN 0.0477 (cards). The same old shape from scratch with the
-# same loss and rate (6500 steps): val 0.082 / 0.070 / 0.068 / 0.068 / 0.069 / 0.068 / 0.068 at 1000 /
-# 2000 / 3000 / 4000 / 5000 / 6000 / 6500 steps (the shared small shape: 0.079-0.087); so the
-# start from weights trained on easier data (direct light, log L1 then relative L1) is what DPCN lacked
-# here, more than the shape. Those weights are shipped (dpcn_small.md lists both runs).
+# checkpoint records that shape, so it still loads and scores as before. Why those weights and not
+# this configuration's: weights/dpcn_small.log.md (the runs that failed and the one that worked).
 # Torch's default initialisation in the small configuration (the shipped kpcn_small.pt's; on
 # the unit tests' toy batch Xavier's larger start made KPCN's first steps at lr 5e-3 overshoot).
 SMALL_CONFIG = {

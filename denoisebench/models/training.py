@@ -350,7 +350,18 @@ _RESUMED_KEYS = (
     "validation_history",
     "devices",
     "earlier_runs",
+    "machines",
 )
+
+
+def machine_description(device: str) -> str:
+    """The machine a stage trained on, for its card: core count and accelerator (``"8-core machine, no GPU"``)."""
+    cores = os.cpu_count() or 1
+    if device == "cuda" and torch.cuda.is_available():
+        accelerator = torch.cuda.get_device_name(0)
+    else:
+        accelerator = "no GPU"
+    return f"a {cores}-core machine, {accelerator}"
 
 
 def _new_meta() -> dict:
@@ -428,6 +439,7 @@ def _init_from_start(spec, options: TrainOptions, device: torch.device) -> _Star
             "steps": int(earlier.get("steps", 0)),  # the batch order continues from here
             "seconds": float(earlier.get("seconds", 0.0)),  # the weights' whole training time
             "threads": list(earlier.get("threads", [])),
+            "machines": list(earlier.get("machines", [])),
             "devices": list(earlier.get("devices", [])),
             "earlier_runs": [
                 *earlier.get("earlier_runs", []),
@@ -495,6 +507,7 @@ def _record_run(start: _Start, spec, options: TrainOptions, ds: Dataset, run: di
     if not start.rescoring and options.steps > 0:  # threads, devices and stages describe training; scoring is no stage
         meta["threads"] = sorted(set(meta.get("threads", [])) | {run["threads"]})
         meta["devices"] = sorted(set(meta.get("devices", [])) | {run["device"]})
+        meta["machines"] = [*meta.get("machines", []), machine_description(run["device"])]
         # One record per command (stage) of a multi-stage run: what the card lists.
         meta.setdefault("stages", []).append(
             {
