@@ -115,9 +115,9 @@ def test_two_processes_writing_one_database_lose_no_rows(dataset, tmp_path):
         [(units_other, units_other * FRAMES), (units_same, units_same * FRAMES)]
     )
     assert all(counts["finished"].values())
-    # relmse and flip (always) per frame, two flicker scores (temporal_relmse, tpsnr) on frames 1.. :
-    # nothing lost, nothing doubled
-    expected_metrics = (units_same + units_other) * (2 * FRAMES + 2 * (FRAMES - 1))
+    # relmse_robust, relmse and flip (always) per frame, three flicker scores (temporal_relmse_robust,
+    # temporal_relmse, tpsnr) on frames 1.. : nothing lost, nothing doubled
+    expected_metrics = (units_same + units_other) * (3 * FRAMES + 3 * (FRAMES - 1))
     assert counts["metric_rows"] == expected_metrics
 
 

@@ -265,7 +265,10 @@ def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
         assert relmse["aggregate"] == "mean" and relmse["floor"] > 0
         assert relmse["corrected"] == pytest.approx(relmse["mean"] - relmse["floor"])
         assert row["metrics"]["temporal_relmse"]["floor"] > 0
-    assert results["flicker"]["metrics"] == ["temporal_relmse", "tpsnr"]
+        # the robust scores (always computed, they lead) carry floors too
+        assert row["metrics"]["relmse_robust"]["floor"] > 0
+        assert row["metrics"]["temporal_relmse_robust"]["floor"] > 0
+    assert results["flicker"]["metrics"] == ["temporal_relmse_robust", "temporal_relmse", "tpsnr"]
     assert set(results["flicker"]["series"]["temporal_relmse"]) == {"1", "4"}  # one panel per input spp
     header = next(csv.reader((tmp_path / "report" / "results.csv").open()))
     assert {"relmse_floor", "relmse_corrected", "flicker.temporal_relmse", "flicker.tpsnr"} <= set(header)

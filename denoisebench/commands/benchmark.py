@@ -29,6 +29,7 @@ EPILOG = """examples:
   run-benchmark --data out/dataset --denoiser my_pkg.filters:MyDenoiser --option my_pkg.filters:MyDenoiser:radius=5
   run-benchmark --data out/dataset --denoiser plugins/slow.py:Slow --time-limit 600 --memory-limit 8192
   run-benchmark --data out/dataset --metrics noisebase,cvvdp   # Noisebase's table beside ColorVideoVDP
+  run-benchmark --data out/dataset --trim 0.002   # robust scores drop the worst 0.2 % of pixels
 """
 
 
@@ -92,6 +93,14 @@ def add_arguments(parser) -> None:
         help="comma-separated metrics or metric sets (noisebase: Noisebase's definitions, "
         "nb_*); default every registered metric outside the sets; relmse and flip always",
     )
+    parser.add_argument(
+        "--trim",
+        type=float,
+        default=None,
+        metavar="FRACTION",
+        help="fraction of the highest per-pixel errors the robust scores (relmse_robust, "
+        "temporal_relmse_robust) drop, in [0, 0.5) (default 0.001 = 0.1 %%; recorded in the run)",
+    )
     parser.add_argument("--out", default="report", help="report folder (default report)")
     parser.add_argument("--db", default="benchmark.sqlite", help="results database (default benchmark.sqlite)")
     parser.add_argument("--executor", default="local", choices=("local", "ray"), help="where units run (default local)")
@@ -118,6 +127,14 @@ def run(args) -> int:
     from denoisebench.outputs import check_writable_dir, check_writable_file
 
     limits = limits_from_args(args)  # bad limits are exit 2 before anything else
+    trim = None
+    if args.trim is not None:
+        from denoisebench.metrics.robust import check_trim
+
+        try:
+            trim = check_trim(args.trim)
+        except ValueError as exc:
+            raise UserInputError(f"--trim: {exc}") from None
 
     # --denoiser alone benchmarks just those plugins; --denoisers defaults to all otherwise
     given = args.denoisers if args.denoisers is not None else ("" if args.denoiser else "all")
@@ -133,6 +150,7 @@ def run(args) -> int:
         time_limit=None if limits.time_limit == DEFAULT_TIME_LIMIT else limits.time_limit,
         memory_limit_mb=None if limits.memory_limit_mb == DEFAULT_MEMORY_LIMIT_MB else limits.memory_limit_mb,
         verify=not args.no_verify,
+        trim=trim,
     )
     # outputs first: a run that cannot write its results must not measure for minutes first
     check_writable_file(args.db, "--db")

@@ -41,9 +41,9 @@ from denoisebench.leaderboard import aggregate as agg
 from denoisebench.leaderboard.aggregate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401 (re-exported)
 from denoisebench.leaderboard.runner import FLICKER_METRICS, FLICKER_PREFIX, NOISY
 
-ERROR_METRICS = ("relmse", "flip")
+ERROR_METRICS = ("relmse_robust", "relmse", "flip")  # the first leads (metrics.robust; issue 29)
 #: Assumed slope of log(error) vs log(spp) when only one input spp was measured.
-DEFAULT_SLOPE = {"relmse": -1.0, "mse": -1.0, "flip": -0.5}
+DEFAULT_SLOPE = {"relmse_robust": -1.0, "relmse": -1.0, "mse": -1.0, "flip": -0.5}
 
 
 def _finite(values) -> list[float]:
@@ -302,6 +302,8 @@ class AccuracyTime:
     reference_seconds: float | None
     reference_spp: int | None
     hidden: list[str]  # points that cannot be drawn on log axes, and why
+    time_label: str = "seconds per frame (render at input spp + denoise)"
+    noisy_curve: dict[int, float] = field(default_factory=dict)  # measured rungs {spp: error}
 
 
 def pareto_front(points: list[Point]) -> None:
@@ -353,25 +355,45 @@ def fit_noisy(points: list[Point], render_times: list[tuple[float, float]], metr
     return NoisyFit(float(intercept), float(slope), timing[1], sorted(p.spp for p in noisy), assumed, timing[0])
 
 
-def accuracy_time(data: RunData, summary: list[SummaryRow], metric: str, reference: dict) -> AccuracyTime:
+def accuracy_time(
+    data: RunData, summary: list[SummaryRow], metric: str, reference: dict, model=None
+) -> AccuracyTime:
+    """Points of ``metric`` against seconds per frame; with a :class:`.time_model.TimeModel`, the
+    seconds are the model's at its resolution (render line and denoise costs), else as measured."""
     points, hidden = [], []
     for row in summary:
         cell = row.metrics.get(metric)
-        if cell is None or cell.mean is None or row.total_seconds is None:
+        seconds = row.total_seconds if model is None else model.total_seconds(row.denoiser, row.spp)
+        if cell is None or cell.mean is None:
             continue
-        if cell.mean <= 0 or row.total_seconds <= 0:
+        if seconds is None:
+            if model is not None:
+                hidden.append(f"{row.denoiser} at {row.spp} spp: no time at {model.time_at[0]}×{model.time_at[1]}")
+            continue
+        if cell.mean <= 0 or seconds <= 0:
             hidden.append(
-                f"{row.denoiser} at {row.spp} spp ({metric} {cell.mean:.3g}, {row.total_seconds:.3g} s): not positive, off a log axis"
+                f"{row.denoiser} at {row.spp} spp ({metric} {cell.mean:.3g}, {seconds:.3g} s): not positive, off a log axis"
             )
             continue
-        points.append(Point(row.denoiser, row.spp, row.total_seconds, cell.mean))
+        points.append(Point(row.denoiser, row.spp, seconds, cell.mean))
     pareto_front(points)
     noisy_frames = [f for f in data.frames if f["denoiser"] == NOISY and f["render_seconds"]]
     render_times = [(f["spp"], f["render_seconds"]) for f in noisy_frames]
-    if reference.get("seconds") and reference.get("spp"):
+    if reference.get("seconds") and reference.get("spp") and model is None:
         render_times.append((reference["spp"], reference["seconds"]))  # the reference is a render time too
     fit = fit_noisy(points, render_times, metric)
-    return AccuracyTime(metric, points, fit, reference.get("seconds"), reference.get("spp"), hidden)
+    reference_seconds = reference.get("seconds")
+    label = "seconds per frame (render at input spp + denoise)"
+    if model is not None and model.render is not None:
+        if fit is not None:
+            fit.time_offset, fit.seconds_per_spp = model.render.offset(model.pixels), model.render.per_spp(model.pixels)
+        if model.projected and reference.get("spp"):
+            reference_seconds = model.render_seconds(reference["spp"])
+        width, height = model.time_at
+        label = f"seconds per frame at {width}×{height}" + (" (projected)" if model.projected else "")
+    at = AccuracyTime(metric, points, fit, reference_seconds, reference.get("spp"), hidden, label)
+    at.noisy_curve = {p.spp: p.error for p in points if p.denoiser == NOISY}
+    return at
 
 
 def _ratio_text(ratio: float) -> str:
@@ -379,18 +401,22 @@ def _ratio_text(ratio: float) -> str:
 
 
 def readings(at: AccuracyTime) -> list[str]:
-    """One sentence per denoiser at the spp where it saves the most time against rendering alone."""
+    """One sentence per denoiser at the spp where it saves the most time against rendering alone.
+
+    A verdict rests only on the measured rungs of the noisy input: the spp rendering alone needs for
+    a denoiser's error is read off the straight log-log segment between the two rungs around it
+    (:func:`.equal_tables.spp_for`). An error below the top rung's (or any error when one rung was
+    measured) would need an extrapolation: the sentence then says so and gives no verdict."""
+    from denoisebench.leaderboard.equal_tables import spp_for
+
     if at.fit is None:
         return [f"No noisy-input curve for {at.metric}: the inputs' error does not fall with spp (or no render times)."]
     fit = at.fit
-    measured = (
-        f"{fit.measured_spp[0]}–{fit.measured_spp[-1]} spp"
-        if len(fit.measured_spp) > 1
-        else f"{fit.measured_spp[0]} spp"
-    )
+    noisy_error = at.noisy_curve or {p.spp: p.error for p in at.points if p.denoiser == NOISY}
+    rungs = sorted(noisy_error)
+    measured = f"{rungs[0]}–{rungs[-1]} spp" if len(rungs) > 1 else f"{rungs[0]} spp"
     sentences = []
     best: dict[str, tuple[float, str]] = {}
-    noisy_error = {p.spp: p.error for p in at.points if p.denoiser == NOISY}
     for p in at.points:
         if p.denoiser == NOISY:
             continue
@@ -398,14 +424,19 @@ def readings(at: AccuracyTime) -> list[str]:
             text = f"{p.denoiser} at {p.spp} spp does not improve on its own input ({at.metric} {p.error:.3g} vs {noisy_error[p.spp]:.3g})."
             best.setdefault(p.denoiser, (-math.inf, text))
             continue
-        spp_eq = fit.spp_for(p.error)
+        found = spp_for(noisy_error, p.error) if len(rungs) > 1 else None
+        if found is None or found.how == "extrapolated":
+            text = (
+                f"{p.denoiser} at {p.spp} spp ({at.metric} {p.error:.3g}) is below the error of rendering alone at "
+                f"every measured rung ({measured}): no verdict, since the rendering time to match it would be "
+                "extrapolated (the equal-quality table gives that figure, marked)."
+            )
+            best.setdefault(p.denoiser, (-math.inf + 1, text))
+            continue
+        spp_eq = found.value
         seconds_eq = fit.seconds_at(spp_eq)
         ratio = p.seconds / seconds_eq
         notes = []
-        if spp_eq > fit.measured_spp[-1]:
-            notes.append(
-                f"extrapolated from the noisy inputs at {measured}" + (", slope assumed" if fit.assumed_slope else "")
-            )
         if at.reference_spp and spp_eq > at.reference_spp:
             notes.append(f"beyond the {at.reference_spp}-spp reference, whose own noise then dominates the score")
         note = f" ({'; '.join(notes)})" if notes else ""

@@ -8,14 +8,16 @@ from denoisebench.leaderboard.runner import NOISY
 
 #: Metrics shown in the summary tables, in this order.
 LEAD_METRICS = (
+    "relmse_robust",  # the headline (metrics.robust): a handful of fireflies cannot decide it
     "relmse",
+    "smape",
     "flip",
     "ssim",
     "psnr",
-    "smape",
     "deltae2000",
     "grad_l1",
     "hfen",
+    "temporal_relmse_robust",
     "temporal_relmse",
     "tpsnr",
     "temporal_l1",
@@ -25,7 +27,7 @@ LEAD_METRICS = (
 
 #: Left out of the summary tables to keep them readable (still in results.json/csv; the temporal
 #: ones are in the flicker table).
-HIDDEN_IN_TABLES = ("smape", "grad_l1", "temporal_l1", "temporal_l1_warped")
+HIDDEN_IN_TABLES = ("grad_l1", "temporal_l1", "temporal_l1_warped")
 #: How a heading names an aggregation rule other than the mean (see leaderboard.aggregate).
 RULE_NOTE = {"geomean": "geo. mean", "relative_to_input": "× input"}
 
@@ -75,7 +77,8 @@ def _metric_columns(rows, metrics: list[str]) -> tuple[list[str], list]:
 
 
 def summary_rows(report: dict, spp: int) -> tuple[list[str], list[list[str]]]:
-    """(header, rows) of the summary table at ``spp``: noisy first, then by relMSE."""
+    """(header, rows) of the summary table at ``spp``: noisy first, then by the lead metric
+    (LEAD_METRICS' first that the run has: the robust relMSE, else relMSE)."""
     # the tables show the lead metrics; results.json/results.csv hold every one
     metrics = [
         m
@@ -85,9 +88,10 @@ def summary_rows(report: dict, spp: int) -> tuple[list[str], list[list[str]]]:
     rows = [r for r in report["summary"] if r.spp == spp]
     headings, makers = _metric_columns(rows, metrics)
     header = ["denoiser", *headings, "denoise s/frame", "total s/frame", "frames"]
+    lead = next((m for m in metrics if m in ("relmse_robust", "relmse")), "relmse")
     key = lambda r: (
         r.denoiser != NOISY,
-        r.metrics.get("relmse").mean if r.metrics.get("relmse") and r.metrics["relmse"].mean is not None else math.inf,
+        r.metrics.get(lead).mean if r.metrics.get(lead) and r.metrics[lead].mean is not None else math.inf,
     )  # noqa: E731
     body = []
     for r in sorted(rows, key=key):

@@ -73,6 +73,7 @@ def run_ray(
         plan.spatial,
         plan.temporal,
         plan.resumed,
+        plan.trim,
     )
     task = ray.remote(_measure_remote)
     root = str(dataset.root.resolve())

@@ -171,7 +171,7 @@ def _comparisons(store: ResultsStore, data: analysis.RunData, dataset: Dataset, 
 
 #: Temporal metrics the flicker table leads with (scale-free; cvvdp is ColorVideoVDP's JOD, how visible
 #: the flicker is to a viewer); the others follow, linear ones last.
-FLICKER_LEAD = ("temporal_relmse", "cvvdp", "tpsnr")
+FLICKER_LEAD = ("temporal_relmse_robust", "temporal_relmse", "cvvdp", "tpsnr")
 
 
 def temporal_metric_order(names: list[str]) -> list[str]:
@@ -243,16 +243,35 @@ def _strips(store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: 
     return out
 
 
+def _dataset_size(dataset: Dataset, scenes: list[str]) -> tuple[int, int]:
+    """(width, height) of the run's frames (the first scene's: a run's scenes share one size)."""
+    record = dataset.scene(scenes[0]).record if scenes else {}
+    return int(record.get("width", 0)), int(record.get("height", 0))
+
+
 def build_report(
-    store: ResultsStore, run_id: str, dataset: Dataset, denoisers: dict[str, object] | None = None
+    store: ResultsStore,
+    run_id: str,
+    dataset: Dataset,
+    denoisers: dict[str, object] | None = None,
+    time_at: tuple[int, int] | None = None,
 ) -> dict:
-    """Everything the report shows, as plain data (figures as PNG/SVG, images as data URIs)."""
+    """Everything the report shows, as plain data (figures as PNG/SVG, images as data URIs).
+
+    ``time_at``: the resolution of the report's time axis (default
+    :data:`.time_model.DEFAULT_TIME_AT`), projected from the run's timings (:mod:`.time_model`)."""
+    from denoisebench.leaderboard import equal_tables, time_model
     from denoisebench.leaderboard.stability import stability_table
 
     data = analysis.RunData(store, run_id)
     summary = analysis.summary_table(data)
     reference = _reference_info(dataset, data.scenes)
-    panels = [analysis.accuracy_time(data, summary, metric, reference) for metric in analysis.ERROR_METRICS]
+    model = time_model.build_time_model(
+        data, time_model.read_timings(store, run_id), time_at, _dataset_size(dataset, data.scenes)
+    )
+    lead = equal_tables.lead_metrics(data.frame_metric_names + data.sequence_metric_names)
+    panels = [analysis.accuracy_time(data, summary, metric, reference, model) for metric in lead]
+    tables = [equal_tables.build_tables(summary, model, data.spp, metric) for metric in lead]
     palette = figures.colors(data.labels)
     figure_files = {}
     if any(p.points for p in panels):
@@ -278,6 +297,9 @@ def build_report(
         "summary": summary,
         "accuracy": panels,
         "readings": {p.metric: analysis.readings(p) for p in panels},
+        "time_model": model,
+        "equal_tables": tables,
+        "verdicts": [v for t in tables for v in equal_tables.verdicts(t)],
         "effects": analysis.effect_breakdown(data, scene_effects),
         "flicker": flicker,
         "temporal_metrics": temporal_metric_order(data.sequence_metric_names),
@@ -295,6 +317,8 @@ def build_report(
 
 def results_json(report: dict) -> dict:
     """The machine-readable part of the report (no images)."""
+    from denoisebench.leaderboard import equal_tables
+
     return _clean(
         {
             "run": report["run"],
@@ -334,10 +358,13 @@ def results_json(report: dict) -> dict:
                     "noisy_fit": vars(p.fit) if p.fit else None,
                     "reference_seconds": p.reference_seconds,
                     "reference_spp": p.reference_spp,
+                    "time_axis": p.time_label,
                 }
                 for p in report["accuracy"]
             ],
             "readings": report["readings"],
+            "time_model": report["time_model"].as_dict(),
+            "equal_tables": [equal_tables.as_dict(t) for t in report["equal_tables"]],
             "effects": report["effects"],
             "flicker": report["flicker"],
             "not_distinguishable": [vars(p) for p in report["indistinguishable"]],
@@ -414,14 +441,19 @@ def results_csv(report: dict) -> str:
 
 
 def write_report(
-    store: ResultsStore, run_id: str, dataset: Dataset, out_dir: str | Path, denoisers: dict[str, object] | None = None
+    store: ResultsStore,
+    run_id: str,
+    dataset: Dataset,
+    out_dir: str | Path,
+    denoisers: dict[str, object] | None = None,
+    time_at: tuple[int, int] | None = None,
 ) -> Path:
-    """Write the report folder; return the path of index.html."""
+    """Write the report folder; return the path of index.html (``time_at``: see :func:`build_report`)."""
     from denoisebench.leaderboard.report_html import render_html
     from denoisebench.leaderboard.report_markdown import render_markdown
 
     out = Path(out_dir)
-    report = build_report(store, run_id, dataset, denoisers)
+    report = build_report(store, run_id, dataset, denoisers, time_at)
     for name, (png, svg) in report["figures"].items():
         atomic_write_bytes(out / "figures" / f"{name}.png", png)
         atomic_write_bytes(out / "figures" / f"{name}.svg", svg.encode("utf-8"))

@@ -41,18 +41,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from denoisebench.dataset import Dataset, DatasetError, layout, manifest_without_timings
+from denoisebench.dataset import Dataset, DatasetError, layout
 from denoisebench.dataset.exr_io import canonical_json
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard.store import FrameRecord, ResultsStore, UnitRecord
 
 NOISY = "noisy"
 #: Metrics the report leads with; always computed (temporal ones on sequences of ≥ 2 frames).
-REQUIRED_METRICS = ("relmse", "flip", "temporal_relmse", "tpsnr")
+REQUIRED_METRICS = ("relmse_robust", "relmse", "flip", "temporal_relmse_robust", "temporal_relmse", "tpsnr")
 #: Per-frame flicker: these temporal metrics of frames (t−1, t), stored as frame metrics
 #: ``flicker.<name>`` of frame t (scale-free ones: the flicker figure averages them over scenes).
 #: Runs before issue 15 stored temporal_l1 as ``flicker``.
-FLICKER_METRICS = ("temporal_relmse", "tpsnr")
+FLICKER_METRICS = ("temporal_relmse_robust", "temporal_relmse", "tpsnr")
 FLICKER_PREFIX = "flicker."
 #: Distributions whose versions a run records (those installed).
 VERSIONED = (
@@ -85,6 +85,7 @@ class BenchmarkConfig:
     time_limit: float | None = None  # per-call seconds of an isolated denoiser (None: the default)
     memory_limit_mb: int | None = None  # worker resident-memory limit (None: the default)
     verify: bool = True  # check every file's sha256 before the first unit
+    trim: float | None = None  # robust scores' dropped fraction (None: metrics.robust.DEFAULT_TRIM, 0.1 %)
 
     def as_dict(self) -> dict:
         data = {
@@ -106,6 +107,8 @@ class BenchmarkConfig:
             data["memory_limit_mb"] = int(self.memory_limit_mb)
         if not self.verify:
             data["verify"] = False
+        if self.trim is not None:
+            data["trim"] = float(self.trim)
         return data
 
     def limits(self):
@@ -134,7 +137,7 @@ class LoadedDenoiser:
 
 def dataset_hash(dataset: Dataset) -> str:
     """sha256 of the manifest without timings: the dataset's content (files' sha256 included)."""
-    return hashlib.sha256(canonical_json(manifest_without_timings(dataset.manifest)).encode()).hexdigest()
+    return dataset.content_hash()  # streamed one scene at a time (the same text for schema versions 1 and 2)
 
 
 def run_identity(data_hash: str, config: BenchmarkConfig) -> str:
@@ -239,23 +242,25 @@ def _split_results(results) -> tuple[dict[str, float], dict[str, float], dict[st
     return values, floors, ses
 
 
-def _frame_metrics(pred: np.ndarray, ref: np.ndarray, names: list[str], ref_var=None):
+def _frame_metrics(pred: np.ndarray, ref: np.ndarray, names: list[str], ref_var=None, trim=None):
     from denoisebench.metrics import compute_metrics
 
-    return _split_results(compute_metrics(pred, ref, names, ref_var=ref_var))
+    return _split_results(compute_metrics(pred, ref, names, ref_var=ref_var, trim=trim))
 
 
-def _sequence_metrics(outputs, refs, motion, names: list[str], ref_vars=None):
+def _sequence_metrics(outputs, refs, motion, names: list[str], ref_vars=None, trim=None):
     from denoisebench.metrics import compute_metrics, get_metric
 
     usable = [n for n in names if "motion" not in get_metric(n).requires or motion is not None]
     if len(outputs) < 2 or not usable:
         return {}, {}, {}
     ref_var = None if ref_vars is None else np.stack(ref_vars)
-    return _split_results(compute_metrics(np.stack(outputs), np.stack(refs), usable, motion=motion, ref_var=ref_var))
+    return _split_results(
+        compute_metrics(np.stack(outputs), np.stack(refs), usable, motion=motion, ref_var=ref_var, trim=trim)
+    )
 
 
-def _flicker(outputs, refs, motion=None) -> list[dict[str, float]]:
+def _flicker(outputs, refs, motion=None, trim=None) -> list[dict[str, float]]:
     """FLICKER_METRICS of each consecutive pair: the flicker of frame t against frame t−1."""
     from denoisebench.metrics import compute_metrics
 
@@ -263,7 +268,11 @@ def _flicker(outputs, refs, motion=None) -> list[dict[str, float]]:
     for t in range(1, len(outputs)):
         pair_motion = None if motion is None else motion[t - 1 : t + 1]
         results = compute_metrics(
-            np.stack(outputs[t - 1 : t + 1]), np.stack(refs[t - 1 : t + 1]), list(FLICKER_METRICS), motion=pair_motion
+            np.stack(outputs[t - 1 : t + 1]),
+            np.stack(refs[t - 1 : t + 1]),
+            list(FLICKER_METRICS),
+            motion=pair_motion,
+            trim=trim,
         )
         out.append({FLICKER_PREFIX + name: r.value for name, r in results.items()})
     return out
@@ -277,8 +286,12 @@ def _reference_variance(frame) -> np.ndarray | None:
     return np.asarray(var, dtype=np.float32)
 
 
-def measure_unit(label: str, denoiser: object | None, sequence, spatial: list[str], temporal: list[str]) -> UnitRecord:
-    """Run one denoiser (None: the noisy input) on ``sequence`` and measure every frame."""
+def measure_unit(
+    label: str, denoiser: object | None, sequence, spatial: list[str], temporal: list[str], trim: float | None = None
+) -> UnitRecord:
+    """Run one denoiser (None: the noisy input) on ``sequence`` and measure every frame.
+
+    ``trim``: the robust scores' dropped fraction (None: their default, :mod:`denoisebench.metrics.robust`)."""
     from denoisebench.denoisers.runner import run_sequence, sanitize_array
     from denoisebench.metrics.cost import total_seconds
 
@@ -301,7 +314,7 @@ def measure_unit(label: str, denoiser: object | None, sequence, spatial: list[st
         if ok:
             try:
                 record.metrics, record.floors, record.ref_se = _frame_metrics(
-                    output, frame.reference, spatial, _reference_variance(frame)
+                    output, frame.reference, spatial, _reference_variance(frame), trim
                 )
             except ValueError as exc:  # a metric refusing this output is the denoiser's failure
                 record.status, record.error, ok = "failed", f"metrics: {exc}", False
@@ -318,11 +331,11 @@ def measure_unit(label: str, denoiser: object | None, sequence, spatial: list[st
     ref_vars = [_reference_variance(f) for f in frames]
     ref_vars = None if any(v is None for v in ref_vars) else ref_vars
     unit.sequence_metrics, unit.sequence_floors, unit.sequence_ref_se = _sequence_metrics(
-        outputs, refs, motion, temporal, ref_vars
+        outputs, refs, motion, temporal, ref_vars, trim
     )
     unit.image_frame, unit.image = frames[-1].index, outputs[-1]
     if len(outputs) > 1:
-        for record, values in zip(records[1:], _flicker(outputs, refs, motion)):
+        for record, values in zip(records[1:], _flicker(outputs, refs, motion, trim)):
             record.metrics.update(values)
         from denoisebench.leaderboard.strips import cut
 
@@ -361,6 +374,7 @@ class RunPlan:
     spatial: list[str]
     temporal: list[str]
     resumed: bool
+    trim: float | None = None  # the config's (None: the robust scores' default)
 
     @property
     def labels(self) -> list[str]:
@@ -405,7 +419,7 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     denoisers = load_denoisers(specs, config.options, isolation=config.isolation, limits=config.limits())
     created = store.ensure_run(run_id, data_hash, str(dataset.root.resolve()), config.as_dict(), software_versions())
     store.add_denoiser(run_id, NOISY, NOISY, "input", {"color"}, False, None)
-    plan = RunPlan(run_id, scenes, spp, denoisers, spatial, temporal, resumed=not created)
+    plan = RunPlan(run_id, scenes, spp, denoisers, spatial, temporal, resumed=not created, trim=config.trim)
     seen = plan.trained_on()
     for d in denoisers:
         store.add_denoiser(
@@ -441,7 +455,7 @@ def measure_group(
     for label in labels:
         if label != NOISY and label not in instances:
             raise KeyError(f"no denoiser instance for {label!r}")  # never measure a denoiser as the input
-        yield measure_unit(label, instances.get(label), sequence, plan.spatial, plan.temporal)
+        yield measure_unit(label, instances.get(label), sequence, plan.spatial, plan.temporal, plan.trim)
 
 
 def run_local(

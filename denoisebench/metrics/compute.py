@@ -113,17 +113,20 @@ def compute_metrics(
     masks=None,
     maps: bool = False,
     ref_var=None,
+    trim: float | None = None,
 ) -> dict[str, MetricResult]:
     """Evaluate ``metrics`` (names; default: every registered one that applies) on pred vs ref.
 
     ``motion``, ``depth``, ``masks``: per-frame buffers for temporal metrics (see
     ``temporal``); each metric receives those it accepts. ``maps=True`` also returns per-pixel
     maps. ``ref_var``: the reference's per-pixel variance (H×W×3, or T×H×W×3 for a sequence) for
-    the floors. Returns ``{name: MetricResult}`` in the order asked. Bad input (shapes, a non-finite
+    the floors. ``trim``: the fraction of highest per-pixel errors the robust scores drop (those
+    whose ``accepts`` lists ``"trim"``, :mod:`.robust`; None: their default 0.1 %). Returns
+    ``{name: MetricResult}`` in the order asked. Bad input (shapes, a non-finite
     reference, a temporal metric on one frame, a missing motion buffer) is a ``ValueError``.
     """
     sequence = _is_sequence(pred)
-    context = {"motion": motion, "depth": depth, "masks": masks}
+    context = {"motion": motion, "depth": depth, "masks": masks, "trim": trim}
     chosen = _select(metrics, sequence, context)
     checked = check_sequences(pred, ref) if sequence else check_pair(pred, ref)
     pred_arr, ref_arr, total_bad = checked.pred, checked.ref, checked.nonfinite_count
@@ -133,21 +136,21 @@ def compute_metrics(
         t0 = time.perf_counter()
         per_frame = None
         the_map = None
+        kwargs = _kwargs(m, context)
         if m.temporal:
-            kwargs = {k: context[k] for k in m.accepts if context.get(k) is not None}
             value = float(m.fn(pred_arr, ref_arr, **kwargs))
             if maps and m.map_fn is not None:
                 the_map = m.map_fn(pred_arr, ref_arr, **kwargs)
         elif sequence:
-            values = [float(m.fn(p, r)) for p, r in zip(pred_arr, ref_arr)]
+            values = [float(m.fn(p, r, **kwargs)) for p, r in zip(pred_arr, ref_arr)]
             per_frame = tuple(values)
             value = m.worst if total_bad else float(np.mean(values))
             if maps and m.map_fn is not None:
-                the_map = np.stack([m.map_fn(p, r) for p, r in zip(pred_arr, ref_arr)])
+                the_map = np.stack([m.map_fn(p, r, **kwargs) for p, r in zip(pred_arr, ref_arr)])
         else:
-            value = float(m.fn(pred_arr, ref_arr))
+            value = float(m.fn(pred_arr, ref_arr, **kwargs))
             if maps and m.map_fn is not None:
-                the_map = m.map_fn(pred_arr, ref_arr)
+                the_map = m.map_fn(pred_arr, ref_arr, **kwargs)
         if total_bad:
             value = m.worst
         floor = se = None
@@ -169,15 +172,20 @@ def compute_metrics(
     return results
 
 
+def _kwargs(m: Metric, context: dict) -> dict:
+    """The context keywords ``m`` accepts that were given (motion, depth, masks, trim)."""
+    return {k: context[k] for k in m.accepts if context.get(k) is not None}
+
+
 def _floor(m: Metric, pred, ref, ref_var, sequence: bool, context: dict) -> tuple[float, float]:
+    kwargs = _kwargs(m, context)
     if m.temporal or not sequence:  # one call: a whole sequence (temporal) or one frame
-        kwargs = {k: context[k] for k in m.accepts if context.get(k) is not None} if m.temporal else {}
         result = m.floor_fn(pred, ref, ref_var, **kwargs)
         return float(result[0]), float(result[1])
     ref_var = np.asarray(ref_var, dtype=np.float64)
     if ref_var.shape[0] != len(ref):
         raise ValueError(f"ref_var has {ref_var.shape[0]} frames, the reference {len(ref)}")
-    parts = [m.floor_fn(p, r, v) for p, r, v in zip(pred, ref, ref_var)]
+    parts = [m.floor_fn(p, r, v, **kwargs) for p, r, v in zip(pred, ref, ref_var)]
     floors = np.array([float(x[0]) for x in parts])
     ses = np.array([float(x[1]) for x in parts])
     return float(floors.mean()), float(np.sqrt(np.sum(np.square(ses))) / len(parts))

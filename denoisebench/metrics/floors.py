@@ -127,14 +127,23 @@ def mse_floor(pred, ref, ref_var) -> Floor:
     return squared_error_floor(c.pred.astype(np.float64) - c.ref, v, 1.0)
 
 
-def relmse_floor(pred, ref, ref_var) -> Floor:
-    """Reference-noise share and se of ``relmse(pred, ref)``, to second order (module Notes)."""
+def relmse_floor(pred, ref, ref_var, *, valid=None) -> Floor:
+    """Reference-noise share and se of ``relmse(pred, ref)``, to second order (module Notes).
+
+    ``valid`` (H×W bool): count only those pixels (the kept pixels of a trimmed score, :mod:`.robust`).
+    """
     c = check_pair(pred, ref)
     v = as_variance(ref_var, c.ref.shape)
     r = c.ref.astype(np.float64)
     d = c.pred.astype(np.float64) - r
     denom = np.square(r) + EPS_RELMSE
-    first = squared_error_floor(d, v, denom)
+    keep = None
+    if valid is not None:
+        keep = np.asarray(valid, dtype=bool)
+        if keep.shape != c.ref.shape[:2]:
+            raise ValueError(f"valid has shape {keep.shape}, the image {c.ref.shape[:2]}")
+        keep = np.broadcast_to(keep[..., None], c.ref.shape)
+    first = squared_error_floor(d, v, denom, valid=keep)
     if not math.isfinite(first.se):
         return first
     # the reference's noise in the denominator (module Notes): E[d²] = e² + v, E[d·r] = e·R − v
@@ -146,4 +155,4 @@ def relmse_floor(pred, ref, ref_var) -> Floor:
     )
     # the expansion holds only where the reference's noise is small against its value (module Notes)
     second = np.where(v <= SECOND_ORDER_LIMIT * denom, second, 0.0)
-    return Floor(first.floor + float(np.mean(second)), first.se)
+    return Floor(first.floor + float(np.mean(second if keep is None else second[keep])), first.se)

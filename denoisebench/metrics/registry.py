@@ -3,7 +3,8 @@
 A :class:`Metric` pairs the pure function with what a report needs to know about it.
 Spatial and gradient metrics take ``(pred, ref)`` H×W×3; temporal ones take
 ``(pred_seq, ref_seq, **context)`` with the keywords listed in ``accepts`` (``motion``,
-``depth``, ``masks``), of which ``requires`` must be given.
+``depth``, ``masks``), of which ``requires`` must be given. A metric of any kind whose ``accepts``
+lists ``trim`` (the robust scores, :mod:`.robust`) receives the run's trim fraction when one is set.
 
 Aggregation over scenes (``Metric.aggregate``; DESIGN.md "Metrics")
 --------------------------------------------------------------------
@@ -12,8 +13,8 @@ decided by the brightest scene (measured: ``temporal_l1`` ranked the noisy input
 glossy_fireflies scored 1.07–1.44 and every other scene 0.01–0.18). So every metric states how the
 leaderboard combines its per-scene values:
 
-* ``"mean"``: arithmetic mean. Only for scale-free scores (relMSE, SMAPE, FLIP, SSIM, PSNR, tPSNR,
-  ΔE2000 of tone-mapped colour, ``temporal_relmse``).
+* ``"mean"``: arithmetic mean. Only for scale-free scores (relMSE and its robust form, SMAPE, FLIP,
+  SSIM, PSNR, tPSNR, ΔE2000 of tone-mapped colour, ``temporal_relmse`` and its robust form).
 * ``"geomean"``: geometric mean (a brightness factor of a scene multiplies every denoiser's
   value alike, so it cannot change the ranking). A zero value makes the mean 0.
 * ``"relative_to_input"``: per scene and spp, the value divided by the noisy input's on the same
@@ -35,7 +36,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from denoisebench.metrics import colorvideovdp as cv
-from denoisebench.metrics import floors, gradient, spatial, temporal
+from denoisebench.metrics import floors, gradient, robust, spatial, temporal
 from denoisebench.metrics import msssim as ms
 from denoisebench.metrics import noisebase as nb
 
@@ -126,6 +127,10 @@ ALIASES = {
     "t_psnr": "tpsnr",
     "trelmse": "temporal_relmse",
     "relmse_temporal": "temporal_relmse",
+    "robust_relmse": "relmse_robust",
+    "relmse_trimmed": "relmse_robust",
+    "trimmed_relmse": "relmse_robust",
+    "temporal_robust_relmse": "temporal_relmse_robust",
     "temporal_rel_mse": "temporal_relmse",
 }
 
@@ -361,6 +366,33 @@ def _builtin() -> None:
             "PSNR of tone-mapped frame differences, peak 1",
             "dB",
             accepts=("masks",),
+        ),
+        # The robust (trimmed) scores that lead the report (issue 29): robust.py.
+        Metric(
+            "relmse_robust",
+            robust.relmse_robust,
+            False,
+            "linear",
+            "spatial",
+            robust.WORST["relmse_robust"],
+            0.0,
+            robust.relmse_robust_map,
+            "relMSE without the highest 0.1 % of per-pixel errors (--trim; robust.py)",
+            accepts=("trim",),
+            floor_fn=robust.relmse_robust_floor,
+        ),
+        Metric(
+            "temporal_relmse_robust",
+            robust.temporal_relmse_robust,
+            False,
+            "linear",
+            "temporal",
+            robust.WORST["temporal_relmse_robust"],
+            0.0,
+            robust.temporal_relmse_robust_map,
+            "temporal_relmse without each pair's highest 0.1 % of per-pixel values (--trim; robust.py)",
+            accepts=("motion", "depth", "masks", "trim"),
+            floor_fn=robust.temporal_relmse_robust_floor,
         ),
         # Scores comparable with the field (issue 20): msssim.py, colorvideovdp.py, noisebase.py.
         Metric(
