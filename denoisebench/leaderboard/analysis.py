@@ -355,9 +355,7 @@ def fit_noisy(points: list[Point], render_times: list[tuple[float, float]], metr
     return NoisyFit(float(intercept), float(slope), timing[1], sorted(p.spp for p in noisy), assumed, timing[0])
 
 
-def accuracy_time(
-    data: RunData, summary: list[SummaryRow], metric: str, reference: dict, model=None
-) -> AccuracyTime:
+def accuracy_time(data: RunData, summary: list[SummaryRow], metric: str, reference: dict, model=None) -> AccuracyTime:
     """Points of ``metric`` against seconds per frame; with a :class:`.time_model.TimeModel`, the
     seconds are the model's at its resolution (render line and denoise costs), else as measured."""
     points, hidden = [], []

@@ -177,3 +177,126 @@ def stability_rows(table: dict[str, list[dict]]) -> tuple[list[str], list[list[s
             ]
         )
     return ["denoiser", *cases], rows
+
+
+# --------------------------------------------------------------------------------------------------
+# time model and equal-time / equal-quality tables
+
+#: How a table marks a figure read off the measured rungs in another way than measured.
+HOW_MARK = {"measured": "", "interpolated": "", "at_most": "≤ ", "extrapolated": ""}
+
+
+def _estimate(e, digits: int = 3) -> str:
+    """``value`` (``≤ value`` for a bound, ``value (extrapolated)`` outside the measured rungs)."""
+    if e is None:
+        return "—"
+    text = HOW_MARK.get(e.how, "") + num(e.value, digits)
+    if e.low is not None and e.high is not None:
+        text += f" [{num(e.low)}, {num(e.high)}]"
+    return text + (" (extrapolated)" if e.how == "extrapolated" else "")
+
+
+def time_axis_text(report: dict) -> str:
+    """One sentence: the resolution the report's times are for, and whether they are projected."""
+    model = report["time_model"]
+    width, height = model.time_at
+    w0, h0 = model.dataset_size
+    if not model.projected:
+        return f"Times are per frame at the dataset's {w0}×{h0}, as measured."
+    beyond = (
+        " and beyond the largest size timed (extrapolated along the measured line)"
+        if model.extrapolated_pixels()
+        else ""
+    )
+    return (
+        f"Times are per frame at {width}×{height}, projected from {w0}×{h0} frames and timings at a larger size "
+        f"(fixed cost per call + cost per pixel){beyond}: every time in the tables and figure is projected."
+    )
+
+
+def machine_text(report: dict) -> str:
+    m = report["time_model"].machine or {}
+    gpu = m.get("gpu") or "none"
+    return f"Machine: {m.get('cores', '?')} cores ({m.get('cpu') or '?'}, {m.get('system') or '?'}), GPU {gpu}."
+
+
+def time_model_rows(report: dict) -> tuple[list[str], list[list[str]]]:
+    """(header, rows): rendering's and each denoiser's fixed and per-pixel cost, and the time at the axis' size."""
+    model = report["time_model"]
+    width, height = model.time_at
+    header = ["", "fixed s (per call/frame)", "s per megapixel", f"s per frame at {width}×{height}", "measured how"]
+    rows = []
+    if model.render is not None:
+        r = model.render
+        top = max(r.measured_spp) if r.measured_spp else 1
+        rows.append(
+            [
+                "render, per spp",
+                num(r.offset(model.pixels)),
+                num(r.per_megapixel_per_spp) + " per spp",
+                f"{num(model.render_seconds(top))} at {top} spp",
+                f"line over spp {', '.join(map(str, r.measured_spp))}; {r.note}",
+            ]
+        )
+    for label, c in model.denoisers.items():
+        lowest = min(c.small)
+        timed = (
+            f"{num(c.small[lowest])} s at {model.dataset_size[0]}×{model.dataset_size[1]}"
+            + (f", {num(c.large_seconds)} s at {num(c.large_pixels / 1e6, 2)} MP" if c.large_pixels else "")
+            + (f"; {c.note}" if c.note else "")
+        )
+        rows.append([label, num(c.fixed), num(c.per_megapixel), num(model.denoise_seconds(label, lowest)), timed])
+    return header, rows
+
+
+def equal_time_rows(table) -> tuple[list[str], list[list[str]]]:
+    """(header, rows) of one metric's equal-time table."""
+    header = [
+        "budget (render s spp)",
+        "s per frame",
+        f"rendering alone: {table.metric}",
+        "best within budget",
+        f"its {table.metric}",
+        "its s per frame",
+        "error ratio",
+    ]
+    rows = []
+    for r in table.equal_time:
+        best = f"{r.best} at {r.best_spp} spp" if r.best else "rendering alone"
+        rows.append(
+            [
+                f"{r.budget_spp} spp",
+                num(r.budget_seconds),
+                _estimate(r.render_error),
+                best,
+                _estimate(r.best_error) if r.best else "—",
+                num(r.best_seconds) if r.best else "—",
+                num(r.ratio) if r.best else "—",
+            ]
+        )
+    return header, rows
+
+
+def equal_quality_rows(table) -> tuple[list[str], list[list[str]]]:
+    """(header, rows) of one metric's equal-quality table: seconds per frame each needs for each target."""
+    header = [f"target {table.metric}", "rendering alone: spp", "s per frame", *table.denoisers]
+    rows = []
+    for r in table.equal_quality:
+        extrapolated = r.render_how == "extrapolated"
+        cells = []
+        for label in table.denoisers:
+            need = r.needs.get(label)
+            if need is None:
+                cells.append("not reached")
+                continue
+            spp, seconds = need
+            cells.append(f"{_estimate(seconds)} ({HOW_MARK.get(spp.how, '')}{num(spp.value)} spp)")
+        rows.append(
+            [
+                num(r.target) + (" (extrapolated)" if extrapolated else ""),
+                f"{r.target_spp:g}",
+                num(r.render_seconds) + (" (extrapolated)" if extrapolated else ""),
+                *cells,
+            ]
+        )
+    return header, rows

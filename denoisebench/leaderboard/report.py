@@ -270,7 +270,10 @@ def build_report(
         data, time_model.read_timings(store, run_id), time_at, _dataset_size(dataset, data.scenes)
     )
     lead = equal_tables.lead_metrics(data.frame_metric_names + data.sequence_metric_names)
-    panels = [analysis.accuracy_time(data, summary, metric, reference, model) for metric in lead]
+    measured = data.frame_metric_names + data.sequence_metric_names
+    # the figure: the robust relMSE first, raw relMSE beside it, FLIP; the tables: the lead metrics
+    shown = [m for m in analysis.ERROR_METRICS if m in measured]
+    panels = [analysis.accuracy_time(data, summary, metric, reference, model) for metric in shown]
     tables = [equal_tables.build_tables(summary, model, data.spp, metric) for metric in lead]
     palette = figures.colors(data.labels)
     figure_files = {}

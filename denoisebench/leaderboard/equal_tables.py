@@ -1,0 +1,336 @@
+"""Equal-time and equal-quality tables: the two comparisons rendering papers print.
+
+* **Equal time** (:func:`equal_time`): for each budget, the seconds per frame of rendering ``s`` spp
+  at the time axis' resolution (one row per measured rung ``s``), the (denoiser, spp) of lowest
+  error whose render + denoise seconds fit that budget, its error with its 95 % interval, against
+  the error of rendering ``s`` spp alone.
+* **Equal quality** (:func:`equal_quality`): for each error target (the noisy input's error at each
+  measured rung, then at 4× and 16× the top rung), the seconds per frame each denoiser needs to
+  reach it, against the seconds rendering alone needs.
+
+Notes
+-----
+* **Interpolation only between measured rungs.** A denoiser's (or the input's) error between two
+  measured spp is read off the straight line joining them on log-log axes (Monte Carlo error is a
+  power of spp); its denoise seconds are linear in spp between them. Outside the measured rungs a
+  figure is **extrapolated** along the nearest segment, marked ``extrapolated`` in every table, and
+  never makes a verdict (:func:`verdicts`). A target a denoiser already meets at its lowest measured
+  spp gets "≤" (it might need fewer samples, which were not measured), a bound and no extrapolation.
+* **Where the seconds come from.** Every second is the :class:`~.time_model.TimeModel` at the
+  report's resolution (``projected`` when that is not the dataset's); the tables do not mix
+  resolutions.
+* **Which error.** The lead metric is the robust relMSE (``relmse_robust``) when the metrics
+  registry has it and the run measured it, else relMSE; FLIP beside it (:func:`lead_metrics`). Each
+  is aggregated over scenes by its rule (:func:`.analysis.summary_table`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from denoisebench.leaderboard.runner import NOISY
+
+#: Multiples of the top rung the equal-quality table adds as (extrapolated) targets.
+EXTRA_TARGETS = (4, 16)
+
+
+def lead_metrics(measured: list[str]) -> list[str]:
+    """The tables' metrics: robust relMSE (else relMSE), then FLIP, among those the run measured."""
+    from denoisebench.metrics.registry import metric_names
+
+    registered = set(metric_names())
+    first = "relmse_robust" if "relmse_robust" in registered and "relmse_robust" in measured else "relmse"
+    return [m for m in (first, "flip") if m in measured]
+
+
+@dataclass
+class Estimate:
+    """A value read off measured rungs: ``how`` is ``measured``, ``interpolated``, ``at_most`` or ``extrapolated``."""
+
+    value: float
+    how: str
+    low: float | None = None
+    high: float | None = None
+
+    @property
+    def verdict_ok(self) -> bool:
+        return self.how in ("measured", "interpolated", "at_most")
+
+
+def _log_segment(x0, y0, x1, y1, x) -> float:
+    t = (math.log(x) - math.log(x0)) / (math.log(x1) - math.log(x0))
+    return math.exp(math.log(y0) + t * (math.log(y1) - math.log(y0)))
+
+
+def error_at(curve: dict[int, float], spp: float) -> Estimate | None:
+    """Error at ``spp`` on a measured curve {spp: error > 0}: log-log between rungs, extrapolated outside."""
+    points = sorted((s, e) for s, e in curve.items() if e is not None and e > 0)
+    if not points:
+        return None
+    for s, e in points:
+        if math.isclose(s, spp):
+            return Estimate(e, "measured")
+    if len(points) == 1:
+        return None
+    if spp < points[0][0]:
+        (x0, y0), (x1, y1) = points[0], points[1]
+        return Estimate(_log_segment(x0, y0, x1, y1, spp), "extrapolated")
+    if spp > points[-1][0]:
+        (x0, y0), (x1, y1) = points[-2], points[-1]
+        return Estimate(_log_segment(x0, y0, x1, y1, spp), "extrapolated")
+    for (x0, y0), (x1, y1) in zip(points, points[1:]):
+        if x0 <= spp <= x1:
+            return Estimate(_log_segment(x0, y0, x1, y1, spp), "interpolated")
+    return None
+
+
+def spp_for(curve: dict[int, float], target: float) -> Estimate | None:
+    """The least spp at which a curve {spp: error} reaches ``target`` (error ≤ target).
+
+    ``at_most``: met at the lowest rung already; ``interpolated``: on the first segment that crosses
+    it; ``extrapolated``: beyond the top rung along the last segment when that falls; None when the
+    curve neither reaches it nor falls at its end."""
+    points = sorted((s, e) for s, e in curve.items() if e is not None and e > 0)
+    if not points or target <= 0:
+        return None
+    if points[0][1] <= target:
+        return Estimate(float(points[0][0]), "at_most")
+    for (x0, y0), (x1, y1) in zip(points, points[1:]):
+        if y1 <= target < y0:
+            if math.isclose(y1, target):
+                return Estimate(float(x1), "measured")
+            t = (math.log(target) - math.log(y0)) / (math.log(y1) - math.log(y0))
+            return Estimate(math.exp(math.log(x0) + t * (math.log(x1) - math.log(x0))), "interpolated")
+    if len(points) >= 2:
+        (x0, y0), (x1, y1) = points[-2], points[-1]
+        if y1 < y0:
+            slope = (math.log(y1) - math.log(y0)) / (math.log(x1) - math.log(x0))
+            return Estimate(math.exp(math.log(x1) + (math.log(target) - math.log(y1)) / slope), "extrapolated")
+    return None
+
+
+@dataclass
+class Curves:
+    """Per label {spp: (mean, low, high)} of one metric from the summary rows."""
+
+    metric: str
+    cells: dict[str, dict[int, tuple[float, float | None, float | None]]]
+
+    def curve(self, label: str) -> dict[int, float]:
+        return {s: c[0] for s, c in self.cells.get(label, {}).items() if c[0] is not None and c[0] > 0}
+
+    @classmethod
+    def from_summary(cls, summary, metric: str) -> Curves:
+        cells: dict[str, dict] = {}
+        for row in summary:
+            cell = row.metrics.get(metric)
+            if cell is None or cell.mean is None or row.failed_units:
+                continue
+            cells.setdefault(row.denoiser, {})[int(row.spp)] = (float(cell.mean), cell.low, cell.high)
+        return cls(metric, cells)
+
+
+@dataclass
+class EqualTimeRow:
+    budget_spp: int
+    budget_seconds: float
+    render_error: Estimate
+    best: str | None  # a denoiser label, or None when rendering alone is best
+    best_spp: int | None
+    best_seconds: float | None
+    best_error: Estimate | None
+    candidates: int
+
+    @property
+    def ratio(self) -> float | None:
+        """Best error / rendering's error (< 1: the denoiser wins at this budget)."""
+        if self.best_error is None or not self.render_error.value:
+            return None
+        return self.best_error.value / self.render_error.value
+
+
+@dataclass
+class EqualQualityRow:
+    target: float
+    target_spp: float  # spp rendering alone needs
+    render_seconds: float
+    render_how: str  # measured (a rung) or extrapolated
+    needs: dict[str, tuple[Estimate, Estimate] | None] = field(default_factory=dict)  # label → (spp, seconds)
+
+
+@dataclass
+class Tables:
+    metric: str
+    time_at: tuple[int, int]
+    projected: bool
+    equal_time: list[EqualTimeRow]
+    equal_quality: list[EqualQualityRow]
+    denoisers: list[str]
+
+
+def equal_time(curves: Curves, model, rungs: list[int]) -> list[EqualTimeRow]:
+    """One row per measured rung: the best (denoiser, spp) within rendering's seconds at that rung."""
+    rows = []
+    noisy = curves.cells.get(NOISY, {})
+    for s in rungs:
+        if s not in noisy or model.render_seconds(s) is None:
+            continue
+        budget = model.render_seconds(s)
+        mean, low, high = noisy[s]
+        render_error = Estimate(mean, "measured", low, high)
+        best = None
+        count = 0
+        for label, by_spp in curves.cells.items():
+            if label == NOISY:
+                continue
+            for spp, (e, lo, hi) in by_spp.items():
+                seconds = model.total_seconds(label, spp)
+                if seconds is None or seconds > budget * (1 + 1e-9):
+                    continue
+                count += 1
+                if best is None or e < best[3].value:
+                    best = (label, spp, seconds, Estimate(e, "measured", lo, hi))
+        if best is not None and best[3].value < mean:
+            rows.append(EqualTimeRow(s, budget, render_error, *best, count))
+        else:
+            rows.append(EqualTimeRow(s, budget, render_error, None, None, None, None, count))
+    return rows
+
+
+def equal_quality(curves: Curves, model, rungs: list[int]) -> list[EqualQualityRow]:
+    """Targets: the input's error at each measured rung, then at EXTRA_TARGETS × the top rung."""
+    noisy = curves.curve(NOISY)
+    if not noisy:
+        return []
+    targets = [(float(s), Estimate(noisy[s], "measured")) for s in sorted(noisy) if s in rungs]
+    top = max(noisy)
+    for factor in EXTRA_TARGETS:
+        found = error_at(noisy, top * factor)
+        if found is not None and found.value < noisy[top]:
+            targets.append((float(top * factor), found))
+    rows = []
+    for target_spp, target in targets:
+        render = model.render_seconds(target_spp)
+        if render is None:
+            continue
+        row = EqualQualityRow(target.value, target_spp, render, target.how)
+        for label in curves.cells:
+            if label == NOISY:
+                continue
+            need = spp_for(curves.curve(label), target.value)
+            if need is None:
+                row.needs[label] = None
+                continue
+            seconds = model.total_seconds(label, need.value)
+            row.needs[label] = None if seconds is None else (need, Estimate(seconds, need.how))
+        rows.append(row)
+    return rows
+
+
+def build_tables(summary, model, rungs: list[int], metric: str) -> Tables:
+    curves = Curves.from_summary(summary, metric)
+    labels = [label for label in curves.cells if label != NOISY]
+    return Tables(
+        metric,
+        tuple(model.time_at),
+        bool(model.projected),
+        equal_time(curves, model, rungs),
+        equal_quality(curves, model, rungs),
+        labels,
+    )
+
+
+def _pct(ratio: float) -> str:
+    return f"1/{1 / ratio:.0f}" if ratio < 0.5 else f"{100 * ratio:.0f} %"
+
+
+def _res(tables: Tables) -> str:
+    w, h = tables.time_at
+    return f"{w}×{h}" + (", projected" if tables.projected else "")
+
+
+def verdicts(tables: Tables) -> list[str]:
+    """Sentences from rows whose every figure lies within the measured rungs (none from an extrapolation)."""
+    out = []
+    from denoisebench.leaderboard.formatting import num
+
+    wins = [r for r in tables.equal_time if r.best is not None and r.best_error.verdict_ok]
+    if wins:
+        r = max(wins, key=lambda r: r.budget_spp)
+        interval = f" [{num(r.best_error.low)}, {num(r.best_error.high)}]" if r.best_error.low is not None else ""
+        out.append(
+            f"Equal time ({tables.metric}): within the {num(r.budget_seconds)} s per frame that rendering "
+            f"{r.budget_spp} spp takes ({_res(tables)}), {r.best} at {r.best_spp} spp reaches "
+            f"{num(r.best_error.value)}{interval} against rendering's {num(r.render_error.value)}: "
+            f"{_pct(r.ratio)} of its error."
+        )
+    losses = [r for r in tables.equal_time if r.best is None and r.candidates]
+    if losses and not wins:
+        out.append(
+            f"Equal time ({tables.metric}): at every measured budget rendering alone has the lowest error "
+            f"({_res(tables)})."
+        )
+    for label in tables.denoisers:
+        best = None
+        for row in tables.equal_quality:
+            need = row.needs.get(label)
+            if row.render_how != "measured" or need is None or not need[1].verdict_ok:
+                continue
+            ratio = need[1].value / row.render_seconds
+            if best is None or ratio < best[0]:
+                best = (ratio, row, need)
+        if best is None:
+            continue
+        ratio, row, (spp, seconds) = best
+        bound = "at most " if spp.how == "at_most" else ""
+        if ratio <= 1:
+            tail = f"{_pct(ratio)} of rendering's time"
+        else:
+            tail = f"{ratio:.2g}× rendering's time: rendering more samples is cheaper"
+        out.append(
+            f"Equal quality ({tables.metric}): {label} reaches the error of {row.target_spp:g}-spp rendering "
+            f"({num(row.target)}) in {bound}{num(seconds.value)} s per frame against {num(row.render_seconds)} s "
+            f"({_res(tables)}), {tail}."
+        )
+    return out
+
+
+def as_dict(tables: Tables) -> dict:
+    """results.json's form of the tables."""
+
+    def est(e: Estimate | None):
+        return None if e is None else {"value": e.value, "how": e.how, "ci95": [e.low, e.high]}
+
+    return {
+        "metric": tables.metric,
+        "time_at": list(tables.time_at),
+        "projected": tables.projected,
+        "equal_time": [
+            {
+                "budget_spp": r.budget_spp,
+                "budget_seconds": r.budget_seconds,
+                "render_error": est(r.render_error),
+                "best": r.best,
+                "best_spp": r.best_spp,
+                "best_seconds": r.best_seconds,
+                "best_error": est(r.best_error),
+                "error_ratio": r.ratio,
+            }
+            for r in tables.equal_time
+        ],
+        "equal_quality": [
+            {
+                "target": r.target,
+                "target_spp": r.target_spp,
+                "target_how": r.render_how,
+                "render_seconds": r.render_seconds,
+                "denoisers": {
+                    label: None if need is None else {"spp": est(need[0]), "seconds": est(need[1])}
+                    for label, need in r.needs.items()
+                },
+            }
+            for r in tables.equal_quality
+        ],
+        "verdicts": verdicts(tables),
+    }

@@ -1,0 +1,530 @@
+"""Times that hold where users render: fixed and per-pixel cost of rendering and of each denoiser.
+
+A benchmark's frames are small (the demo's are 80×80 = 6400 pixels); at that size most of a
+frame's seconds grow with neither pixels nor samples (kernel launches, a network's set-up, Python
+calls). Scaling such a time by the pixel ratio to 1920×1080 charges that overhead 324 times. This
+module separates the costs from measurements and projects them to the resolution a report states
+(``run-benchmark --time-at WxH``, default 1920×1080):
+
+* **Denoisers**: ``seconds(P, s) = fixed + (t₀(s) − fixed) · P / P₀``. ``t₀(s)`` is the mean
+  measured seconds per frame at the dataset's ``P₀`` pixels and input spp ``s`` (the run's own
+  calls); ``fixed`` (per call) comes from a line through that time and one more call, after the
+  run, on a synthetic frame of ``--time-size`` pixels (default 1024×1024, 1 MP): the frame's
+  buffers (and per-sample data) tiled up to that size (:func:`upscaled_frame`) at the lowest spp.
+  The part that grows with spp (per-sample filters such as RPF) is taken as per-pixel.
+* **Rendering**: ``seconds(P, s) = a(P) + b(P) · s``, a line through the stored render seconds of
+  the ladder's rungs (seconds against spp; with nested rungs, the progressive time to reach each)
+  at ``P₀``. ``b`` (per sample) is a per-pixel-sample cost: each sample is one camera path through
+  one pixel, so it is scaled by ``P / P₀``. The offset ``a`` is split into fixed and per-pixel parts
+  by **one timed render of the dataset's own stage** (its first scene, frame 0, at ``--time-size``
+  and spp 1 and 4, :func:`probe_render`); without that render (``--no-render-probe``, or it failed)
+  the offset is held fixed (not scaled), which the report says.
+
+Notes
+-----
+* **Which figures are projected.** Every time at a resolution other than the dataset's own is a
+  projection and is marked so; within ``P₀ … P₁`` (the two measured sizes) it is interpolated,
+  beyond ``P₁`` extrapolated along the measured line. Without a second size (``--time-size none``)
+  nothing is projected: the report's time axis stays at the dataset's resolution and says why.
+* **What cancels.** Rendering's offset is paid by "render s spp" and "render s′ spp, then denoise"
+  alike, so comparisons of the two (the equal-time table's verdicts) depend on ``b`` and the
+  denoiser's time, not on how the offset is split; ratios of seconds do depend on it.
+* **Time budget.** A denoiser whose proportional estimate at the timing size exceeds
+  ``budget`` seconds is timed at the largest size that fits (at least 4 × ``P₀``), or not at all;
+  the record says which size was used. The timing call is made after ``reset()`` and followed by
+  one, so that a temporal denoiser neither sees a frame of another size as its history nor keeps
+  it.
+* **Where it is kept.** Measurements go to the run's store in a table of this module
+  (``run_timings``: run id, key, JSON value), written once per run and reused when the run resumes
+  or its report is rebuilt.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import platform
+import sqlite3
+import sys
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from denoisebench.errors import UserInputError
+
+#: The resolution a report's time axis is for unless ``--time-at`` says otherwise.
+DEFAULT_TIME_AT = (1920, 1080)
+#: The second size each denoiser (and the render probe) is timed at unless ``--time-size`` says otherwise.
+DEFAULT_TIME_SIZE = (1024, 1024)
+#: Seconds one denoiser's timing call may be expected to take before its size is reduced.
+DEFAULT_TIME_BUDGET = 60.0
+#: Spp of the render probe (two, so that its offset and per-sample cost separate).
+PROBE_SPP = (1, 4)
+#: The smallest timing size, as a multiple of the dataset's pixels, that still separates the costs.
+MIN_SIZE_FACTOR = 4
+
+_TABLE = (
+    "CREATE TABLE IF NOT EXISTS run_timings (run_id TEXT NOT NULL, key TEXT NOT NULL, value TEXT NOT NULL, "
+    "PRIMARY KEY (run_id, key))"
+)
+
+
+def parse_size(text: str | None, option: str) -> tuple[int, int] | None:
+    """``"1920x1080"`` → (1920, 1080); ``"none"``/``"0"``/``""`` → None; anything else is bad input."""
+    if text is None or text.strip().lower() in ("", "none", "0", "off"):
+        return None
+    parts = text.lower().replace("×", "x").split("x")
+    try:
+        width, height = (int(p) for p in parts)
+    except ValueError:
+        raise UserInputError(f"{option} wants WIDTHxHEIGHT such as 1920x1080, got {text!r}") from None
+    if width < 1 or height < 1 or width * height > 64_000_000:
+        raise UserInputError(f"{option} wants a size between 1x1 and 64 megapixels, got {text!r}")
+    return width, height
+
+
+def size_text(size) -> str:
+    return f"{size[0]}×{size[1]}"
+
+
+def machine() -> dict:
+    """Cores, CPU and GPU (None without CUDA) of this machine, as a report states them."""
+    gpu = None
+    try:
+        import torch
+
+        if torch.cuda.is_available():
+            gpu = torch.cuda.get_device_name(0)
+    except Exception:  # noqa: BLE001 - no torch or no driver: no GPU to state
+        gpu = None
+    return {
+        "cores": os.cpu_count(),
+        "cpu": platform.processor() or platform.machine(),
+        "system": platform.system(),
+        "gpu": gpu,
+    }
+
+
+# --------------------------------------------------------------------------------------------------
+# the store's timing table
+
+
+def read_timings(store, run_id: str) -> dict[str, dict]:
+    """{key: value} of a run's timing records ({} for a store without the table)."""
+    try:
+        rows = store.conn.execute("SELECT key, value FROM run_timings WHERE run_id = ?", (run_id,)).fetchall()
+    except sqlite3.OperationalError:  # an older store, or one opened read-only before any timing
+        return {}
+    return {key: json.loads(value) for key, value in rows}
+
+
+def write_timing(store, run_id: str, key: str, value: dict) -> None:
+    with store.transaction() as conn:
+        conn.execute(_TABLE)
+        conn.execute(
+            "INSERT OR REPLACE INTO run_timings (run_id, key, value) VALUES (?, ?, ?)",
+            (run_id, key, json.dumps(value, sort_keys=True)),
+        )
+
+
+# --------------------------------------------------------------------------------------------------
+# fits
+
+
+def line_through(points) -> tuple[float, float] | None:
+    """(offset, slope) of a least-squares line through (x, y) points, offset ≥ 0 and slope ≥ 0.
+
+    A negative offset (noise on a time that is all per-unit) refits through the origin; a negative
+    slope (noise on a time that is all offset) gives slope 0 and the mean as offset. One distinct x:
+    through the origin. None without a point."""
+    pairs = [(float(x), float(y)) for x, y in points if y is not None and math.isfinite(y) and x > 0]
+    if not pairs:
+        return None
+    x = np.array([p[0] for p in pairs])
+    y = np.array([p[1] for p in pairs])
+    if np.ptp(x) > 0:
+        slope, offset = np.polyfit(x, y, 1)
+        if slope >= 0 and offset >= 0:
+            return float(offset), float(slope)
+        if slope < 0:
+            return float(max(np.mean(y), 0.0)), 0.0
+    return 0.0, float(max(np.sum(x * y) / np.sum(x * x), 0.0))
+
+
+@dataclass
+class DenoiserCost:
+    """One denoiser's time per frame: ``fixed`` per call plus a per-pixel part measured at ``pixels0``."""
+
+    label: str
+    pixels0: int
+    small: dict[int, float]  # spp → mean measured seconds per frame at pixels0
+    fixed: float | None = None  # None: no second size measured
+    large_pixels: int | None = None
+    large_seconds: float | None = None
+    note: str = ""
+
+    @property
+    def per_megapixel(self) -> float | None:
+        """Seconds per megapixel of the per-pixel part at the lowest spp (None without a second size)."""
+        if self.fixed is None or not self.small:
+            return None
+        base = self.small[min(self.small)]
+        return (base - self.fixed) / self.pixels0 * 1e6
+
+    def small_at(self, spp: float) -> float | None:
+        """Seconds per frame at ``pixels0``, linear in spp between measured spp (held beyond them)."""
+        if not self.small:
+            return None
+        keys = sorted(self.small)
+        return float(np.interp(spp, keys, [self.small[k] for k in keys]))
+
+    def seconds(self, pixels: int, spp: float) -> float | None:
+        base = self.small_at(spp)
+        if base is None:
+            return None
+        if pixels == self.pixels0:
+            return base
+        if self.fixed is None:
+            return None  # never scale a small frame's time by the pixel ratio alone
+        fixed = min(self.fixed, base)
+        return fixed + (base - fixed) * pixels / self.pixels0
+
+
+@dataclass
+class RenderCost:
+    """Render seconds per frame ``a(P) + b(P) · spp`` from the ladder at ``pixels0`` (and a probe)."""
+
+    pixels0: int
+    offset0: float
+    per_spp0: float
+    measured_spp: list[int]
+    probe: dict | None = None  # {"pixels", "offset", "per_spp", "scene"}: the timed larger render
+    note: str = ""
+
+    def _linear(self, pixels: int, at0: float, at1: float | None) -> float:
+        """A cost measured at pixels0 (``at0``) and at the probe's size (``at1``), as fixed + per-pixel."""
+        if at1 is None or self.probe is None or self.probe["pixels"] == self.pixels0:
+            return at0
+        slope = max((at1 - at0) / (self.probe["pixels"] - self.pixels0), 0.0)
+        fixed = max(at0 - slope * self.pixels0, 0.0)
+        return fixed + slope * pixels
+
+    def offset(self, pixels: int) -> float:
+        """Per-frame seconds that do not grow with spp; held fixed without a probe."""
+        return self._linear(pixels, self.offset0, None if self.probe is None else self.probe["offset"])
+
+    def per_spp(self, pixels: int) -> float:
+        """Seconds per spp: per pixel-sample, so proportional to pixels without a probe."""
+        if self.probe is None:
+            return self.per_spp0 * pixels / self.pixels0
+        return self._linear(pixels, self.per_spp0, self.probe["per_spp"])
+
+    def seconds(self, pixels: int, spp: float) -> float:
+        return self.offset(pixels) + self.per_spp(pixels) * spp
+
+    @property
+    def per_megapixel_per_spp(self) -> float:
+        return self.per_spp(1_000_000)
+
+
+@dataclass
+class TimeModel:
+    """What a report's time axis rests on: the resolution, the machine and every cost."""
+
+    time_at: tuple[int, int]
+    pixels0: int
+    dataset_size: tuple[int, int]
+    render: RenderCost | None
+    denoisers: dict[str, DenoiserCost] = field(default_factory=dict)
+    machine: dict = field(default_factory=dict)
+    projected: bool = False  # times are at another resolution than the dataset's
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def pixels(self) -> int:
+        return self.time_at[0] * self.time_at[1]
+
+    def render_seconds(self, spp: float) -> float | None:
+        return None if self.render is None else self.render.seconds(self.pixels, spp)
+
+    def denoise_seconds(self, label: str, spp: float) -> float | None:
+        """Seconds per frame of ``label`` at the time axis' resolution (0 for the noisy input)."""
+        from denoisebench.leaderboard.runner import NOISY
+
+        if label == NOISY:
+            return 0.0
+        cost = self.denoisers.get(label)
+        return None if cost is None else cost.seconds(self.pixels, spp)
+
+    def total_seconds(self, label: str, spp: float) -> float | None:
+        render, denoise = self.render_seconds(spp), self.denoise_seconds(label, spp)
+        return None if render is None or denoise is None else render + denoise
+
+    def extrapolated_pixels(self) -> bool:
+        """True when the time axis lies beyond the largest size anything was timed at."""
+        sizes = [c.large_pixels for c in self.denoisers.values() if c.large_pixels]
+        if self.render is not None and self.render.probe:
+            sizes.append(self.render.probe["pixels"])
+        return self.projected and (not sizes or self.pixels > max(sizes))
+
+    def as_dict(self) -> dict:
+        return {
+            "time_at": list(self.time_at),
+            "dataset_size": list(self.dataset_size),
+            "projected": self.projected,
+            "beyond_timed_sizes": self.extrapolated_pixels(),
+            "machine": self.machine,
+            "notes": self.notes,
+            "render": None
+            if self.render is None
+            else {
+                "offset_s_at_dataset_size": self.render.offset0,
+                "seconds_per_spp_at_dataset_size": self.render.per_spp0,
+                "offset_s": self.render.offset(self.pixels),
+                "seconds_per_spp": self.render.per_spp(self.pixels),
+                "seconds_per_megapixel_per_spp": self.render.per_megapixel_per_spp,
+                "measured_spp": self.render.measured_spp,
+                "probe": self.render.probe,
+                "note": self.render.note,
+            },
+            "denoisers": {
+                label: {
+                    "fixed_s_per_call": c.fixed,
+                    "seconds_per_megapixel": c.per_megapixel,
+                    "measured_at_dataset_size": c.small,
+                    "timed_pixels": c.large_pixels,
+                    "timed_seconds": c.large_seconds,
+                    "seconds_at_time_at": {str(s): c.seconds(self.pixels, s) for s in sorted(c.small)},
+                    "note": c.note,
+                }
+                for label, c in self.denoisers.items()
+            },
+        }
+
+
+def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | None, dataset_size) -> TimeModel:
+    """The run's :class:`TimeModel` from its frames (``analysis.RunData``) and stored timings.
+
+    ``time_at`` None: :data:`DEFAULT_TIME_AT`. Without any second-size timing the model stays at the
+    dataset's resolution (``projected`` False) and says so in ``notes``."""
+    from denoisebench.leaderboard.runner import NOISY
+
+    width0, height0 = dataset_size
+    pixels0 = int(width0 * height0)
+    requested = tuple(time_at or DEFAULT_TIME_AT)
+    render_points = [(f["spp"], f["render_seconds"]) for f in data.frames if f["denoiser"] == NOISY]
+    fitted = line_through(render_points)
+    render = None
+    if fitted is not None:
+        render = RenderCost(pixels0, fitted[0], fitted[1], sorted({int(s) for s, _ in render_points}))
+        probe = timings.get("render_probe")
+        if probe and probe.get("points"):
+            line = line_through(probe["points"])
+            if line is not None:
+                render.probe = {
+                    "pixels": int(probe["width"]) * int(probe["height"]),
+                    "width": int(probe["width"]),
+                    "height": int(probe["height"]),
+                    "scene": probe.get("scene"),
+                    "offset": line[0],
+                    "per_spp": line[1],
+                }
+                render.note = (
+                    f"offset split into fixed and per-pixel parts by one render of {probe.get('scene')} at "
+                    f"{probe['width']}×{probe['height']} (spp {', '.join(str(int(p[0])) for p in probe['points'])})"
+                )
+        if render.probe is None:
+            reason = (probe or {}).get("error") or "no timed larger render"
+            render.note = (
+                f"per-sample cost scaled with pixels; the per-frame offset ({fitted[0]:.3g} s) held fixed ({reason})"
+            )
+    costs = {}
+    for label in data.labels:
+        if label == NOISY:
+            continue
+        small = {}
+        for spp in data.spp:
+            values = [f["denoise_seconds"] for f in data.ok_frames(label, spp) if f["denoise_seconds"] is not None]
+            if values:
+                small[int(spp)] = float(np.mean(values))
+        if not small:
+            continue
+        cost = DenoiserCost(label, pixels0, small)
+        record = timings.get(f"denoiser:{label}") or {}
+        if record.get("seconds") is not None:
+            pixels = int(record["width"]) * int(record["height"])
+            line = line_through([(pixels0, small[min(small)]), (pixels, record["seconds"])])
+            if line is not None and pixels > pixels0:
+                cost.fixed = min(line[0], small[min(small)])
+                cost.large_pixels, cost.large_seconds = pixels, float(record["seconds"])
+        cost.note = record.get("note", "")
+        costs[label] = cost
+    timed = [c for c in costs.values() if c.fixed is not None]
+    model = TimeModel(requested, pixels0, (width0, height0), render, costs, timings.get("machine") or machine())
+    if requested != (width0, height0):
+        if costs and len(timed) < len(costs):
+            missing = sorted(c.label for c in costs.values() if c.fixed is None)
+            model.notes.append(
+                f"not timed at a second size: {', '.join(missing)}; times stay at the dataset's "
+                f"{width0}×{height0} (a small frame's time is never scaled by pixel count alone)"
+            )
+            model.time_at = (width0, height0)
+        else:
+            model.projected = True
+    return model
+
+
+# --------------------------------------------------------------------------------------------------
+# measuring
+
+
+def upscaled_frame(frame, width: int, height: int):
+    """A synthetic ``width``×``height`` frame: ``frame``'s buffers (and per-sample data) tiled, then cropped.
+
+    Only for timing: the content repeats, which no denoiser's cost depends on in a way that matters
+    here (the cost of a call grows with pixels and samples, not with what they show)."""
+    from denoisebench.dataset.frame import Frame
+
+    def tile(array: np.ndarray, axes: tuple[int, int]) -> np.ndarray:
+        reps = [1] * array.ndim
+        reps[axes[0]] = math.ceil(height / array.shape[axes[0]])
+        reps[axes[1]] = math.ceil(width / array.shape[axes[1]])
+        out = np.tile(array, reps)
+        index = [slice(None)] * array.ndim
+        index[axes[0]], index[axes[1]] = slice(0, height), slice(0, width)
+        return np.ascontiguousarray(out[tuple(index)])
+
+    buffers = {name: tile(array, (0, 1)) for name, array in frame.buffers.items()}
+    samples = None if frame.samples is None else {name: tile(a, (1, 2)) for name, a in frame.samples.items()}
+    return Frame(buffers, frame.spp, frame.scene, frame.index, None, samples, dict(frame.meta))
+
+
+def timing_size(small_seconds: float, pixels0: int, requested: tuple[int, int], budget: float):
+    """(width, height, note) to time a denoiser at: ``requested``, or smaller to fit ``budget``, or None."""
+    width, height = requested
+    estimate = small_seconds * width * height / pixels0  # proportional: an upper bound when fixed ≥ 0
+    if estimate <= budget:
+        return width, height, ""
+    scale = math.sqrt(budget / estimate)
+    width, height = max(int(width * scale), 1), max(int(height * scale), 1)
+    if width * height < MIN_SIZE_FACTOR * pixels0:
+        return None
+    return width, height, f"timed at {width}×{height}, not {requested[0]}×{requested[1]}, to stay within {budget:g} s"
+
+
+def time_call(denoiser, frame, label: str, repeats: int = 2) -> tuple[float | None, str]:
+    """Least seconds of up to ``repeats`` calls on ``frame`` (one when a call takes over 2 s), or (None, why)."""
+    from denoisebench.denoisers.runner import run_frame
+
+    best = None
+    for _ in range(repeats):
+        reset = getattr(denoiser, "reset", None)
+        if callable(reset):
+            reset()
+        result = run_frame(denoiser, frame, name=label, keep_output=False)
+        if callable(reset):
+            reset()
+        if result.status != "ok":
+            return None, f"timing call failed: {result.error}"
+        best = result.seconds if best is None else min(best, result.seconds)
+        if result.seconds > 2.0:
+            break
+    return best, ""
+
+
+def probe_render(dataset, scene: str, size: tuple[int, int], spp=PROBE_SPP) -> dict:
+    """One render of ``scene``'s frame 0 at ``size`` and each of ``spp``: {"points": [[spp, seconds]]}.
+
+    Seconds exclude kernel compilation, like the dataset's own (the generator's timer)."""
+    from denoisebench.generator.frame_jobs import FrameJob, render_job
+
+    info = dataset.scene(scene)
+    record = info.record
+    plan = record.get("plan") or {}
+    options = {"per_sample": bool(plan.get("per_sample", False)), "rr_depth": int(plan.get("rr_depth", 5))}
+    if plan.get("max_depth_source") == "user":
+        options["max_depth"] = int(plan.get("max_depth", -1))
+    usd = dataset.path(record["usd"], "stage file")
+    job = FrameJob(
+        scene,
+        0,
+        str(record.get("stage_sha256", scene)),
+        str(usd),
+        tuple(int(s) for s in spp),
+        None,
+        int(size[0]),
+        int(size[1]),
+        int(record.get("render_seed", 0)),
+        options,
+    )
+    result = render_job(job)
+    return {
+        "scene": scene,
+        "width": int(size[0]),
+        "height": int(size[1]),
+        "points": [[r.spp, r.seconds] for r in result.noisy],
+    }
+
+
+def measure_run_timings(
+    store,
+    dataset,
+    plan,
+    instances: dict,
+    size: tuple[int, int] | None = DEFAULT_TIME_SIZE,
+    *,
+    budget: float = DEFAULT_TIME_BUDGET,
+    render_probe: bool = True,
+    progress: bool = True,
+) -> dict[str, dict]:
+    """Time every loaded denoiser (and one render) at ``size`` once per run; return the run's timings.
+
+    ``size`` None: nothing is timed (the report's times stay at the dataset's resolution)."""
+    from tqdm import tqdm
+
+    done = read_timings(store, plan.run_id)
+    if "machine" not in done:
+        write_timing(store, plan.run_id, "machine", machine())
+    if size is None or not plan.scenes or not plan.spp:
+        return read_timings(store, plan.run_id)
+    scene, spp = plan.scenes[0], min(plan.spp)
+    info = dataset.scene(scene)
+    pixels0 = int(info.record["width"]) * int(info.record["height"])
+    frames = store.frames(plan.run_id)
+    todo = [label for label in instances if f"denoiser:{label}" not in done]
+    wants_probe = render_probe and "render_probe" not in done
+    bar = tqdm(
+        total=len(todo) + wants_probe, desc="benchmark: timing at a larger size", file=sys.stderr, disable=not progress
+    )
+    if todo:
+        needs_samples = any("samples" in getattr(d, "needs", ()) for d in plan.denoisers if d.label in todo)
+        small = dataset.frame(scene, spp, 0, samples=needs_samples)
+    for label in todo:
+        measured = [
+            f["denoise_seconds"]
+            for f in frames
+            if f["denoiser"] == label and f["spp"] == spp and f["denoise_seconds"] is not None
+        ]
+        record = {"spp": spp, "scene": scene}
+        chosen = timing_size(float(np.mean(measured)) if measured else 0.0, pixels0, size, budget)
+        if chosen is None:
+            record.update(seconds=None, note=f"not timed at a larger size: over {budget:g} s even at 4× the frame")
+        else:
+            width, height, note = chosen
+            started = time.perf_counter()
+            seconds, error = time_call(instances[label], upscaled_frame(small, width, height), label)
+            record.update(width=width, height=height, seconds=seconds, note=error or note)
+            record["wall_seconds"] = time.perf_counter() - started
+        write_timing(store, plan.run_id, f"denoiser:{label}", record)
+        bar.update(1)
+    if wants_probe:
+        try:
+            record = probe_render(dataset, scene, size)
+        except Exception as error:  # noqa: BLE001 - no renderer here, or a stage it cannot load: say so
+            record = {"error": f"render probe failed: {type(error).__name__}: {error}".splitlines()[0][:300]}
+        write_timing(store, plan.run_id, "render_probe", record)
+        bar.update(1)
+    bar.close()
+    return read_timings(store, plan.run_id)
