@@ -24,6 +24,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "benchmark": ("benchmark", "run denoisers over a dataset split into SQLite and write a report (run-benchmark)"),
     "leaderboard": ("leaderboard", "rank denoisers across the runs on one dataset in a results database"),
     "check-plugin": ("check_plugin", "run a denoiser through the hard-case suite; print a pass/fail table"),
+    "export": ("export", "export a dataset for OIDN's training toolkit or Noisebase's loaders"),
 }
 
 EPILOG = textwrap.dedent(
