@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import sqlite3
 import subprocess
 import sys
 import time
@@ -57,7 +58,7 @@ def _file_hashes(root: Path) -> dict[str, str]:
     return {
         p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
         for p in sorted(root.rglob("*"))
-        if p.is_file() and p.name != layout.MANIFEST_NAME
+        if p.is_file() and p.name not in (layout.MANIFEST_NAME, layout.INDEX_NAME)  # the index: by content
     }
 
 
@@ -159,16 +160,18 @@ def test_sigkill_then_rerun_gives_the_bytes_of_an_uninterrupted_run(local_datase
     killed_with = None
     try:
         while time.monotonic() < deadline and proc.poll() is None:
-            try:
-                manifest = json.loads(manifest_path.read_text())
-            except (OSError, ValueError):
-                manifest = None
-            if manifest:
-                written = sum(len(r) for s in manifest["scenes"].values() for r in s.get("renders", {}).values())
-                if written >= 1:
-                    proc.send_signal(signal.SIGKILL)
-                    killed_with = written
-                    break
+            written = 0
+            if (out / layout.INDEX_NAME).is_file():  # frame records are committed there, one transaction each
+                try:
+                    db = sqlite3.connect(f"{(out / layout.INDEX_NAME).as_uri()}?mode=ro", uri=True)
+                    written = db.execute("SELECT COUNT(*) FROM frames").fetchone()[0]
+                    db.close()
+                except sqlite3.Error:
+                    written = 0
+            if written >= 1:
+                proc.send_signal(signal.SIGKILL)
+                killed_with = written
+                break
             time.sleep(0.005)
     finally:
         if proc.poll() is None and killed_with is None:

@@ -9,7 +9,6 @@ ended in a traceback after the whole run was measured; results.csv wrote ``=...`
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import sqlite3
@@ -22,6 +21,7 @@ from denoisebench import cli
 from denoisebench.dataset import bounds, open_dataset
 from denoisebench.dataset.errors import DatasetError
 from denoisebench.dataset.exr_io import encode_exr, load_exr
+from denoisebench.dataset.manifest import load_manifest, save_manifest
 from denoisebench.dataset.synthetic import make_synthetic_dataset
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard.report import csv_cell
@@ -81,9 +81,9 @@ def _units(db: Path) -> int:
 
 def _edit_manifest(dataset: Path, edit) -> None:
     path = dataset / "dataset.json"
-    manifest = json.loads(path.read_text())
+    manifest = load_manifest(path)  # the whole manifest, frame records from dataset.sqlite included
     edit(manifest)
-    path.write_text(json.dumps(manifest))
+    save_manifest(path, manifest)
 
 
 def test_scaled_reference_is_refused_before_the_first_unit_and_no_verify_is_recorded(dataset, tmp_path, capsys):

@@ -3,6 +3,7 @@
 ::
 
     OUT/dataset.json
+    OUT/dataset.sqlite                       the frame records (schema version 2, see manifest.py)
     OUT/<scene>/scene.usda
     OUT/<scene>/spp0004/frame_0000.exr
     OUT/<scene>/spp0004/samples/frame_0000.exr
@@ -16,6 +17,7 @@ from __future__ import annotations
 import re
 
 MANIFEST_NAME = "dataset.json"
+INDEX_NAME = "dataset.sqlite"
 REFERENCE = "reference"
 SCENE_USD = "scene.usda"
 
@@ -24,7 +26,7 @@ _SCENE_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 def check_scene_name(name: str) -> str:
     """A scene name is a folder name: letters, digits, ``._-``, not starting with ``.``/``-``."""
-    if not isinstance(name, str) or not _SCENE_NAME.match(name) or name == MANIFEST_NAME:
+    if not isinstance(name, str) or not _SCENE_NAME.match(name) or name in (MANIFEST_NAME, INDEX_NAME):
         raise ValueError(f"bad scene name {name!r}: use letters, digits, '.', '_' and '-'")
     return name
 

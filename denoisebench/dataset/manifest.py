@@ -1,9 +1,11 @@
 """The ``dataset.json`` model (DESIGN.md, "Dataset on disk"): schema, config hash, splits, quality.
 
-Layout of the manifest (all keys sorted when saved; paths relative to the dataset folder)::
+Layout of the manifest (all keys sorted when saved; paths relative to the dataset folder), as
+:func:`load_manifest` returns it whatever the schema version on disk::
 
     {
-      "schema": "denoisebench-dataset", "schema_version": 1,
+      "schema": "denoisebench-dataset", "schema_version": 2,
+      "frame_records": {"store": "sqlite", "file": "dataset.sqlite", "count": int | null},  # version 2
       "config": {...}, "config_hash": "<sha256 of the canonical JSON of config>",
       "versions": {"python": ..., "numpy": ..., "openexr": ..., <caller's: mitsuba, drjit, usd ...>},
       "complete": true,                      # set by finalize when every expected file is done
@@ -26,6 +28,17 @@ Layout of the manifest (all keys sorted when saved; paths relative to the datase
         }
       }
     }
+
+Schema versions. Version 1 (until issue 34) keeps every frame record inline in ``dataset.json``
+and rewrote the whole file after each record: O(records) per record, quadratic in all. Version 2
+keeps the same dict minus ``renders``, which live in the SQLite index named by
+``frame_records`` (:mod:`.frame_index`; why SQLite is said there); ``count`` is the number of
+records, set when the dataset is finalized. ``dataset.json`` remains the one self-describing file
+(config, versions, scenes, plans, splits, completeness) and is rewritten only when a scene is added
+and at the end. Both versions are read: :func:`load_header` returns the manifest without frame
+records (version 1: with them, inline, since they are in the file anyway), :func:`load_manifest`
+the whole logical manifest (version 2: records read from the index, O(records)).
+:func:`save_manifest` always writes version 2.
 
 Identical bytes: the EXR files are byte-identical for the same seed and config; the manifest is
 identical **except for timings** (render seconds are there by design). A timing is any key whose
@@ -63,12 +76,15 @@ from pathlib import Path
 
 import numpy as np
 
+from denoisebench.dataset import layout
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.dataset.errors import DatasetError
 from denoisebench.dataset.exr_io import canonical_json
 
 SCHEMA = "denoisebench-dataset"
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
+#: Schema versions this denoisebench reads (1: frame records inline in dataset.json).
+READABLE_VERSIONS = (1, 2)
 SPLITS = ("train", "val", "test")
 DEFAULT_FRACTIONS = (0.7, 0.15, 0.15)
 
@@ -88,7 +104,9 @@ __all__ = [
     "reference_quality",
     "software_versions",
     "new_manifest",
+    "load_header",
     "load_manifest",
+    "manifest_header",
     "save_manifest",
     "manifest_bytes",
     "is_timing_key",
@@ -237,10 +255,28 @@ def new_manifest(config: Mapping, versions: Mapping[str, str]) -> dict:
         "config": config,
         "config_hash": config_hash(config),
         "versions": dict(versions),
+        "frame_records": frame_records_entry(None),
         "complete": False,
         "splits": {split: [] for split in SPLITS},
         "scenes": {},
     }
+
+
+def frame_records_entry(count: int | None) -> dict:
+    """The version-2 pointer to the frame records: the index file beside dataset.json, and their count."""
+    return {"store": "sqlite", "file": layout.INDEX_NAME, "count": count}
+
+
+def manifest_header(manifest: Mapping) -> dict:
+    """The version-2 ``dataset.json`` content of a logical manifest: everything but the frame records."""
+    header = {key: value for key, value in manifest.items() if key != "scenes"}
+    header["schema_version"] = SCHEMA_VERSION
+    header.setdefault("frame_records", frame_records_entry(None))
+    header["scenes"] = {
+        name: {key: value for key, value in scene.items() if key != "renders"}
+        for name, scene in manifest["scenes"].items()
+    }
+    return header
 
 
 def manifest_bytes(manifest: Mapping) -> bytes:
@@ -249,11 +285,30 @@ def manifest_bytes(manifest: Mapping) -> bytes:
 
 
 def save_manifest(path: str | os.PathLike, manifest: Mapping) -> None:
-    atomic_write_bytes(path, manifest_bytes(manifest))
+    """Write a whole logical manifest as version 2: its frame records into the index, then ``dataset.json``.
+
+    O(records): for tools and tests that edit a dataset wholesale (and for migrating version 1);
+    the writer records frames one by one instead."""
+    from denoisebench.dataset.frame_index import FrameIndexWriter
+
+    path = Path(path)
+    renders = {name: scene.get("renders", {}) for name, scene in manifest["scenes"].items()}
+    header = manifest_header(manifest)
+    header["frame_records"] = frame_records_entry(
+        sum(len(frames) for kinds in renders.values() for frames in kinds.values())
+    )
+    index = FrameIndexWriter(path.parent / layout.INDEX_NAME)
+    try:
+        index.replace_all(renders)
+    finally:
+        index.close(seal=True)
+    atomic_write_bytes(path, manifest_bytes(header))
 
 
-def load_manifest(path: str | os.PathLike) -> dict:
-    """Read and check a manifest; DatasetError (one line, naming the file) when it is not one."""
+def load_header(path: str | os.PathLike) -> dict:
+    """Read and check ``dataset.json``; DatasetError (one line, naming the file) when it is not a manifest.
+
+    Version 2: the scenes carry no ``renders`` (they are in the index); version 1: they do."""
     path = Path(path)
     try:
         text = path.read_text(encoding="utf-8")
@@ -268,14 +323,49 @@ def load_manifest(path: str | os.PathLike) -> dict:
     if not isinstance(manifest, dict) or manifest.get("schema") != SCHEMA:
         raise DatasetError(f"{path} is not a denoisebench dataset manifest")
     version = manifest.get("schema_version")
-    if version != SCHEMA_VERSION:
-        raise DatasetError(f"{path} has schema version {version}; this denoisebench reads version {SCHEMA_VERSION}")
+    if version not in READABLE_VERSIONS:
+        readable = " and ".join(str(v) for v in READABLE_VERSIONS)
+        raise DatasetError(f"{path} has schema version {version}; this denoisebench reads versions {readable}")
     for key, kind in (("config", dict), ("config_hash", str), ("versions", dict), ("splits", dict), ("scenes", dict)):
         if not isinstance(manifest.get(key), kind):
             raise DatasetError(f"{path}: manifest field {key!r} is missing or not a {kind.__name__}")
+    if version >= 2:
+        records = manifest.get("frame_records")
+        if (
+            not isinstance(records, dict)
+            or records.get("store") != "sqlite"
+            or records.get("file") != layout.INDEX_NAME
+        ):
+            raise DatasetError(
+                f"{path}: manifest field 'frame_records' must name the SQLite index {layout.INDEX_NAME!r}"
+            )
     for name, scene in manifest["scenes"].items():
         if not isinstance(scene, dict) or not isinstance(scene.get("renders", {}), dict):
             raise DatasetError(f"{path}: scene {name!r} has a malformed record")
+        if version >= 2 and "renders" in scene:
+            raise DatasetError(f"{path}: scene {name!r} has inline frame records in a version-2 manifest")
+    return manifest
+
+
+def index_path(manifest_path: str | os.PathLike) -> Path:
+    """Where a version-2 manifest's frame records are: ``dataset.sqlite`` beside it."""
+    return Path(manifest_path).parent / layout.INDEX_NAME
+
+
+def load_manifest(path: str | os.PathLike) -> dict:
+    """The whole logical manifest (version 2: frame records read from the index; O(records)).
+
+    DatasetError (one line, naming the file) when it is not a manifest. Readers that need a few
+    frames use :func:`~denoisebench.dataset.reader.open_dataset`, which loads records on demand."""
+    manifest = load_header(path)
+    if manifest["schema_version"] >= 2:
+        from denoisebench.dataset.frame_index import FrameIndexReader
+
+        renders: dict = {}
+        if manifest["scenes"]:
+            renders = dict(FrameIndexReader(index_path(path)).scenes())
+        for name, scene in manifest["scenes"].items():
+            scene["renders"] = renders.get(name, {})
     return manifest
 
 

@@ -17,6 +17,12 @@ Every problem is a one-line :class:`~denoisebench.dataset.errors.DatasetError` n
 frame and file: an unknown scene or spp, a frame with no record (incomplete dataset), a missing or
 corrupt file, NaN/Inf in it, and with ``verify=True`` a sha256 that differs from the manifest.
 
+Frame records are loaded on demand (schema version 2, :mod:`.frame_index`): opening a dataset parses
+only ``dataset.json`` (config, scenes, splits), :meth:`Dataset.frame` looks up the records it needs
+by key, and :meth:`Dataset.scene` loads one scene's records (the last scene's are kept). A
+version-1 dataset (records inline in ``dataset.json``) opens as before.
+:meth:`Dataset.content_hash` streams the manifest scene by scene.
+
 Manifest paths are untrusted: :meth:`Dataset.path` confines each to the dataset root (relative,
 no ``..`` part, and the resolved path, symlinks followed, inside the resolved root) before any
 file is opened; a path that escapes is a DatasetError naming it.
@@ -24,6 +30,7 @@ file is opened; a path that escapes is a DatasetError naming it.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -33,9 +40,10 @@ import numpy as np
 
 from denoisebench.dataset import layout
 from denoisebench.dataset.errors import DatasetError
-from denoisebench.dataset.exr_io import load_exr, load_samples_exr
+from denoisebench.dataset.exr_io import canonical_json, load_exr, load_samples_exr
 from denoisebench.dataset.frame import Frame, Sequence
-from denoisebench.dataset.manifest import SPLITS, load_manifest
+from denoisebench.dataset.frame_index import FrameIndexReader
+from denoisebench.dataset.manifest import SPLITS, load_header, manifest_without_timings
 
 
 @dataclass(frozen=True)
@@ -99,12 +107,24 @@ class SceneInfo:
 
 
 class Dataset:
-    """A dataset folder opened by :func:`open_dataset`."""
+    """A dataset folder opened by :func:`open_dataset`.
+
+    ``manifest`` is what ``dataset.json`` holds: for schema version 2 the scenes carry no
+    ``renders`` (use :meth:`scene` or :meth:`record`); for version 1 they do."""
 
     def __init__(self, root: Path, manifest: dict, verify: bool = False):
         self.root = root
         self.manifest = manifest
         self.verify = verify
+        self._index = None
+        if int(manifest.get("schema_version", 1)) >= 2:
+            self._index = FrameIndexReader(self.path(layout.INDEX_NAME, "frame index"))
+        self._cached: tuple[str, dict] | None = None
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_cached"] = None
+        return state
 
     # ------------------------------------------------------------------ catalogue
 
@@ -138,18 +158,60 @@ class Dataset:
             raise DatasetError(f"unknown split {name!r}; splits are {', '.join(SPLITS)}")
         return self.splits[name]
 
-    def scene(self, name: str) -> SceneInfo:
+    def _scene_record(self, name: str) -> dict:
         try:
-            return SceneInfo(name, self.manifest["scenes"][name])
+            return self.manifest["scenes"][name]
         except KeyError:
             known = ", ".join(self.scenes[:8]) + (", ..." if len(self.scenes) > 8 else "")
             raise DatasetError(f"{self.root}: no scene {name!r} (scenes: {known or 'none'})") from None
 
+    def scene(self, name: str, *, renders: bool = True) -> SceneInfo:
+        """Scene ``name``; its record has ``renders`` (its frame records: one look-up of that scene's
+        records in a version-2 dataset, kept until another scene is asked for) unless ``renders=False``."""
+        record = self._scene_record(name)
+        if self._index is None or not renders:
+            return SceneInfo(name, record)
+        if self._cached is None or self._cached[0] != name:
+            self._cached = (name, self._index.scene(name))
+        return SceneInfo(name, {**record, "renders": self._cached[1]})
+
+    def record(self, scene: str, spp: int | str, index: int) -> dict | None:
+        """The manifest record of frame ``index`` of ``scene`` at ``spp`` (or ``"reference"``), or None."""
+        return self._lookup(scene, layout.spp_key(spp), layout.frame_key(index))
+
+    def _lookup(self, scene: str, key: str, fkey: str) -> dict | None:
+        if self._index is None:
+            return self._scene_record(scene).get("renders", {}).get(key, {}).get(fkey)
+        if self._cached is not None and self._cached[0] == scene:
+            return self._cached[1].get(key, {}).get(fkey)
+        return self._index.get(scene, key, fkey)
+
+    def content_hash(self) -> str:
+        """sha256 of the canonical JSON of the whole manifest without timings, streamed one scene at a time.
+
+        The same text as ``canonical_json(manifest_without_timings(load_manifest(...)))``, so a
+        version-1 dataset keeps the hash it had; memory is one scene's records, time O(records)."""
+        header = manifest_without_timings({k: v for k, v in self.manifest.items() if k != "scenes"})
+        marker = "\u0000scenes\u0000"
+        parts = canonical_json({**header, "scenes": marker}).split(canonical_json(marker))
+        if len(parts) != 2:
+            raise DatasetError(f"{self.root}: the manifest holds the reserved text {marker!r}")
+        head, tail = parts
+        digest = hashlib.sha256(head.encode())
+        digest.update(b"{")
+        for n, name in enumerate(sorted(self.manifest["scenes"])):
+            record = self.scene(name).record
+            digest.update(f"{',' if n else ''}{canonical_json(name)}:".encode())
+            digest.update(canonical_json(manifest_without_timings(record)).encode())
+        digest.update(b"}")
+        digest.update(tail.encode())
+        return digest.hexdigest()
+
     def _frame_record(self, scene: str, key: str, index: int, what: str, expected: str) -> dict:
-        info = self.scene(scene)
+        info = self.scene(scene, renders=False)
         if not 0 <= index < info.frame_count:
             raise DatasetError(f"scene {scene!r} has frames 0..{info.frame_count - 1}, not {index}")
-        record = info.record.get("renders", {}).get(key, {}).get(layout.frame_key(index))
+        record = self._lookup(scene, key, layout.frame_key(index))
         if record is None:
             raise DatasetError(
                 f"{self.root}: scene {scene!r} frame {index} has no {what} in the manifest "
@@ -213,7 +275,7 @@ class Dataset:
         ``reference``: attach the reference when the scene has one; ``samples``: load per-sample
         data when present; ``buffers``: keep only these noisy buffers (``color`` always kept).
         """
-        info = self.scene(scene)
+        info = self.scene(scene, renders=False)
         spp = int(spp)
         if spp not in info.spp:
             raise DatasetError(f"scene {scene!r} was rendered at spp {info.spp}, not {spp}")
@@ -270,12 +332,12 @@ class Dataset:
 
     def frames(self, scene: str, spp: int, **options) -> Iterator[Frame]:
         """Frames 0..N−1 of ``scene`` at ``spp``, loaded one at a time (options as :meth:`frame`)."""
-        for index in range(self.scene(scene).frame_count):
+        for index in range(self.scene(scene, renders=False).frame_count):
             yield self.frame(scene, spp, index, **options)
 
     def sequence(self, scene: str, spp: int, **options) -> Sequence:
         """All frames of ``scene`` at ``spp`` in order; ``meta`` is the scene record (plan, camera...)."""
-        info = self.scene(scene)
+        info = self.scene(scene, renders=False)
         return Sequence(scene=scene, spp=int(spp), frames=list(self.frames(scene, spp, **options)), meta=info.meta)
 
 
@@ -291,4 +353,4 @@ def open_dataset(path: str | os.PathLike, verify: bool = False) -> Dataset:
         root, manifest_path = path, path / layout.MANIFEST_NAME
     if not root.exists():
         raise DatasetError(f"dataset folder {root} does not exist")
-    return Dataset(root, load_manifest(manifest_path), verify=verify)
+    return Dataset(root, load_header(manifest_path), verify=verify)

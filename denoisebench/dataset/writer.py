@@ -1,15 +1,24 @@
 """Write a dataset folder: EXR files and the ``dataset.json`` records, resumable.
 
 :class:`DatasetWriter` is driven by one process (render workers hand their arrays to it). Every
-file is written atomically, then its record goes into the manifest, which is saved atomically
-after each record. A frame is **done** when its record is in the manifest and its file(s) exist
-with the recorded sha256 (:meth:`DatasetWriter.is_done`), so an interrupted run, started again with
-the same config, skips what is done and rewrites anything else: the EXR bytes and the manifest
-without timings come out the same as from an uninterrupted run (see :mod:`.manifest`).
+file is written atomically, then its record is committed to the frame index (``dataset.sqlite``,
+:mod:`.frame_index`): one small durable transaction per record, whatever the number of records
+already written, so recording the 10 000th frame costs what the first did. A frame is **done**
+when its record is committed and its file(s) exist with the recorded sha256
+(:meth:`DatasetWriter.is_done`), so a run killed at any point (``kill -9`` included) loses at most
+the frame in flight, and started again with the same config skips what is done and rewrites
+anything else: the EXR bytes and the manifest without timings come out the same as from an
+uninterrupted run (see :mod:`.manifest`).
+
+``dataset.json`` (the header: config, versions, scenes, splits; schema version 2) is written when
+the writer opens, before the first record after scenes were added or a finished dataset was
+changed, and by :meth:`DatasetWriter.finalize`: a constant number of times per run, never per
+record. A version-1 dataset (records inline) resumed with the same config is migrated: its records
+go into the index in one transaction and ``dataset.json`` becomes version 2.
 
 A different config (another hash) is refused unless ``force``; then the old dataset is cleared
 *safely*: its ``dataset.json`` is removed first (so an interruption never leaves a manifest
-claiming stale frames), then only the scene folders the old manifest names are deleted (scene
+claiming stale frames), then the frame index, then only the scene folders the old manifest names are deleted (scene
 names are plain folder names; symbolic links are unlinked, never followed). Other files in OUT
 are left alone.
 """
@@ -26,17 +35,21 @@ from pathlib import Path
 import numpy as np
 
 from denoisebench.dataset import layout
-from denoisebench.dataset.atomic import is_temporary
+from denoisebench.dataset.atomic import atomic_write_bytes, is_temporary
 from denoisebench.dataset.errors import DatasetError
 from denoisebench.dataset.exr_io import canonical_json, sha256_file, write_exr
+from denoisebench.dataset.frame_index import FrameIndexWriter, remove_index
 from denoisebench.dataset.manifest import (
+    SCHEMA_VERSION,
     SPLITS,
     config_hash,
+    frame_records_entry,
     load_manifest,
+    manifest_bytes,
+    manifest_header,
     new_manifest,
     reference_quality,
     relative_standard_error,
-    save_manifest,
     software_versions,
 )
 
@@ -77,6 +90,7 @@ class DatasetWriter:
         if self.root.exists() and not self.root.is_dir():
             raise DatasetError(f"{self.root} exists and is not a folder")
         self.manifest_path = self.root / layout.MANIFEST_NAME
+        self.index_path = self.root / layout.INDEX_NAME
         self.config_hash = config_hash(config)
         current_versions = software_versions(versions)
         self.resumed = False
@@ -103,9 +117,15 @@ class DatasetWriter:
             else:
                 self._clear(old)
         if manifest is None:
+            remove_index(self.index_path)  # records of no manifest (a run killed before its first save)
             manifest = new_manifest(config, current_versions)
-        self.manifest = manifest
         self.root.mkdir(parents=True, exist_ok=True)
+        self._index = FrameIndexWriter(self.index_path)
+        if manifest.get("schema_version") != SCHEMA_VERSION:  # version 1, resumed: migrate its records
+            self._index.replace_all({name: scene.get("renders", {}) for name, scene in manifest["scenes"].items()})
+            manifest["schema_version"] = SCHEMA_VERSION
+            manifest["frame_records"] = frame_records_entry(None)
+        self.manifest = manifest
         self._remove_temporaries()
         self._save()
 
@@ -113,6 +133,7 @@ class DatasetWriter:
 
     def _clear(self, old: dict | None) -> None:
         self.manifest_path.unlink(missing_ok=True)
+        remove_index(self.index_path)
         for name in sorted((old or {}).get("scenes", {})):
             if not _is_plain_name(name):
                 continue  # never delete a path a malformed manifest makes up
@@ -135,7 +156,13 @@ class DatasetWriter:
                     path.unlink(missing_ok=True)
 
     def _save(self) -> None:
-        save_manifest(self.manifest_path, self.manifest)
+        """Write the header (``dataset.json``, without frame records): O(scenes), not O(records)."""
+        atomic_write_bytes(self.manifest_path, manifest_bytes(manifest_header(self.manifest)))
+        self._header_saved = True
+
+    def close(self) -> None:
+        """Close the frame index (the writer cannot record frames afterwards)."""
+        self._index.close()
 
     def path(self, relative: str) -> Path:
         """Absolute path of a manifest-relative path."""
@@ -159,8 +186,33 @@ class DatasetWriter:
         """Record a scene (see :data:`REQUIRED_SCENE_KEYS`; ``renders`` is the writer's).
 
         On resume, an identical record keeps the scene's frame records; a different one (the plan
-        changed, say) drops them, so every frame of that scene is rendered again.
+        changed, say) drops them, so every frame of that scene is rendered again. The header is
+        saved when something changed; :meth:`add_scenes` saves it once for many scenes.
         """
+        self.add_scenes({name: record})
+
+    def add_scenes(self, records: Mapping[str, Mapping]) -> None:
+        """:meth:`add_scene` for each ``name → record``, every record checked first, the header saved
+        once (adding n scenes one by one would write n headers of up to n scenes: O(n²))."""
+        plain = {name: self._plain_scene(name, record) for name, record in records.items()}
+        changed = False
+        for name, record in plain.items():
+            old = self.manifest["scenes"].get(name)
+            renders = {}
+            if old is not None:
+                old_plain = {k: v for k, v in old.items() if k != "renders"}
+                if old_plain == record:
+                    renders = old.get("renders", {})
+                elif old.get("renders"):
+                    self._index.delete_scene(name)
+            record["renders"] = renders
+            changed |= old is None or record != old
+            self.manifest["scenes"][name] = record
+        self._mark_changed()
+        if changed or not self._header_saved:
+            self._save()
+
+    def _plain_scene(self, name: str, record: Mapping) -> dict:
         layout.check_scene_name(name)
         record = dict(record)
         if "renders" in record:
@@ -183,16 +235,7 @@ class DatasetWriter:
             plain = json.loads(canonical_json(record))
         except (TypeError, ValueError) as exc:
             raise ValueError(f"scene {name!r} record is not plain JSON: {exc}") from None
-        old = self.manifest["scenes"].get(name)
-        renders = {}
-        if old is not None:
-            old_plain = {k: v for k, v in old.items() if k != "renders"}
-            if old_plain == plain:
-                renders = old.get("renders", {})
-        plain["renders"] = renders
-        self.manifest["scenes"][name] = plain
-        self.manifest["complete"] = False
-        self._save()
+        return plain
 
     # ------------------------------------------------------------------ frames
 
@@ -301,26 +344,41 @@ class DatasetWriter:
         _check_extra(extra)
         entry.update(dict(extra or {}))
         entry = json.loads(canonical_json(entry))
+        self._mark_changed()
+        if not self._header_saved:
+            self._save()  # the scene records this frame belongs to are on disk before it
         renders = self.manifest["scenes"][scene]["renders"]
-        renders.setdefault(key, {})[layout.frame_key(frame)] = entry
-        self._update_reference_flag(scene, frame)
-        self.manifest["complete"] = False
-        self._save()
+        fkey = layout.frame_key(frame)
+        renders.setdefault(key, {})[fkey] = entry
+        rows = [(scene, key, fkey, entry)]
+        if self._update_reference_flag(scene, frame) and key != layout.REFERENCE:
+            rows.append((scene, layout.REFERENCE, fkey, renders[layout.REFERENCE][fkey]))
+        self._index.put_many(rows)  # the frame is done when this returns
         return entry
 
-    def _update_reference_flag(self, scene: str, frame: int) -> None:
+    def _mark_changed(self) -> None:
+        """The dataset is no longer complete: say so on disk before the next record (once)."""
+        if self.manifest.get("complete") or self.manifest.get("frame_records", {}).get("count") is not None:
+            self.manifest["complete"] = False
+            self.manifest["frame_records"] = frame_records_entry(None)
+            self._header_saved = False
+
+    def _update_reference_flag(self, scene: str, frame: int) -> bool:
+        """Recompute the reference's noise flag from the frame's inputs; True when its record changed."""
         renders = self.manifest["scenes"][scene]["renders"]
         fkey = layout.frame_key(frame)
         reference = renders.get(layout.REFERENCE, {}).get(fkey)
         if reference is None:
-            return
+            return False
         noisy = [
             records[fkey]["rel_se"]
             for key, records in renders.items()
             if key != layout.REFERENCE and fkey in records and records[fkey].get("rel_se") is not None
         ]
+        before = (reference.get("noisy_rel_se_max"), reference.get("reference_too_noisy"))
         reference["noisy_rel_se_max"] = max(noisy) if noisy else None
         reference["reference_too_noisy"] = reference_quality(noisy, reference.get("rel_se"))
+        return before != (reference["noisy_rel_se_max"], reference["reference_too_noisy"])
 
     # ------------------------------------------------------------------ completion
 
@@ -373,11 +431,21 @@ class DatasetWriter:
         if missing and not allow_incomplete:
             scene, frame, kind = missing[0]
             raise ValueError(f"{len(missing)} file(s) not written yet, e.g. scene {scene!r} frame {frame} {kind}")
+        changed = []
         for name in sorted(scenes):
             for frame in range(self.manifest["scenes"][name]["frames"]):
-                self._update_reference_flag(name, frame)
+                if self._update_reference_flag(name, frame):
+                    fkey = layout.frame_key(frame)
+                    changed.append(
+                        (name, layout.REFERENCE, fkey, self.manifest["scenes"][name]["renders"][layout.REFERENCE][fkey])
+                    )
+        if changed:
+            self._index.put_many(changed)
+        self._index.seal()
         self.manifest["splits"] = {split: sorted(splits.get(split, [])) for split in SPLITS}
         self.manifest["complete"] = not missing
+        count = sum(len(frames) for scene in self.manifest["scenes"].values() for frames in scene["renders"].values())
+        self.manifest["frame_records"] = frame_records_entry(count)
         self._save()
 
 

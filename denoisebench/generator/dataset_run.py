@@ -2,7 +2,8 @@
 
 :func:`generate_dataset` is what ``denoisebench generate`` and the demo run. The dataset config
 (:func:`dataset_config`) is everything that decides the bytes: families, scene count, frames,
-size, spp, reference spp (the cap with ``ref_error``), the reference's target floor ``ref_error``,
+size, spp and whether its rungs are nested (``rungs``), reference spp (the cap with ``ref_error``),
+the reference's target floor ``ref_error``,
 the user's transport restriction ``max_depth``, per-sample data, seed and the user's USD files
 (path and sha256). The
 executor is *not* part of it: local and Ray runs give the same bytes, so a run started locally may
@@ -67,6 +68,7 @@ class GenerateRequest:
     camera: str | None = None  # --camera PATH for the --usd stages
     auto_camera: bool = False  # --auto-camera: frame --usd stages with an orbiting camera (usd/additions.py)
     default_light: bool = False  # --default-light: light --usd stages that have no light
+    independent_rungs: bool = False  # --independent-rungs: every spp its own render (default: nested rungs)
 
     def stage_options(self) -> dict:
         """What is written into every copied --usd stage (dataset_scenes.stage_options)."""
@@ -158,6 +160,7 @@ def dataset_config(request: GenerateRequest) -> dict:
         "max_depth": request.max_depth,
         "samples": bool(request.samples),
         "seed": request.seed,
+        "rungs": "independent" if request.independent_rungs else "nested",
         "usd": [{"path": str(Path(p).resolve()), "sha256": _file_sha256(Path(p))} for p in request.usd],
         **(
             {
@@ -246,10 +249,12 @@ def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names:
             )
         )
     options = RenderOptions(**render_options(request))
+    records = {}
     for spec in entries:
         translated = translate_usd(spec.usd_path)
         plan = make_render_plan(translated.effects, options, stage_max_depth=translated.max_depth)
-        writer.add_scene(spec.name, _scene_record(spec, translated, request, plan))
+        records[spec.name] = _scene_record(spec, translated, request, plan)
+    writer.add_scenes(records)  # one header write for all scenes (not one per scene)
     return entries
 
 
@@ -278,7 +283,16 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
     for spec in specs:
         stage_key = writer.manifest["scenes"][spec.name]["stage_sha256"]
         jobs.extend(
-            missing_jobs(writer, spec.name, stage_key, str(spec.usd_path), spec.render_seed, options, request.ref_error)
+            missing_jobs(
+                writer,
+                spec.name,
+                stage_key,
+                str(spec.usd_path),
+                spec.render_seed,
+                options,
+                request.ref_error,
+                request.independent_rungs,
+            )
         )
     summary = GenerateSummary(out=Path(request.out), scenes=len(specs))
     total_frames = sum(writer.manifest["scenes"][s.name]["frames"] for s in specs)
@@ -306,9 +320,8 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
                 continue
             summary.files += write_rendered(writer, outcome)
             summary.frames += 1
-            renders = outcome.noisy + ([outcome.reference] if outcome.reference else [])
-            summary.render_seconds += sum(r.seconds for r in renders)
-            summary.samples += sum(r.spp for r in renders) * request.width * request.height
+            summary.render_seconds += outcome.render_seconds()  # nested rungs count once
+            summary.samples += outcome.samples_per_pixel() * request.width * request.height
             bar.update(1)
     finally:
         bar.close()

@@ -400,23 +400,25 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     spp = (
         sorted({int(s) for s in config.spp})
         if config.spp
-        else sorted(set.intersection(*(set(dataset.scene(s).spp) for s in scenes)))
+        else sorted(set.intersection(*(set(dataset.scene(s, renders=False).spp) for s in scenes)))
     )
     if not spp:
         raise UserInputError(f"{dataset.root}: the scenes of split {config.split!r} share no input spp")
     config.spp = spp
+    # cheap checks first (names, options, metrics: a typo is refused before any file is hashed),
+    # then the files: one stat per file, then one sha256 per file (minutes at 10 000 frames)
+    spatial, temporal = split_metrics(config.metrics)
+    specs = resolve_denoiser_specs(config.denoisers)
+    config.denoisers = specs
+    denoisers = load_denoisers(specs, config.options, isolation=config.isolation, limits=config.limits())
     check_dataset(dataset, scenes, spp)
     if config.verify:
         from denoisebench.dataset.verify import run_files, verify_files
 
         # samples files included (cheap): a samples file that is listed must be genuine too
         verify_files(dataset, run_files(dataset, scenes, spp, samples=True), progress=progress)
-    spatial, temporal = split_metrics(config.metrics)
-    specs = resolve_denoiser_specs(config.denoisers)
-    config.denoisers = specs
     data_hash = dataset_hash(dataset)
     run_id = run_identity(data_hash, config)
-    denoisers = load_denoisers(specs, config.options, isolation=config.isolation, limits=config.limits())
     created = store.ensure_run(run_id, data_hash, str(dataset.root.resolve()), config.as_dict(), software_versions())
     store.add_denoiser(run_id, NOISY, NOISY, "input", {"color"}, False, None)
     plan = RunPlan(run_id, scenes, spp, denoisers, spatial, temporal, resumed=not created, trim=config.trim)
