@@ -298,9 +298,10 @@ def plan_export(dataset: Dataset, spp: int | None, layout: str) -> dict[str, lis
         info = dataset.scene(scene)
         if not info.has_reference:
             raise UserInputError(f"scene {scene!r} has no reference; Noisebase's format needs one")
+        chosen = _samples_spp(dataset, scene, spp)
         if "fov_x_deg" not in info.camera:
             raise UserInputError(f"scene {scene!r} has no camera field of view in the manifest")
-        plan.setdefault(splits[scene], []).append((scene, _samples_spp(dataset, scene, spp)))
+        plan.setdefault(splits[scene], []).append((scene, chosen))
     if layout == "train":
         for split, entries in plan.items():
             shapes = {
