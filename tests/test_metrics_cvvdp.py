@@ -19,7 +19,13 @@ import pytest
 import torch
 
 from denoisebench.metrics import compute_metrics, get_metric
-from denoisebench.metrics.colorvideovdp import cvvdp, exposure_from_reference
+from denoisebench.metrics.colorvideovdp import (
+    DISPLAY_MODEL,
+    cvvdp,
+    exposure_from_reference,
+    luminance_ratio,
+    viewing_conditions,
+)
 
 ROOT = Path(__file__).resolve().parent.parent
 T, H, W = 8, 32, 32
@@ -70,8 +76,11 @@ def test_exposure_is_the_reference_key_at_100_nits():
     assert exposure_from_reference(flat) == pytest.approx(200.0)
     assert exposure_from_reference(np.zeros((2, 4, 4, 3))) == 100.0
     half_black = flat.copy()
-    half_black[:, :2] = 0.0  # black floored at 1/1000 of the mean (0.25): key = sqrt(0.5 * 0.00025)
-    assert exposure_from_reference(half_black) == pytest.approx(100.0 / math.sqrt(0.5 * 0.00025), rel=1e-9)
+    half_black[:, :2] = 0.0  # black pixels are left out of the key: it stays 0.5
+    assert exposure_from_reference(half_black) == pytest.approx(200.0, rel=1e-12)
+    near_black = flat.copy()
+    near_black[:, :1] = 0.5e-3 * 0.375  # at 1/2000 of the mean luminance: left out too
+    assert exposure_from_reference(near_black) == pytest.approx(200.0, rel=1e-12)
 
 
 def test_registered_as_temporal_jod_higher_is_better():
@@ -121,3 +130,58 @@ def test_torchvision_compiled_ops_still_fail_loudly():
         pytest.skip("torchvision's compiled operators load here: nothing was declared")
     with pytest.raises(RuntimeError):
         torchvision.ops.nms(torch.zeros(1, 4), torch.zeros(1), 0.5)
+
+
+def _dark_scene_with_black_background():
+    """Issue 29's case in small: a dark textured reference (mean Y ≈ 0.02) whose left 31 % is black."""
+    yy, xx = np.mgrid[0:H, 0:W]
+    base = 0.03 * (1 + 0.8 * np.sin(xx / 2.5) * np.cos(yy / 3.5))
+    base[:, :10] = 0.0
+    return np.repeat(np.repeat(base[None, :, :, None], 3, axis=3), T, axis=0)
+
+
+def test_a_mostly_black_output_scores_far_below_zero_while_tpsnr_prefers_it():
+    # depth_of_field_900 at 1 spp (colorvideovdp.py Notes): cross_bilateral −16.2 / rae −4.1 JOD against the
+    # input's +0.35, tPSNR 25.2 / 23.9 dB against 14.2: the outputs are mostly black where the reference
+    # is textured. Here: a 1-spp-like input (15 % of the pixels carry ref / 0.15, the rest 0) against an
+    # output that keeps 5 % of the pixels of each frame at the reference's value and leaves the rest black
+    # (measured 2.16 / −3.42 JOD, tPSNR 14.7 / 26.3 dB).
+    from denoisebench.metrics import tpsnr
+
+    ref = _dark_scene_with_black_background()
+    rng = np.random.default_rng(3)
+    noisy = np.where((rng.random(ref.shape[:3]) < 0.15)[..., None], ref / 0.15, 0.0)
+    mostly_black = ref * (rng.random(ref.shape[:3]) < 0.05)[..., None]
+    jod_noisy, jod_black = cvvdp(noisy, ref), cvvdp(mostly_black, ref)
+    assert jod_black < 0.0 and jod_noisy - jod_black > 4.0
+    assert tpsnr(mostly_black, ref) > tpsnr(noisy, ref) + 10.0
+    assert luminance_ratio(mostly_black, ref) < 0.1 and luminance_ratio(noisy, ref) == pytest.approx(1.0, abs=0.15)
+    # a global darkening alone costs little (contrast constancy; measured 9.31): the structure decides
+    assert cvvdp(ref * 0.014, ref) > 9.0
+
+
+def test_black_pixels_do_not_set_the_exposure():
+    ref = _dark_scene_with_black_background()
+    lit = ref[:, :, 10:]
+    assert exposure_from_reference(ref) == pytest.approx(exposure_from_reference(lit), rel=1e-12)
+    # the old floored key (black at 1/1000 of the mean) showed this scene 9.4× brighter (measured on
+    # depth_of_field_900: 24 849 against 3220 cd/m² per unit)
+    y = ref @ np.array([0.2126, 0.7152, 0.0722])
+    old = 100.0 / math.exp(np.log(np.maximum(y, 1e-3 * y.mean())).mean())
+    assert old / exposure_from_reference(ref) > 5.0
+
+
+def test_viewing_conditions_match_the_package_display_model():
+    from denoisebench.metrics.colorvideovdp import _model
+
+    model = _model()
+    assert model.display_geometry.get_ppd() == pytest.approx(DISPLAY_MODEL["ppd"], abs=0.01)
+    assert model.display_photometry.get_peak_luminance() == DISPLAY_MODEL["peak_cd_m2"]
+    ref = _dark_scene_with_black_background()
+    vc = viewing_conditions(ref)
+    assert vc["black_cd_m2"] == pytest.approx(sum(model.display_photometry.get_black_level()), rel=1e-6)
+    assert vc["frame_px"] == [W, H] and vc["field_deg"][0] == pytest.approx(W / 75.40, rel=1e-3)
+    assert vc["exposure"] == pytest.approx(exposure_from_reference(ref)) and 0.68 < vc["lit_fraction"] < 0.70
+    assert vc["clipped_fraction"] == 0.0
+    assert "75.4 pixels per degree" in vc["text"] and "32×32 frame spans 0.42°×0.42°" in vc["text"]
+    assert viewing_conditions()["ppd"] == DISPLAY_MODEL["ppd"] and "exposure" not in viewing_conditions()

@@ -13,15 +13,32 @@ The mapping from our data to what the model sees (it needs absolute photometric 
    colour space (no tone map, no encoding). Negative prediction values are clamped to 0 (a
    display emits no negative light).
 2. **Exposure** ``k`` (cd/m² per unit of radiance), one per sequence, **from the reference only**:
-   ``k = 100 cd/m² / key`` where ``key = exp(mean(log(max(Y, 1e-3 · mean(Y)))))`` is the
-   log-average (Reinhard's "key") of the reference's Rec.709 luminance ``Y = 0.2126 R + 0.7152 G
-   + 0.0722 B`` over every pixel of every frame, each luminance floored at 1/1000 of the mean
-   (so black pixels do not drive the key to 0). The typical surface of the reference is thus
-   shown at ~100 cd/m²; every denoiser of a sequence gets the same ``k``, so one prediction's
-   score never depends on another's. An all-black reference (mean 0) uses ``k = 100``.
-   Pitfall: the key is a geometric mean, so a small bright emitter barely moves it (a plain mean
-   would darken the whole scene to make room for it); highlights above 15× the key clip at the
-   display's peak.
+   ``k = 100 cd/m² / key`` where ``key = exp(mean(log Y))`` is the log-average (Reinhard's "key")
+   of the reference's Rec.709 luminance ``Y = 0.2126 R + 0.7152 G + 0.0722 B`` over the **lit**
+   pixels of every frame: those with ``Y > 1e-3 · mean(Y)``; black and near-black pixels are left
+   out (black stays black at any exposure, so it must not set one). The typical lit surface of
+   the reference is thus shown at ~100 cd/m²; every denoiser of a sequence gets the same ``k``,
+   so one prediction's score never depends on another's. An all-black reference (mean 0) uses
+   ``k = 100``. Pitfall: the key is a geometric mean, so a small bright emitter barely moves it (a
+   plain mean would darken the whole scene to make room for it); highlights above 15× the key
+   clip at the display's peak.
+
+   Until issue 29 black pixels were floored at 1/1000 of the mean and counted, and a reference
+   with a black background got a key far too low. Measured on depth_of_field_900 (80 px, 8
+   frames, 1024-spp reference, 31 % of its pixels black; ``tests/test_metrics_cvvdp.py``
+   reproduces the case): k = 24 849 instead of 3220, the median surface at 490 cd/m² instead of
+   ~65, and the 1-spp outputs of cross_bilateral / rae scored −39.0 / −18.9 JOD (the demo's
+   −19.2 / −21.9) against the noisy input's −0.09; with the lit key −16.2 / −4.1 against +0.35
+   (oidn +1.5). What is left is the outputs, not the viewing: at 1 spp most of the input's
+   pixels are black (its median is 0) and cross_bilateral's range kernel keeps them black (its
+   median pixel is 0.1 % of the reference's, its mean luminance 1.4 %; rae's mean 38 %), while
+   the noisy input's sparse bright samples carry the right mean. A global darkening alone would
+   cost little (the reference × 0.014 scores 8.3 JOD: contrast constancy); a mostly black image
+   where the reference is textured costs a lot. tPSNR cannot see it: a dark, steady output has
+   small frame differences (cross_bilateral 25.2 dB against the input's 14.2). The frame size
+   is not the cause: 75, 30 and 15 pixels per degree give −16.2 / −16.2 / −16.1 JOD for
+   cross_bilateral and −4.1 / −4.1 / −4.0 for rae. :func:`luminance_ratio` states the darkening
+   so that a report can say why a score is that low.
 3. **Display** (``DISPLAY``): cvvdp's own ``standard_hdr_linear`` model: a 30-inch 3840×2160
    HDR monitor, peak 1500 cd/m², contrast 10⁶:1, 10 lux ambient light (reflectivity 0.005), seen
    from 2 display heights (0.747 m) → 75.4 pixels per degree. The display clips ``k·RGB`` to
@@ -39,6 +56,10 @@ brightness alternating ±15 % frame to frame → 5.2 JOD while the same +15 % he
 σ = 0.1 → 9.2–9.3 (new noise every frame) and 9.1 (the same noise in every frame). With a plain
 ×100 cd/m² scale instead of the key the flicker case scored 6.7: brighter display, more
 visible flicker.
+
+Viewing conditions: :func:`viewing_conditions` gives the display, its pixels per degree, the
+visual angle a frame spans and, for a reference, the exposure and how much of it clips, as plain
+numbers and one sentence, for run records and reports.
 
 Runs offline on the CPU (the model's data ship in the package), on one torch thread
 (:mod:`.torch_threads`: 20× less CPU than two threads here). ``bench/field_metrics_speed.py``
@@ -77,17 +98,32 @@ __all__ = [
     "cvvdp",
     "exposure_from_reference",
     "load_pycvvdp",
+    "luminance_ratio",
+    "viewing_conditions",
 ]
 
 DISPLAY = "standard_hdr_linear"
 DISPLAY_DESCRIPTION = (
     "cvvdp 'standard_hdr_linear': 30-inch 4K HDR monitor, peak 1500 cd/m^2, contrast 1e6, 10 lux, "
-    "viewed from 2 display heights (75.4 ppd); exposure maps the reference's log-average luminance "
+    "viewed from 2 display heights (75.4 ppd); exposure maps the log-average luminance of the reference's lit pixels "
     "to 100 cd/m^2"
 )
 FPS = 30.0
 TARGET_KEY_CD_M2 = 100.0
-KEY_FLOOR = 1e-3  # luminance floor of the key, relative to the reference's mean luminance
+KEY_FLOOR = 1e-3  # pixels at or below this × the reference's mean luminance are left out of the key
+#: ``DISPLAY``'s model in cvvdp 0.5.7's display_models.json (tests/test_metrics_cvvdp.py checks them
+#: against the package): resolution, diagonal, viewing distance, peak, contrast, ambient light, and
+#: the pixels per degree at the centre that pycvvdp's display geometry computes from them.
+DISPLAY_MODEL = {
+    "resolution": (3840, 2160),
+    "diagonal_inches": 30.0,
+    "distance_m": 0.7472,
+    "peak_cd_m2": 1500.0,
+    "contrast": 1e6,
+    "ambient_lux": 10.0,
+    "reflectivity": 0.005,
+    "ppd": 75.40,
+}
 WORST = -math.inf  # JOD is unbounded below; a non-finite prediction gets -inf
 
 _REC709_Y = np.array([0.2126, 0.7152, 0.0722])
@@ -135,15 +171,89 @@ def _model():
         return _MODEL
 
 
-def exposure_from_reference(ref_seq) -> float:
-    """cd/m² per unit of radiance for a sequence: ``100 / key`` of the reference (module Notes)."""
-    ref = np.asarray(ref_seq, dtype=np.float64)
-    y = np.maximum(ref[..., :3] @ _REC709_Y, 0.0)
+def _luminance(seq) -> np.ndarray:
+    return np.maximum(np.asarray(seq, dtype=np.float64)[..., :3] @ _REC709_Y, 0.0)
+
+
+def _key(y: np.ndarray) -> tuple[float | None, float]:
+    """(log-average luminance of the lit pixels, their fraction); (None, 0) for a black reference."""
     mean = float(y.mean())
     if not (mean > 0.0 and math.isfinite(mean)):
-        return TARGET_KEY_CD_M2
-    key = math.exp(float(np.log(np.maximum(y, KEY_FLOOR * mean)).mean()))
-    return TARGET_KEY_CD_M2 / key
+        return None, 0.0
+    lit = y[y > KEY_FLOOR * mean]
+    return math.exp(float(np.log(lit).mean())), lit.size / y.size
+
+
+def exposure_from_reference(ref_seq) -> float:
+    """cd/m² per unit of radiance for a sequence: ``100 / key`` of the reference's lit pixels (module Notes)."""
+    key, _ = _key(_luminance(ref_seq))
+    return TARGET_KEY_CD_M2 if key is None else TARGET_KEY_CD_M2 / key
+
+
+def luminance_ratio(pred_seq, ref_seq) -> float | None:
+    """Mean Rec.709 luminance of the prediction over the reference's (1: no light lost or added).
+
+    None for a black reference. A denoiser whose output is much darker than its reference (energy
+    lost from a sparse low-spp input) scores far below zero JOD although its tPSNR may be good.
+    """
+    c = check_sequences(pred_seq, ref_seq, min_frames=1)
+    ref_mean = float(_luminance(c.ref).mean())
+    if not ref_mean > 0:
+        return None
+    return float(_luminance(np.where(np.isfinite(c.pred), c.pred, 0.0)).mean()) / ref_mean
+
+
+def viewing_conditions(ref_seq=None) -> dict:
+    """What cvvdp's viewer sees: display, pixels per degree and, for a reference, exposure and field of view.
+
+    Returns plain numbers (JSON-ready) and ``"text"``, one sentence for a report. With ``ref_seq``
+    (T×H×W×3 or H×W×3): ``frame_px`` (W, H), ``field_deg`` (the frame's width and height in
+    degrees of visual angle at the display's ppd), ``exposure`` (cd/m² per unit radiance),
+    ``key`` (the lit pixels' log-average radiance), ``lit_fraction``, and ``clipped_fraction``
+    (reference pixels whose ``exposure · Y`` exceeds the display's peak).
+    """
+    d = DISPLAY_MODEL
+    black = d["peak_cd_m2"] / d["contrast"] + d["ambient_lux"] / math.pi * d["reflectivity"]
+    out = {
+        "display": DISPLAY,
+        "description": DISPLAY_DESCRIPTION,
+        "resolution": list(d["resolution"]),
+        "ppd": d["ppd"],
+        "peak_cd_m2": d["peak_cd_m2"],
+        "black_cd_m2": black,
+        "ambient_lux": d["ambient_lux"],
+        "fps": FPS,
+        "target_key_cd_m2": TARGET_KEY_CD_M2,
+    }
+    text = (
+        f"cvvdp display {DISPLAY} (30-inch 4K HDR, peak {d['peak_cd_m2']:.0f} cd/m², {d['ambient_lux']:.0f} lux, "
+        f"{d['ppd']:.1f} pixels per degree), {FPS:.0f} fps"
+    )
+    if ref_seq is not None:
+        ref = np.asarray(ref_seq, dtype=np.float64)
+        if ref.ndim == 3:
+            ref = ref[None]
+        if ref.ndim != 4 or ref.shape[-1] < 3:
+            raise ValueError(f"the reference must be T×H×W×3 or H×W×3, got shape {ref.shape}")
+        y = _luminance(ref)
+        key, lit = _key(y)
+        k = TARGET_KEY_CD_M2 if key is None else TARGET_KEY_CD_M2 / key
+        h, w = ref.shape[1:3]
+        out.update(
+            frame_px=[int(w), int(h)],
+            field_deg=[w / d["ppd"], h / d["ppd"]],
+            exposure=k,
+            key=key,
+            lit_fraction=lit,
+            clipped_fraction=float(np.mean(k * y > d["peak_cd_m2"])),
+        )
+        text += (
+            f"; a {w}×{h} frame spans {w / d['ppd']:.2f}°×{h / d['ppd']:.2f}°; exposure {k:.4g} cd/m² per unit "
+            f"(the lit {100 * lit:.0f} % of the reference's pixels average {TARGET_KEY_CD_M2:.0f} cd/m², "
+            f"{100 * out['clipped_fraction']:.1f} % clip at the peak)"
+        )
+    out["text"] = text
+    return out
 
 
 def cvvdp(pred_seq, ref_seq, *, fps: float = FPS) -> float:
