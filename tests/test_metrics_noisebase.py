@@ -2,7 +2,8 @@
 
 The expected values below are computed from the published definitions
 (github.com/balintio/noisebase: data.py ACES, loaders/torch/test_sample_v1.py Sequence.save,
-scripts/nb_compute_metrics.py) written out again in numpy, not by calling the module under test.
+scripts/nb_compute_metrics.py) written out again in numpy, not by calling the module under test;
+the last tests run the ``noisebase`` package's own code on the same frames.
 """
 
 import math
@@ -127,3 +128,103 @@ def test_msssim_at_their_size_is_pytorch_msssim_on_the_hand_luminance():
 
     expected = float(ms_ssim(lum(pred[0]), lum(ref[0]), data_range=1.0))
     assert nb.nb_msssim(pred[0], ref[0]) == pytest.approx(expected, abs=1e-5)
+
+
+# --------------------------------------------------------------------------- Noisebase's own code
+# The checks above restate Noisebase's definitions; these run the `noisebase` package's own code
+# (1.1.1, installed --no-deps) on the same frames: Sequence.save writes their 8-bit PNGs, and
+# scripts/nb_compute_metrics.py scores them. That script imports pyfvvdp (FovVideoVDP) at the top,
+# whose 1.2.0 release imports numpy.lib.shape_base (gone in numpy 2): the two FovVideoVDP modules
+# are replaced by empty ones for the import; nothing compared here uses them.
+
+
+@pytest.fixture(scope="module")
+def noisebase_scripts():
+    import importlib
+    import sys
+    import types
+
+    pytest.importorskip("noisebase.loaders.torch")
+    stubs = {"pyfvvdp": types.ModuleType("pyfvvdp"), "pyfvvdp.fvvdp": types.ModuleType("pyfvvdp.fvvdp")}
+    stubs["pyfvvdp.fvvdp"].reshuffle_dims = None
+    stubs["noisebase.metrics.fvvdp"] = types.ModuleType("noisebase.metrics.fvvdp")
+    stubs["noisebase.metrics.fvvdp"].nb_fvvdp = None
+    saved = {name: sys.modules.get(name) for name in [*stubs, "noisebase.scripts.nb_compute_metrics"]}
+    sys.modules.update(stubs)
+    try:
+        module = importlib.import_module("noisebase.scripts.nb_compute_metrics")
+    finally:
+        for name, old in saved.items():
+            if name == "noisebase.scripts.nb_compute_metrics":
+                continue
+            if old is None:
+                sys.modules.pop(name, None)
+            else:
+                sys.modules[name] = old
+    return module
+
+
+def _their_frames(tmp_path, name, frames):
+    """Linear T×H×W×3 frames -> Noisebase's saved PNGs (their Sequence.save) read back as their
+    metric script reads them (imageio, then HWC -> NCHW float32 / 255)."""
+    import imageio.v3 as iio
+    import torch
+    from noisebase.loaders.torch.test_sample_v1 import Sequence
+
+    output = "{sequence_name}/frame{index:04d}.png"
+    sequence = Sequence(src={}, sequence={"name": name}, save_dir=str(tmp_path), output=output)
+    for i, frame in enumerate(frames):
+        sequence.save(i, torch.from_numpy(np.ascontiguousarray(frame.transpose(2, 0, 1)))[None])
+    sequence.join()
+    read = [iio.imread(tmp_path / output.format(sequence_name=name, index=i)) for i in range(len(frames))]
+    return [torch.from_numpy(r).permute(2, 0, 1)[None].to(torch.float32) / 255 for r in read]
+
+
+def test_scores_equal_noisebase_metric_script(noisebase_scripts, tmp_path):
+    nbm = noisebase_scripts
+    pred, ref = _scene(t=3, size=176, sigma=0.1)  # 176 px: pytorch_msssim's five scales, as theirs
+    tp, tr = _their_frames(tmp_path, "pred", pred), _their_frames(tmp_path, "ref", ref)
+    # their 8-bit frames are ours
+    for ours, theirs in zip(pred, tp):
+        np.testing.assert_array_equal(nb.nb_encode(ours), theirs[0].permute(1, 2, 0).numpy())
+    for i in range(3):
+        # measured: |Δ| ≤ 2.1e-7 dB (PSNR), ≤ 1e-7 (SSIM, MS-SSIM): float32 torch against float64 numpy
+        assert nb.nb_psnr(pred[i], ref[i]) == pytest.approx(nbm.psnr(tp[i], tr[i]), abs=1e-5)
+        assert nb.nb_ssim(pred[i], ref[i]) == pytest.approx(nbm.ssim(tp[i], tr[i]), abs=1e-6)
+        assert nb.nb_msssim(pred[i], ref[i]) == pytest.approx(nbm.msssim(tp[i], tr[i]), abs=1e-6)
+    tpsnr, trmae = nbm.TemporalMetricAdapter(nbm.psnr), nbm.TemporalMetricAdapter(nbm.rmae)
+    for a, b in zip(tp, tr):
+        tpsnr.feed(a, b)
+        trmae.feed(a, b)
+    assert nb.nb_tpsnr(pred, ref) == pytest.approx(tpsnr.compute(), abs=1e-5)
+    assert nb.nb_trmae(pred, ref) == pytest.approx(trmae.compute(), rel=1e-5)
+
+
+class _CpuTorch:
+    """``torch`` for Noisebase's FLIP module with its hard-wired ``device='cuda'`` dropped."""
+
+    def __init__(self, torch):
+        self._torch = torch
+
+    def zeros(self, *args, device=None, **kwargs):
+        return self._torch.zeros(*args, **kwargs)
+
+    def __getattr__(self, name):
+        return getattr(self._torch, name)
+
+
+def test_flip_equals_noisebase_flip_run_on_the_cpu(tmp_path, monkeypatch):
+    """Their LDR-FLIP (noisebase/metrics/flip.py, PyTorch) against ours (flip-evaluator, C++)."""
+    import torch
+
+    pytest.importorskip("noisebase.loaders.torch")
+    from noisebase.metrics import flip as their_flip
+
+    monkeypatch.setattr(torch.Tensor, "cuda", lambda self, *a, **k: self)
+    monkeypatch.setattr(their_flip, "torch", _CpuTorch(torch))
+    pred, ref = _scene(t=1, size=64, sigma=0.1)
+    tp, tr = _their_frames(tmp_path, "pred", pred), _their_frames(tmp_path, "ref", ref)
+    with torch.no_grad():
+        theirs = their_flip.flip(tp[0], tr[0])
+    # measured: 0.1278116 (ours) against 0.1278115 (theirs), relative 2e-7
+    assert nb.nb_flip(pred[0], ref[0]) == pytest.approx(theirs, rel=1e-5)

@@ -38,6 +38,11 @@ Not reproduced: their ``fvvdp`` (FovVideoVDP, package ``pyfvvdp``): we carry its
 ColorVideoVDP as ``cvvdp`` (:mod:`.colorvideovdp`), whose JOD values are not the same scale.
 Their warm-up (the first frames of a sequence excluded) is a property of their test set; we
 score the frames given.
+
+Checked against Noisebase's own code (``noisebase`` 1.1.1, tests/test_metrics_noisebase.py): their
+``Sequence.save`` PNGs equal :func:`nb_encode` exactly, and their script's ``psnr``, ``ssim``,
+``msssim``, ``tpsnr``, ``trmae`` and their PyTorch LDR-FLIP (run on the CPU) give our values to
+2e-7 (dB, or relative for FLIP).
 """
 
 from __future__ import annotations
@@ -48,7 +53,7 @@ import numpy as np
 
 from denoisebench.metrics.msssim import ms_ssim_tensor
 from denoisebench.metrics.torch_threads import one_torch_thread
-from denoisebench.metrics.validation import check_pair, check_sequences
+from denoisebench.metrics.validation import MetricNotApplicable, check_pair, check_sequences
 
 __all__ = [
     "ACES_INPUT",
@@ -143,7 +148,7 @@ def _luminance_pair(pred, ref, what: str):
     """
     c = check_pair(pred, ref)
     if min(c.ref.shape[:2]) < 11:
-        raise ValueError(f"{what} needs images of at least 11×11 px, got {c.ref.shape[0]}×{c.ref.shape[1]}")
+        raise MetricNotApplicable(f"{what} needs images of at least 11×11 px, got {c.ref.shape[0]}×{c.ref.shape[1]}")
     if c.nonfinite_count:
         return None
     return _gray_tensor(nb_luminance(nb_encode(c.pred))), _gray_tensor(nb_luminance(nb_encode(c.ref)))
