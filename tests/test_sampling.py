@@ -206,3 +206,18 @@ def test_registry_finds_builtins_entry_points_module_attr_and_files(tmp_path, mo
     assert registry.load_sampler("plugged", rounds=2).rounds == 2
     assert registry.load_sampler("uniform").name == "uniform"  # a built-in wins over an entry point
     assert "plugged" in registry.available_samplers()
+
+
+def test_synthetic_frame_matches_the_renderers_conventions_for_empty_pixels_and_samples():
+    frame = SyntheticProgressiveFrame(np.full((2, 3, 3), 0.4), np.full((2, 3), 0.5), keep_samples=True)
+    counts = np.array([[0, 1, 3], [2, 0, 1]])
+    result = frame.render_round(counts)
+    var = result.buffers["color_var"][..., 0]
+    assert np.isinf(var[counts == 0]).all() and (var[counts == 1] == 0).all() and (var[counts > 1] > 0).all()
+    assert (result.buffers["color"][counts == 0] == 0).all()
+    samples = result.samples["color"]
+    assert samples.shape == (3, 2, 3, 3)
+    assert ((samples[..., 0] > 0).sum(axis=0) == counts).all()  # row j < count holds a sample, zeros after
+    np.testing.assert_allclose(
+        samples.sum(axis=0) / np.maximum(counts, 1)[..., None], result.buffers["color"], rtol=1e-5
+    )

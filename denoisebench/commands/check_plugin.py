@@ -29,6 +29,8 @@ EPILOG = """examples:
   denoisebench check-plugin plugins/median.py:Median --json
   denoisebench check-plugin plugins/slow.py:Slow --time-limit 300 --memory-limit 8192
   denoisebench check-plugin --list
+  denoisebench check-plugin --sampler hachisuka2008
+  denoisebench check-plugin --sampler my_package.sampling:MySampler --option rounds=8 --json
 """
 
 
@@ -44,6 +46,12 @@ def add_arguments(parser) -> None:
     parser.add_argument("--case", action="append", default=None, metavar="NAME", help="run only this case; repeatable")
     parser.add_argument("--json", action="store_true", help="print the results as JSON instead of a table")
     parser.add_argument("--list", action="store_true", help="list the known denoisers and the hard cases, then exit")
+    parser.add_argument(
+        "--sampler",
+        action="store_true",
+        help="SPEC is a sampler (group denoisebench.samplers): run its convergence check on a frame of known truth "
+        "(denoisebench.sampling.checks) instead of the hard cases; runs in this process",
+    )
     from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
 
     add_isolation_arguments(parser)
@@ -73,6 +81,11 @@ def _list() -> int:
     print("hard cases:")
     for case in CASES:
         print(f"  {case.name:<22} {case.description}")
+    from denoisebench.sampling.registry import available_samplers
+
+    print("samplers (--sampler):")
+    for name, origin in available_samplers().items():
+        print(f"  {name:<22} {origin}")
     return 0
 
 
@@ -102,6 +115,10 @@ def run(args) -> int:
         return _list()
     if not args.spec:
         raise UserInputError("give a denoiser SPEC (or --list)")
+    if args.sampler:
+        from denoisebench.sampling.checks import check_sampler
+
+        return check_sampler(args.spec, parse_options(args.option), as_json=args.json)
     from tqdm import tqdm
 
     from denoisebench.denoisers import hard_cases, isolation

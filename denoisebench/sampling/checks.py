@@ -104,9 +104,14 @@ def _one_budget(make_sampler, spp: float, seeds, size: int) -> BudgetOutcome:
     )
 
 
-def convergence_check(make_sampler, *, name: str = "sampler", budgets=BUDGETS, seeds=SEEDS, size: int = 32):
-    """Run the check (module docstring). ``make_sampler()`` returns a fresh sampler for each run."""
-    outcomes = [_one_budget(make_sampler, spp, seeds, size) for spp in budgets]
+def convergence_check(
+    make_sampler, *, name: str = "sampler", budgets=BUDGETS, seeds=SEEDS, size: int = 32, progress=iter
+):
+    """Run the check (module docstring). ``make_sampler()`` returns a fresh sampler for each run.
+
+    ``progress`` wraps the iteration over budgets (``tqdm`` on the command line).
+    """
+    outcomes = [_one_budget(make_sampler, spp, seeds, size) for spp in progress(budgets)]
     reasons = []
     first, last = outcomes[0], outcomes[-1]
     for outcome in outcomes:
@@ -140,3 +145,23 @@ def format_check(outcome: CheckOutcome) -> str:
     lines.extend(f"FAIL: {reason}" for reason in outcome.reasons)
     lines.append("converges: pass" if outcome.passed else "converges: FAIL")
     return "\n".join(lines)
+
+
+def check_sampler(spec: str, options: dict, *, as_json: bool = False) -> int:
+    """``check-plugin --sampler SPEC``: load (a one-line error, exit 2, when it cannot), check, print; 0 pass, 1 fail."""
+    import json
+    import sys
+
+    from tqdm import tqdm
+
+    from denoisebench.sampling.protocol import sampler_name
+    from denoisebench.sampling.registry import load_sampler
+
+    name = sampler_name(load_sampler(spec, **options), spec)
+
+    def progress(budgets):
+        return tqdm(budgets, desc=f"check {name}", unit="budget", file=sys.stderr, leave=False)
+
+    outcome = convergence_check(lambda: load_sampler(spec, **options), name=name, progress=progress)
+    print(json.dumps({"spec": spec, **outcome.summary()}, indent=2) if as_json else format_check(outcome))
+    return 0 if outcome.passed else 1

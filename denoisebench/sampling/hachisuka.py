@@ -104,7 +104,7 @@ class Hachisuka2008:
         done = 0
         while not rounds.cut and (size := round_size(rounds, done, self.rounds)) > 0:
             lum = luminance(result.buffers)
-            sample_var = luminance_var(result.buffers) * rounds.counts
+            sample_var = np.where(rounds.counts > 0, luminance_var(result.buffers) * np.maximum(rounds.counts, 1), 0.0)
             contrasts = self.refine(lum, sample_var)
             weights = self.weights(contrasts, lum.shape)
             result = rounds.render(top_up(weights, rounds.counts, size))

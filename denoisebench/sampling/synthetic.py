@@ -18,6 +18,8 @@ Notes
 * Deterministic per round: round ``i`` draws from ``default_rng([seed, reference, i])``, so the
   same sequence of requests gives bit-identical buffers; a different request order gives different
   samples, as it would in the renderer.
+* As in the renderer's progressive frame, a pixel without samples has mean 0 and variance inf,
+  one with a single sample variance 0.
 * ``diffuse`` is ``diffuse_fraction`` of ``color`` and ``specular`` the rest (their sum is ``color``,
   as in DESIGN.md's buffer table); ``albedo``, ``normal`` and ``depth`` are noise-free features with
   zero variance.
@@ -38,9 +40,10 @@ class RoundBuffers:
     """What a round returns (the same fields as the renderer's ``RoundBuffers``).
 
     ``buffers``: accumulated per-pixel means (H×W×C float32) and ``<name>_var`` (variance of the
-    mean); ``counts``: H×W int32 samples per pixel so far; ``seconds``: render seconds of this round;
-    ``samples``: this round's samples when asked for (here ``{"color": K×3, "pixel": K}``, ``pixel``
-    the flat index ``y·W + x`` of each sample).
+    mean; inf where a pixel has no sample, 0 where it has one); ``counts``: H×W int32 samples per
+    pixel so far; ``seconds``: render seconds of this round; ``samples``: this round's new samples
+    when asked for, ``{"color": N×H×W×3}`` with N the round's largest count, row ``j`` a pixel's
+    ``j``-th new sample and zeros past its count (the renderer's layout).
     """
 
     buffers: dict[str, np.ndarray]
@@ -107,8 +110,10 @@ class SyntheticProgressiveFrame:
         buffers = self._buffers()
         samples = None
         if self.keep_samples:
-            truth = self.truth.reshape(-1, 3)
-            samples = {"color": (truth[pixel] * draws[:, None]).astype(np.float32), "pixel": pixel.astype(np.int32)}
+            rank = np.arange(pixel.size) - np.repeat(np.cumsum(flat) - flat, flat)  # j-th new sample of its pixel
+            color = np.zeros((int(flat.max(initial=0)), flat.size, 3), dtype=np.float32)
+            color[rank, pixel] = self.truth.reshape(-1, 3)[pixel] * draws[:, None]
+            samples = {"color": color.reshape(-1, self.height, self.width, 3)}
         return RoundBuffers(
             buffers=buffers,
             counts=self._n.reshape(self.height, self.width).astype(np.int32),
@@ -122,9 +127,10 @@ class SyntheticProgressiveFrame:
         with np.errstate(divide="ignore", invalid="ignore"):
             mean_g = np.where(n > 0, self._sum / np.maximum(n, 1), 0.0)
             spread = np.where(n > 1, (self._sum2 - n * mean_g**2) / np.maximum(n - 1, 1), 0.0)
-            var_g = np.maximum(spread, 0.0) / np.maximum(n, 1)
+            var_g = np.where(n > 0, np.maximum(spread, 0.0) / np.maximum(n, 1), np.inf)
         color = self.truth * mean_g.reshape(shape)[..., None]
-        color_var = self.truth**2 * var_g.reshape(shape)[..., None]
+        unseen = np.isinf(var_g).reshape(shape)[..., None]
+        color_var = np.where(unseen, np.inf, self.truth**2 * np.where(unseen, 0.0, var_g.reshape(shape)[..., None]))
         share = self.diffuse_fraction
         zeros = np.zeros(shape + (3,), dtype=np.float32)
         buffers = {
@@ -134,7 +140,7 @@ class SyntheticProgressiveFrame:
             "diffuse_var": color_var * share**2,
             "specular": color * (1 - share),
             "specular_var": color_var * (1 - share) ** 2,
-            "albedo": np.clip(self.truth, 0.0, 1.0),
+            "albedo": np.clip(self.truth, 0.0, 1.0),  # noise-free features: the same with or without samples
             "albedo_var": zeros,
             "normal": np.broadcast_to(np.array([0.0, 0.0, 1.0]), shape + (3,)),
             "normal_var": zeros,
