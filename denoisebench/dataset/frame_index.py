@@ -75,7 +75,7 @@ class FrameIndexWriter:
         self.path = Path(path)
         try:
             self._db = sqlite3.connect(self.path, isolation_level=None)
-            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA journal_mode=WAL").fetchall()
             self._db.execute("PRAGMA synchronous=FULL")
             self._db.execute(_SCHEMA)
             self._db.execute(f"PRAGMA user_version={INDEX_VERSION}")
@@ -124,8 +124,10 @@ class FrameIndexWriter:
 
     def seal(self) -> None:
         """Fold the WAL into the file and leave one self-contained file (rollback journal from now on)."""
-        self._db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
-        self._db.execute("PRAGMA journal_mode=DELETE")
+        self._db.execute(
+            "PRAGMA wal_checkpoint(TRUNCATE)"
+        ).fetchall()  # read to the end: an open statement holds a lock
+        self._db.execute("PRAGMA journal_mode=DELETE").fetchall()
 
     def close(self, *, seal: bool = False) -> None:
         """Close; ``seal``: :meth:`seal` first."""
@@ -186,6 +188,13 @@ class FrameIndexReader:
 
     def count(self) -> int:
         return int(self._query("SELECT COUNT(*) FROM frames")[0][0])
+
+    def close(self) -> None:
+        """Close the connection (a writer in this process then has the file to itself)."""
+        with self._lock:
+            if self._db is not None and self._pid == os.getpid():
+                self._db.close()
+            self._db = None
 
 
 def _decode(path: Path, text: str) -> dict:

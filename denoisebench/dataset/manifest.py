@@ -363,7 +363,11 @@ def load_manifest(path: str | os.PathLike) -> dict:
 
         renders: dict = {}
         if manifest["scenes"]:
-            renders = dict(FrameIndexReader(index_path(path)).scenes())
+            index = FrameIndexReader(index_path(path))
+            try:
+                renders = dict(index.scenes())
+            finally:
+                index.close()
         for name, scene in manifest["scenes"].items():
             scene["renders"] = renders.get(name, {})
     return manifest

@@ -309,6 +309,8 @@ def build_report(
         "indistinguishable": analysis.indistinguishable_pairs(data, summary),
         "strips": _strips(store, data, dataset, data.spp[0]) if data.spp else [],
         "failures": failures,
+        # metrics whose preconditions the frames do not meet (SSIM under 11×11 px): frames count, reason
+        "not_applicable": store.not_applicable_summary(run_id),
         "comparisons": _comparisons(store, data, dataset, data.spp[0]) if data.spp else [],
         "stability": stability_table(denoisers) if denoisers else None,
         "figures": figure_files,
@@ -372,6 +374,7 @@ def results_json(report: dict) -> dict:
             "flicker": report["flicker"],
             "not_distinguishable": [vars(p) for p in report["indistinguishable"]],
             "failures": report["failures"],
+            "not_applicable": report.get("not_applicable", {}),
             "stability": report["stability"],
             "frames": report["frames"],
             "sequence_metrics": report["sequences"],

@@ -242,10 +242,31 @@ def _split_results(results) -> tuple[dict[str, float], dict[str, float], dict[st
     return values, floors, ses
 
 
+def _applicable(compute: Callable[[list[str]], dict], names: list[str]) -> tuple[dict, dict[str, str]]:
+    """``compute(names)``, and when a metric's precondition fails (MetricNotApplicable, e.g. SSIM on
+    frames under 11×11 px), each metric on its own: (results of those that apply, {name: reason})."""
+    from denoisebench.metrics.validation import MetricNotApplicable
+
+    try:
+        return compute(names), {}
+    except MetricNotApplicable:
+        pass
+    results: dict = {}
+    skipped: dict[str, str] = {}
+    for name in names:
+        try:
+            results.update(compute([name]))
+        except MetricNotApplicable as exc:
+            skipped[name] = str(exc)
+    return results, skipped
+
+
 def _frame_metrics(pred: np.ndarray, ref: np.ndarray, names: list[str], ref_var=None, trim=None):
+    """(values, floors, ref_se, not applicable {name: reason}) of the per-frame metrics."""
     from denoisebench.metrics import compute_metrics
 
-    return _split_results(compute_metrics(pred, ref, names, ref_var=ref_var, trim=trim))
+    results, skipped = _applicable(lambda chosen: compute_metrics(pred, ref, chosen, ref_var=ref_var, trim=trim), names)
+    return (*_split_results(results), skipped)
 
 
 def _sequence_metrics(outputs, refs, motion, names: list[str], ref_vars=None, trim=None):
@@ -253,11 +274,13 @@ def _sequence_metrics(outputs, refs, motion, names: list[str], ref_vars=None, tr
 
     usable = [n for n in names if "motion" not in get_metric(n).requires or motion is not None]
     if len(outputs) < 2 or not usable:
-        return {}, {}, {}
+        return {}, {}, {}, {}
     ref_var = None if ref_vars is None else np.stack(ref_vars)
-    return _split_results(
-        compute_metrics(np.stack(outputs), np.stack(refs), usable, motion=motion, ref_var=ref_var, trim=trim)
+    pred, ref = np.stack(outputs), np.stack(refs)
+    results, skipped = _applicable(
+        lambda chosen: compute_metrics(pred, ref, chosen, motion=motion, ref_var=ref_var, trim=trim), usable
     )
+    return (*_split_results(results), skipped)
 
 
 def _flicker(outputs, refs, motion=None, trim=None) -> list[dict[str, float]]:
@@ -313,7 +336,7 @@ def measure_unit(
         record = FrameRecord(frame.index, "ok" if ok else "failed", error, render, seconds, total, sanitized)
         if ok:
             try:
-                record.metrics, record.floors, record.ref_se = _frame_metrics(
+                record.metrics, record.floors, record.ref_se, record.not_applicable = _frame_metrics(
                     output, frame.reference, spatial, _reference_variance(frame), trim
                 )
             except ValueError as exc:  # a metric refusing this output is the denoiser's failure
@@ -330,7 +353,7 @@ def measure_unit(
     motion = np.stack([f.buffers["motion"] for f in frames]) if all(f.has("motion") for f in frames) else None
     ref_vars = [_reference_variance(f) for f in frames]
     ref_vars = None if any(v is None for v in ref_vars) else ref_vars
-    unit.sequence_metrics, unit.sequence_floors, unit.sequence_ref_se = _sequence_metrics(
+    unit.sequence_metrics, unit.sequence_floors, unit.sequence_ref_se, unit.sequence_not_applicable = _sequence_metrics(
         outputs, refs, motion, temporal, ref_vars, trim
     )
     unit.image_frame, unit.image = frames[-1].index, outputs[-1]

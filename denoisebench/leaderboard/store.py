@@ -12,6 +12,9 @@ Tables (schema version :data:`SCHEMA_VERSION`, kept in ``schema_version``):
 ``sequence_metrics``  temporal metric values per unit (same ``floor``/``ref_se`` columns)
 ``images``          the denoised last frame of each unit (zlib-compressed float32), for reports
 ``strips``          a crop of the unit's first frames (:mod:`.strips`, zlib-compressed float32)
+``not_applicable``  metrics that do not apply to a frame (``frame`` ≥ 0) or to a unit's sequence
+                    (``frame`` = -1), with the reason (SSIM on frames under 11×11 px): such a
+                    metric has no value there, the frame's other metrics are kept
 
 Notes
 -----
@@ -27,8 +30,9 @@ Notes
   ``sequence_metrics`` and the ``strips`` table (:mod:`denoisebench.metrics.floors`). A version-1 database opened for
   writing is migrated in place (``ALTER TABLE ... ADD COLUMN``, one transaction; its old rows get
   NULL floors); opened read-only it is read as it is, every floor None. Version 3 added
-  ``run_denoisers.trained_on`` (migrated the same way; NULL: not declared). A newer version than
-  this code knows is refused.
+  ``run_denoisers.trained_on`` (migrated the same way; NULL: not declared). Version 4 added the
+  ``not_applicable`` table (created when an older database is opened for writing; read as empty
+  from an older one opened read-only). A newer version than this code knows is refused.
 * The WAL journal mode is a property of the database file; network file systems do not support it
   (SQLite's documentation): keep the database on a local disk.
 """
@@ -49,9 +53,9 @@ import numpy as np
 
 from denoisebench.errors import UserInputError
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 #: Versions this code reads (older ones are migrated when opened for writing).
-READABLE_VERSIONS = (1, 2, 3)
+READABLE_VERSIONS = (1, 2, 3, 4)
 #: Seconds a writer waits for another's transaction before giving up.
 BUSY_TIMEOUT_S = 120.0
 
@@ -117,6 +121,16 @@ CREATE TABLE IF NOT EXISTS frame_metrics (
     ref_se REAL,
     PRIMARY KEY (run_id, denoiser, scene, spp, frame, metric)
 );
+CREATE TABLE IF NOT EXISTS not_applicable (
+    run_id TEXT NOT NULL,
+    denoiser TEXT NOT NULL,
+    scene TEXT NOT NULL,
+    spp INTEGER NOT NULL,
+    frame INTEGER NOT NULL,
+    metric TEXT NOT NULL,
+    reason TEXT NOT NULL,
+    PRIMARY KEY (run_id, denoiser, scene, spp, frame, metric)
+);
 CREATE TABLE IF NOT EXISTS sequence_metrics (
     run_id TEXT NOT NULL,
     denoiser TEXT NOT NULL,
@@ -154,7 +168,9 @@ CREATE TABLE IF NOT EXISTS strips (
 );
 """
 
-_UNIT_TABLES = ("frames", "frame_metrics", "sequence_metrics", "images", "strips")
+_UNIT_TABLES = ("frames", "frame_metrics", "sequence_metrics", "images", "strips", "not_applicable")
+#: The tables of a unit that exist in a database of each schema version.
+_UNIT_TABLES_OF = {1: _UNIT_TABLES[:4], 2: _UNIT_TABLES[:5], 3: _UNIT_TABLES[:5], 4: _UNIT_TABLES}
 
 
 def utc_now() -> str:
@@ -175,6 +191,7 @@ class FrameRecord:
     metrics: dict[str, float] = field(default_factory=dict)
     floors: dict[str, float] = field(default_factory=dict)  # reference-noise floor per MSE-family metric
     ref_se: dict[str, float] = field(default_factory=dict)  # the score's standard error from the reference's noise
+    not_applicable: dict[str, str] = field(default_factory=dict)  # metric → why it does not apply to this frame
 
 
 @dataclass
@@ -190,6 +207,7 @@ class UnitRecord:
     sequence_metrics: dict[str, float] = field(default_factory=dict)
     sequence_floors: dict[str, float] = field(default_factory=dict)
     sequence_ref_se: dict[str, float] = field(default_factory=dict)
+    sequence_not_applicable: dict[str, str] = field(default_factory=dict)  # temporal metric → reason
     image_frame: int | None = None
     image: np.ndarray | None = None  # H×W×3 float32: the denoised frame ``image_frame``
     strip_first: int | None = None  # first frame of the strip
@@ -266,6 +284,9 @@ class ResultsStore:
                 if "trained_on" not in have:
                     self.conn.execute("ALTER TABLE run_denoisers ADD COLUMN trained_on TEXT")
                 self.conn.execute("UPDATE schema_version SET version = 3")
+                version = 3
+            if version == 3:  # 3 → 4: the not_applicable table (created above)
+                self.conn.execute("UPDATE schema_version SET version = 4")
 
     def _check_version(self) -> None:
         try:
@@ -417,7 +438,7 @@ class ResultsStore:
                 return False
             # leftovers of a unit whose transaction never committed cannot exist (atomicity), but a
             # unit row deleted by hand may have left its children: replace them
-            for table in _UNIT_TABLES:
+            for table in _UNIT_TABLES_OF[self.version]:
                 conn.execute(f"DELETE FROM {table} WHERE run_id = ? AND denoiser = ? AND scene = ? AND spp = ?", key)
             for f in unit.frames:
                 conn.execute(
@@ -449,6 +470,16 @@ class ResultsStore:
                         for name, value in f.metrics.items()
                     ],
                 )
+                conn.executemany(
+                    "INSERT INTO not_applicable (run_id, denoiser, scene, spp, frame, metric, reason) "
+                    "VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    [(*key, f.frame, name, str(reason)) for name, reason in f.not_applicable.items()],
+                )
+            conn.executemany(
+                "INSERT INTO not_applicable (run_id, denoiser, scene, spp, frame, metric, reason) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?)",
+                [(*key, -1, name, str(reason)) for name, reason in unit.sequence_not_applicable.items()],
+            )
             conn.executemany(
                 "INSERT INTO sequence_metrics (run_id, denoiser, scene, spp, metric, value, floor, ref_se) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
                 [
@@ -554,6 +585,27 @@ class ResultsStore:
                     row["ref_se"][metric] = se
         return list(rows.values())
 
+    def not_applicable(self, run_id: str) -> list[dict]:
+        """Rows of metrics that did not apply: denoiser, scene, spp, frame (-1: the sequence), metric, reason."""
+        if self.version < 4:
+            return []
+        rows = self.conn.execute(
+            "SELECT denoiser, scene, spp, frame, metric, reason FROM not_applicable WHERE run_id = ? "
+            "ORDER BY denoiser, scene, spp, frame, metric",
+            (run_id,),
+        )
+        return [dict(zip(("denoiser", "scene", "spp", "frame", "metric", "reason"), r)) for r in rows]
+
+    def not_applicable_summary(self, run_id: str) -> dict[str, dict]:
+        """Per metric: how many frames (or sequences, frame -1) it did not apply to, and one reason."""
+        if self.version < 4:
+            return {}
+        rows = self.conn.execute(
+            "SELECT metric, COUNT(*), MIN(reason) FROM not_applicable WHERE run_id = ? GROUP BY metric ORDER BY metric",
+            (run_id,),
+        )
+        return {metric: {"count": int(count), "reason": reason} for metric, count, reason in rows}
+
     def sequence_metrics(self, run_id: str) -> list[dict]:
         """Temporal metric rows: denoiser, scene, spp, metric, value, floor, ref_se (None without)."""
         rows = self.conn.execute(
@@ -590,7 +642,7 @@ class ResultsStore:
     def integrity_problems(self) -> list[str]:
         """SQLite's integrity check plus ours: every frame row belongs to a unit row and vice versa."""
         problems = [r[0] for r in self.conn.execute("PRAGMA integrity_check") if r[0] != "ok"]
-        for table in _UNIT_TABLES if self.version >= 2 else _UNIT_TABLES[:4]:
+        for table in _UNIT_TABLES_OF[self.version]:
             orphans = self.conn.execute(
                 f"SELECT COUNT(*) FROM {table} t WHERE NOT EXISTS (SELECT 1 FROM units u WHERE u.run_id = t.run_id "
                 "AND u.denoiser = t.denoiser AND u.scene = t.scene AND u.spp = t.spp)"

@@ -29,7 +29,7 @@ import numpy as np
 
 from denoisebench.metrics.tonemap import tonemap
 from denoisebench.metrics.torch_threads import one_torch_thread
-from denoisebench.metrics.validation import check_pair
+from denoisebench.metrics.validation import MetricNotApplicable, check_pair
 
 __all__ = ["WEIGHTS", "WIN_SIZE", "WIN_SIGMA", "WORST", "msssim", "msssim_scales", "ms_ssim_tensor"]
 
@@ -43,7 +43,7 @@ def msssim_scales(height: int, width: int, win_size: int = WIN_SIZE) -> int:
     """Number of scales used for an image of this size (module Notes); ValueError below win_size."""
     side = min(int(height), int(width))
     if side < win_size:
-        raise ValueError(f"MS-SSIM needs images of at least {win_size}×{win_size} px, got {height}×{width}")
+        raise MetricNotApplicable(f"MS-SSIM needs images of at least {win_size}×{win_size} px, got {height}×{width}")
     n = 1
     while n < len(WEIGHTS) and side > (win_size - 1) * 2**n:
         n += 1

@@ -52,7 +52,7 @@ import warnings
 import numpy as np
 
 from denoisebench.metrics.tonemap import reinhard, tonemap
-from denoisebench.metrics.validation import Checked, check_pair
+from denoisebench.metrics.validation import Checked, MetricNotApplicable, check_pair
 
 __all__ = [
     "EPS_RELMSE",
@@ -201,7 +201,7 @@ def psnr(pred, ref) -> float:
 def _ssim_size_check(c: Checked) -> None:
     h, w = c.ref.shape[:2]
     if min(h, w) < SSIM_MIN_SIZE:
-        raise ValueError(
+        raise MetricNotApplicable(
             f"SSIM needs images of at least {SSIM_MIN_SIZE}×{SSIM_MIN_SIZE} pixels "
             f"(its Gaussian window, σ = {SSIM_SIGMA}), got {h}×{w}"
         )

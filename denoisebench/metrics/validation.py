@@ -32,6 +32,12 @@ __all__ = [
 ]
 
 
+class MetricNotApplicable(ValueError):  # noqa: N818 - reads as what it says: "metric not applicable"
+    """A metric's precondition on the frames (not on the prediction) is not met, e.g. SSIM on frames
+    smaller than its window. The benchmark records the metric as not applicable with this message
+    and keeps the frame's other metrics; anything else raising ValueError is bad input."""
+
+
 class Checked(NamedTuple):
     """A validated prediction/reference pair (or pair of sequences).
 
