@@ -144,7 +144,7 @@ def test_hachisuka_tree_partitions_the_image_and_refines_the_noisy_half():
     frame = synthetic.noisy_half(32, 16, quiet=0.02, loud=1.0)
     run_sampler(sampler, frame, Budget(spp=16))
     cover = np.zeros((16, 32), dtype=int)
-    for y0, y1, x0, x1 in sampler.leaves:
+    for y0, y1, x0, x1 in sampler.leaves.tolist():
         cover[y0:y1, x0:x1] += 1
     assert (cover == 1).all()
     loud = sum(1 for leaf in sampler.leaves if leaf[2] >= 16)
