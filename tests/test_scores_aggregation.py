@@ -296,3 +296,104 @@ def test_the_leaderboard_command_ranks_a_linear_flicker_score_per_scene_against_
     assert metric.aggregate == "relative_to_input" and spp == 4
     assert [e.denoiser for e in ranked] == ["oidn", NOISY]
     assert ranked[1].value == pytest.approx(1.0)
+
+
+# --------------------------------------------------------------------------------------------------
+# references that cannot resolve a score (issue 29, item 5)
+
+
+class _Run:
+    """A RunData stand-in: per-scene values and floors of one metric, keyed (label, spp, scene)."""
+
+    def __init__(self, values, floors, metric="relmse_robust"):
+        self.values, self.floors, self.metric = values, floors, metric
+        self.scenes = sorted({k[2] for k in values})
+        self.labels = sorted({k[0] for k in values})
+        self.spp = sorted({k[1] for k in values})
+        self.frame_metric_names, self.sequence_metric_names = [metric, "relmse"], []
+
+    def per_scene(self, label, spp, metric, scenes=None):
+        assert metric == self.metric  # the robust score is judged when the run has it
+        out = [{}, {}, {}]
+        for scene in scenes or self.scenes:
+            if (label, spp, scene) in self.values:
+                out[0][scene] = self.values[label, spp, scene]
+                out[1][scene] = self.floors[label, spp, scene]
+        return tuple(out)
+
+
+def test_a_reference_floor_above_a_tenth_of_the_best_score_or_still_growing_is_set_apart():
+    values, floors = {}, {}
+    for scene, best, floor in (("clean", 0.02, 0.001), ("noisy_ref", 0.02, 0.005), ("growing", 0.05, 0.001)):
+        for label, factor in ((NOISY, 10.0), ("oidn", 1.0)):
+            for spp, s in ((1, 4.0), (4, 1.0)):
+                values[label, spp, scene] = best * factor * s
+                floors[label, spp, scene] = floor
+    refs = {"clean": {"spp": 1024, "floor_growth": 1.01}, "noisy_ref": {"spp": 256, "floor_growth": 1.1}}
+    refs["growing"] = {"spp": 512, "floor_growth": 1.6}
+    found = agg.unresolved_references(_Run(values, floors), refs)
+    assert [(u.scene, u.reason) for u in found] == [("growing", "floor_growing"), ("noisy_ref", "floor_above_tenth")]
+    grow, above = found
+    # floor 0.005 > 0.1 × 0.02 (oidn at 4 spp): 256 · 0.005 / 0.002 = 640 spp would bring it to a tenth
+    assert (above.best, above.label, above.spp, above.floor, above.needed_spp) == (0.02, "oidn", 4, 0.005, 640)
+    assert not above.needed_is_lower_bound
+    assert "noisy_ref" in above.sentence() and "640 spp" in above.sentence() and "a tenth" in above.sentence()
+    # growing: its floor rule alone would pass (0.001 ≤ 0.005), so at least twice its spp
+    assert (grow.needed_spp, grow.needed_is_lower_bound, grow.floor_growth) == (1024, True, 1.6)
+    assert "at least 1024 spp" in grow.sentence() and "still growing" in grow.sentence()
+    assert agg.excluded_scenes(found) == ["growing", "noisy_ref"]
+    assert found[1].as_dict()["sentence"] == above.sentence()
+    # a looser fraction resolves the noisy reference; no reference record: only the floor rule
+    assert [u.scene for u in agg.unresolved_references(_Run(values, floors), refs, fraction=0.3)] == ["growing"]
+    assert [u.scene for u in agg.unresolved_references(_Run(values, floors), {})] == ["noisy_ref"]
+
+
+def test_reference_states_read_the_manifest_records():
+    records = {
+        "a": {
+            "ref_spp": 1024,
+            "renders": {
+                "reference": {
+                    "0000": {"reference_adaptive": {"spp": 256, "floor_growth": 1.02}},
+                    "0001": {"reference_adaptive": {"spp": 512, "floor_growth": 1.4}},
+                }
+            },
+        },
+        "b": {"ref_spp": 64, "renders": {"reference": {"0000": {"spp": 64}}}},
+        "c": {},
+    }
+    assert agg.reference_states(records) == {
+        "a": {"spp": 512, "floor_growth": 1.4},
+        "b": {"spp": 64, "floor_growth": None},
+        "c": {"spp": None, "floor_growth": None},
+    }
+
+
+def test_the_report_leaves_unresolved_scenes_out_of_the_summary_unless_asked(tmp_path, monkeypatch):
+    import json
+
+    from denoisebench.dataset import open_dataset
+    from denoisebench.dataset.synthetic import make_synthetic_dataset
+    from denoisebench.leaderboard.benchmark_run import run_benchmark
+    from denoisebench.leaderboard.report import build_report, results_json
+    from denoisebench.leaderboard.runner import BenchmarkConfig
+
+    data = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=2, frames=2, height=16, width=16, spp=(1,)))
+    with ResultsStore(tmp_path / "r.sqlite") as store:
+        plan = run_benchmark(
+            data, BenchmarkConfig(["identity"], [1], split="all", metrics=["relmse"]), store, progress=False
+        )
+        scenes = sorted(data.scenes)
+        states = agg.reference_states({s: data.scene(s).record for s in scenes})
+        states[scenes[0]] = {"spp": 64, "floor_growth": 2.0}  # as if its floor were still growing
+        monkeypatch.setattr(agg, "reference_states", lambda records: states)
+        report = build_report(store, plan.run_id, data)
+        kept = build_report(store, plan.run_id, data, include_unresolved=True)
+    listed = report["unresolved_references"]["scenes"]
+    assert scenes[0] in {u["scene"] for u in listed} and not report["unresolved_references"]["included"]
+    excluded = {u["scene"] for u in listed}
+    for row in report["summary"]:
+        assert row.metrics["relmse_robust"].scenes == len(scenes) - len(excluded)
+    for row in kept["summary"]:
+        assert row.metrics["relmse_robust"].scenes == len(scenes)
+    assert json.dumps(results_json(report)["unresolved_references"], allow_nan=False)

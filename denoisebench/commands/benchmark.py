@@ -101,6 +101,12 @@ def add_arguments(parser) -> None:
         help="fraction of the highest per-pixel errors the robust scores (relmse_robust, "
         "temporal_relmse_robust) drop, in [0, 0.5) (default 0.001 = 0.1 %%; recorded in the run)",
     )
+    parser.add_argument(
+        "--include-unresolved",
+        action="store_true",
+        help="keep scenes whose reference cannot resolve the headline scores (floor still growing, or above "
+        "a tenth of the best score) in the report's aggregates; by default they are listed apart",
+    )
     parser.add_argument("--out", default="report", help="report folder (default report)")
     parser.add_argument("--db", default="benchmark.sqlite", help="results database (default benchmark.sqlite)")
     parser.add_argument("--executor", default="local", choices=("local", "ray"), help="where units run (default local)")
@@ -174,7 +180,9 @@ def run(args) -> int:
         from denoisebench.leaderboard.report import write_report
 
         instances = {d.label: d.instance for d in plan.denoisers if d.instance is not None}
-        index = write_report(store, plan.run_id, dataset, Path(args.out), instances)
+        index = write_report(
+            store, plan.run_id, dataset, Path(args.out), instances, include_unresolved=args.include_unresolved
+        )
     print(f"report: {index.resolve()}")
     sys.stdout.flush()
     return 0

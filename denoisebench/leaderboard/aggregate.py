@@ -27,12 +27,26 @@ Notes
   errors are correlated (one reference), and only each score's own se is stored, so the se of a
   difference is bounded by the sum of the two (|ρ| ≤ 1): conservative, it never claims a
   difference the reference cannot resolve.
+* **References that cannot resolve a score** (:func:`unresolved_references`). A scene's
+  reference cannot decide a score when (a) its floor estimate was still growing when rendering
+  stopped (``floor_growth`` in the manifest above :data:`GROWTH_LIMIT`, 1.25: rare bright paths
+  were still being found, so the floor is a lower bound; generate-dataset warns about such
+  frames), or (b) its floor (the expected score of a perfect denoiser) is above a tenth
+  (:data:`RESOLVE_FRACTION`) of the best score anyone reached on that scene: then at least 10 %
+  of that score is the reference's own noise. Such a scene is listed apart with its reason and
+  the reference spp it would need (the floor falls as 1/spp once every kind of path is sampled,
+  so ``ref_spp · floor / (0.1 · best)``; for a growing floor at least twice the spp it has, a
+  lower bound), and is left out of the headline aggregates (the summary table) unless asked
+  for (``run-benchmark --include-unresolved``). The rule is judged on the headline scores that
+  have floors (the robust relMSE and the robust flicker score; their raw forms for runs
+  without them), over every label (noisy input included) and every measured spp.
 """
 
 from __future__ import annotations
 
 import math
 import warnings
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -42,7 +56,26 @@ BOOTSTRAP_SEED = 0
 #: Two-sided 95 % normal quantile.
 Z95 = 1.959963984540054
 
-__all__ = ["aggregate", "scene_terms", "bootstrap_mean", "reference_resolution", "rule_of"]
+#: A reference resolves a scene's scores when its floor is at most this fraction of the best score there.
+RESOLVE_FRACTION = 0.1
+#: ``floor_growth`` above this: the floor estimate was still rising (generator.render.reference.GROWTH_WARNING).
+GROWTH_LIMIT = 1.25
+#: The scores the rule is judged on, each pair in order of preference (the robust form, else the raw one).
+RESOLUTION_METRICS = (("relmse_robust", "relmse"), ("temporal_relmse_robust", "temporal_relmse"))
+
+__all__ = [
+    "aggregate",
+    "scene_terms",
+    "bootstrap_mean",
+    "reference_resolution",
+    "rule_of",
+    "RESOLVE_FRACTION",
+    "GROWTH_LIMIT",
+    "Unresolved",
+    "reference_states",
+    "unresolved_references",
+    "excluded_scenes",
+]
 
 
 def rule_of(metric_name: str) -> str:
@@ -145,3 +178,140 @@ def reference_resolution(rule: str, mine_a: dict, ses_a: dict, mine_b: dict, ses
             a, b = log_se(a, mine_a[s]), log_se(b, mine_b[s])
         total += (a + b) ** 2
     return Z95 * math.sqrt(total) / len(scenes)
+
+
+# --------------------------------------------------------------------------------------------------
+# references that cannot resolve a score
+
+
+@dataclass(frozen=True)
+class Unresolved:
+    """One scene whose reference cannot resolve a score (module Notes): why, and what it would need.
+
+    ``reason``: ``"floor_growing"`` or ``"floor_above_tenth"``. ``metric``/``spp``/``label``/``best``/
+    ``floor``: the best score on the scene, where it was reached and its floor (``floor_growing``:
+    those of the judged metric, possibly None). ``needed_spp``: the reference spp that would bring
+    the floor to a tenth of the best score; ``needed_is_lower_bound`` when the floor is still growing.
+    """
+
+    scene: str
+    reason: str
+    metric: str | None
+    reference_spp: int | None
+    floor_growth: float | None
+    best: float | None
+    label: str | None
+    spp: int | None
+    floor: float | None
+    needed_spp: int | None
+    needed_is_lower_bound: bool
+
+    def sentence(self) -> str:
+        """One line for a report: the scene, the reason in words, the spp it would need."""
+        need = ""
+        if self.needed_spp is not None:
+            need = f"; it would need {'at least ' if self.needed_is_lower_bound else ''}{self.needed_spp} spp"
+        have = f"{self.reference_spp}-spp reference" if self.reference_spp else "reference"
+        if self.reason == "floor_growing":
+            growth = f"{self.floor_growth:.2f}" if self.floor_growth is not None else "?"
+            why = (
+                f"its {have}'s noise floor estimate was still growing (spp × floor ×{growth} from half the "
+                "samples to all: rare bright paths not yet resolved)"
+            )
+        else:
+            why = (
+                f"its {have}'s {self.metric} floor {self.floor:.3g} is above a tenth of the best score there "
+                f"({self.label} at {self.spp} spp: {self.best:.3g})"
+            )
+        return f"{self.scene}: {why}{need}"
+
+    def as_dict(self) -> dict:
+        return {**asdict(self), "sentence": self.sentence()}
+
+
+def reference_states(scene_records: dict[str, dict]) -> dict[str, dict]:
+    """{scene: {"spp": reference spp, "floor_growth": largest over its frames or None}} from manifest
+    scene records (``dataset.scene(name).record``, or ``manifest["scenes"]``)."""
+    out = {}
+    for scene, record in scene_records.items():
+        growth, spps = [], []
+        for frame in (record.get("renders", {}) or {}).get("reference", {}).values():
+            adaptive = frame.get("reference_adaptive") or {}
+            if adaptive.get("floor_growth") is not None:
+                growth.append(float(adaptive["floor_growth"]))
+            spp = adaptive.get("spp") or frame.get("spp")
+            if spp:
+                spps.append(int(spp))
+        ref_spp = max(spps) if spps else record.get("ref_spp")  # the spp used (adaptive: below the cap)
+        out[scene] = {"spp": int(ref_spp) if ref_spp else None, "floor_growth": max(growth) if growth else None}
+    return out
+
+
+def _needed(ref_spp: int | None, floor: float | None, best: float | None, fraction: float) -> int | None:
+    if not ref_spp or floor is None or best is None or not (best > 0 and floor > 0):
+        return None
+    return int(math.ceil(ref_spp * floor / (fraction * best)))
+
+
+def unresolved_references(
+    data,
+    references: dict[str, dict],
+    *,
+    fraction: float = RESOLVE_FRACTION,
+    growth_limit: float = GROWTH_LIMIT,
+    metrics=RESOLUTION_METRICS,
+) -> list[Unresolved]:
+    """The scenes of a run whose reference cannot resolve its headline scores (module Notes).
+
+    ``data``: a :class:`denoisebench.leaderboard.analysis.RunData` (``scenes``, ``labels``, ``spp``,
+    ``per_scene(label, spp, metric)`` and the metric names); ``references``: :func:`reference_states`.
+    One entry per scene and reason, floor growth first; lower-is-better scores with floors only.
+    """
+    measured = set(data.frame_metric_names) | set(data.sequence_metric_names)
+    judged = [next((m for m in pair if m in measured), None) for pair in metrics]
+    judged = [m for m in judged if m is not None and not _higher_is_better(m)]
+    out: list[Unresolved] = []
+    for scene in data.scenes:
+        state = references.get(scene) or {}
+        ref_spp, growth = state.get("spp"), state.get("floor_growth")
+        bests = []
+        for metric in judged:
+            best = None  # (value, label, spp, floor)
+            for label in data.labels:
+                for spp in data.spp:
+                    values, floors, _ = data.per_scene(label, spp, metric, [scene])
+                    value = values.get(scene)
+                    if value is not None and (best is None or value < best[0]):
+                        best = (value, label, spp, floors.get(scene))
+            if best is not None:
+                bests.append((metric, *best))
+        if growth is not None and growth > growth_limit:
+            metric, value, label, spp, floor = bests[0] if bests else (None, None, None, None, None)
+            needed = _needed(ref_spp, floor, value, fraction)
+            needed = max(needed or 0, 2 * ref_spp) if ref_spp else needed
+            out.append(
+                Unresolved(scene, "floor_growing", metric, ref_spp, growth, value, label, spp, floor, needed, True)
+            )
+        for metric, value, label, spp, floor in bests:
+            if floor is not None and value is not None and floor > fraction * value:
+                needed = _needed(ref_spp, floor, value, fraction)
+                out.append(
+                    Unresolved(
+                        scene, "floor_above_tenth", metric, ref_spp, growth, value, label, spp, floor, needed, False
+                    )
+                )
+    return out
+
+
+def excluded_scenes(unresolved: list[Unresolved]) -> list[str]:
+    """The scenes the headline aggregates leave out (sorted, each once)."""
+    return sorted({u.scene for u in unresolved})
+
+
+def _higher_is_better(metric: str) -> bool:
+    from denoisebench.metrics import get_metric
+
+    try:
+        return get_metric(metric).higher_is_better
+    except ValueError:
+        return False

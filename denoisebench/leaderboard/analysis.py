@@ -165,14 +165,17 @@ class RunData:
         )
 
 
-def summary_table(data: RunData) -> list[SummaryRow]:
+def summary_table(data: RunData, exclude=()) -> list[SummaryRow]:
+    """Per (spp, denoiser): every metric aggregated over its ok scenes, except ``exclude`` (the scenes
+    whose reference cannot resolve the headline scores, :func:`.aggregate.unresolved_references`)."""
+    exclude = set(exclude)
     rows = []
     for spp in data.spp:
         for label in data.labels:
             units = [u for u in data.units if u["denoiser"] == label and u["spp"] == spp]
             if not units:
                 continue
-            ok_scenes = [u["scene"] for u in units if u["status"] == "ok"]
+            ok_scenes = [u["scene"] for u in units if u["status"] == "ok" and u["scene"] not in exclude]
             cells = {}
             for metric in data.frame_metric_names + data.sequence_metric_names:
                 cells[metric] = metric_cell(data, label, spp, metric, ok_scenes)

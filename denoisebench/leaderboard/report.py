@@ -34,6 +34,7 @@ import numpy as np
 
 from denoisebench.dataset import Dataset
 from denoisebench.dataset.atomic import atomic_write_bytes
+from denoisebench.leaderboard import aggregate as agg
 from denoisebench.leaderboard import analysis, figures, images, strips
 from denoisebench.leaderboard.runner import NOISY
 from denoisebench.leaderboard.store import ResultsStore
@@ -255,6 +256,7 @@ def build_report(
     dataset: Dataset,
     denoisers: dict[str, object] | None = None,
     time_at: tuple[int, int] | None = None,
+    include_unresolved: bool = False,
 ) -> dict:
     """Everything the report shows, as plain data (figures as PNG/SVG, images as data URIs).
 
@@ -264,7 +266,10 @@ def build_report(
     from denoisebench.leaderboard.stability import stability_table
 
     data = analysis.RunData(store, run_id)
-    summary = analysis.summary_table(data)
+    # scenes whose reference cannot resolve the headline scores: listed apart, out of the aggregates
+    states = agg.reference_states({s: dataset.scene(s).record for s in data.scenes})
+    unresolved = agg.unresolved_references(data, states)
+    summary = analysis.summary_table(data, exclude=() if include_unresolved else agg.excluded_scenes(unresolved))
     reference = _reference_info(dataset, data.scenes)
     model = time_model.build_time_model(
         data, time_model.read_timings(store, run_id), time_at, _dataset_size(dataset, data.scenes)
@@ -309,6 +314,10 @@ def build_report(
         "indistinguishable": analysis.indistinguishable_pairs(data, summary),
         "strips": _strips(store, data, dataset, data.spp[0]) if data.spp else [],
         "failures": failures,
+        "unresolved_references": {
+            "included": include_unresolved,
+            "scenes": [u.as_dict() for u in unresolved],
+        },
         # metrics whose preconditions the frames do not meet (SSIM under 11×11 px): frames count, reason
         "not_applicable": store.not_applicable_summary(run_id),
         "comparisons": _comparisons(store, data, dataset, data.spp[0]) if data.spp else [],
@@ -374,6 +383,7 @@ def results_json(report: dict) -> dict:
             "flicker": report["flicker"],
             "not_distinguishable": [vars(p) for p in report["indistinguishable"]],
             "failures": report["failures"],
+            "unresolved_references": report.get("unresolved_references"),
             "not_applicable": report.get("not_applicable", {}),
             "stability": report["stability"],
             "frames": report["frames"],
@@ -453,13 +463,14 @@ def write_report(
     out_dir: str | Path,
     denoisers: dict[str, object] | None = None,
     time_at: tuple[int, int] | None = None,
+    include_unresolved: bool = False,
 ) -> Path:
     """Write the report folder; return the path of index.html (``time_at``: see :func:`build_report`)."""
     from denoisebench.leaderboard.report_html import render_html
     from denoisebench.leaderboard.report_markdown import render_markdown
 
     out = Path(out_dir)
-    report = build_report(store, run_id, dataset, denoisers, time_at)
+    report = build_report(store, run_id, dataset, denoisers, time_at, include_unresolved)
     for name, (png, svg) in report["figures"].items():
         atomic_write_bytes(out / "figures" / f"{name}.png", png)
         atomic_write_bytes(out / "figures" / f"{name}.svg", svg.encode("utf-8"))
