@@ -155,3 +155,25 @@ def test_luminance_helpers_read_color():
     buffers = {"color": np.ones((2, 2, 3)), "color_var": np.full((2, 2, 3), 4.0)}
     assert luminance(buffers) == pytest.approx(np.ones((2, 2)))
     assert luminance_var(buffers) == pytest.approx(np.full((2, 2), 4.0))
+
+
+@pytest.mark.parametrize("name", sorted(BUILTINS))
+def test_every_builtin_keeps_to_a_seconds_budget(name):
+    from denoisebench.sampling.synthetic import RoundBuffers
+
+    class Costed:  # rounds cost 10 µs per sample, reported exactly; the clock stands still (no decision time)
+        def __init__(self, frame):
+            self.frame, self.width, self.height = frame, frame.width, frame.height
+
+        def render_round(self, counts):
+            out = self.frame.render_round(counts)
+            return RoundBuffers(out.buffers, out.counts, float(counts.sum()) * 1e-5, out.samples)
+
+    result = run_sampler(
+        load_sampler(name), Costed(synthetic.noisy_half(16, 16)), Budget(seconds=0.1), clock=lambda: 0.0
+    )
+    assert result.error is None and result.budget_samples is None
+    assert 0.95 * 0.1 <= result.seconds <= 0.1 + 1e-9, result.summary()
+    assert result.rounds[0].granted <= 256 and result.pixels_without_samples == 0  # the probe: <= 1 spp
+    if name != "uniform":
+        assert result.spp[:, 8:].mean() > 2 * result.spp[:, :8].mean()  # still adaptive under a time budget
