@@ -15,7 +15,13 @@ path tracing, so the decision shares it prints are upper bounds). ``auto`` (defa
 when it renders a non-uniform round here and says which it used.
 
     .venv/bin/python bench/sampler_overhead.py [--renderer auto|mitsuba|synthetic] [--family cornell]
-        [--size 64] [--spp 16] [--repeats 3]
+        [--size 64] [--spp 16] [--repeats 3] [--seeds 5]
+
+A second table, always on synthetic frames of known truth (``sampling/synthetic.py``), says what
+the decisions buy and how noisy the error maps are: relMSE to the truth on ``check_frame`` (mean of
+``--seeds`` seeds) over uniform's at the same spp, and the spread of the spp map (coefficient of
+variation; 0 is right) on a constant image with the same noise everywhere, where any spread is the
+error map's own noise.
 """
 
 from __future__ import annotations
@@ -67,6 +73,7 @@ def main(argv=None) -> int:
     parser.add_argument("--size", type=int, default=64)
     parser.add_argument("--spp", type=float, default=16)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--seeds", type=int, default=5)
     args = parser.parse_args(argv)
 
     make_frame, label = None, "synthetic (SyntheticProgressiveFrame.check_frame; numpy, not path tracing)"
@@ -112,7 +119,25 @@ def main(argv=None) -> int:
             f"{name:<15} {rounds:>6g} {render:>9.4f} {decide:>9.4f} {decide / max(render, 1e-12):>13.3f} "
             f"{median(name, 'seconds') / base:>13.3f}"
         )
+    print()
+    print(f"synthetic frames of known truth, {args.size}x{args.size} px, {args.spp:g} spp, {args.seeds} seeds")
+    print(f"{'sampler':<15} {'relMSE':>9} {'/uniform':>9} {'spp spread on flat noise':>25}")
+    quality = {name: quality_figures(name, args.size, budget, args.seeds) for name in names}
+    for name, (error, spread) in quality.items():
+        print(f"{name:<15} {error:>9.4f} {error / quality['uniform'][0]:>9.3f} {spread:>25.3f}")
     return 0
+
+
+def quality_figures(name: str, size: int, budget: Budget, seeds: int) -> tuple[float, float]:
+    """(mean relMSE to the truth on check_frame, coefficient of variation of spp on a flat noisy frame)."""
+    errors, spreads = [], []
+    for seed in range(seeds):
+        frame = synthetic.check_frame(size, size, seed=seed)
+        image = run_sampler(load_sampler(name), frame, budget).buffers["color"].astype(np.float64)
+        errors.append(np.mean((image - frame.truth) ** 2 / (frame.truth**2 + 0.01)))
+        spp = run_sampler(load_sampler(name), synthetic.constant(size, size, noise=0.5, seed=seed), budget).spp
+        spreads.append(spp.std() / spp.mean())
+    return float(np.mean(errors)), float(np.mean(spreads))
 
 
 if __name__ == "__main__":
