@@ -28,16 +28,31 @@ def test_pareto_front_marks_exactly_the_undominated_points():
 
 
 def test_equivalent_spp_and_time_ratio_follow_the_noisy_curve():
-    points = _curve() + [analysis.Point("den", 4, 0.05, 0.5 / 100)]  # the error of 100-spp rendering
+    points = _curve() + [analysis.Point("den", 4, 0.05, 0.5 / 8)]  # the error of 8-spp rendering
     fit = analysis.fit_noisy(points, [(s, 0.01 * s) for s in (1, 4, 16)], "relmse")
     assert fit.slope == pytest.approx(-1.0) and not fit.assumed_slope
     assert fit.spp_for(0.005) == pytest.approx(100.0)
     at = analysis.AccuracyTime("relmse", points, fit, reference_seconds=10.24, reference_spp=1024, hidden=[])
     analysis.pareto_front(points)
     text = analysis.readings(at)[0]
-    # 100 spp take 1.0 s; the denoiser takes 0.05 s: 1/20 of the time, beyond the measured 1–16 spp
-    assert text.startswith("den at 4 spp matches 100-spp rendering") and "1/20 of its time" in text
-    assert "extrapolated" in text and "beyond" not in text
+    # 8 spp (between the measured 4 and 16) take 0.08 s; the denoiser takes 0.05 s: 62 % of the time
+    assert text.startswith("den at 4 spp matches 8-spp rendering") and "62 % of its time" in text
+    assert "extrapolated" not in text
+
+
+def test_no_verdict_rests_on_an_extrapolation_beyond_the_measured_rungs():
+    points = _curve() + [analysis.Point("den", 4, 0.05, 0.5 / 100)]  # the error of 100-spp rendering
+    fit = analysis.fit_noisy(points, [(s, 0.01 * s) for s in (1, 4, 16)], "relmse")
+    at = analysis.AccuracyTime("relmse", points, fit, reference_seconds=10.24, reference_spp=1024, hidden=[])
+    text = analysis.readings(at)[0]
+    assert text.startswith("den at 4 spp (relmse 0.005) is below the error of rendering alone at every measured")
+    assert "no verdict" in text and "matches" not in text and "cheaper" not in text
+    # one measured rung: every comparison would extrapolate along an assumed slope
+    one = analysis.fit_noisy(_curve(spps=(4,)) + [analysis.Point("den", 4, 0.05, 0.01)], [(4, 0.04)], "relmse")
+    single = analysis.AccuracyTime(
+        "relmse", _curve(spps=(4,)) + [analysis.Point("den", 4, 0.05, 0.01)], one, None, None, []
+    )
+    assert "no verdict" in analysis.readings(single)[0]
 
 
 def test_readings_say_when_rendering_is_cheaper_or_the_input_is_not_improved():

@@ -30,6 +30,7 @@ EPILOG = """examples:
   run-benchmark --data out/dataset --denoiser plugins/slow.py:Slow --time-limit 600 --memory-limit 8192
   run-benchmark --data out/dataset --metrics noisebase,cvvdp   # Noisebase's table beside ColorVideoVDP
   run-benchmark --data out/dataset --trim 0.002   # robust scores drop the worst 0.2 % of pixels
+  run-benchmark --data out/dataset --time-at 3840x2160 --time-size 512x512   # times for 4K frames
 """
 
 
@@ -119,6 +120,33 @@ def add_arguments(parser) -> None:
         action="store_true",
         help="skip the sha256 check of the dataset's files before the run (recorded in the run)",
     )
+    from denoisebench.leaderboard.time_model import DEFAULT_TIME_BUDGET
+
+    parser.add_argument(
+        "--time-at",
+        default="1920x1080",
+        metavar="WxH",
+        help="resolution the report's times are for, projected from fixed + per-pixel costs (default 1920x1080)",
+    )
+    parser.add_argument(
+        "--time-size",
+        default="1024x1024",
+        metavar="WxH",
+        help="second size each denoiser and one render are timed at after the run, on tiled copies of a frame "
+        "(default 1024x1024; none: no timing, times stay at the dataset's resolution)",
+    )
+    parser.add_argument(
+        "--time-budget",
+        type=float,
+        default=DEFAULT_TIME_BUDGET,
+        metavar="SECONDS",
+        help=f"a denoiser expected to take longer at --time-size is timed smaller (default {DEFAULT_TIME_BUDGET:g})",
+    )
+    parser.add_argument(
+        "--no-render-probe",
+        action="store_true",
+        help="do not time one render of the dataset's stage at --time-size (render offsets are then held fixed)",
+    )
     from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
 
     add_isolation_arguments(parser)
@@ -141,6 +169,15 @@ def run(args) -> int:
             trim = check_trim(args.trim)
         except ValueError as exc:
             raise UserInputError(f"--trim: {exc}") from None
+
+    from denoisebench.leaderboard.time_model import parse_size
+
+    time_at = parse_size(args.time_at, "--time-at")
+    time_size = parse_size(args.time_size, "--time-size")
+    if time_at is None:
+        raise UserInputError("--time-at wants WIDTHxHEIGHT such as 1920x1080")
+    if not args.time_budget > 0:
+        raise UserInputError(f"--time-budget wants a positive number of seconds, got {args.time_budget}")
 
     # --denoiser alone benchmarks just those plugins; --denoisers defaults to all otherwise
     given = args.denoisers if args.denoisers is not None else ("" if args.denoiser else "all")
@@ -175,13 +212,24 @@ def run(args) -> int:
         for d in plan.denoisers:
             if d.load_error:
                 print(f"  {d.spec}: not run: {d.load_error}")
+        from denoisebench.leaderboard.time_model import measure_run_timings
+
+        instances = {d.label: d.instance for d in plan.denoisers if d.instance is not None}
+        measure_run_timings(
+            store,
+            dataset,
+            plan,
+            instances,
+            time_size,
+            budget=args.time_budget,
+            render_probe=not args.no_render_probe,
+        )
         if args.no_report:
             return 0
         from denoisebench.leaderboard.report import write_report
 
-        instances = {d.label: d.instance for d in plan.denoisers if d.instance is not None}
         index = write_report(
-            store, plan.run_id, dataset, Path(args.out), instances, include_unresolved=args.include_unresolved
+            store, plan.run_id, dataset, Path(args.out), instances, time_at, include_unresolved=args.include_unresolved
         )
     print(f"report: {index.resolve()}")
     sys.stdout.flush()

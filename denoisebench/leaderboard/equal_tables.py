@@ -284,7 +284,9 @@ def verdicts(tables: Tables) -> list[str]:
             continue
         ratio, row, (spp, seconds) = best
         bound = "at most " if spp.how == "at_most" else ""
-        if ratio <= 1:
+        if 0.95 <= ratio <= 1.05:
+            tail = "about rendering's time (no saving)"
+        elif ratio < 1:
             tail = f"{_pct(ratio)} of rendering's time"
         else:
             tail = f"{ratio:.2g}× rendering's time: rendering more samples is cheaper"

@@ -128,7 +128,7 @@ def _accuracy_axis(ax, at: AccuracyTime, palette: dict[str, str]) -> None:
         ax.text(
             at.reference_seconds,
             0.98,
-            f" reference\n {at.reference_spp} spp",
+            f" reference\n {at.reference_spp} spp" + ("\n (extrapolated)" if "projected" in at.time_label else ""),
             transform=ax.get_xaxis_transform(),
             va="top",
             ha="left",
@@ -137,7 +137,7 @@ def _accuracy_axis(ax, at: AccuracyTime, palette: dict[str, str]) -> None:
         )
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("seconds per frame (render at input spp + denoise)")
+    ax.set_xlabel(f"{at.time_label}: render at input spp + denoise")
     ax.set_ylabel(f"{at.metric} (lower is better)")
     ax.grid(True, which="both", alpha=0.25)
 

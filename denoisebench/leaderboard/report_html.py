@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from html import escape
 
+from denoisebench.denoisers.isolation import isolation_text
 from denoisebench.leaderboard import formatting as fmt
 
 STYLE = """
@@ -122,7 +123,7 @@ def _accuracy(report: dict) -> str:
     parts = [
         _figure(report, "accuracy_time", "error against seconds per frame"),
         '<p class="note">Each point is a denoiser at one input spp (the number beside it): mean error over the test '
-        "frames against mean total seconds per frame (render at that spp + denoise), log axes. The grey curve is the "
+        "frames against total seconds per frame (render at that spp + denoise, at the resolution stated under Times), log axes. The grey curve is the "
         "noisy input at rising spp, the \u201cjust render more samples\u201d line, dashed where extrapolated; the dotted "
         "line is the reference's render time (its error against itself is zero, which a log axis cannot show). Circled "
         "points are on the Pareto front.</p>",
@@ -133,6 +134,33 @@ def _accuracy(report: dict) -> str:
     hidden = [h for p in report["accuracy"] for h in p.hidden]
     if hidden:
         parts.append("<p class=\"note\">Not drawn: " + e("; ".join(hidden)) + "</p>")
+    if "time_model" in report:
+        notes = "".join(f"<li>{e(n)}</li>" for n in report["time_model"].notes)
+        parts.append(
+            f'<h3>Times</h3><p class="note">{e(fmt.time_axis_text(report))} {e(fmt.machine_text(report))}</p>'
+            + (f'<ul class="readings">{notes}</ul>' if notes else "")
+            + _table(*fmt.time_model_rows(report))
+        )
+    return "".join(parts)
+
+
+def _equal_tables(report: dict) -> str:
+    """Equal-time and equal-quality tables per lead metric, then the verdicts (measured rungs only)."""
+    parts = [
+        '<p class="note"><em>Equal time</em>: for each budget (the seconds rendering s spp takes), the (denoiser, '
+        "spp) of lowest error whose render + denoise seconds fit it, against rendering alone. <em>Equal quality</em>: "
+        "for each error target (rendering alone at each measured rung, then beyond it), the seconds each denoiser "
+        "needs. Between measured rungs figures are interpolated on log-log axes; outside them they are marked "
+        "extrapolated and make no verdict; \u2264: met at the lowest measured spp already. "
+        + e(fmt.time_axis_text(report))
+        + "</p>"
+    ]
+    for table in report.get("equal_tables", []):
+        parts.append(f"<h3>Equal time: {e(table.metric)}</h3>" + _table(*fmt.equal_time_rows(table)))
+        parts.append(f"<h3>Equal quality: {e(table.metric)}</h3>" + _table(*fmt.equal_quality_rows(table)))
+    if report.get("verdicts"):
+        items = "".join(f"<li>{e(v)}</li>" for v in report["verdicts"])
+        parts.append(f'<h3>Verdicts (measured rungs only)</h3><ul class="readings">{items}</ul>')
     return "".join(parts)
 
 
@@ -309,10 +337,12 @@ def render_html(report: dict) -> str:
         f"{e(run['config'].get('split'))} \u00b7 {len(report['scenes'])} scene(s) \u00b7 input spp "
         f"{e(', '.join(map(str, report['spp'])))} \u00b7 reference {e(report['reference'].get('description', str(report['reference']['spp']) + ' spp'))} \u00b7 started "
         f"{e(run['created_at'])}, finished {e(run['finished_at'] or 'not yet (partial results)')}"
+        f" \u00b7 {e(isolation_text(run['config'], run['versions']))}"
     )
     versions = ", ".join(f"{k} {v}" for k, v in sorted(run["versions"].items()))
     sections = [
         ("accuracy", "Accuracy against time", _accuracy(report)),
+        ("equal", "Equal time and equal quality", _equal_tables(report)),
         ("results", "Results", _results(report)),
         ("effects", "Per-effect breakdown", _effects(report)),
         ("flicker", "Temporal flicker", _flicker(report)),

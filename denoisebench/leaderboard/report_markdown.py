@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import re
 
+from denoisebench.denoisers.isolation import isolation_text
 from denoisebench.leaderboard import formatting as fmt
 
 _SPECIAL = re.compile(r"([\\`*_\[\]|<>#])")
@@ -35,12 +36,14 @@ def render_markdown(report: dict) -> str:
         f"{md(run['config'].get('split'))}: {len(report['scenes'])} scene(s), input spp {', '.join(map(str, report['spp']))}, "
         f"reference {report['reference'].get('description', str(report['reference']['spp']) + ' spp')}. Started {run['created_at']}, finished {run['finished_at'] or 'not yet (partial)'}.",
         "",
+        md(isolation_text(run["config"], run["versions"])),
+        "",
         "## Accuracy against time",
         "",
         "![error against seconds per frame](figures/accuracy_time.png)",
         "",
         "Each point is a denoiser at one input spp: its mean error against its total seconds per frame "
-        "(render at that spp + denoise). The grey curve is the noisy input at rising spp: what rendering "
+        "(render at that spp + denoise, at the resolution stated under Times). The grey curve is the noisy input at rising spp: what rendering "
         "more samples buys. Circled points are on the Pareto front.",
         "",
     ]
@@ -49,6 +52,8 @@ def render_markdown(report: dict) -> str:
     for panel in report["accuracy"]:
         for hidden in panel.hidden:
             lines.append(f"- not drawn: {md(hidden)}")
+    if "time_model" in report:
+        lines += [""] + _times(report)
     lines += [
         "## Results",
         "",
@@ -115,6 +120,29 @@ def render_markdown(report: dict) -> str:
     versions = ", ".join(f"{k} {v}" for k, v in sorted(run["versions"].items()))
     lines += ["## Software", "", md(versions), ""]
     return "\n".join(lines)
+
+
+def _times(report: dict) -> list[str]:
+    """The time axis' resolution and machine, the fixed and per-pixel costs, and the two tables."""
+    lines = ["### Times", "", md(fmt.time_axis_text(report)) + " " + md(fmt.machine_text(report)), ""]
+    lines += [f"- {md(note)}" for note in report["time_model"].notes]
+    lines += _table(*fmt.time_model_rows(report))
+    lines += [
+        "## Equal time and equal quality",
+        "",
+        "*Equal time*: for each budget (the seconds rendering s spp takes), the (denoiser, spp) of lowest error "
+        "whose render + denoise seconds fit it, against rendering alone. *Equal quality*: for each error target "
+        "(rendering alone at each measured rung, then beyond it), the seconds each denoiser needs. Between "
+        "measured rungs figures are interpolated on log-log axes; outside them they are marked extrapolated "
+        "and make no verdict; ≤: met at the lowest measured spp already.",
+        "",
+    ]
+    for table in report.get("equal_tables", []):
+        lines += [f"### Equal time: {md(table.metric)}", ""] + _table(*fmt.equal_time_rows(table))
+        lines += [f"### Equal quality: {md(table.metric)}", ""] + _table(*fmt.equal_quality_rows(table))
+    if report.get("verdicts"):
+        lines += ["**Verdicts** (measured rungs only)", ""] + [f"- {md(v)}" for v in report["verdicts"]] + [""]
+    return lines
 
 
 def _stability(table) -> list[str]:

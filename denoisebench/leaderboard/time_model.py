@@ -146,6 +146,8 @@ def line_through(points) -> tuple[float, float] | None:
     y = np.array([p[1] for p in pairs])
     if np.ptp(x) > 0:
         slope, offset = np.polyfit(x, y, 1)
+        if abs(offset) <= 1e-9 * float(np.max(np.abs(y))):  # rounding of a line through the origin
+            offset = 0.0
         if slope >= 0 and offset >= 0:
             return float(offset), float(slope)
         if slope < 0:
@@ -508,8 +510,10 @@ def measure_run_timings(
             if f["denoiser"] == label and f["spp"] == spp and f["denoise_seconds"] is not None
         ]
         record = {"spp": spp, "scene": scene}
-        chosen = timing_size(float(np.mean(measured)) if measured else 0.0, pixels0, size, budget)
-        if chosen is None:
+        chosen = timing_size(float(np.mean(measured)), pixels0, size, budget) if measured else None
+        if not measured:  # every unit failed (or none ran): a timing call would only fail or hang again
+            record.update(seconds=None, note="not timed at a larger size: no successful frame in the run")
+        elif chosen is None:
             record.update(seconds=None, note=f"not timed at a larger size: over {budget:g} s even at 4× the frame")
         else:
             width, height, note = chosen

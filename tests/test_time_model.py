@@ -1,0 +1,174 @@
+"""The time model: fixed + per-pixel costs recovered from constructed timings, projections, tiled timing frames.
+
+Every expected value is computed by hand from a cost law the test plants (no clock is read: speed is
+measured in bench/, never in unit tests)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from denoisebench.dataset.frame import Frame
+from denoisebench.errors import UserInputError
+from denoisebench.leaderboard import time_model as tm
+from denoisebench.leaderboard.runner import NOISY
+
+FIXED, PER_PIXEL = 0.05, 2e-7  # a denoiser: 50 ms per call + 0.2 s per megapixel
+P0, P1, HD = 80 * 80, 1024 * 1024, 1920 * 1080
+
+
+def _law(pixels: int) -> float:
+    return FIXED + PER_PIXEL * pixels
+
+
+def test_line_through_separates_offset_and_slope_and_stays_non_negative():
+    assert tm.line_through([(1, 0.92), (4, 0.98), (256, 6.02)]) == (pytest.approx(0.9), pytest.approx(0.02))
+    # all offset, noisy: slope 0, the mean as offset
+    assert tm.line_through([(1, 0.5), (4, 0.49)]) == (pytest.approx(0.495), 0.0)
+    # a negative offset refits through the origin
+    offset, slope = tm.line_through([(1, 0.0), (2, 0.3), (3, 0.5)])
+    assert offset == 0.0 and slope == pytest.approx((0.3 * 2 + 0.5 * 3) / (1 + 4 + 9))
+    assert tm.line_through([(4, 0.4)]) == (0.0, pytest.approx(0.1))
+    assert tm.line_through([]) is None
+
+
+def test_denoiser_cost_projects_fixed_plus_per_pixel_and_never_scales_a_small_frame_alone():
+    cost = tm.DenoiserCost("d", P0, {1: _law(P0), 4: _law(P0) + 0.01})
+    assert cost.seconds(HD, 1) is None  # one size measured: no projection by pixel ratio
+    assert cost.seconds(P0, 4) == pytest.approx(_law(P0) + 0.01)
+    offset, _ = tm.line_through([(P0, _law(P0)), (P1, _law(P1))])
+    cost.fixed = offset
+    assert cost.fixed == pytest.approx(FIXED)
+    assert cost.seconds(HD, 1) == pytest.approx(_law(HD))
+    assert cost.per_megapixel == pytest.approx(PER_PIXEL * 1e6)
+    # the spp-dependent part (0.01 s at P0) is per-pixel: × HD/P0 at 1920×1080
+    assert cost.seconds(HD, 4) == pytest.approx(_law(HD) + 0.01 * HD / P0)
+    # pure proportional scaling would have charged the 50 ms fixed cost HD/P0 = 324 times
+    assert _law(P0) * HD / P0 > 10 * cost.seconds(HD, 1)
+
+
+def test_render_cost_scales_the_per_sample_cost_with_pixels_and_splits_the_offset_with_a_probe():
+    render = tm.RenderCost(P0, offset0=0.3, per_spp0=0.002, measured_spp=[1, 2, 4, 8, 16])
+    assert render.seconds(P0, 8) == pytest.approx(0.3 + 0.016)
+    assert render.offset(HD) == 0.3  # held fixed without a probe
+    assert render.per_spp(HD) == pytest.approx(0.002 * HD / P0)
+    # probe at 1 MP: offset 0.3 + 1e-7 per pixel; per spp 2e-3 · P/P0 exactly
+    render.probe = {"pixels": P1, "offset": 0.3 + 1e-7 * (P1 - P0), "per_spp": 0.002 * P1 / P0}
+    assert render.offset(HD) == pytest.approx(0.3 + 1e-7 * (HD - P0))
+    assert render.per_spp(HD) == pytest.approx(0.002 * HD / P0)
+
+
+class _Data:
+    """The slice of analysis.RunData the time model reads."""
+
+    def __init__(self, frames, labels, spp):
+        self.frames, self.labels, self.spp = frames, labels, spp
+
+    def ok_frames(self, label, spp):
+        return [f for f in self.frames if f["denoiser"] == label and f["spp"] == spp]
+
+
+def _frames():
+    out = []
+    for spp in (1, 2, 4):
+        render = 0.3 + 0.002 * spp
+        out += [{"denoiser": NOISY, "spp": spp, "render_seconds": render, "denoise_seconds": 0.0}] * 2
+        out += [{"denoiser": "d", "spp": spp, "render_seconds": render, "denoise_seconds": _law(P0)}] * 2
+        out += [{"denoiser": "e", "spp": spp, "render_seconds": render, "denoise_seconds": 0.01}] * 2
+    return out
+
+
+def test_build_time_model_projects_only_when_every_denoiser_was_timed_at_a_second_size():
+    data = _Data(_frames(), [NOISY, "d", "e"], [1, 2, 4])
+    timings = {
+        "denoiser:d": {"width": 1024, "height": 1024, "seconds": _law(P1)},
+        "denoiser:e": {"width": 1024, "height": 1024, "seconds": 0.01},  # all fixed cost
+        "machine": {"cores": 2, "gpu": None},
+    }
+    model = tm.build_time_model(data, timings, (1920, 1080), (80, 80))
+    assert model.projected and model.time_at == (1920, 1080) and model.extrapolated_pixels()
+    assert model.render.offset0 == pytest.approx(0.3) and model.render.per_spp0 == pytest.approx(0.002)
+    assert model.denoise_seconds("d", 1) == pytest.approx(_law(HD))
+    assert model.denoise_seconds("e", 1) == pytest.approx(0.01)  # a fixed cost stays fixed
+    assert model.total_seconds(NOISY, 4) == pytest.approx(0.3 + 0.002 * 4 * HD / P0)
+    assert model.as_dict()["denoisers"]["d"]["fixed_s_per_call"] == pytest.approx(FIXED)
+    # one denoiser without a second size: the axis stays at the dataset's size, and the report says so
+    del timings["denoiser:e"]
+    model = tm.build_time_model(data, timings, (1920, 1080), (80, 80))
+    assert not model.projected and model.time_at == (80, 80)
+    assert "e" in model.notes[0] and "never scaled by pixel count" in model.notes[0]
+    assert model.denoise_seconds("e", 2) == pytest.approx(0.01)
+    from denoisebench.leaderboard.formatting import time_axis_text
+
+    assert time_axis_text({"time_model": model}) == "Times are per frame at the dataset's 80×80, as measured."
+
+
+def test_upscaled_frame_tiles_every_buffer_and_the_samples():
+    rng = np.random.default_rng(0)
+    color = rng.random((5, 7, 3), dtype=np.float32)
+    samples = {"color": rng.random((2, 5, 7, 3), dtype=np.float32)}
+    frame = Frame({"color": color, "depth": color[..., :1].copy()}, spp=2, samples=samples)
+    big = tm.upscaled_frame(frame, width=16, height=12)
+    assert big.color.shape == (12, 16, 3) and big.buffers["depth"].shape == (12, 16, 1)
+    assert big.samples["color"].shape == (2, 12, 16, 3) and big.reference is None
+    assert np.array_equal(big.color[11, 15], color[11 % 5, 15 % 7])
+    assert np.array_equal(big.samples["color"][1, 6, 9], samples["color"][1, 1, 2])
+
+
+def test_timing_size_shrinks_to_the_budget_and_gives_up_below_four_frames():
+    assert tm.timing_size(0.001, P0, (1024, 1024), 60.0) == (1024, 1024, "")
+    width, height, note = tm.timing_size(1.0, P0, (1024, 1024), 60.0)  # 164 s proportional estimate
+    assert width * height * 1.0 / P0 <= 60.0 and width * height >= 4 * P0 and "60 s" in note
+    assert tm.timing_size(30.0, P0, (1024, 1024), 60.0) is None
+
+
+def test_sizes_parse_and_bad_ones_are_one_line_errors(capsys):
+    from denoisebench.cli import main
+
+    assert tm.parse_size("1920x1080", "--time-at") == (1920, 1080)
+    assert tm.parse_size("none", "--time-size") is None
+    with pytest.raises(UserInputError):
+        tm.parse_size("1920", "--time-at")
+    assert main(["benchmark", "--data", "nowhere", "--time-at", "wide"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--time-at" in err[0]
+
+
+def test_timings_are_measured_once_per_run_and_kept_in_the_store(tmp_path):
+    from denoisebench.dataset import open_dataset
+    from denoisebench.dataset.synthetic import make_synthetic_dataset
+    from denoisebench.leaderboard.benchmark_run import run_benchmark
+    from denoisebench.leaderboard.runner import BenchmarkConfig
+    from denoisebench.leaderboard.store import ResultsStore
+
+    dataset = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=2, frames=2, height=16, width=16, spp=(1,)))
+    with ResultsStore(tmp_path / "db.sqlite") as store:
+        plan = run_benchmark(
+            dataset, BenchmarkConfig(["identity"], [1], split="all", metrics=["relmse"]), store, progress=False
+        )
+        instances = {d.label: d.instance for d in plan.denoisers}
+        first = tm.measure_run_timings(store, dataset, plan, instances, (64, 48), progress=False)
+        assert first["denoiser:identity"]["width"] == 64 and first["denoiser:identity"]["seconds"] > 0
+        assert "error" in first["render_probe"]  # a synthetic dataset has no stage to render
+        assert first["machine"]["cores"] >= 1
+        again = tm.measure_run_timings(store, dataset, plan, instances, (64, 48), progress=False)
+        assert again == first  # not measured twice
+    with ResultsStore(tmp_path / "db.sqlite", readonly=True) as store:
+        assert tm.read_timings(store, plan.run_id) == first
+        assert tm.read_timings(store, "no-such-run") == {}
+    with ResultsStore(tmp_path / "fresh.sqlite") as store:
+        assert tm.read_timings(store, plan.run_id) == {}  # no table yet: nothing, not an error
+
+
+def test_time_model_is_in_the_report(tmp_path):
+    from denoisebench.cli import main
+    from denoisebench.dataset.synthetic import make_synthetic_dataset
+
+    data = make_synthetic_dataset(tmp_path / "ds", scenes=2, frames=2, height=16, width=16, spp=(1, 2))
+    args = ["benchmark", "--data", str(data), "--db", str(tmp_path / "db.sqlite"), "--denoisers", "identity"]
+    assert (
+        main([*args, "--out", str(tmp_path / "r"), "--split", "all", "--time-size", "64x64", "--metrics", "relmse"])
+        == 0
+    )
+    md = (tmp_path / "r" / "report.md").read_text()
+    assert "Times are per frame at 1920×1080, projected from 16×16" in md and "GPU" in md
