@@ -176,3 +176,39 @@ def test_integrator_depth_and_files_are_read_with_defaults_resolved(tmp_path):
     path.write_text(CORNELL.replace('value="-1"', 'value="3"'))
     assert read_structure(path).max_depth == 3
     assert XML_NAME == "scene.xml"
+
+
+def test_generate_dataset_renders_an_xml_scene_and_copies_its_files(tmp_path, mi, capsys):
+    from denoisebench.cli import main
+    from denoisebench.dataset import open_dataset
+
+    source = write_cornell(tmp_path / "src")
+    out = tmp_path / "ds"
+    args = ["generate", "--out", str(out), "--xml", str(source), "--frames", "2", "--width", "16", "--height", "16"]
+    args += ["--spp", "1,2", "--ref-spp", "16", "--ref-error", "0", "--quiet"]
+    assert main(args) == 0
+    ds = open_dataset(out)
+    assert ds.scenes == ["xml_cornell"]
+    info = ds.scene("xml_cornell")
+    assert info.usd == "xml_cornell/scene.xml" and info.frame_count == 2
+    assert info.record["stage_files"] == ["scene.xml", "camera.json", "meshes/block.obj"]
+    assert (out / "xml_cornell" / "scene.xml").read_bytes() == source.read_bytes()
+    assert set(info.effects["inferred"]) == {"area_lights", "glossy"}
+    frame = ds.frame("xml_cornell", 2, 1)
+    assert frame.reference.mean() > 0 and np.isfinite(frame.buffers["albedo"]).all()
+    capsys.readouterr()
+    assert main(args) == 0  # resumes: everything is there already
+    captured = capsys.readouterr()
+    assert "1 scene(s), 0 frame(s) rendered" in captured.out + captured.err
+
+
+def test_generate_refuses_a_malformed_xml_in_one_line_and_writes_nothing(tmp_path, capsys):
+    from denoisebench.cli import main
+
+    bad = tmp_path / "bad.xml"
+    bad.write_text("<scene version='3.0.0'><shape type='sphere'>")
+    out = tmp_path / "ds"
+    assert main(["generate", "--out", str(out), "--xml", str(bad), "--frames", "1", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "not well-formed XML" in err and "\n" not in err
+    assert not out.exists()

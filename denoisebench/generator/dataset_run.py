@@ -62,6 +62,7 @@ class GenerateRequest:
     samples: bool = False
     seed: int = 0
     usd: tuple[str, ...] = ()
+    xml: tuple[str, ...] = ()  # --xml: Mitsuba XML scenes (generator/mitsuba_xml.py), a static camera over --frames
     force: bool = False
     ref_error: float | None = DEFAULT_REF_ERROR  # None: one reference render at ref_spp
     max_depth: int | None = None  # the user's transport restriction (None: full transport / stage's own)
@@ -105,8 +106,8 @@ def check_request(request: GenerateRequest) -> None:
         raise UserInputError(f"--width/--height at most 16384 (got {request.width}x{request.height})")
     if not request.spp or min(request.spp) < 1:
         raise UserInputError(f"--spp needs positive sample counts (got {list(request.spp)})")
-    if not request.families and not request.usd:
-        raise UserInputError("nothing to generate: give --families and/or --usd")
+    if not request.families and not request.usd and not request.xml:
+        raise UserInputError("nothing to generate: give --families, --usd and/or --xml")
     from denoisebench.dataset import bounds  # documented upper bounds and a memory estimate, before any allocation
 
     bounds.check_generate(
@@ -139,6 +140,8 @@ def validate_request(request: GenerateRequest) -> None:
             get_family(family)  # UnknownFamilyError is a UserInputError
     for path in request.usd:
         scenes_mod.check_user_stage(path, request.stage_options())
+    for path in request.xml:
+        scenes_mod.check_xml_scene(path, request.frames)
 
 
 def _file_sha256(path: Path) -> str:
@@ -162,6 +165,11 @@ def dataset_config(request: GenerateRequest) -> dict:
         "seed": request.seed,
         "rungs": "independent" if request.independent_rungs else "nested",
         "usd": [{"path": str(Path(p).resolve()), "sha256": _file_sha256(Path(p))} for p in request.usd],
+        **(
+            {"xml": [{"path": str(Path(p).resolve()), "sha256": _file_sha256(Path(p))} for p in request.xml]}
+            if request.xml
+            else {}
+        ),
         **(
             {
                 "usd_options": {
@@ -203,7 +211,7 @@ def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -
         "ref_spp": request.ref_spp,
         "ref_error": request.ref_error,
         "transport": plan.transport_line(),
-        "usd": layout.usd_path(spec.name),
+        "usd": f"{spec.name}/{spec.stage_files[0]}",  # scene.usda, or scene.xml for --xml
         "stage_files": list(spec.stage_files),
         "stage_sha256": scenes_mod.stage_digest(spec.stage_dir, spec.stage_files),
         "render_seed": spec.render_seed,
@@ -226,7 +234,6 @@ def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -
 def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names: list[str]) -> list[SceneSpec]:
     """Author / copy every scene into OUT and record it with the writer."""
     from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
-    from denoisebench.generator.usd.translate import translate_usd
     from denoisebench.scenes import get_family
 
     entries = []
@@ -248,10 +255,19 @@ def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names:
                 name, "usd", 0, str(path), str(folder.resolve()), files, scenes_mod.render_seed(request.seed, name)
             )
         )
+    taken = {spec.name for spec in entries}
+    for path, name in zip(request.xml, scenes_mod.user_scene_names(list(request.xml), taken, prefix="xml_")):
+        folder = writer.scene_dir(name)
+        files = scenes_mod.copy_xml_scene(path, folder, request.frames)
+        entries.append(
+            SceneSpec(
+                name, "xml", 0, str(path), str(folder.resolve()), files, scenes_mod.render_seed(request.seed, name)
+            )
+        )
     options = RenderOptions(**render_options(request))
     records = {}
     for spec in entries:
-        translated = translate_usd(spec.usd_path)
+        translated = scenes_mod.translate_scene_file(spec.usd_path)
         plan = make_render_plan(translated.effects, options, stage_max_depth=translated.max_depth)
         records[spec.name] = _scene_record(spec, translated, request, plan)
     writer.add_scenes(records)  # one header write for all scenes (not one per scene)

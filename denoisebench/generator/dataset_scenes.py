@@ -10,7 +10,9 @@ Names and seeds are deterministic:
 * family scenes are ``<family>_<scene seed:03d>``, with scene seeds ``seed, seed+1, ...`` (the
   same stage ``denoisebench scenes make FAMILY --seed S`` writes);
 * a user's stage is ``usd_<file stem>`` (other characters become ``_``; a second file with the
-  same stem gets ``_2``, in argument order);
+  same stem gets ``_2``, in argument order), a Mitsuba XML scene ``xml_<file stem>``: copied
+  verbatim as ``scene.xml`` with the files it names, plus ``camera.json`` (its static camera's
+  frame count), :func:`copy_xml_scene`;
 * every scene renders with its own ``render_seed``, a hash of the dataset seed and the scene name,
   so no two scenes share random numbers and a scene's pixels do not depend on which others exist.
 
@@ -82,7 +84,8 @@ class SceneSpec:
 
     @property
     def usd_path(self) -> Path:
-        return Path(self.stage_dir) / layout.SCENE_USD
+        """The scene file: ``scene.usda``, or ``scene.xml`` for a Mitsuba XML scene (``stage_files[0]``)."""
+        return Path(self.stage_dir) / self.stage_files[0]
 
 
 def render_seed(dataset_seed: int, scene: str) -> int:
@@ -96,12 +99,12 @@ def family_scene_names(families: list[str], count: int, seed: int) -> list[tuple
     return [(family, seed + i, f"{family}_{seed + i:03d}") for family in families for i in range(count)]
 
 
-def user_scene_names(paths: list[str], taken: set[str]) -> list[str]:
-    """``usd_<stem>`` names for the user's files, unique among themselves and ``taken``."""
+def user_scene_names(paths: list[str], taken: set[str], prefix: str = "usd_") -> list[str]:
+    """``usd_<stem>`` (``prefix``) names for the user's files, unique among themselves and ``taken``."""
     names = []
     used = set(taken)
     for path in paths:
-        base = "usd_" + (re.sub(r"[^A-Za-z0-9._-]", "_", Path(path).stem) or "stage")
+        base = prefix + (re.sub(r"[^A-Za-z0-9._-]", "_", Path(path).stem) or "stage")
         name, k = base, 2
         while name in used:
             name, k = f"{base}_{k}", k + 1
@@ -271,3 +274,67 @@ def check_user_stage(path: str | Path, options: dict | None = None):
     translated = translate_usd(path, **(options or {}), strict=True)
     user_stage_dependencies(path)
     return translated
+
+
+# --------------------------------------------------------------------------- Mitsuba XML scenes
+
+#: Beside a copied ``scene.xml``: the frame count of its static camera track (the XML has none).
+XML_CAMERA = "camera.json"
+
+
+def load_scene_file(path: str | Path):
+    """``(TranslatedScene, mi.Scene or None)`` of a dataset's scene file: ``scene.usda`` translated by
+    USD (None: ``build_mitsuba_scene`` makes the Mitsuba scene), ``scene.xml`` loaded by Mitsuba."""
+    path = Path(path)
+    if path.suffix.lower() == ".xml":
+        from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
+
+        return load_mitsuba_xml(path, frames=xml_frames(path))
+    from denoisebench.generator.usd.translate import translate_usd
+
+    return translate_usd(path), None
+
+
+def translate_scene_file(path: str | Path):
+    """The TranslatedScene of a dataset's scene file (:func:`load_scene_file`)."""
+    return load_scene_file(path)[0]
+
+
+def xml_frames(path: Path) -> int:
+    """Frames of a copied XML scene's static camera (its ``camera.json``; 1 without one)."""
+    import json
+
+    sidecar = Path(path).parent / XML_CAMERA
+    return int(json.loads(sidecar.read_text())["frames"]) if sidecar.is_file() else 1
+
+
+def check_xml_scene(path: str | Path, frames: int):
+    """Load and check a Mitsuba XML scene before anything is written (UserInputError, one line)."""
+    from denoisebench.generator.mitsuba_xml import dependencies, load_mitsuba_xml
+
+    path = Path(path)
+    if path.suffix.lower() != ".xml":
+        raise UserInputError(f"{path}: expected a Mitsuba .xml scene file")
+    translated, _ = load_mitsuba_xml(path, frames=frames)
+    if any(relative == XML_CAMERA for _, relative in dependencies(path)):
+        raise UserInputError(f"{path}: a file it names is called {XML_CAMERA}, which the dataset reserves")
+    return translated
+
+
+def copy_xml_scene(path: str | Path, scene_dir: Path, frames: int) -> tuple[str, ...]:
+    """Copy a Mitsuba XML scene to ``scene_dir/scene.xml`` (verbatim) with the files it names, and
+    ``camera.json`` (its static camera's frame count); return the stage files, ``scene.xml`` first."""
+    import json
+
+    from denoisebench.generator.mitsuba_xml import XML_NAME, dependencies
+
+    path = Path(path)
+    scene_dir.mkdir(parents=True, exist_ok=True)
+    files = []
+    for absolute, relative in dependencies(path):
+        atomic_write_bytes(scene_dir / relative, absolute.read_bytes())
+        files.append(relative)
+    camera = {"frames": int(frames), "camera": "the first sensor of scene.xml, static"}
+    atomic_write_bytes(scene_dir / XML_CAMERA, (json.dumps(camera, sort_keys=True) + "\n").encode())
+    atomic_write_bytes(scene_dir / XML_NAME, path.read_bytes())
+    return (XML_NAME, XML_CAMERA, *files)

@@ -91,14 +91,14 @@ class _LoadedScene:
 
     def __init__(self, usd_path: Path, options: dict):
         from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
+        from denoisebench.generator.dataset_scenes import load_scene_file
         from denoisebench.generator.render.scene import build_mitsuba_scene
-        from denoisebench.generator.usd.translate import translate_usd
 
-        self.translated = translate_usd(usd_path)
+        self.translated, loaded = load_scene_file(usd_path)  # scene.usda (USD) or scene.xml (Mitsuba XML)
         self.plan = make_render_plan(
             self.translated.effects, RenderOptions(**options), stage_max_depth=self.translated.max_depth
         )
-        self.scene = build_mitsuba_scene(self.translated)
+        self.scene = loaded if loaded is not None else build_mitsuba_scene(self.translated)
         self._frame_scene: tuple = (0, self.scene)
 
     def scene_at(self, frame: int):
@@ -159,7 +159,7 @@ def _materialize(stage_key: str, files: dict[str, bytes]) -> Path:
             target.parent.mkdir(parents=True, exist_ok=True)
             target.write_bytes(data)
         _STAGE_DIRS[stage_key] = folder
-    return folder / layout.SCENE_USD
+    return folder / ("scene.xml" if "scene.xml" in files else layout.SCENE_USD)
 
 
 def _loaded(job: FrameJob, stage_files: dict[str, bytes] | None) -> _LoadedScene:
