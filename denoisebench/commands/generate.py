@@ -5,6 +5,12 @@ buffers, features and variances at each --spp), OUT/<scene>/reference/frame_NNNN
 color and its variance), and OUT/dataset.json (config, render plans, splits, per-frame sha256, render
 seconds, reference quality). Frame i is rendered at the camera's i-th time sample.
 
+The --spp rungs of a frame are nested: the k-spp image is the mean of the first k samples of one
+progressive render per pixel, so --spp 1,2,4,...,64 costs about what --spp 64 costs and rung 4 is
+the same bytes as a plain --spp 4 dataset with the same seed (rungs are correlated; each is
+unbiased). A rung's render seconds is the time the progressive render took to reach it.
+--independent-rungs renders every rung on its own instead (recorded in dataset.json's config).
+
 References are adaptive: each frame's reference is rendered in rounds (fresh deterministic seeds)
 until its noise floor -- the relMSE a perfect denoiser would score against it, estimated robustly
 against fireflies -- is at most --ref-error, with --ref-spp as the cap; frames that stop at the cap
@@ -46,6 +52,8 @@ from denoisebench.errors import UserInputError
 EPILOG = """examples:
   generate-dataset --out data/small --families cornell,glossy_fireflies --scenes 2 --frames 4 \\
       --width 128 --height 128 --spp 1,4,16 --ref-spp 1024
+  generate-dataset --out data/ladder --families cornell --spp 1,2,4,8,16,32,64   # nested rungs
+  generate-dataset --out data/uncorrelated --families cornell --spp 1,4,16 --independent-rungs
   denoisebench generate --out data/mine --usd shots/my_shot.usda --spp 4 --ref-spp 512
   generate-dataset --out data/clean --families cornell --ref-error 2e-4 --ref-spp 16384
   generate-dataset --out data/direct --families cornell --max-depth 2 --ref-error 0 --ref-spp 1024
@@ -117,6 +125,12 @@ def add_arguments(parser) -> None:
         "default: full transport, or the stage's own denoisebench maxDepth",
     )
     parser.add_argument("--samples", action="store_true", help="also write per-sample data (large)")
+    parser.add_argument(
+        "--independent-rungs",
+        action="store_true",
+        help="render every --spp on its own (uncorrelated inputs; costs the sum of the rungs) instead of "
+        "nested rungs: prefixes of one progressive render, which cost what the top rung costs",
+    )
     parser.add_argument(
         "--seed", type=int, default=0, help="dataset seed: scene seeds, render seeds, splits (default 0)"
     )
@@ -190,6 +204,7 @@ def request_from_args(args):
         camera=args.camera,
         auto_camera=args.auto_camera,
         default_light=args.default_light,
+        independent_rungs=args.independent_rungs,
         force=args.force,
     )
 

@@ -7,7 +7,16 @@ the result with the :class:`~denoisebench.dataset.writer.DatasetWriter` in the d
 
 Frame ``i`` is rendered at the camera's ``i``-th time sample. Noisy renders and the reference use
 the renderer's separate random streams (``reference=True``), so they never share random numbers;
-the seed of every render is the scene's ``render_seed``. The same job gives bit-identical buffers
+the seed of every render is the scene's ``render_seed``.
+
+Rungs (the noisy spp of a frame) are nested by default: one progressive render
+(:func:`~denoisebench.generator.render.frame.render_ladder`) whose rung ``k`` is the mean of each
+pixel's first ``k`` samples, so a ladder costs what its top rung costs and a rung is the same bytes
+as a plain render at that spp; a rung's seconds is the time the render took to reach it. A frame
+whose rungs are partly written renders again up to its highest missing rung and writes the missing
+ones (the same bytes whichever rungs are asked for). With ``independent_rungs``
+(``--independent-rungs``) every rung is a render of its own, seeded by :func:`independent_rung_seed`,
+for users who need uncorrelated inputs. The same job gives bit-identical buffers
 in any process, which is what makes resuming and the Ray executor byte-identical to a plain run.
 
 References: with ``ref_error`` (``--ref-error``) a frame's reference is adaptive
@@ -21,15 +30,19 @@ Notes:
     include Dr.Jit's kernel compilation, which happens the first time a process meets a kernel
     (a new scene, sample count, image size or frame kind) and can take seconds where rendering
     takes milliseconds. Dr.Jit's own kernel history (``JitFlag.KernelHistory``) reports the LLVM
-    compile time of every launch; :func:`_timed_render` subtracts it, and records it apart as
-    ``jit_compile_seconds``. What remains is tracing plus execution, what a warm renderer costs.
+    compile time of every launch; :func:`_timed_render` and :func:`_timed_ladder` subtract it
+    (:class:`~denoisebench.generator.render.progressive.RenderClock`, read at every rung), and
+    record it apart as ``jit_compile_seconds`` (for a ladder: the whole render's, on every rung).
+    What remains is tracing plus execution, what a warm renderer costs.
 """
 
 from __future__ import annotations
 
 import atexit
+import hashlib
 import os
 import shutil
+import struct
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -63,6 +76,7 @@ class FrameJob:
     render_seed: int
     options: dict = field(default_factory=dict)
     ref_error: float | None = None  # adaptive reference target (None: one render at ref_spp)
+    independent_rungs: bool = False  # False: the spp are rungs of one progressive render
 
 
 @dataclass
@@ -84,6 +98,19 @@ class RenderedJob:
     noisy: list[Render]
     reference: Render | None
     pose: list
+    nested: bool = True  # the noisy renders are rungs of one progressive render
+
+    def render_seconds(self) -> float:
+        """Seconds this job rendered: nested rungs count once (the top rung's time), plus the reference."""
+        times = [r.seconds for r in self.noisy]
+        noisy = max(times, default=0.0) if self.nested else sum(times)
+        return noisy + (self.reference.seconds if self.reference else 0.0)
+
+    def samples_per_pixel(self) -> int:
+        """Samples per pixel this job traced (nested rungs: the top rung's)."""
+        spps = [r.spp for r in self.noisy]
+        noisy = max(spps, default=0) if self.nested else sum(spps)
+        return noisy + (self.reference.spp if self.reference else 0)
 
 
 class _LoadedScene:
@@ -173,16 +200,24 @@ def _loaded(job: FrameJob, stage_files: dict[str, bytes] | None) -> _LoadedScene
     return _CACHE[key]
 
 
+#: Stream tag of independent rungs' seeds (hashed with the render seed and the rung's spp).
+INDEPENDENT_RUNG_STREAM = 3
+
+
+def independent_rung_seed(render_seed: int, spp: int) -> int:
+    """Render seed of rung ``spp`` with ``--independent-rungs``: a hash of the render seed, spp and a stream tag."""
+    data = struct.pack("<qqq", int(render_seed), int(spp), INDEPENDENT_RUNG_STREAM)
+    return int.from_bytes(hashlib.blake2b(data, digest_size=4).digest(), "little")
+
+
 def _timed_render(loaded: _LoadedScene, job: FrameJob, spp: int, reference: bool, seed: int | None = None) -> Render:
     """Render, and split the renderer's seconds into rendering and kernel compilation.
 
     ``seed``: the sampler seed (default: the job's ``render_seed``; adaptive reference rounds pass their own)."""
-    import drjit as dr
-
     from denoisebench.generator.render.frame import render_frame
+    from denoisebench.generator.render.progressive import RenderClock
 
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    dr.kernel_history()  # drains (and so clears) the history of earlier launches
+    clock = RenderClock()
     out = render_frame(
         loaded.scene_at(job.frame),
         loaded.translated.camera,
@@ -193,12 +228,33 @@ def _timed_render(loaded: _LoadedScene, job: FrameJob, spp: int, reference: bool
         spp=spp,
         seed=job.render_seed if seed is None else seed,
         reference=reference,
+        clock=clock,
     )
-    compile_ms = sum(
-        float(entry.get("backend_time", 0.0)) for entry in dr.kernel_history() if not entry.get("cache_hit")
+    return Render(spp, out.buffers, None if reference else out.samples, out.seconds, clock.compile_seconds)
+
+
+def _timed_ladder(loaded: _LoadedScene, job: FrameJob) -> list[Render]:
+    """The job's noisy rungs from one progressive render; each rung's seconds is the time to reach it."""
+    from denoisebench.generator.render.frame import render_ladder
+    from denoisebench.generator.render.progressive import RenderClock
+
+    clock = RenderClock()
+    renders = []
+    rungs = render_ladder(
+        loaded.scene_at(job.frame),
+        loaded.translated.camera,
+        job.frame,
+        loaded.plan,
+        width=job.width,
+        height=job.height,
+        rungs=job.spp,
+        seed=job.render_seed,
+        clock=clock,
     )
-    compile_seconds = min(compile_ms / 1000.0, out.seconds)
-    return Render(spp, out.buffers, None if reference else out.samples, out.seconds - compile_seconds, compile_seconds)
+    compiled = clock.compile_seconds  # compilation happens in the first passes; report it with every rung
+    for rung in rungs:
+        renders.append(Render(rung.spp, rung.buffers, rung.samples, rung.seconds, compiled))
+    return renders
 
 
 def render_job(job: FrameJob, stage_files: dict[str, bytes] | None = None) -> RenderedJob:
@@ -207,9 +263,18 @@ def render_job(job: FrameJob, stage_files: dict[str, bytes] | None = None) -> Re
     camera = loaded.translated.camera
     if not 0 <= job.frame < camera.frames:
         raise ValueError(f"scene {job.scene!r} has {camera.frames} frame(s), not frame {job.frame}")
-    noisy = [_timed_render(loaded, job, spp, reference=False) for spp in job.spp]
+    if not job.spp:
+        noisy = []
+    elif job.independent_rungs:
+        noisy = [
+            _timed_render(loaded, job, spp, reference=False, seed=independent_rung_seed(job.render_seed, spp))
+            for spp in job.spp
+        ]
+    else:
+        noisy = _timed_ladder(loaded, job)
     reference = _render_reference(loaded, job) if job.ref_spp else None
-    return RenderedJob(job.scene, job.frame, noisy, reference, np.asarray(camera.poses[job.frame]).tolist())
+    pose = np.asarray(camera.poses[job.frame]).tolist()
+    return RenderedJob(job.scene, job.frame, noisy, reference, pose, nested=not job.independent_rungs)
 
 
 def _render_reference(loaded: _LoadedScene, job: FrameJob) -> Render:
@@ -263,9 +328,18 @@ def write_rendered(writer, result: RenderedJob) -> int:
 
 
 def missing_jobs(
-    writer, scene: str, stage_key: str, usd_path: str, render_seed: int, options: dict, ref_error: float | None = None
+    writer,
+    scene: str,
+    stage_key: str,
+    usd_path: str,
+    render_seed: int,
+    options: dict,
+    ref_error: float | None = None,
+    independent_rungs: bool = False,
 ) -> list[FrameJob]:
-    """The jobs still needed for ``scene`` (frames whose every file is intact are skipped)."""
+    """The jobs still needed for ``scene`` (frames whose every file is intact are skipped).
+
+    A job lists the frame's missing rungs only; nested rungs render up to the highest of them."""
     record = writer.manifest["scenes"][scene]
     jobs = []
     for frame in range(record["frames"]):
@@ -287,6 +361,7 @@ def missing_jobs(
                     render_seed,
                     dict(options),
                     ref_error,
+                    independent_rungs,
                 )
             )
     return jobs

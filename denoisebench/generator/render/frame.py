@@ -24,18 +24,25 @@ Conventions:
   (where the first bounce lands; 0 on a miss). Images are the same bytes with or without them.
 * ``reference=True``: color, diffuse and specular with their variances only (no features), from an
   independent random stream.
-* Seeds: each pass seeds Mitsuba's ``independent`` sampler with a 32-bit hash (BLAKE2b) of
-  ``(seed, frame, spp, stream, pass)`` where stream is 0 for noisy and 1 for reference renders, so
-  frames, sample counts and the reference never share random numbers, and the same arguments give
-  bit-identical buffers.
+* Seeds and sample order: sample ``s`` of pixel ``p`` draws its random numbers from its own PCG32
+  stream, seeded from ``(key, p, s)`` (:func:`~denoisebench.generator.render.integrator.sample_stream`)
+  where the key is a 64-bit hash (BLAKE2b) of ``(seed, frame, stream)`` (:func:`stream_key`; stream 0
+  for noisy, 1 for reference renders). A pixel's samples are therefore one progressive stream:
+  a k-spp render is the mean of the first k samples of any longer render with the same seed, and
+  frames and the reference never share random numbers (DESIGN.md, "Spp ladders are nested").
+* Moments are carried, not merged: each lane keeps running (Welford) moments of its own samples
+  across passes, so where a render is split (passes, rungs, rounds) never changes the bits: a
+  plain k-spp render, rung k of a ladder (:func:`render_ladder`) and k uniform samples requested
+  through :class:`FrameStream` in any number of rounds are the same bytes.
 * Each pass configuration (kernel options, camera switches, buffers, band and sample sizes) is
   recorded once per scene with ``dr.freeze`` and replayed for later frames, whose camera and seed
   are the recording's inputs: a replay launches the kernels a fresh trace would, so bytes do not
   depend on it (:data:`FREEZE_PASSES` turns it off; tests/test_render_frozen.py compares the two).
 * Passes hold at most :data:`MAX_PATHS_PER_PASS` paths: a frame is split into bands of rows and
-  chunks of samples, whose statistics are merged exactly (Chan et al.'s pairwise update).
-* Random numbers depend on the pass layout (:data:`MAX_PATHS_PER_PASS`, ``target_lanes``), which
-  is fixed, never derived from the core count (vector width may still change float rounding).
+  chunks of samples.
+* Lanes per pixel (``groups``: lane ``g`` takes the samples ``s ≡ g`` mod groups) depend on the image
+  size and ``target_lanes`` only, never on spp or the core count; they decide the float rounding
+  of the means (the order of the sums), not the random numbers.
 """
 
 from __future__ import annotations
@@ -43,6 +50,7 @@ from __future__ import annotations
 import hashlib
 import struct
 import time as _time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -53,9 +61,11 @@ from denoisebench.generator.render.camera import CameraSwitches, DrCamera, camer
 from denoisebench.generator.render.integrator import (
     NULL_SKIPS,
     KernelOptions,
+    _channel_type,
     moment_layout,
     pixel_moments,
     render_moments,
+    sample_stream,
     scene_has_delta_only_bsdf,
     scene_has_null_bsdf,
     scene_has_object_motion,
@@ -104,59 +114,80 @@ class _PassConfig:
     sample_channels: tuple  # (name, channels) of per-sample data, () without
     band: int  # rows of the pass
     width: int
-    count: int  # samples per pixel in the pass
+    count: int  # most samples a pixel gets in the pass: rows of the per-sample arrays (0 without them)
     groups: int  # lanes per pixel
+    uniform: bool  # every pixel's sample range is the same: starts/ends are opaque scalars, not arrays
+    fresh: bool  # the first pass of a stream: moments start at zero (made inside, not an input)
 
 
-def _render_pass(scene, seed, row0, camera_values: dict, config: _PassConfig):
-    """Trace one pass: ``config.count`` samples of every pixel of rows ``row0 .. row0 + band``.
+def _render_pass(scene, params, ranges: tuple, state, camera_values: dict, config: _PassConfig):
+    """Trace samples ``start[p] .. end[p]`` of every pixel ``p`` of rows ``row0 .. row0 + band``.
 
-    Returns ``(packed, targets)``: the per-pixel moments packed as :func:`moment_layout` says, and
-    the per-sample arrays (name → flat Float, sample-major) or ``None``. Dr.Jit arrays, evaluated.
+    ``params`` is a UInt32 array ``[key0, key1, row0, start, end]`` (the frame's stream key, the
+    band's first row and, when ``config.uniform``, every pixel's sample range); otherwise ``ranges``
+    is ``(starts, ends)``, UInt32 per pixel of the band (row-major). ``state`` holds the lanes'
+    moments so far (name → (mean, m2), one entry per lane; ``None`` when ``config.fresh``: the first
+    pass starts from zeros made inside, so that single-pass renders have no state inputs at all). Returns ``(state, packed, targets)``: the lanes' moments after
+    the pass, the per-pixel moments packed as :func:`moment_layout` says (all samples so far), and
+    the per-sample arrays (name → flat Float, row ``(s - starts[p]) * pixels + p``) or ``None``.
+    Dr.Jit arrays, evaluated.
     """
     mi = load_mitsuba()
     import drjit as dr
 
-    band, width, count, groups = config.band, config.width, config.count, config.groups
+    band, width, groups = config.band, config.width, config.groups
     stat_channels = dict(config.stat_channels)
     pixels = band * width
-    base, rem = divmod(count, groups)
     lanes = pixels * groups
     cam = DrCamera(mi, config.switches, camera_values)
-    sampler = mi.load_dict({"type": "independent", "sample_count": 1})
-    sampler.seed(seed, lanes)
     # Pixel-major lanes (lane = pixel * groups + group): a pixel's lanes are one contiguous block.
     # Sizes enter as opaque values: as literals, every image size and spp would compile anew.
     groups_o, pixels_o, width_o = (dr.opaque(mi.UInt32, v) for v in (groups, pixels, width))
+    # Scalars come in one array read at fixed positions: separate opaque scalars of equal value may
+    # share a variable in one call and not in the next, and a frozen function's input layout
+    # includes such aliasing (seen as recordings anew on every few replays).
+    key0, key1, row0, start, end = (dr.gather(mi.UInt32, params, k) for k in range(5))
+    if config.fresh:
+        state = {
+            k: (dr.zeros(_channel_type(mi, c), lanes), dr.zeros(_channel_type(mi, c), lanes))
+            for k, c in stat_channels.items()
+        }
     lane = dr.arange(mi.UInt32, lanes)
     pixel = lane // groups_o
     group = lane - pixel * groups_o
     px = pixel % width_o
     py = pixel // width_o + row0
-    lane_count = dr.opaque(mi.UInt32, base) + dr.select(group < dr.opaque(mi.UInt32, rem), mi.UInt32(1), mi.UInt32(0))
+    if not config.uniform:
+        start, end = (dr.gather(mi.UInt32, r, pixel) for r in ranges)
+    first = start + (group + groups_o - start % groups_o) % groups_o  # the lane's first sample >= start
+    image_pixel = py * width_o + px  # bands cover whole rows: the pixel's index in the image
     targets = None
     if config.sample_channels:
-        targets = {k: (dr.zeros(mi.Float, count * pixels * c), c) for k, c in config.sample_channels}
-    moments_dr = render_moments(
+        targets = {k: (dr.zeros(mi.Float, config.count * pixels * c), c) for k, c in config.sample_channels}
+    state = render_moments(
         mi,
         scene,
-        sampler,
+        lambda s: sample_stream(mi, (key0, key1), image_pixel, s),
         cam,
         config.opts,
         px,
         py,
-        lane_count,
+        first,
+        end,
+        groups_o,
+        state,
         stat_channels,
         targets,
-        lambda s: (group + s * groups_o) * pixels_o + pixel,  # sample index within the pass, then pixel
+        lambda s: (s - start) * pixels_o + pixel,  # the pixel's sample within the pass, then pixel
     )
     if groups > 1:
-        dr.eval(moments_dr, targets)  # one kernel traces everything; the merge gathers from its results
-    packed, _ = pixel_moments(mi, moments_dr, stat_channels, groups, base, rem, count)
+        dr.eval(state, targets)  # one kernel traces everything; the merge gathers from its results
+    samples_so_far = end if config.uniform else ranges[1]  # per pixel (the lanes' `end` is per lane)
+    packed, _ = pixel_moments(mi, state, stat_channels, groups, samples_so_far)
     targets = None if targets is None else {k: target for k, (target, _) in targets.items()}
     # One lane per pixel: tracing and packing are a single kernel. Several: the merge kernel.
-    dr.eval(packed, targets)
-    return packed, targets
+    dr.eval(state, packed, targets)
+    return state, packed, targets
 
 
 #: Record passes with ``dr.freeze`` and replay them (False: trace every pass afresh; same bits).
@@ -179,7 +210,10 @@ def _compiled_pass(scene, config: _PassConfig):
         compare the two bit for bit).
 
         One frozen function per configuration: a single one that alternated between two (noisy and
-        reference frames) re-recorded on every call. Image sizes are in the configuration because
+        reference frames) re-recorded on every call. Passes with per-pixel sample ranges (uneven
+        count maps of :class:`FrameStream`) are traced, not frozen: with the ranges as per-pixel
+        input arrays, replays re-recorded at random (Dr.Jit 1.5; the same inputs recorded a new
+        variant every few calls), which costs more than tracing. Image sizes are in the configuration because
         sizes taken with ``dr.width`` inside become constants of the recording.
 
         Recordings are only reused for the scene object they were made with (its BSDF and shape
@@ -188,7 +222,7 @@ def _compiled_pass(scene, config: _PassConfig):
     """
     import drjit as dr
 
-    if not FREEZE_PASSES:
+    if not FREEZE_PASSES or not config.uniform:
         return _render_pass
     if _COMPILED_SCENE[0] is not scene:
         _COMPILED.clear()
@@ -242,49 +276,213 @@ def load_scene(scene_dict: dict):
     return mi.load_dict(scene_dict)
 
 
-def derive_seed(seed: int, frame: int, spp: int, stream: int, pass_index: int = 0) -> int:
-    """32-bit sampler seed for one pass: a hash of everything that must decorrelate renders."""
-    data = struct.pack("<qqqqq", int(seed), int(frame), int(spp), int(stream), int(pass_index))
-    return int.from_bytes(hashlib.blake2b(data, digest_size=4).digest(), "little")
+def stream_key(seed: int, frame: int, stream: int) -> tuple[int, int]:
+    """The 64-bit key (two 32-bit words) of one frame's sample streams: a hash of what decorrelates renders."""
+    data = struct.pack("<qqq", int(seed), int(frame), int(stream))
+    digest = hashlib.blake2b(data, digest_size=8).digest()
+    return int.from_bytes(digest[:4], "little"), int.from_bytes(digest[4:], "little")
 
 
-class _Moments:
-    """Per-pixel mean and sum of squared deviations of one buffer (float64), merged pass by pass."""
-
-    def __init__(self, height: int, width: int, channels: int):
-        self.mean = np.zeros((height, width, channels))
-        self.m2 = np.zeros((height, width, channels))
-
-    def add(self, rows: slice, before: int, count: int, mean_b: np.ndarray, m2_b: np.ndarray) -> None:
-        """Merge ``count`` new samples per pixel of ``rows`` (their mean and M2) into ``before`` ones."""
-        if before == 0:
-            self.mean[rows] = mean_b
-            self.m2[rows] = m2_b
-        else:
-            total = before + count
-            delta = mean_b - self.mean[rows]
-            self.mean[rows] += delta * (count / total)
-            self.m2[rows] += m2_b + np.square(delta) * (before * count / total)
-
-    def finish(self, spp: int):
-        mean = self.mean.astype(np.float32)
-        if spp > 1:
-            var = (np.maximum(self.m2, 0.0) / ((spp - 1) * spp)).astype(np.float32)
-        else:
-            var = np.zeros_like(mean)
-        return mean, var
+def _lane_groups(band: int, width: int, target_lanes: int) -> int:
+    """Lanes per pixel for a band: enough lanes to keep every core busy on small images (never spp-dependent)."""
+    return max(1, -(-target_lanes // (band * width)))
 
 
-def _plan_passes(height: int, width: int, spp: int, max_paths: int):
-    """(row0, rows, sample0, samples) of every pass, rows outermost."""
-    rows = max(1, min(height, max_paths // width))
-    chunk = max(1, min(spp, max_paths // (rows * width)))
-    passes = []
-    for row0 in range(0, height, rows):
-        band = min(rows, height - row0)
-        for s0 in range(0, spp, chunk):
-            passes.append((row0, band, s0, min(chunk, spp - s0)))
-    return passes
+def _device_copy(mi, kind, values: np.ndarray):
+    """``values`` (1-D) as an evaluated Dr.Jit array of ``kind`` in memory Dr.Jit allocated, distinct from every other.
+
+    Notes:
+        ``kind(numpy_array)`` maps the NumPy buffer, and a frozen function's input layout includes
+        whether each buffer is aligned (render/camera.py ``_float_array``): mapped inputs made
+        replays record anew. A gather into a fresh array copies on the device (fast for large
+        arrays, unlike going through a list), and each call gives a new variable, so that inputs
+        never alias one another.
+    """
+    import drjit as dr
+
+    mapped = kind(values)
+    copy = dr.gather(kind, mapped, dr.arange(mi.UInt32, len(values)))
+    dr.eval(copy)
+    return copy
+
+
+class FrameStream:
+    """The progressive sample stream of one frame: per-pixel sample counts that grow round by round.
+
+    :meth:`advance` traces more samples per pixel (each pixel continues its own stream where it
+    stopped); :meth:`buffers` gives the means and variances of the mean of all samples so far.
+    :func:`render_frame`, :func:`render_ladder` and
+    :class:`~denoisebench.generator.render.progressive.ProgressiveFrame` are built on it, so they
+    share its bits: a pixel's value depends only on its sample count, never on the rounds.
+
+    Notes:
+        Per-lane moments stay on the device between rounds (one entry per lane and channel, all
+        bands at once): about ``pixels × groups × 2 × channels × 4`` bytes, e.g. 0.2 GB for a
+        1920×1080 frame with every feature. The last round's packed per-pixel moments are copied
+        to the host (float32); variances are formed there in float64.
+    """
+
+    def __init__(
+        self,
+        scene,
+        camera: CameraTrack,
+        frame: int,
+        plan: RenderPlan,
+        *,
+        width: int,
+        height: int,
+        seed: int,
+        reference: bool = False,
+        keep_samples: bool | None = None,
+        max_paths_per_pass: int = MAX_PATHS_PER_PASS,
+        target_lanes: int = TARGET_LANES,
+        _jitter: bool = True,
+    ):
+        mi = load_mitsuba()
+
+        self.scene, self.width, self.height = scene, int(width), int(height)
+        setup = camera_setup(camera, frame, plan, width, height)
+        features = () if reference else tuple(f for f in FEATURES if f in plan.features)
+        want_motion = "motion" in features and setup.has_previous
+        opts = KernelOptions(
+            max_depth=int(plan.max_depth),
+            rr_depth=int(plan.rr_depth),
+            lobe_split=bool(plan.lobe_split),
+            features=bool(features),
+            motion=want_motion,
+            object_motion=want_motion and scene_has_object_motion(scene),
+            null_skips=NULL_SKIPS if scene_has_null_bsdf(mi, scene) else 0,
+            follow_delta_albedo="albedo" in features and scene_has_delta_only_bsdf(mi, scene),
+            jitter=_jitter,
+        )
+        if keep_samples is None:
+            keep_samples = bool(plan.per_sample)
+        keep_samples = keep_samples and not reference
+        if keep_samples and opts.features and opts.bounces:
+            opts = replace(opts, second_hit=True)  # RPF's bounce random numbers and second-hit features
+        self.zero_motion = "motion" in features and not want_motion
+        stat_channels = {"color": 3, "diffuse": 3, "specular": 3}
+        for name in features:
+            if name != "motion" or want_motion:
+                stat_channels[name] = FEATURE_CHANNELS[name]
+        sample_channels = {}
+        if keep_samples:
+            sample_channels = {k: c for k, c in SAMPLE_BUFFERS.items() if k in stat_channels}
+            # light/bounce (listed by the plan when paths bounce) come with the second-hit channels below
+            sample_channels.update(
+                {k: RANDOM_PARAMETER_CHANNELS[k] for k in plan.random_parameters if k in RANDOM_PARAMETER_CHANNELS}
+            )
+            if opts.second_hit:
+                sample_channels.update(SECOND_HIT_CHANNELS)
+        self.stat_channels, self.sample_channels = stat_channels, sample_channels
+        self.keep_samples = bool(sample_channels)
+        self._opts, self._switches = opts, camera_switches(setup)
+        self._values = camera_values(mi, setup)
+        self._layout = moment_layout(stat_channels)
+        stream = REFERENCE_STREAM if reference else NOISY_STREAM
+        self._key = stream_key(seed, frame, stream)
+        rows = max(1, min(height, max_paths_per_pass // width))
+        self._bands = [(row0, min(rows, height - row0)) for row0 in range(0, height, rows)]
+        self._chunk = max(1, max_paths_per_pass // (rows * width))  # samples per pixel per pass
+        self._groups = [_lane_groups(band, width, target_lanes) for _, band in self._bands]
+        self._state: list = [None] * len(self._bands)
+        self.counts = np.zeros((height, width), np.int64)
+        self._packed = np.zeros((height, width, self._layout["stride"]), np.float32)
+
+    def advance(self, counts) -> dict[str, np.ndarray] | None:
+        """Trace ``counts`` (H×W ints >= 0, or one int for every pixel) more samples per pixel.
+
+        Returns this round's per-sample data when kept (name → N×H×W×C float32, N the largest count
+        of the round; row ``j`` of pixel ``p`` is its ``j``-th new sample, zeros where ``j >=
+        counts[p]``), else ``None``.
+        """
+        mi = load_mitsuba()
+
+        add = np.broadcast_to(np.asarray(counts), (self.height, self.width))
+        if not np.issubdtype(add.dtype, np.integer) or (add < 0).any():
+            raise ValueError("per-pixel sample counts must be integers >= 0")
+        add = add.astype(np.int64)
+        if int((self.counts + add).max(initial=0)) >= 1 << 31:
+            raise ValueError("at most 2^31 - 1 samples per pixel")
+        rows_most = int(add.max(initial=0))
+        samples = None
+        if self.keep_samples:
+            samples = {
+                k: np.zeros((rows_most, self.height, self.width, c), np.float32)
+                for k, c in self.sample_channels.items()
+            }
+        layout = self._layout
+        for index, ((row0, band), groups) in enumerate(zip(self._bands, self._groups)):
+            rows = slice(row0, row0 + band)
+            before = self.counts[rows]
+            extra = add[rows]
+            most = int(extra.max(initial=0))
+            for offset in range(0, most, self._chunk):
+                starts = before + np.minimum(extra, offset)
+                ends = before + np.minimum(extra, offset + self._chunk)
+                count = int((ends - starts).max()) if self.keep_samples else 0
+                uniform = bool((starts == starts.flat[0]).all() and (ends == ends.flat[0]).all())
+                scalars = [*self._key, row0, int(starts.flat[0]), int(ends.flat[0])]
+                params = _device_copy(mi, mi.UInt32, np.asarray(scalars, np.uint32))
+                ranges = (
+                    ()
+                    if uniform
+                    else tuple(_device_copy(mi, mi.UInt32, a.astype(np.uint32).ravel()) for a in (starts, ends))
+                )
+                config = _PassConfig(
+                    self._opts,
+                    self._switches,
+                    tuple(self.stat_channels.items()),
+                    tuple(self.sample_channels.items()),
+                    band,
+                    self.width,
+                    count,
+                    groups,
+                    uniform,
+                    self._state[index] is None,
+                )
+                state = self._state[index]
+                state, packed, targets = _compiled_pass(self.scene, config)(
+                    self.scene,
+                    params,
+                    ranges,
+                    state,
+                    self._values,
+                    config,
+                )
+                self._state[index] = state
+                self._packed[rows] = np.asarray(packed, dtype=np.float32).reshape(band, self.width, layout["stride"])
+                if samples is not None:
+                    for name, chans in self.sample_channels.items():
+                        values = np.asarray(targets[name]).reshape(count, band, self.width, chans)
+                        samples[name][offset : offset + count, rows] = values
+                del packed, targets
+        self.counts = self.counts + add
+        return samples
+
+    def buffers(self) -> dict[str, np.ndarray]:
+        """Means and variances of the mean of every sample so far (module docstring's conventions).
+
+        A pixel without samples has mean 0 and variance ``inf``; one with a single sample has
+        variance 0 (unknown, but finite, as in a 1-spp render).
+        """
+        counts = self.counts[..., None].astype(np.float64)
+        out = {}
+        for name, chans in self.stat_channels.items():
+            mean_at, m2_at = self._layout[name]
+            mean = self._packed[..., mean_at : mean_at + chans].copy()
+            m2 = np.maximum(self._packed[..., m2_at : m2_at + chans].astype(np.float64), 0.0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                var = np.where(counts > 1, m2 / ((counts - 1) * counts), 0.0)
+            var = np.where(counts == 0, np.inf, var).astype(np.float32)
+            out[name] = mean
+            out[f"{name}_var"] = var
+        if self.zero_motion:
+            out["motion"] = np.zeros((self.height, self.width, 2), np.float32)
+            out["motion_var"] = np.where(self.counts[..., None] == 0, np.inf, 0.0).astype(np.float32) * np.ones(
+                2, np.float32
+            )
+        return out
 
 
 def render_frame(
@@ -300,86 +498,92 @@ def render_frame(
     reference: bool = False,
     max_paths_per_pass: int = MAX_PATHS_PER_PASS,
     target_lanes: int = TARGET_LANES,
+    clock: Callable[[], float] = _time.perf_counter,
     _jitter: bool = True,
 ) -> RenderedFrame:
     """Render ``frame`` of ``camera`` with ``spp`` samples per pixel; see the module docstring.
 
     ``target_lanes`` overrides how many lanes one launch aims for (:data:`TARGET_LANES`); it
-    changes which random numbers each sample gets, not the estimator.
+    changes the float rounding of the means, not the random numbers or the estimator. ``clock``
+    measures ``seconds`` (e.g. one that leaves out kernel compilation).
 
     ``_jitter=False`` puts every sample at its pixel center (tests compare features with Mitsuba's
     ``aov`` integrator that way); it is not meant for datasets.
     """
-    start = _time.perf_counter()
-    if spp < 1:
-        raise ValueError(f"spp must be >= 1 (got {spp})")
-    mi = load_mitsuba()
-    import drjit as dr
-
-    setup = camera_setup(camera, frame, plan, width, height)
-    features = () if reference else tuple(f for f in FEATURES if f in plan.features)
-    want_motion = "motion" in features and setup.has_previous
-    opts = KernelOptions(
-        max_depth=int(plan.max_depth),
-        rr_depth=int(plan.rr_depth),
-        lobe_split=bool(plan.lobe_split),
-        features=bool(features),
-        motion=want_motion,
-        object_motion=want_motion and scene_has_object_motion(scene),
-        null_skips=NULL_SKIPS if scene_has_null_bsdf(mi, scene) else 0,
-        follow_delta_albedo="albedo" in features and scene_has_delta_only_bsdf(mi, scene),
-        jitter=_jitter,
+    (out,) = render_ladder(
+        scene,
+        camera,
+        frame,
+        plan,
+        width=width,
+        height=height,
+        rungs=(spp,),
+        seed=seed,
+        reference=reference,
+        max_paths_per_pass=max_paths_per_pass,
+        target_lanes=target_lanes,
+        clock=clock,
+        _jitter=_jitter,
     )
-    stream = REFERENCE_STREAM if reference else NOISY_STREAM
-    keep_samples = plan.per_sample and not reference
-    if keep_samples and opts.features and opts.bounces:
-        opts = replace(opts, second_hit=True)  # RPF's bounce random numbers and second-hit features
+    return out
 
-    stat_channels = {"color": 3, "diffuse": 3, "specular": 3}
-    for name in features:
-        if name != "motion" or want_motion:
-            stat_channels[name] = FEATURE_CHANNELS[name]
-    moments = {name: _Moments(height, width, c) for name, c in stat_channels.items()}
-    sample_channels = {}
-    if keep_samples:
-        sample_channels = {k: c for k, c in SAMPLE_BUFFERS.items() if k in stat_channels}
-        # light/bounce (listed by the plan when paths bounce) come with the second-hit channels below
-        sample_channels.update(
-            {k: RANDOM_PARAMETER_CHANNELS[k] for k in plan.random_parameters if k in RANDOM_PARAMETER_CHANNELS}
-        )
-        if opts.second_hit:
-            sample_channels.update(SECOND_HIT_CHANNELS)
-        samples = {k: np.zeros((spp, height, width, c), np.float32) for k, c in sample_channels.items()}
-    else:
-        samples = None
 
-    switches = camera_switches(setup)
-    values = camera_values(mi, setup)
-    layout = moment_layout(stat_channels)
-    passes = _plan_passes(height, width, spp, max_paths_per_pass)
-    for index, (row0, band, s0, count) in enumerate(passes):
-        groups = max(1, min(count, -(-target_lanes // (band * width))))  # lanes per pixel (each loops over samples)
-        config = _PassConfig(
-            opts, switches, tuple(stat_channels.items()), tuple(sample_channels.items()), band, width, count, groups
-        )
-        seed_dr = dr.opaque(mi.UInt32, derive_seed(seed, frame, spp, stream, index))
-        packed, targets = _compiled_pass(scene, config)(scene, seed_dr, dr.opaque(mi.UInt32, row0), values, config)
-        host = np.asarray(packed, dtype=np.float32).reshape(band, width, layout["stride"])  # one copy
-        rows = slice(row0, row0 + band)
-        for name, chans in stat_channels.items():
-            mean_at, m2_at = layout[name]
-            moments[name].add(rows, s0, count, host[..., mean_at : mean_at + chans], host[..., m2_at : m2_at + chans])
-        if samples is not None:
-            for name, chans in sample_channels.items():
-                samples[name][s0 : s0 + count, rows] = np.asarray(targets[name]).reshape(count, band, width, chans)
-        del packed, targets
+def render_ladder(
+    scene,
+    camera: CameraTrack,
+    frame: int,
+    plan: RenderPlan,
+    *,
+    width: int,
+    height: int,
+    rungs,
+    seed: int,
+    reference: bool = False,
+    max_paths_per_pass: int = MAX_PATHS_PER_PASS,
+    target_lanes: int = TARGET_LANES,
+    clock: Callable[[], float] = _time.perf_counter,
+    _jitter: bool = True,
+) -> list[RenderedFrame]:
+    """Render one progressive stream per pixel and return its rungs (ascending spp, duplicates dropped).
 
-    buffers = {}
-    for name, m in moments.items():
-        mean, var = m.finish(spp)
-        buffers[name] = mean
-        buffers[f"{name}_var"] = var
-    if "motion" in features and not want_motion:
-        buffers["motion"] = np.zeros((height, width, 2), np.float32)
-        buffers["motion_var"] = np.zeros((height, width, 2), np.float32)
-    return RenderedFrame(buffers=buffers, samples=samples, seconds=_time.perf_counter() - start, spp=spp)
+    Rung ``k`` is the mean of each pixel's first ``k`` samples, with its own ``_var`` buffers and,
+    when the plan keeps them, the first ``k`` samples (views of one array of the top rung's
+    samples). It is the same bytes as ``render_frame(..., spp=k)`` with the same seed. A rung's
+    ``seconds`` is the time (by ``clock``) from the call until that rung's buffers were ready, so the
+    top rung's seconds is what the whole ladder cost.
+
+    Notes:
+        The passes are split at rung boundaries (each rung is a snapshot of the carried moments),
+        so a ladder ``1, 2, 4, ..., 64`` traces what a plain 64-spp render traces plus one launch,
+        one host copy and one variance per rung (bench/ladder_cost.py measures the difference).
+    """
+    started = clock()
+    rungs = sorted({int(k) for k in rungs})
+    if not rungs or rungs[0] < 1:
+        raise ValueError(f"spp must be >= 1 (got {rungs})")
+    stream = FrameStream(
+        scene,
+        camera,
+        frame,
+        plan,
+        width=width,
+        height=height,
+        seed=seed,
+        reference=reference,
+        max_paths_per_pass=max_paths_per_pass,
+        target_lanes=target_lanes,
+        _jitter=_jitter,
+    )
+    top = None
+    if stream.keep_samples:
+        top = {k: np.zeros((rungs[-1], height, width, c), np.float32) for k, c in stream.sample_channels.items()}
+    out, done = [], 0
+    for spp in rungs:
+        new = stream.advance(spp - done)
+        if top is not None:
+            for name, values in new.items():
+                top[name][done:spp] = values
+        done = spp
+        samples = None if top is None else {name: values[:spp] for name, values in top.items()}
+        out.append(RenderedFrame(buffers=stream.buffers(), samples=samples, seconds=clock() - started, spp=spp))
+    return out

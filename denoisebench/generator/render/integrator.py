@@ -422,22 +422,79 @@ def _channel_type(mi, channels: int):
     return {1: mi.Float, 2: mi.Vector2f, 3: mi.Color3f}[channels]
 
 
+@functools.cache
+def _sample_stream_type(pcg_type, point2_type):
+    """The :class:`SampleStream` class of one Dr.Jit variant (its ``DRJIT_STRUCT`` names the variant's PCG32)."""
+
+    class SampleStream:
+        """The random numbers of one sample per lane: a PCG32 stream with Mitsuba's sampler interface.
+
+        ``trace`` (and the loops that carry it) only call :meth:`next_1d` and :meth:`next_2d`;
+        ``DRJIT_STRUCT`` makes it a Dr.Jit PyTree, so that it can be loop state.
+        """
+
+        DRJIT_STRUCT = {"rng": pcg_type}
+
+        def __init__(self, rng=None):
+            self.rng = pcg_type() if rng is None else rng
+
+        def next_1d(self):
+            return self.rng.next_float32()
+
+        def next_2d(self):
+            x = self.rng.next_float32()
+            return point2_type(x, self.rng.next_float32())
+
+    return SampleStream
+
+
+def sample_stream(mi, key, pixel_index, sample_index):
+    """The random stream of sample ``sample_index`` of pixel ``pixel_index`` (UInt32 per lane).
+
+    ``key`` is a pair of UInt32 (the frame's stream key: a hash of seed, frame and stream). The
+    PCG32 state and sequence come from two rounds of TEA (Zafar et al. 2010, the scrambler Mitsuba's
+    ``independent`` sampler seeds with): ``(h0, h1) = TEA(pixel, key0)``, then
+    ``(state, seq) = TEA(h0 + sample, h1 ^ key1)``.
+
+    Notes:
+        A sample's random numbers depend on nothing but (key, pixel, sample): not on the lane that
+        traces it, the pass it falls in, the other samples of the pass or how many samples a pixel
+        gets. That is what makes a k-spp render the prefix of any longer one (nested spp ladders)
+        and lets per-pixel sample counts continue each pixel's own stream. For a fixed key the map
+        from (pixel, sample) to the TEA input is one to one for samples below 2^32, and TEA is a
+        permutation, so no two samples of a frame share a stream.
+    """
+    h0, h1 = mi.sample_tea_32(pixel_index, key[0])
+    state, seq = mi.sample_tea_32(h0 + sample_index, h1 ^ key[1])
+    rng = mi.PCG32()
+    rng.seed(mi.UInt64(state), mi.UInt64(seq))  # not the constructor: it adds arange(size) to both
+    return _sample_stream_type(mi.PCG32, mi.Point2f)(rng)
+
+
 def render_moments(
     mi,
     scene,
-    sampler,
+    streams,
     camera: DrCamera,
     opts: KernelOptions,
     pixel_x,
     pixel_y,
-    count,
+    first,
+    end,
+    step,
+    start: dict,
     names: dict,
     sample_targets: dict | None = None,
     sample_slot=None,
 ):
-    """Each lane traces ``count`` samples of pixel ``(pixel_x, pixel_y)`` in a loop, keeping running
-    per-lane moments (Welford: mean and sum of squared deviations) of the buffers in ``names``
-    (name → channels): one kernel yields per-pixel statistics without storing samples.
+    """Each lane traces samples ``first, first + step, ... < end`` of pixel ``(pixel_x, pixel_y)`` in a
+    loop, continuing running per-lane moments (Welford: mean and sum of squared deviations) of the
+    buffers in ``names`` (name → channels): one kernel yields per-pixel statistics without storing samples.
+
+    ``streams(s)`` is the :func:`sample_stream` of sample index ``s`` (UInt32 per lane). ``start``
+    holds the lane's moments so far (name → (mean, m2)); the lane's samples are ``s ≡ first (mod
+    step)``, so sample ``s`` is its ``s // step + 1``-th and the Welford weight needs no counter: a
+    lane that continues over several calls gives the same bits as one call over all its samples.
 
     ``sample_targets`` (name → (flat Float array, channels)) also receives per-sample values: sample
     ``s`` of a lane is written to row ``sample_slot(s)`` (row-major, channels innermost).
@@ -445,18 +502,17 @@ def render_moments(
     """
     import drjit as dr
 
-    lanes = dr.width(pixel_x)
-    mean = {k: dr.zeros(_channel_type(mi, c), lanes) for k, c in names.items()}
-    m2 = {k: dr.zeros(_channel_type(mi, c), lanes) for k, c in names.items()}
-    s = dr.zeros(mi.UInt32, lanes)
-    count = mi.UInt32(count)
+    mean = {k: start[k][0] for k in names}
+    m2 = {k: start[k][1] for k in names}
+    s = mi.UInt32(first)
+    end = mi.UInt32(end)
 
-    def cond(sampler, s, mean, m2):
-        return s < count
+    def cond(s, mean, m2):
+        return s < end
 
-    def body(sampler, s, mean, m2):
-        out = trace(mi, scene, sampler, camera, opts, pixel_x, pixel_y)
-        inv_n = dr.rcp(mi.Float(s + 1))
+    def body(s, mean, m2):
+        out = trace(mi, scene, streams(s), camera, opts, pixel_x, pixel_y)
+        inv_n = dr.rcp(mi.Float(s // step + 1))
         new_mean, new_m2 = {}, {}
         for k, c in names.items():
             value = _channel_type(mi, c)(out[k])
@@ -469,29 +525,28 @@ def render_moments(
                 value = out[k]
                 for c in range(channels):
                     dr.scatter(target, value if channels == 1 else value[c], slot * channels + c)
-        return sampler, s + 1, new_mean, new_m2
+        return s + step, new_mean, new_m2
 
     # Dr.Jit's loop optimisation records a loop twice whenever a state variable is loop-invariant,
-    # and the sampler always carries one (its PCG32 stream increment); nested in the sample loop,
-    # the path loop was recorded four times per frame. Python tracing is a fixed cost per frame
-    # (~20 ms, a sixth of a 64x64 16-spp frame), so record once: the invariants stay plain loop
-    # variables, which costs nothing measurable and gives the same bits.
+    # and the path loop's sample stream always carries one (its PCG32 stream increment); nested in
+    # the sample loop, the path loop was recorded four times per frame. Python tracing is a fixed
+    # cost per frame (~20 ms, a sixth of a 64x64 16-spp frame), so record once: the invariants stay
+    # plain loop variables, which costs nothing measurable and gives the same bits.
     with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
-        sampler, s, mean, m2 = dr.while_loop(
-            state=(sampler, s, mean, m2), cond=cond, body=body, label="denoisebench samples per pixel"
-        )
+        s, mean, m2 = dr.while_loop(state=(s, mean, m2), cond=cond, body=body, label="denoisebench samples per pixel")
     return {k: (mean[k], m2[k]) for k in names}
 
 
-def pixel_moments(mi, moments: dict, names: dict, groups: int, base: int, rem: int, total: int):
+def pixel_moments(mi, moments: dict, names: dict, groups: int, total):
     """Per-pixel moments of :func:`render_moments`' per-lane ones, packed into one flat array.
 
-    A pixel owns ``groups`` consecutive lanes (lane = pixel * groups + group); group ``g`` took
-    ``base + (g < rem)`` of the pixel's ``total`` samples. Lanes merge by Chan et al.'s rule
-    generalised to K groups: ``mean = Σ n_k mean_k / n`` and ``M2 = Σ (M2_k + n_k (mean_k - mean)²)``.
-    Returns ``(packed, layout)``: ``packed`` is a flat Float, pixel-major, ``stride`` values per pixel;
-    ``layout`` maps each name of ``names`` (name → channels) to the column offsets of its mean and
-    M2, and ``"stride"`` to the row length.
+    A pixel owns ``groups`` consecutive lanes (lane = pixel * groups + group); group ``g`` holds the
+    pixel's samples ``s ≡ g (mod groups)`` below ``total`` (UInt32 per pixel: samples so far), i.e.
+    ``total // groups + (g < total % groups)`` of them. Lanes merge by Chan et al.'s rule
+    generalised to K groups: ``mean = Σ n_k mean_k / n`` and ``M2 = Σ (M2_k + n_k (mean_k - mean)²)``;
+    a pixel without samples gets 0 for both. Returns ``(packed, layout)``: ``packed`` is a flat
+    Float, pixel-major, ``stride`` values per pixel; ``layout`` maps each name of ``names`` (name →
+    channels) to the column offsets of its mean and M2, and ``"stride"`` to the row length.
 
     Notes:
         One kernel merges and packs: each pixel gathers its lanes in a loop, in group order, so the
@@ -514,10 +569,13 @@ def pixel_moments(mi, moments: dict, names: dict, groups: int, base: int, rem: i
         # Sizes as opaque values, so that every image size shares one compiled kernel.
         groups_o = dr.opaque(mi.UInt32, groups)
         first = pixel * groups_o
-        inv_total = dr.opaque(mi.Float, 1.0 / total)
+        total = mi.UInt32(total)
+        base = total // groups_o
+        rem = total - base * groups_o
+        inv_total = dr.select(total > 0, dr.rcp(mi.Float(total)), 0.0)
 
         def lane_weight(g):
-            return mi.Float(dr.opaque(mi.UInt32, base) + dr.select(g < dr.opaque(mi.UInt32, rem), 1, 0))
+            return mi.Float(base + dr.select(g < rem, mi.UInt32(1), mi.UInt32(0)))
 
         def cond(g, acc):
             return g < groups_o
