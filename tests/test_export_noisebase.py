@@ -168,6 +168,14 @@ def test_moving_objects_are_refused(rendered):
     shifted[4:8, 4:8, 0] += 1.5  # part of the image moves on its own
     with pytest.raises(UserInputError, match="not the camera's alone"):
         nbx.check_static_geometry(*args, shifted, cams[1], cams[0], 24, 16)
+    # background samples (position 0 by our convention) are left out through the hit mask
+    missed = frame.samples["position"].copy()
+    missed[:, 2:6, 10:16] = 0.0
+    with pytest.raises(UserInputError):
+        nbx.check_static_geometry(scene, 1, missed, frame.buffers["motion"], cams[1], cams[0], 24, 16)
+    hit = np.ones((16, 24), bool)
+    hit[2:6, 10:16] = False
+    nbx.check_static_geometry(scene, 1, missed, frame.buffers["motion"], cams[1], cams[0], 24, 16, hit)
 
 
 def test_bad_input_is_one_line_exit_2(rendered, tmp_path, capsys):
@@ -177,6 +185,7 @@ def test_bad_input_is_one_line_exit_2(rendered, tmp_path, capsys):
     for source, extra, message in (
         (plain, [], "no per-sample data"),
         (rendered, ["--spp", "3"], "not --spp 3"),
+        (rendered, ["--scenes", "cornell_000,nope"], "--scenes: no scene nope"),
     ):
         out = tmp_path / "never"
         assert main(["export", str(source), str(out), "--format", "noisebase", "--quiet", *extra]) == 2

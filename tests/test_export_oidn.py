@@ -185,3 +185,13 @@ def test_existing_out_needs_force_and_a_failed_export_leaves_nothing(source, tmp
     monkeypatch.setattr(oidn, "encode_feature", real)
     assert main(["export", str(source), str(out), "--format", "oidn", "--tile-size", "16", "--quiet", "--force"]) == 0
     assert not (out / "keep.txt").exists() and (out / "train").is_dir()
+
+
+def test_scenes_option_exports_only_those(source, tmp_path):
+    ds = open_dataset(source)
+    chosen = [ds.split("train")[0], ds.split("test")[0]]
+    out = tmp_path / "some"
+    args = ["export", str(source), str(out), "--format", "oidn", "--tile-size", "16", "--quiet"]
+    assert main([*args, "--scenes", ",".join(chosen)]) == 0
+    names = {p.name.split("_f")[0] for p in out.rglob("*.exr")}
+    assert names == set(chosen) and not (out / "val").exists()

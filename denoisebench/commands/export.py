@@ -29,7 +29,7 @@ EPILOG = """examples:
   python training/preprocess.py hdr alb nrm -D oidn_data -t train -v val      # in OIDN's repository
   denoisebench export data/small oidn_data --format oidn --features hdr,alb,nrm,z --tile-size 64
   denoisebench export data/samples nb_data --format noisebase --spp 8
-  denoisebench export data/samples nb_test --format noisebase --layout test
+  denoisebench export data/samples nb_test --format noisebase --layout test --scenes cornell_000,dim_room_000
 """
 
 
@@ -47,6 +47,7 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--layout", default="train", choices=("train", "test"), help="noisebase: loader to write for (default train)"
     )
+    parser.add_argument("--scenes", default=None, help="comma-separated scene names to export (default: all)")
     parser.add_argument("--force", action="store_true", help="replace OUT when it exists")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -54,12 +55,13 @@ def add_arguments(parser) -> None:
 def run(args) -> int:
     from pathlib import Path
 
+    from denoisebench.dataset.export.selection import select_scenes
     from denoisebench.dataset.export.staging import check_target, staged_folder
     from denoisebench.dataset.reader import open_dataset
 
     if not (Path(args.data) / "dataset.json").is_file():
         raise UserInputError(f"{args.data}: not a dataset folder (no dataset.json)")
-    dataset = open_dataset(args.data)
+    dataset = select_scenes(open_dataset(args.data), args.scenes)
     target = check_target(args.out, args.force, dataset.root)
     if args.format == "oidn":
         from denoisebench.dataset.export import oidn
@@ -80,6 +82,8 @@ def run(args) -> int:
         noisebase.plan_export(dataset, args.spp, args.layout)
         with staged_folder(target) as staging:
             summary = noisebase.export_noisebase(dataset, staging, args.spp, args.layout, progress=not args.quiet)
+        for scene in summary["unchecked_object_motion"]:
+            print(f"warning: {scene}: thin lens or motion blur: not checked for moving objects", file=sys.stderr)
         print(f"{target}: Noisebase {args.layout} layout for split(s) {', '.join(summary['src'])}")
     sys.stdout.flush()
     return 0

@@ -38,6 +38,8 @@ Conventions, taken from Noisebase's own code (``noisebase/projective.py``):
   ``x·W/2 + W/2``, ``−y·H/2 + H/2``: exactly our renderer's pinhole projection, so the motion the
   loader derives (``motion_vectors``: screen position in the previous frame minus the current one,
   in pixels, (row, column) order) is our ``motion`` buffer with its channels swapped.
+* Background: a sample that misses every surface has position 0 (our convention), so the motion
+  Noisebase derives there is that of the world origin; ours is that of the direction.
 * ``motion`` (world space) is zero for static geometry; camera motion lives in the camera arrays.
   We store screen-space motion only, so a scene whose objects move cannot be exported: the export
   checks, per pixel, that reprojecting the positions with the two frames' cameras reproduces our
@@ -50,7 +52,12 @@ Conventions, taken from Noisebase's own code (``noisebase/projective.py``):
   decoded colour is within half a level, ``exponent / 510``, of ours. A frame with no positive
   value stores zeros and ``exposure = [0, 0]``.
 * Depth of field: the lens offset of each sample is not in Noisebase's format; the position and
-  colour of each sample are. Motion blur: our samples' time is not stored either.
+  colour of each sample are. Through a thin lens our motion buffer follows each sample's lens
+  point, while Noisebase reprojects through the lens center: the two differ by the change of
+  defocus between frames. Motion blur: our samples' time is not stored, and each sample's motion
+  follows the camera at its own time. In both cases the object-motion check cannot run; such
+  scenes are exported with zero world-space motion and listed as ``unchecked_object_motion`` in
+  ``denoisebench_export.json`` (the command warns).
 """
 
 from __future__ import annotations
@@ -176,8 +183,14 @@ def project(points: np.ndarray, view_proj: np.ndarray, width: int, height: int) 
     return np.stack([x, y], axis=-1)
 
 
-def check_static_geometry(scene: str, frame: int, samples_position, motion, cam, prev_cam, width, height) -> None:
-    """UserInputError unless reprojected positions reproduce our motion buffer (no moving objects)."""
+def check_static_geometry(
+    scene: str, frame: int, samples_position, motion, cam, prev_cam, width, height, hit=None
+) -> None:
+    """UserInputError unless reprojected positions reproduce our motion buffer (no moving objects).
+
+    ``hit`` (H×W bool): the pixels whose every sample hit a surface; only those are compared (a miss
+    has position 0 by our convention, and its motion is that of the direction, not of a point).
+    """
     if prev_cam is None:
         return
     now = project(samples_position, cam.view_proj, width, height)
@@ -185,6 +198,8 @@ def check_static_geometry(scene: str, frame: int, samples_position, motion, cam,
     derived = np.mean(before - now, axis=0)  # mean over samples, H×W×2
     error = np.abs(derived - motion)
     finite = np.isfinite(error).all(axis=-1)
+    if hit is not None:
+        finite &= hit
     worst = float(np.percentile(error[finite].max(axis=-1), 99)) if finite.any() else math.inf
     if worst > MOTION_TOLERANCE:
         raise UserInputError(
@@ -222,6 +237,14 @@ def write_zip_group(path: Path, arrays: dict[str, np.ndarray]) -> Path:
     return path
 
 
+def static_check_applies(info) -> bool:
+    """The object-motion check needs a pinhole at the frame's time: through a thin lens our motion follows
+    each sample's lens point (Noisebase reprojects through the lens center: they differ by the change of
+    defocus), and with time sampling each sample's own camera pose (Noisebase uses the frame's)."""
+    plan = info.plan
+    return plan.get("camera_model", "pinhole") == "pinhole" and not plan.get("time_sampling", False)
+
+
 def _frame_arrays(dataset: Dataset, scene: str, spp: int, index: int, pad: int, prev_cam):
     info = dataset.scene(scene)
     loaded = dataset.frame(scene, spp, index, reference=info.has_reference, samples=True)
@@ -232,9 +255,19 @@ def _frame_arrays(dataset: Dataset, scene: str, spp: int, index: int, pad: int, 
         raise UserInputError(f"scene {scene!r} frame {index} has no camera_pose in the manifest (not rendered?)")
     cam = camera_arrays(pose, float(info.camera["fov_x_deg"]), info.width, info.height, pad)
     flat_cam = cam if pad == 0 else camera_arrays(pose, float(info.camera["fov_x_deg"]), info.width, info.height)
-    check_static_geometry(
-        scene, index, samples["position"], loaded.buffers["motion"], flat_cam, prev_cam, info.width, info.height
-    )
+    if static_check_applies(info):
+        hit = (samples["depth"][..., 0] > 0).all(axis=0) if "depth" in samples else None
+        check_static_geometry(
+            scene,
+            index,
+            samples["position"],
+            loaded.buffers["motion"],
+            flat_cam,
+            prev_cam,
+            info.width,
+            info.height,
+            hit,
+        )
 
     def per_sample(name, dtype):
         return np.transpose(samples[name], (3, 1, 2, 0)).astype(dtype)  # S×H×W×C -> C×H×W×S
@@ -369,9 +402,11 @@ def export_noisebase(
                 sources[split] = src
     finally:
         bar.close()
+    unchecked = [s for entries in plan.values() for s, _ in entries if not static_check_applies(dataset.scene(s))]
     summary = {
         "format": "noisebase",
         "layout": layout,
+        "unchecked_object_motion": unchecked,
         "source": str(dataset.root.resolve()),
         "config_hash": dataset.config_hash,
         "src": sources,
