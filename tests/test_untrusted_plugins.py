@@ -190,7 +190,8 @@ def test_crashed_worker_is_replaced_at_the_next_sequence(on_path, tmp_path):
                 return np.array(frame.color, np.float32)
     ''')
     )
-    denoiser = IsolatedDenoiser(f"{module}:CrashOnce")
+    # a plain worker: its flag file must outlive the worker, which the sandbox (test_sandbox.py) forbids
+    denoiser = IsolatedDenoiser(f"{module}:CrashOnce", sandboxed=False)
     first = run_sequence(denoiser, synthetic_sequence(frames=2, height=8, width=8))
     assert first[0].error.startswith("worker exited with status 7") and "earlier in this sequence" in first[1].error
     second = run_sequence(denoiser, synthetic_sequence(frames=2, height=8, width=8))

@@ -200,6 +200,9 @@ def run(args) -> int:
     if not args.no_report:
         check_writable_dir(args.out, "--out")
     dataset = open_dataset(args.data)
+    from denoisebench.denoisers.sandbox import protect
+
+    protect(dataset.root, args.db, None if args.no_report else args.out)  # hidden from every sandboxed worker
     started = time.perf_counter()
     with ResultsStore(args.db) as store:
         plan = run_benchmark(dataset, config, store, executor=args.executor)

@@ -61,7 +61,8 @@ from typing import Any
 
 import numpy as np
 
-from denoisebench.denoisers import shared_frames
+from denoisebench.denoisers import sandbox, shared_frames
+from denoisebench.errors import UserInputError
 
 #: Seconds one call (load, reset or denoise) of an isolated denoiser may take.
 DEFAULT_TIME_LIMIT = 120.0
@@ -69,8 +70,18 @@ DEFAULT_TIME_LIMIT = 120.0
 DEFAULT_MEMORY_LIMIT_MB = 4096
 #: How often the parent looks at the worker while it waits (seconds).
 POLL_SECONDS = 0.02
-#: Who runs in a worker: "plugins" (everything but the built-ins), "all", "none".
-POLICIES = ("plugins", "all", "none")
+#: Tasks (processes and threads) a sandboxed worker may hold at once, itself included.
+DEFAULT_PROCESS_LIMIT = 512
+#: Open files of a sandboxed worker (RLIMIT_NOFILE).
+DEFAULT_OPEN_FILES = 1024
+#: Size of a sandboxed worker's private scratch tmpfs, and its largest file (RLIMIT_FSIZE), MiB.
+DEFAULT_SCRATCH_MB = 1024
+#: Address space (RLIMIT_AS, MiB) of a sandboxed worker: at least this, and 4x the memory limit.
+MIN_ADDRESS_SPACE_MB = 32768
+#: Who runs in a worker: "plugins" (everything but the built-ins, sandboxed), "all" (built-ins too,
+#: sandboxed), "process" (plugins in plain worker processes, no sandbox), "none".
+POLICIES = ("plugins", "all", "process", "none")
+SANDBOXED_POLICIES = ("plugins", "all")
 DEFAULT_POLICY = "plugins"
 #: dtype kinds an output may arrive with (the harness then checks it is float32).
 _ARRAY_KINDS = "fiub"
@@ -80,12 +91,32 @@ class WorkerFailure(Exception):
     """An isolated call failed; the message is the one-line reason recorded for it."""
 
 
+class SandboxUnavailableError(UserInputError):
+    """No sandbox starts on this machine; an untrusted plugin is refused (exit 2) unless the user
+    accepts plain worker processes with ``--isolation process``."""
+
+
 @dataclass(frozen=True)
 class Limits:
-    """Per-call time limit (seconds) and resident-memory limit (MiB) of an isolated denoiser."""
+    """Per-call time limit (seconds) and resident-memory limit (MiB) of an isolated denoiser, and
+    the sandbox's task count, open files and scratch size (MiB; also the largest file)."""
 
     time_limit: float = DEFAULT_TIME_LIMIT
     memory_limit_mb: int = DEFAULT_MEMORY_LIMIT_MB
+    processes: int = DEFAULT_PROCESS_LIMIT
+    open_files: int = DEFAULT_OPEN_FILES
+    scratch_mb: int = DEFAULT_SCRATCH_MB
+
+    def rlimits(self) -> dict[str, int]:
+        """What a sandboxed worker sets on itself before it imports the plugin (resource.RLIMIT_*).
+
+        No address-space limit where NVIDIA devices exist: CUDA reserves terabytes of it."""
+        import glob
+
+        limits = {"NPROC": self.processes, "NOFILE": self.open_files, "FSIZE": self.scratch_mb << 20}
+        if not glob.glob("/dev/nvidia[0-9]*"):
+            limits["AS"] = max(MIN_ADDRESS_SPACE_MB, 4 * self.memory_limit_mb) << 20
+        return limits
 
     def __post_init__(self) -> None:
         from denoisebench.errors import UserInputError
@@ -114,9 +145,31 @@ def _rss_mb(pid: int) -> float | None:
         return None
 
 
-def _exit_reason(code: int | None) -> str:
+def _tree(root: int) -> tuple[list[int], int]:
+    """The processes of the tree under ``root`` (itself first) and their task count (threads)."""
+    pids, tasks, queue = [], 0, [root]
+    while queue:
+        pid = queue.pop(0)
+        try:
+            tids = os.listdir(f"/proc/{pid}/task")
+        except OSError:
+            continue
+        pids.append(pid)
+        tasks += len(tids)
+        for tid in tids:
+            try:
+                with open(f"/proc/{pid}/task/{tid}/children", "rb") as handle:
+                    queue += [int(n) for n in handle.read().split()]
+            except (OSError, ValueError):
+                continue
+    return pids, tasks
+
+
+def _exit_reason(code: int | None, sandboxed: bool = False) -> str:
     if code is None:
         return "worker stopped answering"
+    if sandboxed and sandbox.exit_signal(code):  # bwrap: 128 + N for a worker ended by signal N
+        code = -sandbox.exit_signal(code)
     if code < 0:
         try:
             return f"worker killed by {signal.Signals(-code).name}"
@@ -131,12 +184,23 @@ class IsolatedDenoiser:
     ``name``, ``needs``, ``temporal`` and ``trained_scenes`` are what the worker's instance declared.
     ``last_seconds`` is the time inside the worker's ``denoise()`` of the last call,
     ``overhead_seconds`` the total time spent around those calls (transfer, checks).
+    ``sandboxed``: the worker runs in the sandbox of :mod:`.sandbox` (refused with
+    :class:`SandboxUnavailableError` where none starts); False is a plain worker process.
     """
 
-    def __init__(self, spec: str, options: dict | None = None, limits: Limits | None = None):
+    def __init__(self, spec: str, options: dict | None = None, limits: Limits | None = None, sandboxed: bool = True):
         self.spec = spec
         self.options = dict(options or {})
         self.limits = limits or Limits()
+        self.sandboxed = bool(sandboxed)
+        if self.sandboxed:
+            reason = sandbox.unavailable_reason()
+            if reason:
+                raise SandboxUnavailableError(
+                    f"cannot sandbox {spec!r}: {reason}; --isolation process runs plugins in plain worker "
+                    "processes instead (they can then read your files and reach the network; the run records it)"
+                )
+        self._worker_pid: int | None = None
         self.last_seconds: float | None = None
         self.overhead_seconds = 0.0
         self._proc: subprocess.Popen | None = None
@@ -166,6 +230,17 @@ class IsolatedDenoiser:
         if self._channel is not None:
             command.append(str(self._channel.fd))
             fds += (self._channel.fd,)
+        spec, options, rlimits, wrapped = self.spec, self.options, None, None
+        if self.sandboxed:
+            module, colon, attr = spec.partition(":")
+            if colon and module.endswith(".py"):
+                spec = f"{os.path.abspath(module)}:{attr}"  # the worker's folder is its scratch
+            options, rlimits = sandbox.absolute_options(options), self.limits.rlimits()
+            wrapped = sandbox.command(
+                command, readable=sandbox.readable_paths(spec, options), scratch_bytes=self.limits.scratch_mb << 20
+            )
+            command, fds = wrapped.argv, fds + (wrapped.args_fd,)
+        self._worker_pid = None
         try:
             self._proc = subprocess.Popen(
                 command,
@@ -176,10 +251,12 @@ class IsolatedDenoiser:
             )
         finally:
             theirs.close()
+            if wrapped is not None:
+                wrapped.close()
         self._conn = ours
         _LIVE.add(self)
         try:
-            header, _ = self._request(("load", self.spec, self.options, list(sys.path)), "load")
+            header, _ = self._request(("load", spec, options, list(sys.path), rlimits), "load")
         except WorkerFailure as failure:
             from denoisebench.denoisers.registry import DenoiserLoadError
 
@@ -224,7 +301,8 @@ class IsolatedDenoiser:
         try:
             self._conn.send(message)
         except (OSError, ValueError):
-            raise WorkerFailure(self._kill(_exit_reason(self._proc.poll() if self._proc else None))) from None
+            code = self._proc.poll() if self._proc else None
+            raise WorkerFailure(self._kill(_exit_reason(code, self.sandboxed))) from None
         deadline = time.monotonic() + limit
         while True:
             try:
@@ -235,8 +313,11 @@ class IsolatedDenoiser:
                 break
             code = self._proc.poll()
             if code is not None:
-                raise WorkerFailure(self._kill(_exit_reason(code)))
-            rss = _rss_mb(self._proc.pid)
+                raise WorkerFailure(self._kill(_exit_reason(code, self.sandboxed)))
+            breach = self._over_task_limit(what)
+            if breach:
+                raise WorkerFailure(self._kill(breach))
+            rss = _rss_mb(self._pid())
             if rss is not None and rss > self.limits.memory_limit_mb:
                 raise WorkerFailure(
                     self._kill(
@@ -267,10 +348,34 @@ class IsolatedDenoiser:
                 except subprocess.TimeoutExpired:
                     code = None
             reason = (
-                _exit_reason(code) if code is not None else f"malformed reply from the worker ({type(error).__name__})"
+                _exit_reason(code, self.sandboxed)
+                if code is not None
+                else f"malformed reply from the worker ({type(error).__name__})"
             )
             raise WorkerFailure(self._kill(reason)) from None
         return header, payload
+
+    def _pid(self) -> int:
+        """The worker's process id on this machine (sandboxed: the child of the sandbox's init)."""
+        if not self.sandboxed or self._proc is None:
+            return self._proc.pid if self._proc is not None else -1
+        if self._worker_pid is None:
+            pids, _ = _tree(self._proc.pid)  # bwrap, its init (PID 1 inside), the worker, ...
+            if len(pids) < 3:
+                return self._proc.pid
+            self._worker_pid = pids[2]
+        return self._worker_pid
+
+    def _over_task_limit(self, what: str) -> str | None:
+        """The reason when the sandbox holds more tasks than allowed (the kernel does not enforce
+        RLIMIT_NPROC for a root harness's worker), else None."""
+        if not self.sandboxed or self._proc is None:
+            return None
+        _, tasks = _tree(self._proc.pid)
+        tasks -= 2  # bwrap and the sandbox's init
+        if tasks > self.limits.processes:
+            return f"exceeded the process limit ({tasks} tasks > {self.limits.processes}) in {what}; sandbox killed"
+        return None
 
     def _ready(self) -> None:
         if self._disabled:
@@ -370,6 +475,30 @@ def _load_error(type_name: str, message: str, spec: str) -> Exception:
     return registry.DenoiserLoadError(f"cannot load {spec!r}: {type_name}: {message}")
 
 
+def sandboxed(policy: str = DEFAULT_POLICY) -> bool:
+    """Whether ``policy`` puts isolated denoisers into the sandbox (every policy but process/none)."""
+    return policy in SANDBOXED_POLICIES
+
+
+def isolation_text(config: dict, versions: dict) -> str:
+    """The report's sentence on how a run's denoisers were confined (from its config and versions)."""
+    policy = config.get("isolation", DEFAULT_POLICY)
+    if policy == "none":
+        return "Isolation: none (--isolation none): every denoiser ran in the harness's process, trusted code only."
+    if policy == "process":
+        return (
+            "Isolation: plugins ran in plain worker processes, not sandboxed (--isolation process): "
+            "they could read the user's files and reach the network."
+        )
+    who = "every denoiser" if policy == "all" else "plugins (every non-built-in)"
+    if "bubblewrap" not in versions:
+        return f"Isolation: {who} ran in plain worker processes, not sandboxed (a run made before the sandbox)."
+    return (
+        f"Isolation: {who} ran sandboxed (bubblewrap {versions['bubblewrap']}: no network, own PID namespace, "
+        "the dataset, the store and the user's files out of sight, private scratch, resource limits)."
+    )
+
+
 def isolated(spec: str, policy: str = DEFAULT_POLICY) -> bool:
     """Whether ``spec`` runs in a worker under ``policy``."""
     from denoisebench.denoisers.registry import BUILTINS
@@ -392,7 +521,7 @@ def load(spec: str, options: dict | None = None, *, policy: str = DEFAULT_POLICY
     from denoisebench.denoisers.registry import load_denoiser
 
     if isolated(spec, policy):
-        return IsolatedDenoiser(spec.strip(), options, limits)
+        return IsolatedDenoiser(spec.strip(), options, limits, sandboxed=sandboxed(policy))
     return load_denoiser(spec, **(options or {}))
 
 
@@ -402,8 +531,9 @@ def add_arguments(parser) -> None:
         "--isolation",
         choices=POLICIES,
         default=DEFAULT_POLICY,
-        help="which denoisers run in a worker process of their own: plugins (every non-built-in, default), "
-        "all, or none (trusted code only)",
+        help="which denoisers run in a sandboxed worker process of their own: plugins (every non-built-in, "
+        "default), all; process: plugins in plain worker processes without the sandbox (where none starts; "
+        "recorded); none (trusted code only)",
     )
     parser.add_argument(
         "--time-limit",

@@ -3,11 +3,15 @@
 Started as ``python -m denoisebench.denoisers.isolation_worker FD [MEMFD]`` where FD is one end
 of a socket pair (a :class:`multiprocessing.connection.Connection`) and MEMFD, where given, the
 parent's shared memory file (:mod:`.shared_frames`). The parent is trusted, so its requests are
-pickles: ``("load", spec, options, sys_path)``, ``("reset",)``, ``("denoise", frame)`` (the frame
+pickles: ``("load", spec, options, sys_path, rlimits)``, ``("reset",)``, ``("denoise", frame)`` (the frame
 pickled), ``("denoise_shm", descriptor)`` (the frame in the shared file) and ``("close",)``. The worker is not trusted, so its replies are **never pickles**: one JSON
 header (``send_bytes``), followed, for an array output, by the array's raw bytes. The parent
 rebuilds arrays from a whitelisted dtype and a shape whose size must match the bytes, so nothing a
 plugin does in here can run code in the parent.
+
+``rlimits`` (None outside the sandbox) maps ``resource.RLIMIT_*`` names to values; the worker
+sets them, soft and hard, on itself before it imports the plugin, so the plugin can lower them but
+never raise them again (the sandbox leaves it no capabilities).
 
 Everything a plugin raises, including ``SystemExit`` from ``sys.exit()``, is caught and reported
 as a one-line error; ``os._exit()``, a crash or a signal ends the process, which the parent sees
@@ -30,10 +34,21 @@ def _reply(conn, header: dict, payload: bytes | memoryview | None = None) -> Non
         conn.send_bytes(payload)
 
 
-def _load(conn, spec: str, options: dict, sys_path: list[str]):
+def _set_rlimits(rlimits: dict[str, int] | None) -> None:
+    import resource
+
+    for name, value in (rlimits or {}).items():
+        kind = getattr(resource, f"RLIMIT_{name}")
+        _, hard = resource.getrlimit(kind)
+        value = int(value) if hard == resource.RLIM_INFINITY else min(int(value), hard)
+        resource.setrlimit(kind, (value, value))
+
+
+def _load(conn, spec: str, options: dict, sys_path: list[str], rlimits: dict[str, int] | None = None):
     from denoisebench.denoisers.protocol import describe
     from denoisebench.denoisers.registry import load_denoiser
 
+    _set_rlimits(rlimits)
     sys.path[:] = list(sys_path)
     try:
         denoiser = load_denoiser(spec, **options)
