@@ -12,6 +12,7 @@ setup: $(STAMP)
 # Idempotent: re-runs only when the pins or the package metadata change.
 $(STAMP): requirements.txt requirements-nodeps.txt pyproject.toml scripts/ensure_llvm.sh
 	bash scripts/ensure_llvm.sh
+	bash scripts/ensure_sandbox.sh
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip setuptools
 	$(PY) -m pip install --quiet -r requirements.txt
