@@ -1,4 +1,5 @@
-"""What running a built-in in a worker process costs, on demo-sized frames (issue 16's target ≤ 5 %).
+"""What running a built-in in a worker process costs, on demo-sized frames (issue 16's target ≤ 5 %),
+and what the sandbox adds to that worker (issue 33's targets: start-up ≤ 0.5 s, per frame unchanged).
 
     .venv/bin/python bench/isolation_overhead.py [--size 128] [--spp 4] [--frames 3] [--repeats 2] [--only identity,rpf]
 
@@ -17,6 +18,15 @@ noise (seen: −14 % to +43 % at a load average of 11 on 2 cores), which the per
 avoids. Denoise time is the runner's (inside ``denoise()``), the minimum over ``--repeats``
 sequences after a warm-up. The worker's start-up (interpreter, imports, construction) is paid once
 per denoiser per run and reported apart.
+
+The same denoiser then runs in a sandboxed worker (:mod:`denoisebench.denoisers.sandbox`, the
+default for plugins), beside the plain worker process (``--isolation process``), in the same run:
+
+    start-up ratio  = sandboxed start-up / plain worker start-up   (and the difference in seconds)
+    per-frame ratio = sandboxed overhead per call / plain worker overhead per call
+
+Start-up is the median of ``--starts`` constructions (``IsolatedDenoiser`` until the plugin is
+loaded), alternating the two kinds so that a change in the machine's load hits both.
 """
 
 from __future__ import annotations
@@ -30,6 +40,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from denoisebench.denoisers import sandbox  # noqa: E402
 from denoisebench.denoisers.isolation import IsolatedDenoiser  # noqa: E402
 from denoisebench.denoisers.registry import BUILTINS, load_denoiser  # noqa: E402
 from denoisebench.denoisers.runner import run_sequence  # noqa: E402
@@ -61,7 +72,11 @@ def main() -> int:
     parser.add_argument("--frames", type=int, default=3)
     parser.add_argument("--repeats", type=int, default=2)
     parser.add_argument("--only", default="", help="comma-separated built-ins (default every one that loads)")
+    parser.add_argument("--starts", type=int, default=3, help="constructions per kind for the start-up medians")
     args = parser.parse_args()
+    if sandbox.unavailable_reason():
+        print(f"no sandbox here: {sandbox.unavailable_reason()}", file=sys.stderr)
+        return 2
     names = [n for n in args.only.split(",") if n] or list(BUILTINS)
     sequence = synthetic_sequence("textured", args.size, args.size, args.spp, args.frames, samples=True)
     print(f"{args.size}x{args.size}, {args.spp} spp, {args.frames} frames, per-sample data; min of {args.repeats}")
@@ -70,6 +85,7 @@ def main() -> int:
         f"{'overhead ms/frame':>19}{'overhead':>10}{'start-up s':>12}"
     )
     total_denoise = total_extra = 0.0
+    sandbox_rows = []
     for name in names:
         try:
             local = load_denoiser(name)
@@ -77,14 +93,25 @@ def main() -> int:
             print(f"{name:<22} not loaded: {error}")
             continue
         wall_local, denoise = _measure(local, sequence, args.repeats)
-        started = time.perf_counter()
-        remote = IsolatedDenoiser(name)
-        startup = time.perf_counter() - started
+        starts = {False: [], True: []}
+        for _ in range(args.starts):
+            for boxed in (False, True):
+                started = time.perf_counter()
+                IsolatedDenoiser(name, sandboxed=boxed).close()
+                starts[boxed].append(time.perf_counter() - started)
+        startup = float(np.median(starts[False]))
         per_call: list[float] = []
+        boxed_per_call: list[float] = []
+        remote = IsolatedDenoiser(name, sandboxed=False)
+        boxed = IsolatedDenoiser(name, sandboxed=True)
         try:
-            wall_remote, _ = _measure(remote, sequence, args.repeats, per_call)
+            for _ in range(2):  # alternate the two, so that the machine's load falls on both
+                wall_remote, _ = _measure(remote, sequence, args.repeats, per_call)
+                _measure(boxed, sequence, args.repeats, boxed_per_call)
         finally:
             remote.close()
+            boxed.close()
+        boxed_extra = float(np.median(boxed_per_call))
         frame_denoise = denoise / len(sequence)
         extra = float(np.median(per_call))
         total_denoise += frame_denoise
@@ -93,10 +120,29 @@ def main() -> int:
             f"{name:<22}{frame_denoise:>16.4f}{wall_local:>14.4f}{wall_remote:>15.4f}{1e3 * extra:>19.2f}"
             f"{100 * extra / max(frame_denoise, 1e-9):>9.1f}%{startup:>12.2f}"
         )
+        sandbox_rows.append((name, startup, float(np.median(starts[True])), extra, boxed_extra))
     if total_denoise > 0:
         print(
             f"{'all (sum per frame)':<22}{total_denoise:>16.4f}{'':>14}{'':>15}{1e3 * total_extra:>19.2f}"
             f"{100 * total_extra / total_denoise:>9.1f}%"
+        )
+    if sandbox_rows:
+        print(f"\nsandbox ({sandbox.version()}) against a plain worker process, medians of {args.starts} starts:")
+        print(
+            f"{'denoiser':<22}{'start-up s':>12}{'sandboxed s':>13}{'ratio':>8}{'+ s':>8}"
+            f"{'overhead ms/frame':>19}{'sandboxed':>11}{'ratio':>8}"
+        )
+        for name, plain, boxed_start, extra, boxed_extra in sandbox_rows:
+            print(
+                f"{name:<22}{plain:>12.3f}{boxed_start:>13.3f}{boxed_start / plain:>8.2f}{boxed_start - plain:>8.3f}"
+                f"{1e3 * extra:>19.2f}{1e3 * boxed_extra:>11.2f}{boxed_extra / max(extra, 1e-9):>8.2f}"
+            )
+        plain = float(np.median([r[1] for r in sandbox_rows]))
+        boxed_start = float(np.median([r[2] for r in sandbox_rows]))
+        ratios = [r[4] / max(r[3], 1e-9) for r in sandbox_rows]
+        print(
+            f"{'median':<22}{plain:>12.3f}{boxed_start:>13.3f}{boxed_start / plain:>8.2f}{boxed_start - plain:>8.3f}"
+            f"{'':>19}{'':>11}{float(np.median(ratios)):>8.2f}"
         )
     return 0
 
