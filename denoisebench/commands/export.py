@@ -4,7 +4,8 @@
 OUT/<split>/<scene>_f0000_ref.hdr.exr (the reference, OIDN's target) and OUT/<split>/<scene>.json
 ({"exposure": x}); one single-layer float EXR (R,G,B) per feature, clipped as OIDN clips it on load.
 Normals are world-space; albedo is the diffuse reflectance at the first non-delta hit. Images
-smaller than --tile-size (OIDN's default 256) are refused: pass the same --tile_size to train.py.
+smaller than --tile-size (OIDN's default 256) are refused: pass the same --tile_size to train.py
+(and -l l1 below 161 px, where OIDN's default MS-SSIM loss cannot run).
 
 --format noisebase: needs per-sample data (generate-dataset --samples). --layout train writes
 OUT/<split>/seq0000.zip, one Zarr zip store per sequence for TrainingSampleLoader_v1; --layout test

@@ -48,7 +48,10 @@ not change training, where OIDN computes its own autoexposure.
 
 OIDN trains on random crops of ``--tile_size`` pixels (default 256): every image must be at least
 that large on each side, or its loader fails. ``tile_size`` here is checked against every scene
-before anything is written (pass the same value to OIDN's ``train.py --tile_size``).
+before anything is written (pass the same value to OIDN's ``train.py --tile_size``). OIDN's default
+loss (``mix``: L1 and MS-SSIM) needs tiles of at least 161 px (MS-SSIM's five scales); below that,
+train with ``-l l1``. Checked by running OIDN's ``preprocess.py``, ``train.py`` and ``infer.py``
+(repository at e050ac8) on an export of a 32 px synthetic dataset.
 """
 
 from __future__ import annotations
