@@ -31,6 +31,7 @@ EPILOG = """examples:
   run-benchmark --data out/dataset --metrics noisebase,cvvdp   # Noisebase's table beside ColorVideoVDP
   run-benchmark --data out/dataset --trim 0.002   # robust scores drop the worst 0.2 % of pixels
   run-benchmark --data out/dataset --time-at 3840x2160 --time-size 512x512   # times for 4K frames
+  run-benchmark --data out/dataset --samplers uniform,ci_stop,dual_buffer,hachisuka2008 --denoisers none,oidn
 """
 
 
@@ -75,6 +76,12 @@ def add_arguments(parser) -> None:
         default=[],
         metavar="MODULE:ATTR",
         help="a plugin denoiser as module:attr or path/to/file.py:attr (repeatable; added to --denoisers)",
+    )
+    parser.add_argument(
+        "--samplers",
+        default="",
+        help="comma-separated samplers (built-in, entry point of denoisebench.samplers, module:attr) rendered live on "
+        "the dataset's scenes at each spp, alone and with each denoiser ('none' in --denoisers: only alone)",
     )
     parser.add_argument(
         "--option", action="append", default=[], metavar="SPEC:KEY=VALUE", help="constructor option of a denoiser"
@@ -182,6 +189,11 @@ def run(args) -> int:
     # --denoiser alone benchmarks just those plugins; --denoisers defaults to all otherwise
     given = args.denoisers if args.denoisers is not None else ("" if args.denoiser else "all")
     specs = [s.strip() for s in given.split(",") if s.strip()] + list(args.denoiser)
+    samplers = [s.strip() for s in args.samplers.split(",") if s.strip()]
+    if samplers:  # "none": the samplers' images as they are (identity stands in when no denoiser is left)
+        specs = [s for s in specs if s != "none"] or ["identity"]
+        if args.executor != "local":
+            raise UserInputError("--samplers runs with --executor local only")
     config = BenchmarkConfig(
         denoisers=specs,
         spp=_int_list(args.spp) if args.spp else [],
@@ -194,6 +206,7 @@ def run(args) -> int:
         memory_limit_mb=None if limits.memory_limit_mb == DEFAULT_MEMORY_LIMIT_MB else limits.memory_limit_mb,
         verify=not args.no_verify,
         trim=trim,
+        samplers=samplers,
     )
     # outputs first: a run that cannot write its results must not measure for minutes first
     check_writable_file(args.db, "--db")

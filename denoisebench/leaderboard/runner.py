@@ -86,6 +86,7 @@ class BenchmarkConfig:
     memory_limit_mb: int | None = None  # worker resident-memory limit (None: the default)
     verify: bool = True  # check every file's sha256 before the first unit
     trim: float | None = None  # robust scores' dropped fraction (None: metrics.robust.DEFAULT_TRIM, 0.1 %)
+    samplers: list[str] = field(default_factory=list)  # live sampler × denoiser pairs (leaderboard.sampler_units)
 
     def as_dict(self) -> dict:
         data = {
@@ -109,6 +110,8 @@ class BenchmarkConfig:
             data["verify"] = False
         if self.trim is not None:
             data["trim"] = float(self.trim)
+        if self.samplers:
+            data["samplers"] = list(self.samplers)
         return data
 
     def limits(self):
@@ -402,10 +405,11 @@ class RunPlan:
     temporal: list[str]
     resumed: bool
     trim: float | None = None  # the config's (None: the robust scores' default)
+    samplers: list = field(default_factory=list)  # sampler_units.SamplerPair: measured live, after the denoisers
 
     @property
     def labels(self) -> list[str]:
-        return [NOISY] + [d.label for d in self.denoisers if d.instance is not None]
+        return [NOISY] + [d.label for d in self.denoisers if d.instance is not None] + [p.label for p in self.samplers]
 
     @property
     def total_units(self) -> int:
@@ -438,6 +442,11 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     specs = resolve_denoiser_specs(config.denoisers)
     config.denoisers = specs
     denoisers = load_denoisers(specs, config.options, isolation=config.isolation, limits=config.limits())
+    pairs = []
+    if config.samplers:
+        from denoisebench.leaderboard.sampler_units import plan_pairs
+
+        pairs = plan_pairs(config.samplers, denoisers, {d.label for d in denoisers} | {NOISY})
     check_dataset(dataset, scenes, spp)
     if config.verify:
         from denoisebench.dataset.verify import run_files, verify_files
@@ -461,6 +470,11 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
             d.load_error,
             seen.get(d.label, []) if d.trained_scenes else None,
         )
+    if pairs:
+        from denoisebench.leaderboard.sampler_units import register_pairs
+
+        plan.samplers = pairs
+        register_pairs(store, run_id, pairs, denoisers)
     return plan
 
 
@@ -479,9 +493,16 @@ def measure_group(
     dataset: Dataset, plan: RunPlan, scene: str, spp: int, labels: list[str], instances: dict
 ) -> Iterable[UnitRecord]:
     """Load the sequence once and yield the unit of each label on it."""
+    pairs = {p.label: p for p in plan.samplers}
     wants_samples = any("samples" in d.needs for d in plan.denoisers if d.label in labels)
-    sequence = dataset.sequence(scene, spp, samples=wants_samples)
-    for label in labels:
+    stored = [label for label in labels if label not in pairs]
+    sequence = dataset.sequence(scene, spp, samples=wants_samples) if stored else None
+    if len(stored) < len(labels):
+        from denoisebench.leaderboard.sampler_units import measure_pairs
+
+        live = [pairs[label] for label in labels if label in pairs]
+        yield from measure_pairs(dataset, plan, scene, spp, live, instances)
+    for label in stored:
         if label != NOISY and label not in instances:
             raise KeyError(f"no denoiser instance for {label!r}")  # never measure a denoiser as the input
         yield measure_unit(label, instances.get(label), sequence, plan.spatial, plan.temporal, plan.trim)

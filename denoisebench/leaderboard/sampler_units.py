@@ -1,0 +1,112 @@
+"""Samplers in a benchmark run: sampler × denoiser pairs rendered live on the dataset's own scenes.
+
+``run-benchmark --samplers uniform,ci_stop,...`` adds, for every sampler, the pair ``SAMPLER`` (its
+image as it is) and ``SAMPLER+DENOISER`` for every denoiser of the run. A pair is measured like a
+denoiser, unit by unit (scene × spp): each frame of the scene's sequence is rendered live by the
+sampler at that spp as its mean budget (:mod:`denoisebench.sampling.live`: the scene's own stage,
+plan and size, a seed disjoint from the stored inputs' and the reference's, the same seed for every
+sampler), the denoiser gets those buffers in place of the stored input, and the output is scored
+against the dataset's reference with the run's metrics (:func:`~.runner.measure_unit`). The frame's
+render seconds are the sampler's (render + decision), so the pairs are curves of their own in the
+accuracy-vs-time figure and rows in the equal-time tables.
+
+Notes
+-----
+* One live render per sampler, frame and spp feeds all of that sampler's pairs: its denoisers see
+  the same image.
+* A sampler that fails (raises, or the renderer refuses its round) fails its pairs' units with the
+  reason; a sampler that leaves pixels with fewer than 1 sample is warned about on stderr (their
+  value is 0, not an estimate).
+* Samplers run in this process (plugins included; see :mod:`denoisebench.sampling.harness`).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from denoisebench.errors import UserInputError
+
+SEPARATOR = "+"
+
+
+@dataclass(frozen=True)
+class SamplerPair:
+    """A sampler and the denoiser its buffers go to (None: none); ``label`` names the pair in the store."""
+
+    label: str
+    sampler: str
+    denoiser: str | None
+
+
+def plan_pairs(sampler_specs: list[str], denoisers, taken: set[str]) -> list[SamplerPair]:
+    """Every sampler alone and with every loaded denoiser; each sampler is loaded once to fail early (exit 2)."""
+    from denoisebench.sampling.registry import load_sampler
+
+    pairs = []
+    for spec in dict.fromkeys(s.strip() for s in sampler_specs if s.strip()):
+        load_sampler(spec)  # UnknownSamplerError / SamplerLoadError: one line, before any work
+        if spec in taken:
+            raise UserInputError(f"sampler {spec!r} has the label of a denoiser of this run")
+        pairs.append(SamplerPair(spec, spec, None))
+        pairs.extend(
+            SamplerPair(f"{spec}{SEPARATOR}{d.label}", spec, d.label) for d in denoisers if d.instance is not None
+        )
+    return pairs
+
+
+def register_pairs(store, run_id: str, pairs: list[SamplerPair], denoisers) -> None:
+    by_label = {d.label: d for d in denoisers}
+    for pair in pairs:
+        denoiser = by_label.get(pair.denoiser) if pair.denoiser else None
+        spec = f"sampler {pair.sampler}" + (f" + {denoiser.spec}" if denoiser else "")
+        needs = denoiser.needs if denoiser else {"color"}
+        store.add_denoiser(run_id, pair.label, spec, "sampler", needs, bool(denoiser and denoiser.temporal), None)
+
+
+def live_sequence(dataset, scene: str, spp: int, sampler_spec: str, live=None):
+    """(the scene's sequence at ``spp`` with every frame rendered live by the sampler, None) or (None, reason)."""
+    from denoisebench.dataset.frame import Frame
+    from denoisebench.sampling.live import LiveScene, run_live
+    from denoisebench.sampling.protocol import Budget
+    from denoisebench.sampling.registry import load_sampler
+
+    stored = dataset.sequence(scene, spp, samples=False)
+    live = live or LiveScene.from_dataset(dataset, scene)
+    frames = []
+    for frame in stored:
+        result = run_live(load_sampler(sampler_spec), live, frame.index, Budget(spp=spp))
+        if result.error:
+            return None, f"sampler {sampler_spec}: {result.error}"
+        if result.pixels_without_samples:
+            print(
+                f"warning: sampler {sampler_spec} left {result.pixels_without_samples} pixel(s) without a sample "
+                f"in {scene} frame {frame.index} at {spp} spp (their value is 0)",
+                file=sys.stderr,
+            )
+        meta = {**frame.meta, "seconds": result.seconds, "sampler": result.summary()}
+        buffers = {name: np.ascontiguousarray(value, dtype=np.float32) for name, value in result.buffers.items()}
+        frames.append(
+            Frame(buffers=buffers, spp=int(spp), scene=scene, index=frame.index, reference=frame.reference, meta=meta)
+        )
+    return replace(stored, frames=frames), None
+
+
+def measure_pairs(dataset, plan, scene: str, spp: int, pairs: list[SamplerPair], instances: dict):
+    """Yield the UnitRecord of every pair on ``scene`` at ``spp`` (one live render per sampler)."""
+    from denoisebench.leaderboard.runner import measure_unit
+    from denoisebench.leaderboard.store import UnitRecord
+
+    by_sampler: dict[str, list[SamplerPair]] = {}
+    for pair in pairs:
+        by_sampler.setdefault(pair.sampler, []).append(pair)
+    for sampler, group in by_sampler.items():
+        sequence, error = live_sequence(dataset, scene, spp, sampler)
+        for pair in group:
+            if sequence is None:
+                yield UnitRecord(pair.label, scene, spp, "failed", error, [])
+                continue
+            denoiser = instances.get(pair.denoiser) if pair.denoiser else None
+            yield measure_unit(pair.label, denoiser, sequence, plan.spatial, plan.temporal, plan.trim)
