@@ -122,6 +122,16 @@ def test_camera_and_effects_come_from_the_plugins(tmp_path, mi):
     )
     translated, scene = load_mitsuba_xml(path, frames=3)
     assert set(translated.effects_inferred) == {"depth_of_field", "environment", "glossy", "specular", "transmission"}
+    # a bitmap texture (a file beside the XML) is the textures effect
+    mi.Bitmap(np.full((4, 4, 3), 0.5, np.float32)).write(str(tmp_path / "tex.exr"))
+    textured = tmp_path / "textured.xml"
+    textured.write_text(
+        path.read_text().replace(
+            '<texture type="checkerboard" name="reflectance"/>',
+            '<texture type="bitmap" name="reflectance"><string name="filename" value="tex.exr"/></texture>',
+        )
+    )
+    assert "textures" in load_mitsuba_xml(textured)[0].effects_inferred
     camera = translated.camera
     assert camera.frames == 3 and not camera.is_animated
     assert camera.fov_x_deg == pytest.approx(35.0, abs=1e-4)
