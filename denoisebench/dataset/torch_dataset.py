@@ -76,7 +76,7 @@ class _CropBase(torch.utils.data.Dataset):
         if "color" not in self.buffers:
             self.buffers = ("color",) + self.buffers
         for name in self.scenes:
-            info = self.dataset.scene(name)
+            info = self.dataset.scene(name, renders=False)  # the header record: no frame records loaded
             missing_spp = [s for s in self.spp if s not in info.spp]
             if missing_spp:
                 raise DatasetError(f"scene {name!r} was rendered at spp {info.spp}, not {missing_spp}")
@@ -154,7 +154,7 @@ class CropDataset(_CropBase):
             (scene, s, index, k)
             for scene in self.scenes
             for s in self.spp
-            for index in range(self.dataset.scene(scene).frame_count)
+            for index in range(self.dataset.scene(scene, renders=False).frame_count)
             for k in range(max(1, int(crops_per_frame)))
         ]
 
@@ -208,10 +208,10 @@ class SequenceCropDataset(_CropBase):
             (scene, s, start)
             for scene in self.scenes
             for s in self.spp
-            for start in range(0, self.dataset.scene(scene).frame_count - self.frames + 1, stride)
+            for start in range(0, self.dataset.scene(scene, renders=False).frame_count - self.frames + 1, stride)
         ]
         if not self.items:
-            longest = max(self.dataset.scene(s).frame_count for s in self.scenes)
+            longest = max(self.dataset.scene(s, renders=False).frame_count for s in self.scenes)
             raise DatasetError(f"no scene has {self.frames} frames (the longest has {longest})")
 
     def __len__(self) -> int:
