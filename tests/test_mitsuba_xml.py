@@ -222,3 +222,20 @@ def test_generate_refuses_a_malformed_xml_in_one_line_and_writes_nothing(tmp_pat
     err = capsys.readouterr().err.strip()
     assert "not well-formed XML" in err and "\n" not in err
     assert not out.exists()
+
+
+def test_included_fragments_are_read_and_are_dependencies(tmp_path, mi):
+    from denoisebench.generator.mitsuba_xml import dependencies
+
+    write_cornell(tmp_path)
+    body = CORNELL.split("\n", 1)[1].rsplit("</scene>", 1)[0].replace('value="$depth"', 'value="4"')
+    body = body.replace('<default name="depth" value="-1"/>', "")
+    (tmp_path / "fragments").mkdir()
+    (tmp_path / "fragments" / "all.xml").write_text(f'<scene version="3.0.0">{body}</scene>\n')
+    main = tmp_path / "main.xml"
+    main.write_text('<scene version="3.0.0"><include filename="fragments/all.xml"/></scene>\n')
+    structure = read_structure(main)
+    assert structure.integrator == "path" and structure.max_depth == 4
+    assert [relative for _, relative in dependencies(main)] == ["fragments/all.xml", "meshes/block.obj"]
+    translated, scene = load_mitsuba_xml(main)
+    assert translated.max_depth == 4 and len(scene.emitters()) == 1

@@ -24,8 +24,9 @@ Notes
   estimator with features). A ``path`` (or ``volpath``) integrator's ``max_depth`` other than −1 is
   the scene's own depth restriction (recorded like a stage's ``maxDepth``); any other integrator
   type gets one warning. Participating media (``<medium>``) cannot be rendered: refused.
-* Files: every ``filename`` the scene names must lie inside the XML file's folder (they are copied
-  into the dataset at the same relative paths, as for USD); anything else is refused, one line.
+* Files: every ``filename`` the scene names, and every file it ``<include>``s (read too, for their
+  own files, integrator and media), must lie inside the XML file's folder (they are copied into
+  the dataset at the same relative paths, as for USD); anything else is refused, one line.
 * Refusals are one-line :class:`~denoisebench.errors.UserInputError` (exit 2): a missing file,
   malformed XML, a root other than ``<scene>``, a scene Mitsuba will not load, no or an unsupported
   sensor, no emitter, media.
@@ -66,27 +67,46 @@ def _short(error: BaseException) -> str:
     return " ".join(str(error).split())[:200]
 
 
-def read_structure(path: Path) -> XmlStructure:
-    """Parse ``path`` (UserInputError when it is not a Mitsuba ``<scene>`` document)."""
+def _parse(path: Path, shown: Path) -> ElementTree.Element:
     try:
         root = ElementTree.parse(path).getroot()
     except ElementTree.ParseError as error:
-        raise UserInputError(f"{path}: not well-formed XML ({_short(error)})") from None
+        raise UserInputError(f"{shown}: not well-formed XML ({_short(error)})") from None
     except OSError as error:
-        raise UserInputError(f"{path}: cannot read ({error.strerror or error})") from None
+        raise UserInputError(f"{shown}: cannot read ({error.strerror or error})") from None
     if root.tag != "scene":
-        raise UserInputError(f"{path}: the root element is <{root.tag}>, not a Mitsuba <scene>")
-    defaults = {d.get("name"): d.get("value", "") for d in root.iter("default")}
+        raise UserInputError(f"{shown}: the root element is <{root.tag}>, not a Mitsuba <scene>")
+    return root
+
+
+def read_structure(path: Path) -> XmlStructure:
+    """Parse ``path`` and the files it ``<include>``s (UserInputError when one is not a Mitsuba
+    ``<scene>`` document). Included files' paths, like every ``filename``, are relative to ``path``'s
+    folder, as Mitsuba resolves them."""
+    roots, queue, seen = [], [path], set()
+    while queue:
+        current = queue.pop(0)
+        key = current.resolve()
+        if key in seen:
+            continue
+        seen.add(key)
+        root = _parse(current, path if current == path else current)
+        roots.append(root)
+        queue.extend(path.parent / i.get("filename") for i in root.iter("include") if i.get("filename"))
+    defaults = {d.get("name"): d.get("value", "") for root in roots for d in root.iter("default")}
 
     def resolve(text: str | None) -> str:
         return _VARIABLE.sub(lambda m: defaults.get(m.group(1), m.group(0)), text or "")
 
     out = XmlStructure()
-    out.has_media = any(True for _ in root.iter("medium"))
-    for element in root.iter():
-        if element.get("name") == "filename" and element.get("value"):
-            out.files.append(resolve(element.get("value")))
-    integrator = root.find("integrator")
+    out.has_media = any(True for root in roots for _ in root.iter("medium"))
+    for root in roots:
+        for element in root.iter():
+            if element.tag == "include" and element.get("filename"):
+                out.files.append(resolve(element.get("filename")))
+            elif element.get("name") == "filename" and element.get("value"):
+                out.files.append(resolve(element.get("value")))
+    integrator = next((root.find("integrator") for root in roots if root.find("integrator") is not None), None)
     while integrator is not None and integrator.find("integrator") is not None:  # e.g. aov/moment wrappers
         integrator = integrator.find("integrator")
     if integrator is not None:
