@@ -3,7 +3,8 @@
 Two layouts, as Noisebase's two loaders read them (``noisebase/loaders/torch/``):
 
 * ``train`` (``TrainingSampleLoader_v1``): one Zarr group in a zip store per sequence,
-  ``OUT/<split>/seq0000.zip``..., frames along the first axis::
+  ``OUT/<split>/seq0000.zip``..., frames along the first axis, one uncompressed chunk per frame
+  (written frame by frame: memory holds one frame)::
 
       color           uint8   F×4×H×W×S   per-sample radiance, RGBE (see below)
       exposure        float32 F×2         [min, max] log radiance of the frame's RGBE code
@@ -237,6 +238,46 @@ def write_zip_group(path: Path, arrays: dict[str, np.ndarray]) -> Path:
     return path
 
 
+class SequenceZipWriter:
+    """A sequence's zip store for the training layout, written one frame at a time.
+
+    Each array is ``F×…`` with one uncompressed chunk per frame (``chunks=(1, …)``), so memory holds
+    one frame whatever the sequence length, and Noisebase's ``ds[name][frame_idx]`` reads one chunk.
+    Written under a temporary name and renamed by :meth:`close`; :meth:`abort` removes it.
+    """
+
+    def __init__(self, path: Path, frames: int):
+        import zarr
+
+        self.path, self.frames = path, int(frames)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.tmp = temporary_path(path)
+        self.store = zarr.ZipStore(str(self.tmp), mode="w", compression=zipfile.ZIP_STORED)
+        self.group = zarr.group(store=self.store)
+
+    def add(self, index: int, arrays: dict[str, np.ndarray]) -> None:
+        for name in sorted(arrays):
+            array = np.ascontiguousarray(arrays[name])
+            if name not in self.group:
+                self.group.create_dataset(
+                    name,
+                    shape=(self.frames, *array.shape),
+                    chunks=(1, *array.shape),
+                    dtype=array.dtype,
+                    compressor=None,
+                )
+            self.group[name][index] = array
+
+    def close(self) -> Path:
+        self.store.close()
+        os.replace(self.tmp, self.path)
+        return self.path
+
+    def abort(self) -> None:
+        self.store.close()
+        self.tmp.unlink(missing_ok=True)
+
+
 def static_check_applies(info) -> bool:
     """The object-motion check needs a pinhole at the frame's time: through a thin lens our motion follows
     each sample's lens point (Noisebase reprojects through the lens center: they differ by the change of
@@ -367,18 +408,24 @@ def export_noisebase(
             entries = plan.get(split, [])
             for number, (scene, scene_spp) in enumerate(entries):
                 info = dataset.scene(scene)
-                frames, prev_cam = [], None
-                for index in range(info.frame_count):
-                    arrays, prev_cam = _frame_arrays(dataset, scene, scene_spp, index, pad, prev_cam)
-                    if layout == "test":
-                        path = out / split / scene / f"frame{index:04d}.zip"
-                        write_zip_group(path, arrays)
-                    else:
-                        frames.append(arrays)
-                    bar.update(1)
+                prev_cam = None
+                sequence = None
                 if layout == "train":
-                    stacked = {name: np.stack([f[name] for f in frames]) for name in frames[0]}
-                    write_zip_group(out / split / f"seq{number:04d}.zip", stacked)
+                    sequence = SequenceZipWriter(out / split / f"seq{number:04d}.zip", info.frame_count)
+                try:
+                    for index in range(info.frame_count):
+                        arrays, prev_cam = _frame_arrays(dataset, scene, scene_spp, index, pad, prev_cam)
+                        if sequence is None:
+                            write_zip_group(out / split / scene / f"frame{index:04d}.zip", arrays)
+                        else:
+                            sequence.add(index, arrays)
+                        bar.update(1)
+                except BaseException:
+                    if sequence is not None:
+                        sequence.abort()
+                    raise
+                if sequence is not None:
+                    sequence.close()
             if entries:
                 first = dataset.scene(entries[0][0])
                 src = {
