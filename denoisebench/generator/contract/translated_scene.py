@@ -4,8 +4,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.scenes.effects import DECLARED_ONLY, validate_effects
+
+#: Pose keys per frame of a shape that moves within the shutter (``shutter_motion["times"]``).
+SHUTTER_SUBSTEPS = 4
+
+
+def shutter_keys(frames: int, shutter_open: float, shutter_close: float) -> np.ndarray:
+    """Key times (frames) covering every frame's shutter: ``[min(0, open), frames - 1 + max(0, close)]``
+    every ``1 / SHUTTER_SUBSTEPS`` frame (at least two keys)."""
+    lo = min(0.0, float(shutter_open))
+    hi = float(frames - 1) + max(0.0, float(shutter_close))
+    count = max(2, int(np.ceil((hi - lo) * SHUTTER_SUBSTEPS - 1e-9)) + 1)
+    return lo + np.arange(count, dtype=np.float64) / SHUTTER_SUBSTEPS
 
 
 @dataclass
@@ -20,6 +34,11 @@ class TranslatedScene:
             no integrator: the renderer adds those per frame, because the camera moves and its film,
             filter and sampler depend on the render plan. ``build_mitsuba_scene`` turns it into a
             ``mi.Scene``.
+            A rigid shape that moves while the shutter is open also holds ``shutter_motion``:
+            ``{"times": K key times in frames (uniform, SHUTTER_SUBSTEPS per frame, covering every frame's
+            shutter), "to_world": K×4×4 world-from-object poses at those times, "from_record": 4×4
+            object-from-record matrix (the inverse of the pose the record's positions are baked at)}``;
+            its ``positions`` stay the first frame's, so that renderers without motion blur still work.
         camera: the camera's poses over the sequence and its lens.
         effects_declared: effects the stage's metadata declares (empty for a user's own USD).
         effects_inferred: effects read off the stage itself.
@@ -45,6 +64,11 @@ class TranslatedScene:
         """Some shape moves between frames (its record holds ``frame_positions``: F×N×3 vertices per
         frame, and ``frame_normals`` when it has normals); build its Mitsuba scene per frame."""
         return any("frame_positions" in shape for shape in self.scene_dict["shapes"])
+
+    @property
+    def shutter_moving(self) -> bool:
+        """Some shape moves while the shutter is open (a record holds ``shutter_motion``): object motion blur."""
+        return any("shutter_motion" in shape for shape in self.scene_dict["shapes"])
 
     @property
     def effects(self) -> tuple[str, ...]:

@@ -222,8 +222,8 @@ def _compiled_pass(scene, config: _PassConfig):
     """
     import drjit as dr
 
-    if not FREEZE_PASSES or not config.uniform:
-        return _render_pass
+    if not FREEZE_PASSES or not config.uniform or not getattr(scene, "frozen", True):
+        return _render_pass  # (scenes with motion within the shutter say frozen = False: render/motion.py)
     if _COMPILED_SCENE[0] is not scene:
         _COMPILED.clear()
         _COMPILED_SCENE[0] = scene

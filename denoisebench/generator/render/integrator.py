@@ -43,6 +43,13 @@ Features (the first vertex is the camera ray's first intersection):
   previous frame is where the hit surface point *was* one frame earlier: the mesh attribute
   ``vertex_prev_position`` (render/scene.py) interpolated at the hit, exact for rigid and for
   per-vertex motion alike (both are affine within a triangle); analytic shapes are static.
+  A first hit on a shape that moves *within* the shutter (:mod:`~denoisebench.generator.render.motion`)
+  has its motion defined at the shutter's centre instead (object and camera at ``t_c - 1`` and ``t_c``).
+
+Object motion blur: given a :class:`~denoisebench.generator.render.motion.ShutterMotionScene`, every
+intersection and shadow test (camera ray, cut-out skips, bounces, next-event estimation, second hit)
+also meets the moving shapes at the ray's time; features are those of each sample's own hit. For a
+plain ``mi.Scene`` the kernel is the same code as before (same bytes).
 
 With ``KernelOptions.second_hit`` (per-sample data only; paths that bounce) a sample also carries
 what Sen & Darabi's random parameter filter analyses: ``light`` (the 2-D random numbers of the
@@ -66,6 +73,7 @@ from dataclasses import dataclass
 
 from denoisebench.generator.contract.render_plan import UNBOUNDED_DEPTH, paths_bounce
 from denoisebench.generator.render.camera import DrCamera
+from denoisebench.generator.render.motion import NO_OBJECT, ShutterMotionScene
 from denoisebench.generator.render.scene import PREVIOUS_POSITION
 
 
@@ -210,6 +218,9 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
 
     switches = camera.switches
     out = {}
+    motion = None
+    if isinstance(scene, ShutterMotionScene):  # shapes that move within the shutter
+        scene, motion = scene.base, scene.moving
 
     # ------------------------------------------------------------ camera ray
     if opts.jitter:
@@ -232,14 +243,23 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     ray, pose = camera.generate_ray(film, lens_uv, time)
 
     # ---------------------------------------------------------- first vertex
-    si = scene.ray_intersect(ray, mi.RayFlags.All, True)
+    if motion is None:
+        si = scene.ray_intersect(ray, mi.RayFlags.All, True)
+    else:
+        si, hit_object, hit_local = motion.ray_intersect(scene, ray, True)
     for _ in range(opts.null_skips):
         # Cut-outs: pass straight through points whose BSDF is fully transparent (mask opacity 0), so
         # that the first vertex, its features and its motion are what the camera sees. Unbiased: there
         # the BSDF is a null lobe of weight 1 and evaluates to 0 for light sampling.
         clear = si.is_valid() & (dr.min(si.bsdf(ray).eval_null_transmission(si, si.is_valid())) >= 1.0)
         ray = mi.Ray3f(dr.select(clear, si.spawn_ray(ray.d).o, ray.o), ray.d, ray.maxt, ray.time, ray.wavelengths)
-        si = dr.select(clear, scene.ray_intersect(ray, mi.RayFlags.All, True, clear), si)
+        if motion is None:
+            si = dr.select(clear, scene.ray_intersect(ray, mi.RayFlags.All, True, clear), si)
+        else:
+            si_next, object_next, local_next = motion.ray_intersect(scene, ray, True, clear)
+            si = dr.select(clear, si_next, si)
+            hit_object = dr.select(clear, object_next, hit_object)
+            hit_local = dr.select(clear, local_next, hit_local)
     valid = si.is_valid()
     emitted = si.emitter(scene).eval(si)  # environment on a miss; MIS weight 1 at the camera vertex
     diffuse = mi.Color3f(emitted)
@@ -265,6 +285,12 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
                 prev_xy, front_prev = camera.project(prev, target, w)
             keep = front_now & front_prev
             out["motion"] = dr.select(keep, mi.Vector2f(prev_xy - now_xy), mi.Vector2f(0.0))
+            if motion is not None:
+                on_moving = valid & (hit_object != NO_OBJECT)
+                moved, front = motion.centre_motion(camera, hit_object, hit_local, on_moving)
+                out["motion"] = dr.select(
+                    on_moving, dr.select(front, mi.Vector2f(moved), mi.Vector2f(0.0)), out["motion"]
+                )
 
     need_bsdf = opts.bounces or opts.features
     if not need_bsdf:
@@ -280,7 +306,10 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     active_em = active_next & smooth
     if opts.bounces:
         light_uv = sampler.next_2d()
-        ds, em_weight = scene.sample_emitter_direction(si, light_uv, True, active_em)
+        if motion is None:
+            ds, em_weight = scene.sample_emitter_direction(si, light_uv, True, active_em)
+        else:
+            ds, em_weight = motion.sample_emitter_direction(scene, si, light_uv, active_em)
         active_em &= ds.pdf != 0.0
         wo = si.to_local(ds.d)
         sample1 = sampler.next_1d()
@@ -325,7 +354,10 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             # RPF's random parameters and second-hit features (same random numbers as without them)
             out["light"] = light_uv
             out["bounce"] = sample2
-            si2 = scene.ray_intersect(ray, mi.RayFlags.All, True, active_next)
+            if motion is None:
+                si2 = scene.ray_intersect(ray, mi.RayFlags.All, True, active_next)
+            else:
+                si2 = motion.ray_intersect(scene, ray, True, active_next)[0]
             hit2 = active_next & si2.is_valid()
             out["position2"] = dr.select(hit2, si2.p, mi.Point3f(0.0))
             out["normal2"] = dr.select(hit2, si2.sh_frame.n, mi.Normal3f(0.0))
@@ -350,7 +382,10 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             return active
 
         def body(sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active, *follow_state):
-            si = scene.ray_intersect(ray, mi.RayFlags.All, False, active)
+            if motion is None:
+                si = scene.ray_intersect(ray, mi.RayFlags.All, False, active)
+            else:
+                si = motion.ray_intersect(scene, ray, False, active)[0]
             prev_si = mi.Interaction3f(dr.zeros(mi.Float), ray.time, mi.Color0f(), prev_p, prev_n)
             ds = mi.DirectionSample3f(scene, si, prev_si)
             em_pdf = scene.pdf_emitter_direction(prev_si, ds, active & ~prev_delta)
@@ -370,7 +405,10 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
                 pending = pending & active & si.is_valid() & ~smooth
                 follow_state = (albedo, pending)
             active_em = active_next & smooth
-            ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
+            if motion is None:
+                ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
+            else:
+                ds, em_weight = motion.sample_emitter_direction(scene, si, sampler.next_2d(), active_em)
             active_em &= ds.pdf != 0.0
             wo = si.to_local(ds.d)
             val, pdf, bs, weight = bsdf.eval_pdf_sample(ctx, si, wo, sampler.next_1d(), sampler.next_2d(), active_next)

@@ -10,6 +10,13 @@ ones for static meshes and at frame 0). The feature integrator interpolates it a
 to reproject the point the surface occupied in the previous frame (object motion vectors).
 Analytic spheres never move (moving spheres are tessellated), so they need no attribute.
 
+Motion within the shutter: shapes whose records hold ``shutter_motion`` (rigid shapes of a stage with
+an open shutter) are, when :func:`build_mitsuba_scene` is asked for the feature renderer (no sensor,
+no integrator), left out of the main scene and built in their object space, one Mitsuba scene each;
+the result is a :class:`~denoisebench.generator.render.motion.ShutterMotionScene` that the feature
+integrator intersects at every ray's own time. With a sensor or an integrator (Mitsuba's own
+renders) every shape sits at the frame's pose, as before: Mitsuba cannot move shapes within a frame.
+
 A material, mesh or light that Mitsuba refuses is never a crash: the material becomes grey
 diffuse, the mesh or light is skipped, each with one line added to ``translated.warnings``; a
 scene left without any shape, or one ``load_dict`` still refuses, is a one-line UserInputError. Sensors come from
@@ -24,6 +31,7 @@ import numpy as np
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.contract.translated_scene import TranslatedScene
+from denoisebench.generator.render.motion import MovingShapes, ShutterMotionScene, object_space
 from denoisebench.mitsuba_runtime import load_mitsuba
 
 
@@ -128,10 +136,12 @@ def _emitter_dict(mi, record: dict) -> dict:
     raise ValueError(f"unknown emitter record type {kind!r}")
 
 
-def scene_objects(translated: TranslatedScene, frame: int = 0) -> dict:
+def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: bool = False) -> dict:
     """The ``mi.load_dict`` dictionary of a translated scene with Mitsuba objects (no sensor/integrator).
 
-    ``frame`` places moving shapes (ignored for static scenes)."""
+    ``frame`` places moving shapes (ignored for static scenes). ``shutter_motion``: shapes that move
+    within the shutter are returned apart, under ``moving_<index>`` keys, as ``(mesh in object space,
+    shutter_motion record, (bounding-sphere centre, radius) in object space)``."""
     mi = load_mitsuba()
     data = translated.scene_dict
 
@@ -157,7 +167,18 @@ def scene_objects(translated: TranslatedScene, frame: int = 0) -> dict:
             black = black or mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}})
             bsdf = black
         key = f"shape_{index:04d}"
-        if record["kind"] == "sphere":
+        if shutter_motion and "shutter_motion" in record:
+            try:
+                local = object_space(record)
+                mesh = _build_mesh(mi, local, bsdf, emitter)
+            except Exception as error:
+                skipped(f"{record['name']}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
+                continue
+            points = local["positions"].astype(np.float64)
+            centre = 0.5 * (points.min(0) + points.max(0))
+            radius = float(np.sqrt(np.max(np.sum(np.square(points - centre), axis=1))))
+            out[f"moving_{index:04d}"] = (mesh, record["shutter_motion"], (centre, radius))
+        elif record["kind"] == "sphere":
             shape = {"type": "sphere", "center": record["center"], "radius": record["radius"], "bsdf": bsdf}
             if emitter is not None:
                 shape["emitter"] = emitter
@@ -207,19 +228,34 @@ def sensor_dict(
 
 
 def build_mitsuba_scene(
-    translated: TranslatedScene, sensor: dict | None = None, integrator: dict | None = None, frame: int = 0
+    translated: TranslatedScene,
+    sensor: dict | None = None,
+    integrator: dict | None = None,
+    frame: int = 0,
+    shutter_motion: bool | None = None,
 ):
-    """``mi.Scene`` of a translated stage at ``frame`` (matters for moving scenes), optionally with a sensor and an integrator."""
+    """``mi.Scene`` of a translated stage at ``frame`` (matters for moving scenes), optionally with a sensor and an integrator.
+
+    ``shutter_motion`` (default: when neither a sensor nor an integrator is given and some shape moves
+    within the shutter) returns a :class:`ShutterMotionScene` for the feature renderer instead."""
     mi = load_mitsuba()
-    objects = scene_objects(translated, frame)
+    if shutter_motion is None:
+        shutter_motion = sensor is None and integrator is None and translated.shutter_moving
+    objects = scene_objects(translated, frame, shutter_motion=bool(shutter_motion))
+    moving = [objects.pop(key) for key in sorted(k for k in objects if k.startswith("moving_"))]
     if sensor is not None:
         objects["sensor"] = sensor
     if integrator is not None:
         objects["integrator"] = integrator
-    if not any(key.startswith("shape_") for key in objects):
+    if not moving and not any(key.startswith("shape_") for key in objects):
         raise UserInputError(f"{translated.source or 'stage'}: nothing renderable: no shape that Mitsuba can build")
     try:
-        return mi.load_dict(objects)
+        base = mi.load_dict(objects)
+        if not moving:
+            return base
+        scenes = [mi.load_dict({"type": "scene", "shape": mesh}) for mesh, _, _ in moving]
+        shapes = MovingShapes(mi, scenes, [motion for _, motion, _ in moving], [bound for _, _, bound in moving])
+        return ShutterMotionScene(base, shapes)
     except Exception as error:
         raise UserInputError(
             f"{translated.source or 'stage'}: Mitsuba cannot build the scene ({_short(error)})"

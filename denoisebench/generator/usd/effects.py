@@ -4,7 +4,8 @@ Thresholds: ``specular`` for metals or dielectrics with roughness < 0.05 (a near
 ``glossy`` for roughness in [0.05, 0.4) on metals or dielectrics; ``transmission`` for
 opacity < 1; ``textures`` for any bitmap in use; ``area_lights`` for Rect/Disk/Sphere lights and
 emissive geometry; ``environment`` for a Dome light; ``depth_of_field`` for a lens aperture;
-``motion_blur`` for an open shutter on an animated camera. ``indirect`` (multi-bounce transport
+``motion_blur`` for an open shutter on an animated camera or with a shape that moves within it
+(a record with ``shutter_motion``: object motion blur). ``indirect`` (multi-bounce transport
 matters) cannot be read off a stage reliably; it is only ever declared.
 """
 
@@ -21,7 +22,7 @@ def infer_effects(camera, materials, light_kinds, shapes, emitters) -> tuple[str
     found = set()
     if camera.has_depth_of_field:
         found.add("depth_of_field")
-    if camera.has_open_shutter and camera.is_animated:
+    if camera.has_open_shutter and (camera.is_animated or any("shutter_motion" in shape for shape in shapes)):
         found.add("motion_blur")
     for material in materials:
         non_diffuse = material.metallic > METALLIC_THRESHOLD or material.opacity < 1.0

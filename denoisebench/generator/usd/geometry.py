@@ -10,8 +10,9 @@
 * Transforms are baked into the vertices. A gprim whose transform (or an ancestor's) or whose
   ``points`` are time-sampled is read at every frame (the translator stores the per-frame vertices,
   see translate.py); such a sphere is always tessellated, so that its vertices can move and carry
-  their previous-frame positions for motion vectors. Motion *within* a frame (object motion blur)
-  is not simulated: each frame shows the pose at its time code.
+  their previous-frame positions for motion vectors. Motion *within* a frame (object motion blur):
+  when the camera's shutter is open, a rigidly moving gprim also gets its poses at sub-frame keys
+  (``shutter_motion``, written by translate.py); the renderer intersects it at each ray's time.
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ import numpy as np
 
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.render_plan import STAGE_MAX_DEPTH_KEY, check_max_depth
-from denoisebench.generator.contract.translated_scene import TranslatedScene
+from denoisebench.generator.contract.translated_scene import TranslatedScene, shutter_keys
 from denoisebench.generator.usd import geometry
 from denoisebench.generator.usd.camera import find_camera, read_camera
 from denoisebench.generator.usd.effects import infer_effects
@@ -177,6 +177,8 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
                     [parts] + [_gprim_parts(prim, to_mitsuba, t, [], materials, analytic=False) for t in frames[1:]],
                     warnings,
                 )
+                if camera.has_open_shutter and not geometry.are_points_animated(prim):
+                    _attach_shutter_motion(prim, parts, to_mitsuba, frames, camera, warnings)
             for record, material in parts:
                 bind(record, material)
             continue
@@ -265,6 +267,28 @@ def _attach_frames(prim, parts, per_frame, warnings: list[str]) -> None:
         record["frame_positions"] = np.stack([r["positions"] for r in records])
         if "normals" in record:
             record["frame_normals"] = np.stack([r["normals"] for r in records])
+
+
+def _attach_shutter_motion(prim, parts, to_mitsuba, frames, camera, warnings: list[str]) -> None:
+    """Give each part of a rigidly moving gprim its poses within the shutter (``shutter_motion``).
+
+    Keys every 1/SHUTTER_SUBSTEPS frame over all frames' shutters (time code = first frame + key time);
+    emissive parts are refused (no moving emitters: they keep each frame's pose, one warning)."""
+    times = shutter_keys(len(frames), camera.shutter_open, camera.shutter_close)
+    poses = np.stack([to_mitsuba @ geometry.local_to_world(prim, frames[0] + float(t)) for t in times])
+    first = to_mitsuba @ geometry.local_to_world(prim, frames[0])
+    if abs(np.linalg.det(first[:3, :3])) < 1e-12 or not np.all(np.isfinite(poses)):
+        warnings.append(f"{prim.GetPath()}: degenerate transform; no motion blur within the shutter")
+        return
+    from_record = np.linalg.inv(first)
+    for record, material in parts:
+        if material.emission is not None or "emitter" in record:
+            warnings.append(
+                f"{prim.GetPath()}: emissive geometry moving within the shutter is not supported; "
+                "rendered at each frame's pose (no motion blur on it)"
+            )
+            continue
+        record["shutter_motion"] = {"times": times, "to_world": poses, "from_record": from_record}
 
 
 def scene_bounds(translated: TranslatedScene) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,420 @@
+"""Object motion blur: rigid shapes that move *during* the shutter, intersected at each ray's own time.
+
+Mitsuba 3.9 has no animated shape transforms, so moving shapes are kept out of the main scene: each
+moving shape (one per shape record that has ``shutter_motion``, see
+:class:`~denoisebench.generator.contract.translated_scene.TranslatedScene`) lives in a Mitsuba scene of
+its own, in its *object space*, and a ray meets it by being carried into that space with the inverse of
+the shape's pose at the ray's time. The nearer of the main scene's hit and every moving shape's hit
+wins. Camera rays, bounce rays and shadow rays all go through :meth:`MovingShapes.ray_intersect` and
+:meth:`MovingShapes.sample_emitter_direction`, so each sample sees the geometry at its own time: the
+estimator stays unbiased for the time-averaged image (tests/test_object_motion.py checks it against
+the average of static sub-frame renders by Mitsuba's ``path``).
+
+Conventions and pitfalls:
+
+* Poses: the translator samples a shape's world-from-object matrix ``W(τ)`` at ``SHUTTER_SUBSTEPS`` keys
+  per frame (``τ`` in frames, as ray times are) covering every frame's shutter. Between keys the pose
+  is interpolated as the camera's is: translation and stretch linearly, rotation by slerp (of the
+  polar decomposition ``W = T·R·S``). That is exactly what USD does for translate, scale, orient and
+  single-axis rotate ops; for several Euler angles changing at once it is within the key spacing.
+  Times outside the keys clamp to the end keys (USD holds values beyond its last sample).
+  :func:`pose_matrices` is the same interpolation on the host (sub-frame renders, tests).
+* Object space is the shape's USD local space: the record's frame-0 world positions mapped back by
+  ``from_record`` (the inverse of the frame-0 pose), once, in float64.
+* A surface interaction found in object space is carried back to world space: point, geometric normal
+  (cofactor transform, so mirrored poses keep the baked mesh's orientation), shading frame,
+  ``dp_du``/``dp_dv``; ``t`` is the world ray's (the direction is carried by the linear map, not
+  renormalised), ``wi`` is recomputed from the world ray.
+* A cheap bounding-sphere test per shape and ray masks the lanes that cannot hit it (it never rejects
+  a true hit: the sphere bounds the shape at every pose, its radius scaled by the largest stretch).
+* Motion vectors of a sample whose first hit is a moving shape are defined at the **shutter's
+  centre** ``t_c``: the object point at ``t_c - 1`` seen by the camera at ``t_c - 1`` minus the
+  point at ``t_c`` seen by the camera at ``t_c``. Hits on static geometry keep the renderer's
+  convention (the ray's own time).
+* Moving *emitters* are not supported: the translator keeps emissive shapes at each frame's pose (no
+  shutter motion) and says so in one warning; light sampling therefore never meets a moving emitter.
+* Shadow rays towards infinite emitters end ``2 R`` beyond the shading point (Mitsuba's convention,
+  ``R`` the main scene's bounding-sphere radius): a moving shape further out than that casts no
+  shadow from the sky.
+"""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from denoisebench.generator.contract.translated_scene import SHUTTER_SUBSTEPS as SUBSTEPS
+
+#: Hit-object index of a sample whose hit is not on a moving shape.
+NO_OBJECT = 0xFFFFFFFF
+
+
+# ------------------------------------------------------------------------------------------- host side
+def _quaternion(rotation: np.ndarray) -> np.ndarray:
+    """(x, y, z, w) unit quaternion of a proper rotation matrix."""
+    m = rotation
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0:
+        s = 2.0 * np.sqrt(trace + 1.0)
+        q = [(m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s, 0.25 * s]
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = [0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s, (m[2, 1] - m[1, 2]) / s]
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * np.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = [(m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s, (m[0, 2] - m[2, 0]) / s]
+    else:
+        s = 2.0 * np.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = [(m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s, (m[1, 0] - m[0, 1]) / s]
+    q = np.asarray(q, dtype=np.float64)
+    return q / np.linalg.norm(q)
+
+
+def _rotation(q: np.ndarray) -> np.ndarray:
+    x, y, z, w = q
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+
+
+def decompose(matrices: np.ndarray) -> dict:
+    """K×4×4 world-from-object keys → ``translation`` K×3, ``rotation`` K×4 (x, y, z, w; consecutive
+    keys in one hemisphere), ``stretch`` K×3×3 (polar decomposition ``A = R S``; a mirroring pose keeps
+    its reflection in ``S``), and per key interval the slerp angle ``theta`` (K-1)."""
+    matrices = np.asarray(matrices, dtype=np.float64)
+    count = len(matrices)
+    translation = matrices[:, :3, 3].copy()
+    rotation = np.zeros((count, 4))
+    stretch = np.zeros((count, 3, 3))
+    for k, matrix in enumerate(matrices):
+        u, _, vt = np.linalg.svd(matrix[:3, :3])
+        r = u @ vt
+        if np.linalg.det(r) < 0:
+            r = u @ np.diag([1.0, 1.0, -1.0]) @ vt
+        rotation[k] = _quaternion(r)
+        if k and np.dot(rotation[k], rotation[k - 1]) < 0:
+            rotation[k] = -rotation[k]
+        stretch[k] = r.T @ matrix[:3, :3]
+    cos = np.clip(np.sum(rotation[:-1] * rotation[1:], axis=1), -1.0, 1.0)
+    return {"translation": translation, "rotation": rotation, "stretch": stretch, "theta": np.arccos(cos)}
+
+
+def _slerp_weights(theta, w):
+    """Weights of the two end quaternions (lerp where the angle is tiny), as the kernel computes them."""
+    sin = np.sin(theta)
+    small = sin < 1e-5
+    safe = np.where(small, 1.0, sin)
+    wa = np.where(small, 1.0 - w, np.sin((1.0 - w) * theta) / safe)
+    wb = np.where(small, w, np.sin(w * theta) / safe)
+    return wa, wb
+
+
+def _key_and_weight(times: np.ndarray, tau):
+    lo, count = float(times[0]), len(times)
+    u = np.clip((np.asarray(tau, dtype=np.float64) - lo) * SUBSTEPS, 0.0, count - 1.0)
+    k = np.minimum(np.floor(u), count - 2).astype(np.int64)
+    return k, u - k
+
+
+def pose_matrices(motion: dict, tau) -> np.ndarray:
+    """World-from-object 4×4 pose(s) of a ``shutter_motion`` record at time(s) ``tau`` (frames).
+
+    The host twin of the kernel's interpolation (:class:`MovingShapes`), for sub-frame renders and tests."""
+    parts = decompose(motion["to_world"])
+    taus = np.atleast_1d(np.asarray(tau, dtype=np.float64))
+    k, w = _key_and_weight(np.asarray(motion["times"]), taus)
+    wa, wb = _slerp_weights(parts["theta"][k], w)
+    out = np.zeros((len(taus), 4, 4))
+    for i in range(len(taus)):
+        q = parts["rotation"][k[i]] * wa[i] + parts["rotation"][k[i] + 1] * wb[i]
+        q /= np.linalg.norm(q)
+        s = parts["stretch"][k[i]] * (1 - w[i]) + parts["stretch"][k[i] + 1] * w[i]
+        out[i, :3, :3] = _rotation(q) @ s
+        out[i, :3, 3] = parts["translation"][k[i]] * (1 - w[i]) + parts["translation"][k[i] + 1] * w[i]
+        out[i, 3, 3] = 1.0
+    return out if np.ndim(tau) else out[0]
+
+
+def _apply(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
+    return points @ matrix[:3, :3].T + matrix[:3, 3]
+
+
+def _apply_normals(matrix: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    out = normals @ np.linalg.inv(matrix[:3, :3])
+    return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-20)
+
+
+def object_space(record: dict) -> dict:
+    """A ``shutter_motion`` record's mesh in object space (float32 positions and normals)."""
+    from_record = np.asarray(record["shutter_motion"]["from_record"], dtype=np.float64)
+    out = dict(record)
+    out["positions"] = _apply(from_record, record["positions"].astype(np.float64)).astype(np.float32)
+    if "normals" in record:
+        out["normals"] = _apply_normals(from_record, record["normals"].astype(np.float64)).astype(np.float32)
+    for key in ("frame_positions", "frame_normals", "shutter_motion"):
+        out.pop(key, None)
+    return out
+
+
+def translated_at(translated, tau: float):
+    """A copy of ``translated`` with every shutter-moving shape frozen at time ``tau`` (frames).
+
+    Its Mitsuba scene (``build_mitsuba_scene``) is the static sub-frame whose average over the
+    shutter the blurred frame converges to; moving shapes lose ``frame_positions`` too."""
+    out = copy.copy(translated)
+    shapes = []
+    for record in translated.scene_dict["shapes"]:
+        if "shutter_motion" in record:
+            local = object_space(record)
+            pose = pose_matrices(record["shutter_motion"], float(tau))
+            local["positions"] = _apply(pose, local["positions"].astype(np.float64)).astype(np.float32)
+            if "normals" in local:
+                local["normals"] = _apply_normals(pose, local["normals"].astype(np.float64)).astype(np.float32)
+            record = local
+        shapes.append(record)
+    out.scene_dict = {**translated.scene_dict, "shapes": shapes}
+    out.warnings = list(translated.warnings)
+    return out
+
+
+# ----------------------------------------------------------------------------------------- device side
+class MovingShapes:
+    """Shapes that move within the shutter, each in its own object-space Mitsuba scene, with pose tables.
+
+    Built by :func:`~denoisebench.generator.render.scene.build_mitsuba_scene`; the feature integrator
+    calls :meth:`ray_intersect`, :meth:`sample_emitter_direction` and :meth:`centre_motion`.
+    """
+
+    def __init__(self, mi, scenes: list, motions: list[dict], bounds: list[tuple]):
+        import drjit as dr
+
+        self.mi, self.dr = mi, dr
+        self.scenes = scenes
+        times = np.asarray(motions[0]["times"], dtype=np.float64)
+        for motion in motions:
+            if len(motion["times"]) != len(times) or not np.allclose(motion["times"], times):
+                raise ValueError("moving shapes must share one key schedule (shutter_keys)")
+        self.count = len(times)
+        self.time0 = float(times[0])
+        parts = [decompose(m["to_world"]) for m in motions]
+        self.rigid = all(np.allclose(p["stretch"], np.eye(3), atol=1e-6) for p in parts)
+
+        def table(kind, rows):
+            rows = np.ascontiguousarray(np.concatenate(rows), dtype=np.float32)
+            return dr.unravel(kind, mi.Float(rows.reshape(-1)))
+
+        self.q = table(mi.Vector4f, [p["rotation"] for p in parts])
+        self.t = table(mi.Vector3f, [p["translation"] for p in parts])
+        # Per interval: slerp angle and 1/sin (0 where the angle is tiny: lerp); padded to K rows.
+        slerp = []
+        for p in parts:
+            theta = np.append(p["theta"], 0.0)
+            sin = np.sin(theta)
+            slerp.append(np.stack([theta, np.where(sin < 1e-5, 0.0, 1.0 / np.where(sin < 1e-5, 1.0, sin))], 1))
+        self.slerp = table(mi.Vector2f, slerp)
+        if not self.rigid:
+            self.s = [table(mi.Vector3f, [p["stretch"][:, :, c] for p in parts]) for c in range(3)]
+        centres, radii = [], []
+        for part, (centre, radius) in zip(parts, bounds):
+            largest = max(np.linalg.svd(s, compute_uv=False).max() for s in part["stretch"])
+            centres.append(centre)
+            radii.append(radius * largest * (1.0 + 1e-4) + 1e-5)
+        self.centres = [mi.Point3f(*[float(v) for v in c]) for c in centres]
+        self.radii = [float(r) for r in radii]
+
+    # ------------------------------------------------------------------ poses
+    def _key(self, time):
+        dr, mi = self.dr, self.mi
+        u = dr.clip((time - dr.opaque(mi.Float, self.time0)) * SUBSTEPS, 0.0, float(self.count - 1))
+        k = mi.UInt32(dr.minimum(dr.floor(u), float(self.count - 2)))
+        return k, u - mi.Float(k)
+
+    def pose(self, index, key):
+        """Per-lane pose ``(columns of R, translation, stretch columns or None)`` of shape ``index`` at ``key``."""
+        dr, mi = self.dr, self.mi
+        k, w = key
+        row = mi.UInt32(index) * self.count + k
+        qa = dr.gather(mi.Vector4f, self.q, row)
+        qb = dr.gather(mi.Vector4f, self.q, row + 1)
+        angle = dr.gather(mi.Vector2f, self.slerp, row)
+        small = angle.y == 0.0
+        wa = dr.select(small, 1.0 - w, dr.sin((1.0 - w) * angle.x) * angle.y)
+        wb = dr.select(small, w, dr.sin(w * angle.x) * angle.y)
+        q = dr.normalize(qa * wa + qb * wb)
+        x, y, z, s = q.x, q.y, q.z, q.w
+        c0 = mi.Vector3f(1 - 2 * (y * y + z * z), 2 * (x * y + z * s), 2 * (x * z - y * s))
+        c1 = mi.Vector3f(2 * (x * y - z * s), 1 - 2 * (x * x + z * z), 2 * (y * z + x * s))
+        c2 = mi.Vector3f(2 * (x * z + y * s), 2 * (y * z - x * s), 1 - 2 * (x * x + y * y))
+        t = dr.lerp(dr.gather(mi.Vector3f, self.t, row), dr.gather(mi.Vector3f, self.t, row + 1), w)
+        stretch = None
+        if not self.rigid:
+            stretch = tuple(
+                dr.lerp(dr.gather(mi.Vector3f, col, row), dr.gather(mi.Vector3f, col, row + 1), w) for col in self.s
+            )
+        return (c0, c1, c2), t, stretch
+
+    def _to_world_point(self, pose, p):
+        (c0, c1, c2), t, stretch = pose
+        if stretch is not None:
+            p = stretch[0] * p.x + stretch[1] * p.y + stretch[2] * p.z
+        return self.mi.Point3f(c0 * p.x + c1 * p.y + c2 * p.z + t)
+
+    def _to_world_vector(self, pose, v):
+        (c0, c1, c2), _, stretch = pose
+        if stretch is not None:
+            v = stretch[0] * v.x + stretch[1] * v.y + stretch[2] * v.z
+        return self.mi.Vector3f(c0 * v.x + c1 * v.y + c2 * v.z)
+
+    def _stretch_inverse(self, stretch):
+        """Columns of ``S⁻¹`` and ``det S`` (the adjugate over the determinant)."""
+        dr = self.dr
+        a, b, c = stretch
+        det = dr.dot(a, dr.cross(b, c))
+        inv = dr.rcp(det)
+        # Rows of the inverse are the cross products of the columns; return it as columns.
+        r0, r1, r2 = dr.cross(b, c) * inv, dr.cross(c, a) * inv, dr.cross(a, b) * inv
+        mi = self.mi
+        return (mi.Vector3f(r0.x, r1.x, r2.x), mi.Vector3f(r0.y, r1.y, r2.y), mi.Vector3f(r0.z, r1.z, r2.z)), det
+
+    def _to_object_vector(self, pose, v):
+        """``A⁻¹ v = S⁻¹ Rᵀ v``."""
+        dr, mi = self.dr, self.mi
+        (c0, c1, c2), _, stretch = pose
+        local = mi.Vector3f(dr.dot(c0, v), dr.dot(c1, v), dr.dot(c2, v))
+        if stretch is not None:
+            (i0, i1, i2), _ = self._stretch_inverse(stretch)
+            local = i0 * local.x + i1 * local.y + i2 * local.z
+        return local
+
+    def _to_world_normal(self, pose, n):
+        """``A⁻ᵀ n`` normalised (``R S⁻ᵀ n``), and ``det A`` (1 for rigid poses)."""
+        dr, mi = self.dr, self.mi
+        (c0, c1, c2), _, stretch = pose
+        det = mi.Float(1.0)
+        if stretch is not None:
+            (i0, i1, i2), det = self._stretch_inverse(stretch)
+            n = mi.Vector3f(dr.dot(i0, n), dr.dot(i1, n), dr.dot(i2, n))  # S⁻ᵀ n
+        return dr.normalize(c0 * n.x + c1 * n.y + c2 * n.z), det
+
+    def _object_ray(self, pose, ray, maxt):
+        mi = self.mi
+        (_, _, _), t, _ = pose
+        o = self._to_object_vector(pose, ray.o - t)
+        d = self._to_object_vector(pose, ray.d)
+        return mi.Ray3f(mi.Point3f(o), d, maxt, ray.time, ray.wavelengths)
+
+    def _may_hit(self, index: int, pose, ray, maxt):
+        """Conservative ray / bounding-sphere test of shape ``index`` at its per-lane pose."""
+        dr = self.dr
+        centre = self._to_world_point(pose, self.centres[index])
+        radius = self.radii[index]
+        oc = centre - ray.o
+        inv_dd = dr.rcp(dr.squared_norm(ray.d))
+        b = dr.dot(oc, ray.d) * inv_dd  # ray parameter of the closest approach
+        gap2 = dr.squared_norm(oc) - dr.square(b) * dr.squared_norm(ray.d)
+        reach = radius * dr.sqrt(inv_dd)
+        return (gap2 <= radius * radius) & (b + reach >= 0.0) & (b - reach <= maxt)
+
+    # ------------------------------------------------------------- queries
+    def ray_intersect(self, base, ray, coherent: bool, active=True):
+        """Nearest hit of ``ray`` in ``base`` or on a moving shape at ``ray.time``.
+
+        Returns ``(si, index, p_object)``: the world-space interaction, the moving shape hit
+        (:data:`NO_OBJECT` otherwise) and the hit point in that shape's object space."""
+        dr, mi = self.dr, self.mi
+        flags = mi.RayFlags.All
+        si = base.ray_intersect(ray, flags, coherent, active)
+        best = dr.select(si.is_valid(), si.t, ray.maxt)
+        key = self._key(ray.time)
+        index = mi.UInt32(NO_OBJECT)
+        found = None
+        for j, scene in enumerate(self.scenes):
+            pose = self.pose(j, key)
+            lanes = mi.Bool(active) & self._may_hit(j, pose, ray, best)
+            si_j = scene.ray_intersect(self._object_ray(pose, ray, best), flags, coherent, lanes)
+            hit = lanes & si_j.is_valid() & (si_j.t < best)
+            found = si_j if found is None else dr.select(hit, si_j, found)
+            index = dr.select(hit, mi.UInt32(j), index)
+            best = dr.select(hit, si_j.t, best)
+        moving = index != NO_OBJECT
+        world = self._to_world(found, self.pose(dr.select(moving, index, 0), key), ray)
+        return dr.select(moving, world, si), index, mi.Point3f(found.p)
+
+    def _to_world(self, si, pose, ray):
+        dr, mi = self.dr, self.mi
+        out = mi.SurfaceInteraction3f(si)
+        out.p = self._to_world_point(pose, si.p)
+        n, det = self._to_world_normal(pose, si.n)
+        out.n = mi.Normal3f(dr.select(det < 0.0, -n, n))
+        sh_n, _ = self._to_world_normal(pose, si.sh_frame.n)
+        s = self._to_world_vector(pose, si.sh_frame.s)
+        s = dr.normalize(s - sh_n * dr.dot(sh_n, s))
+        out.sh_frame = mi.Frame3f(s, dr.cross(sh_n, s), sh_n)
+        out.dp_du = self._to_world_vector(pose, si.dp_du)
+        out.dp_dv = self._to_world_vector(pose, si.dp_dv)
+        out.dn_du = self._to_world_vector(pose, si.dn_du)
+        out.dn_dv = self._to_world_vector(pose, si.dn_dv)
+        out.wi = out.sh_frame.to_local(-ray.d)
+        out.time = ray.time
+        return out
+
+    def ray_test(self, ray, active=True):
+        """Whether ``ray`` meets a moving shape (at ``ray.time``) before ``ray.maxt``."""
+        mi = self.mi
+        key = self._key(ray.time)
+        blocked = mi.Bool(False)
+        for j, scene in enumerate(self.scenes):
+            pose = self.pose(j, key)
+            lanes = mi.Bool(active) & ~blocked & self._may_hit(j, pose, ray, ray.maxt)
+            blocked |= lanes & scene.ray_test(self._object_ray(pose, ray, ray.maxt), lanes)
+        return blocked
+
+    def sample_emitter_direction(self, base, si, sample, active):
+        """``base.sample_emitter_direction`` with its visibility test extended to the moving shapes."""
+        dr = self.dr
+        ds, weight = base.sample_emitter_direction(si, sample, False, active)
+        shadow = si.spawn_ray_to(ds.p)
+        live = active & (dr.max(weight) != 0.0)
+        blocked = base.ray_test(shadow, live)
+        blocked |= self.ray_test(shadow, live & ~blocked)
+        return ds, dr.select(blocked, 0.0, weight)
+
+    def centre_motion(self, camera, index, p_object, active):
+        """Motion (pixels) of an object point at the shutter's centre: previous frame minus now."""
+        dr = self.dr
+        centre = camera.sample_time(0.5)
+        safe = dr.select(active, index, 0)
+        now = self._to_world_point(self.pose(safe, self._key(centre)), p_object)
+        was = self._to_world_point(self.pose(safe, self._key(centre - 1.0)), p_object)
+        now_xy, front_now = camera.project(camera.current_pose(centre), now, 1.0)
+        prev_xy, front_prev = camera.project(camera.previous_pose(centre), was, 1.0)
+        return prev_xy - now_xy, front_now & front_prev
+
+
+class ShutterMotionScene:
+    """A Mitsuba scene plus the shapes that move within the shutter (what ``render_frame`` takes).
+
+    ``base`` is the ``mi.Scene`` of everything static (and of lights); :meth:`shapes` lists both kinds
+    so that the renderer's scans (delta and null BSDFs, previous positions) see every shape. Passes
+    over such a scene are traced, not frozen (``frozen = False``): it is rebuilt per frame anyway.
+    """
+
+    frozen = False
+
+    def __init__(self, base, moving: MovingShapes):
+        self.base = base
+        self.moving = moving
+
+    def shapes(self):
+        out = list(self.base.shapes())
+        for scene in self.moving.scenes:
+            out += list(scene.shapes())
+        return out
+
+    def __getattr__(self, name):
+        return getattr(self.base, name)
