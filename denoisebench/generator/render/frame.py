@@ -319,7 +319,7 @@ class FrameStream:
         Per-lane moments stay on the device between rounds (one entry per lane and channel, all
         bands at once): about ``pixels × groups × 2 × channels × 4`` bytes, e.g. 0.2 GB for a
         1920×1080 frame with every feature. The last round's packed per-pixel moments are copied
-        to the host (float32); variances are formed there in float64.
+        to the host (float32); variances are formed there.
     """
 
     def __init__(
@@ -466,20 +466,31 @@ class FrameStream:
         A pixel without samples has mean 0 and variance ``inf``; one with a single sample has
         variance 0 (unknown, but finite, as in a 1-spp render).
         """
-        counts = self.counts[..., None].astype(np.float64)
-        out = {}
-        for name, chans in self.stat_channels.items():
-            mean_at, m2_at = self._layout[name]
-            mean = self._packed[..., mean_at : mean_at + chans].copy()
-            m2 = np.maximum(self._packed[..., m2_at : m2_at + chans].astype(np.float64), 0.0)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                var = np.where(counts > 1, m2 / ((counts - 1) * counts), 0.0)
-            var = np.where(counts == 0, np.inf, var).astype(np.float32)
-            out[name] = mean
-            out[f"{name}_var"] = var
+        counts = self.counts
+        channels = list(self.stat_channels.items())
+        half = self._layout["stride"] // 2  # means, then M2s (moment_layout)
+        means = self._packed[..., :half]
+        m2 = np.maximum(self._packed[..., half:], np.float32(0.0))
+        # var = M2 / ((n - 1) n): one float32 scale per pixel (one for the frame when counts are uniform).
+        low, high = int(counts.min()), int(counts.max())
+        if low == high:
+            var = m2 * np.float32(1.0 / ((low - 1) * low) if low > 1 else 0.0)
+            if low == 0:
+                var[...] = np.inf
+        else:
+            n = counts.astype(np.float64)
+            with np.errstate(divide="ignore"):
+                scale = np.where(counts > 1, 1.0 / ((n - 1) * n), 0.0).astype(np.float32)
+            var = m2 * scale[..., None]
+            var[counts == 0] = np.inf
+        out, at = {}, 0
+        for name, c in channels:
+            out[name] = np.ascontiguousarray(means[..., at : at + c])
+            out[f"{name}_var"] = np.ascontiguousarray(var[..., at : at + c])
+            at += c
         if self.zero_motion:
             out["motion"] = np.zeros((self.height, self.width, 2), np.float32)
-            out["motion_var"] = np.where(self.counts[..., None] == 0, np.inf, 0.0).astype(np.float32) * np.ones(
+            out["motion_var"] = np.where(counts[..., None] == 0, np.inf, 0.0).astype(np.float32) * np.ones(
                 2, np.float32
             )
         return out

@@ -639,8 +639,9 @@ def pixel_moments(mi, moments: dict, names: dict, groups: int, total):
         merged = {k: (means[k], m2s[k]) for k in moments}
 
     columns = []
-    for k, c in names.items():
-        for value in merged[k]:
+    for part in (0, 1):  # every mean, then every M2 (moment_layout)
+        for k, c in names.items():
+            value = merged[k][part]
             columns += [value] if c == 1 else [value[j] for j in range(c)]
     # One scatter of a ``stride``-wide array writes whole rows (pixel * stride + column): separate
     # scatters into one target would each launch a kernel (Dr.Jit flushes a dirty target first), and
@@ -652,10 +653,15 @@ def pixel_moments(mi, moments: dict, names: dict, groups: int, total):
 
 
 def moment_layout(names: dict) -> dict:
-    """Columns of :func:`pixel_moments`' packed rows: name → (mean offset, M2 offset), and ``"stride"``."""
+    """Columns of :func:`pixel_moments`' packed rows: name → (mean offset, M2 offset), and ``"stride"``.
+
+    Every buffer's mean comes first, in the order of ``names``, then every M2 in the same order:
+    the means are one contiguous block ``[0, stride / 2)`` and the M2s ``[stride / 2, stride)``.
+    """
     layout, offset = {}, 0
+    total = sum(names.values())
     for k, c in names.items():
-        layout[k] = (offset, offset + c)
-        offset += 2 * c
-    layout["stride"] = offset
+        layout[k] = (offset, total + offset)
+        offset += c
+    layout["stride"] = 2 * total
     return layout
