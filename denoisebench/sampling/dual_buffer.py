@@ -65,8 +65,11 @@ class DualBuffer:
         n = np.maximum(state["a_n"], 1)
         mean_a, mean_b = state["a"] / n, state["b"] / n
         size = 2 * self.filter_radius + 1
-        var = uniform_filter((mean_a - mean_b) ** 2 / 4.0, size=size, mode="nearest")
-        lum2 = uniform_filter(((mean_a + mean_b) / 2) ** 2, size=size, mode="nearest")
+        with np.errstate(over="ignore", invalid="ignore"):  # a firefly's square may overflow: it counts as none
+            diff2 = np.nan_to_num((mean_a - mean_b) ** 2 / 4.0, nan=0.0, posinf=0.0)
+            mean2 = np.nan_to_num(((mean_a + mean_b) / 2) ** 2, nan=0.0, posinf=0.0)
+        var = uniform_filter(diff2, size=size, mode="nearest")
+        lum2 = uniform_filter(mean2, size=size, mode="nearest")
         return var, lum2
 
     def sample(self, budget, rounds) -> None:
@@ -86,7 +89,7 @@ class DualBuffer:
         done = 0
         while not rounds.cut and (size := round_size(rounds, done, self.rounds) // 2) > 0:
             var, lum2 = self.error_map(state)
-            sigma = np.sqrt(var * rounds.counts)
+            sigma = np.sqrt(np.maximum(np.nan_to_num(var * rounds.counts, posinf=0.0), 0.0))
             half = top_up(sigma / np.sqrt(lum2 + self.epsilon), rounds.counts / 2, size)
             self._half(rounds, half, state)
             if rounds.cut:
