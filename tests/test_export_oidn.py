@@ -195,3 +195,20 @@ def test_scenes_option_exports_only_those(source, tmp_path):
     assert main([*args, "--scenes", ",".join(chosen)]) == 0
     names = {p.name.split("_f")[0] for p in out.rglob("*.exr")}
     assert names == set(chosen) and not (out / "val").exists()
+
+
+def test_scene_without_reference_is_refused_when_oidn_would_pick_a_rung_as_target(tmp_path, capsys):
+    from denoisebench.dataset import DatasetWriter, assign_splits
+    from denoisebench.dataset.synthetic import synthetic_frame
+
+    source = tmp_path / "noref"
+    writer = DatasetWriter(source, {"generator": "test", "no_reference": True}, {"test": "1"})
+    record = {"family": "synthetic", "seed": 0, "frames": 1, "width": 16, "height": 16, "spp": [1, 4]}
+    writer.add_scene("plain", {**record, "ref_spp": None, "plan": {}, "effects": {"declared": [], "inferred": []}})
+    for spp in (1, 4):
+        writer.write_frame("plain", 0, spp, synthetic_frame(16, 16, 0, spp)[0], None, seconds=0.001)
+    writer.finalize(assign_splits(["plain"], 0))
+    out = tmp_path / "never"
+    assert main(["export", str(source), str(out), "--format", "oidn", "--tile-size", "16", "--quiet"]) == 2
+    assert "no reference: OIDN would take its top rung (4 spp)" in capsys.readouterr().err
+    assert not out.exists()

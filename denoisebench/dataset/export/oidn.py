@@ -148,6 +148,11 @@ def check_exportable(dataset: Dataset, features: tuple[str, ...], tile_size: int
                 f"scene {name!r} is {info.width}x{info.height} px, smaller than OIDN's tile size {tile_size}: "
                 f"render at least {tile_size} px a side, or pass --tile-size N (and train.py --tile_size N)"
             )
+        if not info.has_reference and len(info.spp) > 1:
+            raise UserInputError(
+                f"scene {name!r} has no reference: OIDN would take its top rung ({max(info.spp)} spp) as the "
+                "target of its other rungs; leave it out with --scenes"
+            )
         missing = [f for f in features if FEATURES[f][0] not in _buffers_of(info)]
         if missing:
             raise UserInputError(
