@@ -192,3 +192,23 @@ def test_bad_input_is_one_line_exit_2(rendered, tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert message in err and "\n" not in err
         assert not out.exists()
+
+
+def test_peer_packages_are_the_pinned_ones_and_torch_stays():
+    import importlib.metadata
+    import re
+    from pathlib import Path
+
+    import torch
+
+    root = Path(__file__).resolve().parents[1]
+    assert torch.__version__.split("+")[0] == "2.13.0"
+    for file, names in (
+        ("requirements-nodeps.txt", ("noisebase",)),
+        ("requirements.txt", ("zarr", "numcodecs", "hydra-core", "OpenImageIO")),
+    ):
+        text = (root / file).read_text()
+        for name in names:
+            pin = re.search(rf"^{re.escape(name)}==(\S+)", text, re.M)
+            assert pin, (file, name)
+            assert importlib.metadata.version(name) == pin.group(1), name
