@@ -160,6 +160,14 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
+    from denoisebench.dataset import disk_space
+
+    need = lambda: disk_space.store_need(args.db)  # noqa: E731
+    with disk_space.full_disk_is_one_line(Path(args.db).absolute().parent, "--db", "the results store", need):
+        return _run(args)
+
+
+def _run(args) -> int:
     from denoisebench.dataset import open_dataset
     from denoisebench.denoisers.isolation import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, limits_from_args
     from denoisebench.leaderboard.benchmark_run import run_benchmark

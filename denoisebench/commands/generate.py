@@ -261,9 +261,18 @@ def run(args) -> int:
             f"({max(request.spp)}): references will likely be flagged too noisy",
             file=sys.stderr,
         )
+    from denoisebench.dataset import disk_space
+
+    # a lower bound of the dataset's size against the free space, before anything is rendered
+    frames = (len(request.families) * request.scenes + len(request.usd) + len(request.xml)) * request.frames
+    shape = {"width": request.width, "height": request.height, "frames": frames, "rungs": len(request.spp)}
+    disk_space.check_generate(request.out, **shape)
+    per_file = disk_space.generate_lower_bound(**{**shape, "frames": 1, "rungs": 0})
+    remaining = lambda: disk_space.remaining_exr_bytes(request.out, frames * (len(request.spp) + 1), per_file)  # noqa: E731
     executor = make_executor(args.executor, args.ray_address, cpus_per_task=args.ray_cpus_per_task)
     try:
-        summary = generate_dataset(request, executor, progress=not args.quiet)
+        with disk_space.full_disk_is_one_line(request.out, "--out", "the dataset", remaining):
+            summary = generate_dataset(request, executor, progress=not args.quiet)
     finally:
         executor.close()
     print_summary(summary)
