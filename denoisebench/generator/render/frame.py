@@ -116,7 +116,7 @@ class _PassConfig:
     width: int
     count: int  # most samples a pixel gets in the pass: rows of the per-sample arrays (0 without them)
     groups: int  # lanes per pixel
-    uniform: bool  # every pixel's sample range is the same: starts/ends are opaque scalars, not arrays
+    uniform: bool  # every pixel's sample range is the same: its range is in params, not per-pixel arrays
     fresh: bool  # the first pass of a stream: moments start at zero (made inside, not an input)
 
 
@@ -210,10 +210,8 @@ def _compiled_pass(scene, config: _PassConfig):
         compare the two bit for bit).
 
         One frozen function per configuration: a single one that alternated between two (noisy and
-        reference frames) re-recorded on every call. Passes with per-pixel sample ranges (uneven
-        count maps of :class:`FrameStream`) are traced, not frozen: with the ranges as per-pixel
-        input arrays, replays re-recorded at random (Dr.Jit 1.5; the same inputs recorded a new
-        variant every few calls), which costs more than tracing. Image sizes are in the configuration because
+        reference frames) re-recorded on every call. Every input array is a fresh Dr.Jit allocation
+        (:func:`_device_copy`): inputs that map NumPy memory made replays record anew at random. Image sizes are in the configuration because
         sizes taken with ``dr.width`` inside become constants of the recording.
 
         Recordings are only reused for the scene object they were made with (its BSDF and shape
@@ -222,7 +220,7 @@ def _compiled_pass(scene, config: _PassConfig):
     """
     import drjit as dr
 
-    if not FREEZE_PASSES or not config.uniform or not getattr(scene, "frozen", True):
+    if not FREEZE_PASSES or not getattr(scene, "frozen", True):
         return _render_pass  # (scenes with motion within the shutter say frozen = False: render/motion.py)
     if _COMPILED_SCENE[0] is not scene:
         _COMPILED.clear()
@@ -294,14 +292,14 @@ def _device_copy(mi, kind, values: np.ndarray):
     Notes:
         ``kind(numpy_array)`` maps the NumPy buffer, and a frozen function's input layout includes
         whether each buffer is aligned (render/camera.py ``_float_array``): mapped inputs made
-        replays record anew. A gather into a fresh array copies on the device (fast for large
-        arrays, unlike going through a list), and each call gives a new variable, so that inputs
-        never alias one another.
+        replays record anew, at random (NumPy's alignment varies). Adding an opaque zero runs a
+        kernel that writes a fresh Dr.Jit array (fast for large arrays, unlike going through a
+        list); a gather by ``arange`` did not do it (Dr.Jit returned the mapped array itself).
     """
     import drjit as dr
 
     mapped = kind(values)
-    copy = dr.gather(kind, mapped, dr.arange(mi.UInt32, len(values)))
+    copy = mapped + dr.opaque(kind, 0)  # a kernel writes a fresh array (an opaque 0 is not folded away)
     dr.eval(copy)
     return copy
 

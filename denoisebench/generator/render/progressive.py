@@ -31,7 +31,9 @@ Notes:
     :data:`~denoisebench.generator.render.frame.MAX_PATHS_PER_PASS` paths) whose lanes loop over
     their pixel's range of sample indices. A lane of a pixel with fewer samples idles while the
     pixel with the most samples of its vector finishes, so very uneven maps cost somewhat more per
-    sample than uniform ones.
+    sample than uniform ones: measured on a 128 px cornell frame, four rounds of counts drawn
+    uniformly from 0-8 took 1.1-1.4x the time of four uniform rounds of 4 (same total; 2 busy
+    cores). Rounds are replayed with ``dr.freeze`` like frames (uneven maps record once more).
 """
 
 from __future__ import annotations
