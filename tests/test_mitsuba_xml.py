@@ -1,4 +1,4 @@
-"""Mitsuba XML scene files as a scene source (``generate-dataset --xml``).
+"""Mitsuba XML scene files as a scene source (``generate-dataset --mitsuba``, alias ``--xml``).
 
 Peer: Mitsuba itself. The reference our feature renderer makes of a hand-written Cornell-like XML
 file is held against Mitsuba's ``path`` integrator at its defaults rendering the same file through
@@ -194,7 +194,7 @@ def test_generate_dataset_renders_an_xml_scene_and_copies_its_files(tmp_path, mi
 
     source = write_cornell(tmp_path / "src")
     out = tmp_path / "ds"
-    args = ["generate", "--out", str(out), "--xml", str(source), "--frames", "2", "--width", "16", "--height", "16"]
+    args = ["generate", "--out", str(out), "--mitsuba", str(source), "--frames", "2", "--width", "16", "--height", "16"]
     args += ["--spp", "1,2", "--ref-spp", "16", "--ref-error", "0", "--quiet"]
     assert main(args) == 0
     ds = open_dataset(out)
@@ -239,3 +239,16 @@ def test_included_fragments_are_read_and_are_dependencies(tmp_path, mi):
     assert [relative for _, relative in dependencies(main)] == ["fragments/all.xml", "meshes/block.obj"]
     translated, scene = load_mitsuba_xml(main)
     assert translated.max_depth == 4 and len(scene.emitters()) == 1
+
+
+def test_mitsuba_is_the_documented_option_and_xml_its_alias(capsys):
+    import argparse
+
+    from denoisebench.commands import generate
+
+    parser = argparse.ArgumentParser()
+    generate.add_arguments(parser)
+    assert parser.parse_args(["--out", "o", "--mitsuba", "a.xml", "--xml", "b.xml"]).xml == ["a.xml", "b.xml"]
+    parser.print_help()
+    assert "--mitsuba FILE, --xml FILE" in capsys.readouterr().out
+    assert "--mitsuba staircase/scene_v3.xml" in generate.EPILOG

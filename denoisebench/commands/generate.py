@@ -33,10 +33,10 @@ nothing renderable, refuses the command (one line, exit 2). --auto-camera's orbi
 frames when the stage has no time range) and --default-light's lights are written into the copied
 OUT/usd_<stem>/scene.usda.
 
---xml FILE loads a Mitsuba 3 scene file with Mitsuba (meshes and textures relative to the file, which
-must lie in its folder), copies it with those files into OUT/xml_<stem>/scene.xml and renders it from
-its first sensor (perspective or thinlens) held still over --frames frames, with effects inferred from
-its plugins. Media and other sensors are refused (exit 2); another integrator gets a warning.
+--mitsuba FILE (alias --xml) loads a Mitsuba 3 scene file with Mitsuba (meshes and textures relative to
+the file, which must lie in its folder), copies it with those files into OUT/xml_<stem>/scene.xml and
+renders it from its first sensor (perspective or thinlens) held still over --frames frames, with effects
+inferred from its plugins. Media and other sensors are refused (exit 2); another integrator gets a warning.
 
 Exit codes: 0 done, 2 bad input (one line, nothing written), 1 some frames failed to render
 (reported; the dataset is left resumable and marked incomplete).
@@ -59,7 +59,7 @@ EPILOG = """examples:
   generate-dataset --out data/direct --families cornell --max-depth 2 --ref-error 0 --ref-spp 1024
   generate-dataset --out data/big --scenes 20 --executor ray --ray-address auto
   generate-dataset --out data/asset --usd asset.usdz --auto-camera --default-light --frames 8 --spp 4
-  generate-dataset --out data/bitterli --xml staircase/scene_v3.xml --frames 4 --spp 1,4 --ref-spp 1024
+  generate-dataset --out data/bitterli --mitsuba staircase/scene_v3.xml --frames 4 --spp 1,4 --ref-spp 1024
 """
 
 
@@ -142,7 +142,9 @@ def add_arguments(parser) -> None:
         help="render your own USD stage too (repeatable; .usda/.usdc/.usd/.usdz)",
     )
     parser.add_argument(
+        "--mitsuba",
         "--xml",
+        dest="xml",
         action="append",
         default=[],
         metavar="FILE",

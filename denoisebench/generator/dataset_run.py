@@ -62,7 +62,7 @@ class GenerateRequest:
     samples: bool = False
     seed: int = 0
     usd: tuple[str, ...] = ()
-    xml: tuple[str, ...] = ()  # --xml: Mitsuba XML scenes (generator/mitsuba_xml.py), a static camera over --frames
+    xml: tuple[str, ...] = ()  # --mitsuba (--xml): Mitsuba XML scenes (generator/mitsuba_xml.py), static camera
     force: bool = False
     ref_error: float | None = DEFAULT_REF_ERROR  # None: one reference render at ref_spp
     max_depth: int | None = None  # the user's transport restriction (None: full transport / stage's own)
@@ -107,7 +107,7 @@ def check_request(request: GenerateRequest) -> None:
     if not request.spp or min(request.spp) < 1:
         raise UserInputError(f"--spp needs positive sample counts (got {list(request.spp)})")
     if not request.families and not request.usd and not request.xml:
-        raise UserInputError("nothing to generate: give --families, --usd and/or --xml")
+        raise UserInputError("nothing to generate: give --families, --usd and/or --mitsuba")
     from denoisebench.dataset import bounds  # documented upper bounds and a memory estimate, before any allocation
 
     bounds.check_generate(

@@ -1,4 +1,4 @@
-"""Mitsuba 3 XML scene files as a scene source: ``generate-dataset --xml scene.xml``.
+"""Mitsuba 3 XML scene files as a scene source: ``generate-dataset --mitsuba scene.xml`` (alias ``--xml``).
 
 The file is loaded by Mitsuba itself (``mi.load_file``: its meshes, textures and ``<default>``
 parameters resolve relative to the file), and rendered by the same feature renderer as a
