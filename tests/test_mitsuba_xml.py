@@ -206,6 +206,17 @@ def test_generate_dataset_renders_an_xml_scene_and_copies_its_files(tmp_path, mi
     assert set(info.effects["inferred"]) == {"area_lights", "glossy"}
     frame = ds.frame("xml_cornell", 2, 1)
     assert frame.reference.mean() > 0 and np.isfinite(frame.buffers["albedo"]).all()
+    # samplers render the XML scene live (sampling/live.py loads scene.xml as frame_jobs does): uniform
+    # sampling at the scene's render seed gives the stored 2-spp input's bytes
+    from denoisebench.sampling.harness import run_sampler
+    from denoisebench.sampling.live import LiveScene
+    from denoisebench.sampling.protocol import Budget
+    from denoisebench.sampling.registry import load_sampler
+
+    live = LiveScene.from_dataset(ds, "xml_cornell")
+    assert live.frames == 2
+    again = run_sampler(load_sampler("uniform"), live.open(1, seed=info.record["render_seed"]), Budget(spp=2))
+    np.testing.assert_array_equal(again.buffers["color"], frame.buffers["color"])
     capsys.readouterr()
     assert main(args) == 0  # resumes: everything is there already
     captured = capsys.readouterr()

@@ -1,6 +1,7 @@
 """Samplers on a dataset's own scenes, rendered live: a scene's stage and plan as progressive frames.
 
-:class:`LiveScene` loads a stage once (USD translation, the Mitsuba scene) with a render plan, and
+:class:`LiveScene` loads a scene file once as frame_jobs does (``scene.usda`` translated, or ``scene.xml``
+loaded by Mitsuba) with a render plan, and
 :meth:`LiveScene.open` gives a :class:`~denoisebench.generator.render.progressive.ProgressiveFrame`
 of one frame, the handle :func:`~denoisebench.sampling.harness.run_sampler` drives.
 :meth:`LiveScene.from_dataset` takes a dataset scene's own stage, plan, size and render seed from its
@@ -44,16 +45,16 @@ class LiveScene:
     """A stage loaded for progressive rendering with ``plan`` at ``width``×``height`` (module docstring)."""
 
     def __init__(self, usd_path, plan, *, width: int, height: int, render_seed: int = 0, name: str = ""):
+        from denoisebench.generator.dataset_scenes import load_scene_file
         from denoisebench.generator.render.scene import build_mitsuba_scene
-        from denoisebench.generator.usd.translate import translate_usd
 
         self.usd_path = Path(usd_path)
         self.name = name or self.usd_path.parent.name
         self.plan = plan
         self.width, self.height = int(width), int(height)
         self.render_seed = int(render_seed)
-        self.translated = translate_usd(self.usd_path)
-        self._scene = build_mitsuba_scene(self.translated)
+        self.translated, loaded = load_scene_file(self.usd_path)  # scene.usda (USD) or scene.xml (Mitsuba XML)
+        self._scene = loaded if loaded is not None else build_mitsuba_scene(self.translated)
         self._frame_scene: tuple = (0, self._scene)
 
     @classmethod
