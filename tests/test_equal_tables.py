@@ -54,6 +54,8 @@ def test_interpolation_is_log_log_between_rungs_and_marked_outside():
     beyond = et.spp_for(curve, 1 / 100)
     assert beyond.how == "extrapolated" and beyond.value == pytest.approx(100)
     assert et.spp_for({1: 0.5, 2: 0.5}, 0.1) is None  # a flat curve never reaches it
+    # a nearly flat last segment would need ~10^10 spp: not given
+    assert et.spp_for({1: 1.0, 2: 0.95}, 0.1) is None and et.EXTRAPOLATION_LIMIT == 64
 
 
 def test_equal_time_picks_the_best_configuration_that_fits_each_budget():

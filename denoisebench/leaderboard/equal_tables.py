@@ -33,6 +33,9 @@ from denoisebench.leaderboard.runner import NOISY
 
 #: Multiples of the top rung the equal-quality table adds as (extrapolated) targets.
 EXTRA_TARGETS = (4, 16)
+#: An extrapolation further than this multiple of the top rung is not given (a nearly flat last segment
+#: would put a target at absurd spp): the table says "not reached".
+EXTRAPOLATION_LIMIT = 64
 
 
 def lead_metrics(measured: list[str]) -> list[str]:
@@ -89,8 +92,8 @@ def spp_for(curve: dict[int, float], target: float) -> Estimate | None:
     """The least spp at which a curve {spp: error} reaches ``target`` (error ≤ target).
 
     ``at_most``: met at the lowest rung already; ``interpolated``: on the first segment that crosses
-    it; ``extrapolated``: beyond the top rung along the last segment when that falls; None when the
-    curve neither reaches it nor falls at its end."""
+    it; ``extrapolated``: beyond the top rung along the last segment when that falls (at most
+    :data:`EXTRAPOLATION_LIMIT` × the top rung); None when the curve does not reach it so."""
     points = sorted((s, e) for s, e in curve.items() if e is not None and e > 0)
     if not points or target <= 0:
         return None
@@ -106,7 +109,9 @@ def spp_for(curve: dict[int, float], target: float) -> Estimate | None:
         (x0, y0), (x1, y1) = points[-2], points[-1]
         if y1 < y0:
             slope = (math.log(y1) - math.log(y0)) / (math.log(x1) - math.log(x0))
-            return Estimate(math.exp(math.log(x1) + (math.log(target) - math.log(y1)) / slope), "extrapolated")
+            spp = math.exp(math.log(x1) + (math.log(target) - math.log(y1)) / slope)
+            if spp <= EXTRAPOLATION_LIMIT * x1:
+                return Estimate(spp, "extrapolated")
     return None
 
 

@@ -249,6 +249,13 @@ def time_model_rows(report: dict) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
+def empty_table_text(table) -> str:
+    return (
+        f"No equal-time or equal-quality table for {table.metric}: the noisy input has no aggregated score at the "
+        "measured rungs (every scene left out, e.g. references that cannot resolve the score, or no render times)."
+    )
+
+
 def equal_time_rows(table) -> tuple[list[str], list[list[str]]]:
     """(header, rows) of one metric's equal-time table."""
     header = [
@@ -278,25 +285,30 @@ def equal_time_rows(table) -> tuple[list[str], list[list[str]]]:
 
 
 def equal_quality_rows(table) -> tuple[list[str], list[list[str]]]:
-    """(header, rows) of one metric's equal-quality table: seconds per frame each needs for each target."""
-    header = [f"target {table.metric}", "rendering alone: spp", "s per frame", *table.denoisers]
-    rows = []
+    """(header, rows) of one metric's equal-quality table: one column per error target (rendering alone's
+    error at a rung, or beyond the rungs, marked), one row per denoiser after rendering alone's own row;
+    each cell the seconds per frame needed (and the spp it renders)."""
+    header = [f"{table.metric} target →"]
     for r in table.equal_quality:
-        extrapolated = r.render_how == "extrapolated"
+        mark = " (extrapolated)" if r.render_how == "extrapolated" else ""
+        header.append(f"{num(r.target)} = {r.target_spp:g} spp{mark}")
+    rows = [
+        [
+            "rendering alone",
+            *(
+                num(r.render_seconds) + (" (extrapolated)" if r.render_how == "extrapolated" else "")
+                for r in table.equal_quality
+            ),
+        ]
+    ]
+    for label in table.denoisers:
         cells = []
-        for label in table.denoisers:
+        for r in table.equal_quality:
             need = r.needs.get(label)
             if need is None:
                 cells.append("not reached")
                 continue
             spp, seconds = need
             cells.append(f"{_estimate(seconds)} ({HOW_MARK.get(spp.how, '')}{num(spp.value)} spp)")
-        rows.append(
-            [
-                num(r.target) + (" (extrapolated)" if extrapolated else ""),
-                f"{r.target_spp:g}",
-                num(r.render_seconds) + (" (extrapolated)" if extrapolated else ""),
-                *cells,
-            ]
-        )
+        rows.append([label, *cells])
     return header, rows

@@ -156,6 +156,9 @@ def _equal_tables(report: dict) -> str:
         + "</p>"
     ]
     for table in report.get("equal_tables", []):
+        if not table.equal_time and not table.equal_quality:
+            parts.append(f'<p class="note">{e(fmt.empty_table_text(table))}</p>')
+            continue
         parts.append(f"<h3>Equal time: {e(table.metric)}</h3>" + _table(*fmt.equal_time_rows(table)))
         parts.append(f"<h3>Equal quality: {e(table.metric)}</h3>" + _table(*fmt.equal_quality_rows(table)))
     if report.get("verdicts"):

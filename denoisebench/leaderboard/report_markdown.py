@@ -138,6 +138,9 @@ def _times(report: dict) -> list[str]:
         "",
     ]
     for table in report.get("equal_tables", []):
+        if not table.equal_time and not table.equal_quality:
+            lines += [f"- {md(fmt.empty_table_text(table))}", ""]
+            continue
         lines += [f"### Equal time: {md(table.metric)}", ""] + _table(*fmt.equal_time_rows(table))
         lines += [f"### Equal quality: {md(table.metric)}", ""] + _table(*fmt.equal_quality_rows(table))
     if report.get("verdicts"):
