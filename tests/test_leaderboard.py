@@ -39,7 +39,8 @@ def _table(capsys, *args) -> list[str]:
 
 def test_ranks_across_runs_with_means_from_the_store(db, capsys):
     path, expected = db
-    lines = _table(capsys, "--db", str(path))
+    assert _table(capsys, "--db", str(path))[0].startswith("leaderboard: relmse_robust (lower is better) at 1 spp")
+    lines = _table(capsys, "--db", str(path), "--metric", "relmse")
     assert lines[0].startswith("leaderboard: relmse (lower is better) at 1 spp")
     rows = [line.split() for line in lines[3:]]
     names = [r[1] for r in rows]

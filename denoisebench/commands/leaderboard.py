@@ -17,8 +17,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--db", default="benchmark.sqlite", help="results database (default benchmark.sqlite)")
     parser.add_argument(
         "--metric",
-        default="relmse",
-        help="metric to rank by (default relmse); combined over scenes by the metric's aggregation rule",
+        default="relmse_robust",
+        help="metric to rank by (default relmse_robust: relMSE without the worst 0.1 %% of pixels; relmse for the "
+        "raw score); combined over scenes by the metric's aggregation rule",
     )
     parser.add_argument("--spp", type=int, default=None, help="input spp (default the lowest measured)")
     parser.add_argument(

@@ -77,7 +77,7 @@ def _per_scene(m, label: str, ok_frames: list[dict], sequences: list[dict]) -> d
     return {scene: v for scene, values in by_scene.items() if (v := _mean(values)) is not None}
 
 
-def leaderboard(store: ResultsStore, metric: str = "relmse", spp: int | None = None, dataset: str | None = None):
+def leaderboard(store: ResultsStore, metric: str = "relmse_robust", spp: int | None = None, dataset: str | None = None):
     """(metric object, spp, dataset hash, entries ranked best first)."""
     from denoisebench.metrics import get_metric
 
