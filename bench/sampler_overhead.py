@@ -119,6 +119,9 @@ def main(argv=None) -> int:
             f"{name:<15} {rounds:>6g} {render:>9.4f} {decide:>9.4f} {decide / max(render, 1e-12):>13.3f} "
             f"{median(name, 'seconds') / base:>13.3f}"
         )
+    if "mitsuba" in label:
+        print()
+        print_round_costs(make_frame, args.size, int(args.spp), args.repeats)
     print()
     print(f"synthetic frames of known truth, {args.size}x{args.size} px, {args.spp:g} spp, {args.seeds} seeds")
     print(f"{'sampler':<15} {'relMSE':>9} {'/uniform':>9} {'spp spread on flat noise':>25}")
@@ -126,6 +129,31 @@ def main(argv=None) -> int:
     for name, (error, spread) in quality.items():
         print(f"{name:<15} {error:>9.4f} {error / quality['uniform'][0]:>9.3f} {spread:>25.3f}")
     return 0
+
+
+def print_round_costs(make_frame, size: int, spp: int, repeats: int) -> None:
+    """What a round costs the renderer: the same samples in 1 round, in 7, and one uneven round."""
+    shape = (size, size)
+    uneven = np.ones(shape, dtype=np.int32)
+    uneven[size // 2, size // 2] = 4 * spp
+    cases = {
+        f"uniform {spp} spp, 1 round": [np.full(shape, spp, dtype=np.int32)],
+        f"uniform {spp} spp, 7 rounds": [
+            np.full(shape, n, dtype=np.int32) for n in np.diff(np.linspace(0, spp, 8).round())
+        ],
+        f"1 spp + one pixel at {4 * spp}, 1 round": [uneven],
+    }
+    print(f"round cost of the renderer, {size}x{size} px (median of {repeats})")
+    print(f"{'rounds':<34} {'samples':>8} {'render s':>9} {'s per sample / uniform 1 round':>31}")
+    base = None
+    for label, rounds in cases.items():
+        times = []
+        for _ in range(repeats + 1):
+            frame = make_frame()
+            times.append(sum(frame.render_round(c.astype(np.int32)).seconds for c in rounds if c.any()))
+        seconds, samples = statistics.median(times[1:]), int(sum(c.sum() for c in rounds))
+        base = base or seconds / samples
+        print(f"{label:<34} {samples:>8} {seconds:>9.4f} {seconds / samples / base:>31.2f}")
 
 
 def quality_figures(name: str, size: int, budget: Budget, seeds: int) -> tuple[float, float]:

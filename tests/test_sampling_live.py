@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -12,6 +14,10 @@ from denoisebench.sampling.protocol import Budget
 from denoisebench.sampling.registry import BUILTINS, load_sampler
 
 SIZE = 16
+EXAMPLE = (
+    Path(__file__).resolve().parents[1]
+    / "examples/denoisebench-example-sampler/src/denoisebench_example_sampler/__init__.py"
+)
 
 
 @pytest.fixture(scope="module")
@@ -65,16 +71,16 @@ def test_the_benchmark_measures_sampler_denoiser_pairs_live(live, tmp_path):
     from denoisebench.leaderboard.store import ResultsStore
 
     data, scene, _ = live
-    config = BenchmarkConfig(
-        ["identity"], [4], split="all", metrics=["relmse"], samplers=["uniform", "hachisuka2008"], verify=False
-    )
+    plugin = f"{EXAMPLE}:PixelVariance"  # a file plugin: it runs in a worker of its own
+    samplers = ["uniform", "hachisuka2008", plugin]
+    config = BenchmarkConfig(["identity"], [4], split="all", metrics=["relmse"], samplers=samplers, verify=False)
     with ResultsStore(tmp_path / "r.sqlite") as store:
         plan = run_benchmark(data, config, store, progress=False)
         units = {u["denoiser"]: u for u in store.units(plan.run_id)}
         kinds = {d["label"]: d["kind"] for d in store.denoisers(plan.run_id)}
         frames = {f["denoiser"]: f for f in store.frames(plan.run_id)}
-    pairs = {"uniform", "uniform+identity", "hachisuka2008", "hachisuka2008+identity"}
-    assert set(units) == {"noisy", "identity"} | pairs and config.as_dict()["samplers"] == ["uniform", "hachisuka2008"]
+    pairs = {"uniform", "uniform+identity", "hachisuka2008", "hachisuka2008+identity", plugin, f"{plugin}+identity"}
+    assert set(units) == {"noisy", "identity"} | pairs and config.as_dict()["samplers"] == samplers
     assert all(units[label]["status"] == "ok" for label in units) and {kinds[p] for p in pairs} == {"sampler"}
     # identity returns its input: a pair with it scores as the sampler alone; the live image is not the stored one
     assert frames["uniform+identity"]["metrics"]["relmse"] == pytest.approx(frames["uniform"]["metrics"]["relmse"])

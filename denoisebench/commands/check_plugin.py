@@ -50,7 +50,7 @@ def add_arguments(parser) -> None:
         "--sampler",
         action="store_true",
         help="SPEC is a sampler (group denoisebench.samplers): run its convergence check on a frame of known truth "
-        "(denoisebench.sampling.checks) instead of the hard cases; runs in this process",
+        "(denoisebench.sampling.checks) instead of the hard cases; a plugin sampler runs in a worker process",
     )
     from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
 
@@ -118,7 +118,9 @@ def run(args) -> int:
     if args.sampler:
         from denoisebench.sampling.checks import check_sampler
 
-        return check_sampler(args.spec, parse_options(args.option), as_json=args.json)
+        limits = {"time_limit": args.time_limit, "memory_limit_mb": args.memory_limit}
+        options = parse_options(args.option)
+        return check_sampler(args.spec, options, as_json=args.json, isolation=args.isolation, **limits)
     from tqdm import tqdm
 
     from denoisebench.denoisers import hard_cases, isolation

@@ -446,7 +446,8 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     if config.samplers:
         from denoisebench.leaderboard.sampler_units import plan_pairs
 
-        pairs = plan_pairs(config.samplers, denoisers, {d.label for d in denoisers} | {NOISY})
+        taken = {d.label for d in denoisers} | {NOISY}
+        pairs = plan_pairs(config.samplers, denoisers, taken, isolation=config.isolation, limits=config.limits())
     check_dataset(dataset, scenes, spp)
     if config.verify:
         from denoisebench.dataset.verify import run_files, verify_files

@@ -17,7 +17,8 @@ Notes
 * A sampler that fails (raises, or the renderer refuses its round) fails its pairs' units with the
   reason; a sampler that leaves pixels with fewer than 1 sample is warned about on stderr (their
   value is 0, not an estimate).
-* Samplers run in this process (plugins included; see :mod:`denoisebench.sampling.harness`).
+* Plugin samplers run in a worker of their own under the run's ``--isolation``, ``--time-limit`` and
+  ``--memory-limit`` (:mod:`denoisebench.sampling.isolation`); built-ins in this process.
 """
 
 from __future__ import annotations
@@ -39,22 +40,51 @@ class SamplerPair:
     label: str
     sampler: str
     denoiser: str | None
+    isolation: str = "plugins"  # sampling.isolation policy
+    time_limit: float | None = None
+    memory_limit_mb: int | None = None
+
+    def load(self):
+        from denoisebench.sampling.isolation import load
+
+        return load(
+            self.sampler, policy=self.isolation, time_limit=self.time_limit, memory_limit_mb=self.memory_limit_mb
+        )
 
 
-def plan_pairs(sampler_specs: list[str], denoisers, taken: set[str]) -> list[SamplerPair]:
-    """Every sampler alone and with every loaded denoiser; each sampler is loaded once to fail early (exit 2)."""
-    from denoisebench.sampling.registry import load_sampler
+def plan_pairs(
+    sampler_specs: list[str], denoisers, taken: set[str], *, isolation: str = "plugins", limits=None
+) -> list[SamplerPair]:
+    """Every sampler alone and with every loaded denoiser; each sampler is loaded once to fail early (exit 2).
 
+    ``isolation`` is the run's (denoisers') policy, mapped by :func:`~denoisebench.sampling.isolation.sampler_policy`;
+    ``limits`` its :class:`~denoisebench.denoisers.isolation.Limits` (time and memory of a plugin sampler's worker).
+    """
+    from denoisebench.sampling.isolation import sampler_policy
+
+    policy = sampler_policy(isolation)
+    time_limit = getattr(limits, "time_limit", None)
+    memory = getattr(limits, "memory_limit_mb", None)
     pairs = []
     for spec in dict.fromkeys(s.strip() for s in sampler_specs if s.strip()):
-        load_sampler(spec)  # UnknownSamplerError / SamplerLoadError: one line, before any work
         if spec in taken:
             raise UserInputError(f"sampler {spec!r} has the label of a denoiser of this run")
-        pairs.append(SamplerPair(spec, spec, None))
+        alone = SamplerPair(spec, spec, None, policy, time_limit, memory)
+        _close(alone.load())  # UnknownSamplerError / SamplerLoadError: one line, before any work
+        pairs.append(alone)
         pairs.extend(
-            SamplerPair(f"{spec}{SEPARATOR}{d.label}", spec, d.label) for d in denoisers if d.instance is not None
+            replace(alone, label=f"{spec}{SEPARATOR}{d.label}", denoiser=d.label)
+            for d in denoisers
+            if d.instance is not None
         )
     return pairs
+
+
+def _close(sampler) -> None:
+    from denoisebench.sampling.isolation import IsolatedSampler
+
+    if isinstance(sampler, IsolatedSampler):
+        sampler.close()
 
 
 def register_pairs(store, run_id: str, pairs: list[SamplerPair], denoisers) -> None:
@@ -66,18 +96,22 @@ def register_pairs(store, run_id: str, pairs: list[SamplerPair], denoisers) -> N
         store.add_denoiser(run_id, pair.label, spec, "sampler", needs, bool(denoiser and denoiser.temporal), None)
 
 
-def live_sequence(dataset, scene: str, spp: int, sampler_spec: str, live=None):
+def live_sequence(dataset, scene: str, spp: int, pair: SamplerPair, live=None):
     """(the scene's sequence at ``spp`` with every frame rendered live by the sampler, None) or (None, reason)."""
     from denoisebench.dataset.frame import Frame
     from denoisebench.sampling.live import LiveScene, run_live
     from denoisebench.sampling.protocol import Budget
-    from denoisebench.sampling.registry import load_sampler
 
+    sampler_spec = pair.sampler
     stored = dataset.sequence(scene, spp, samples=False)
     live = live or LiveScene.from_dataset(dataset, scene)
     frames = []
     for frame in stored:
-        result = run_live(load_sampler(sampler_spec), live, frame.index, Budget(spp=spp))
+        sampler = pair.load()
+        try:
+            result = run_live(sampler, live, frame.index, Budget(spp=spp))
+        finally:
+            _close(sampler)
         if result.error:
             return None, f"sampler {sampler_spec}: {result.error}"
         if result.pixels_without_samples:
@@ -103,7 +137,7 @@ def measure_pairs(dataset, plan, scene: str, spp: int, pairs: list[SamplerPair],
     for pair in pairs:
         by_sampler.setdefault(pair.sampler, []).append(pair)
     for sampler, group in by_sampler.items():
-        sequence, error = live_sequence(dataset, scene, spp, sampler)
+        sequence, error = live_sequence(dataset, scene, spp, group[0])
         for pair in group:
             if sequence is None:
                 yield UnitRecord(pair.label, scene, spp, "failed", error, [])

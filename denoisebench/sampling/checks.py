@@ -74,10 +74,14 @@ def _one_budget(make_sampler, spp: float, seeds, size: int) -> BudgetOutcome:
     for seed in seeds:
         frame = check_frame(size, size, seed=seed)
         try:
-            result = run_sampler(make_sampler(), frame, Budget(spp=spp))
+            sampler = make_sampler()
         except Exception as failure:  # noqa: BLE001 - a sampler that cannot even start fails the check
             errors.append(one_line(failure))
             continue
+        try:
+            result = run_sampler(sampler, frame, Budget(spp=spp))
+        finally:
+            _close(sampler)
         if result.error:
             errors.append(result.error)
         image = np.asarray(result.buffers["color"], dtype=np.float64)
@@ -102,6 +106,14 @@ def _one_budget(make_sampler, spp: float, seeds, size: int) -> BudgetOutcome:
         stopped=stopped,
         errors=errors,
     )
+
+
+def _close(sampler) -> None:
+    """Stop an isolated sampler's worker (in-process samplers are left alone)."""
+    from denoisebench.sampling.isolation import IsolatedSampler
+
+    if isinstance(sampler, IsolatedSampler):
+        sampler.close()
 
 
 def convergence_check(
@@ -147,21 +159,39 @@ def format_check(outcome: CheckOutcome) -> str:
     return "\n".join(lines)
 
 
-def check_sampler(spec: str, options: dict, *, as_json: bool = False) -> int:
-    """``check-plugin --sampler SPEC``: load (a one-line error, exit 2, when it cannot), check, print; 0 pass, 1 fail."""
+def check_sampler(
+    spec: str,
+    options: dict,
+    *,
+    as_json: bool = False,
+    isolation: str = "plugins",
+    time_limit=None,
+    memory_limit_mb=None,
+) -> int:
+    """``check-plugin --sampler SPEC``: load (a one-line error, exit 2, when it cannot), check, print; 0 pass, 1 fail.
+
+    A plugin runs in a worker (:mod:`.isolation`) unless ``isolation`` is ``"none"`` (``"all"``: built-ins too).
+    """
     import json
     import sys
 
     from tqdm import tqdm
 
+    from denoisebench.sampling.isolation import load, sampler_policy
     from denoisebench.sampling.protocol import sampler_name
-    from denoisebench.sampling.registry import load_sampler
 
-    name = sampler_name(load_sampler(spec, **options), spec)
+    policy = sampler_policy(isolation)
+
+    def make_sampler():
+        return load(spec, options, policy=policy, time_limit=time_limit, memory_limit_mb=memory_limit_mb)
+
+    first = make_sampler()
+    name = sampler_name(first, spec)
+    _close(first)
 
     def progress(budgets):
         return tqdm(budgets, desc=f"check {name}", unit="budget", file=sys.stderr, leave=False)
 
-    outcome = convergence_check(lambda: load_sampler(spec, **options), name=name, progress=progress)
+    outcome = convergence_check(make_sampler, name=name, progress=progress)
     print(json.dumps({"spec": spec, **outcome.summary()}, indent=2) if as_json else format_check(outcome))
     return 0 if outcome.passed else 1

@@ -22,11 +22,11 @@ Notes
   cost and go into its seconds.
 * **What the sampler sees** are read-only views of the renderer's arrays; the result keeps the
   renderer's own, so writing into a view (it raises) cannot change the scored image.
-* **Isolation.** Samplers run in this process, plugins included: the denoisers' worker
-  (``denoisers/isolation.py``) answers one call with one reply, while a sampler calls back into the
-  renderer for every round, and the layering keeps ``sampling`` from importing ``denoisers``. A
-  plugin that raises is recorded (``error``), with what it had rendered; one that exits the
-  process or hangs is not contained.
+* **Isolation.** ``run_sampler`` runs whatever sampler object it is given; a plugin loaded through
+  :func:`denoisebench.sampling.isolation.load` is an :class:`~denoisebench.sampling.isolation.IsolatedSampler`
+  whose ``sample`` serves a worker's round requests with this handle, so the budget is enforced
+  here either way. A sampler that raises (or whose worker exits, crashes or runs over its limits)
+  is recorded (``error``), with what it had rendered.
 * A sampler that renders nothing leaves zero buffers and every pixel without a sample.
 """
 
