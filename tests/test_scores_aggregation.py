@@ -397,3 +397,20 @@ def test_the_report_leaves_unresolved_scenes_out_of_the_summary_unless_asked(tmp
     for row in kept["summary"]:
         assert row.metrics["relmse_robust"].scenes == len(scenes)
     assert json.dumps(results_json(report)["unresolved_references"], allow_nan=False)
+
+
+def test_the_runner_passes_the_trim_to_the_robust_scores():
+    from denoisebench.metrics import robust
+
+    seq = _sequence("plain", 1.0, 1, frames=3, size=24)
+    spatial, temporal = ["relmse_robust"], ["temporal_relmse_robust"]
+    default = measure_unit(NOISY, None, seq, spatial, temporal)
+    wide = measure_unit(NOISY, None, seq, spatial, temporal, trim=0.2)
+    frames = list(seq)
+    for unit, trim in ((default, robust.DEFAULT_TRIM), (wide, 0.2)):
+        for record, frame in zip(unit.frames, frames):
+            expected = robust.relmse_robust(frame.color, frame.reference, trim=trim)
+            assert record.metrics["relmse_robust"] == pytest.approx(expected, rel=1e-9)
+            assert record.floors["relmse_robust"] > 0
+    assert wide.sequence_metrics["temporal_relmse_robust"] < default.sequence_metrics["temporal_relmse_robust"]
+    assert "flicker.temporal_relmse_robust" in default.frames[1].metrics
