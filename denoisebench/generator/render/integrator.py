@@ -241,12 +241,14 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     else:
         lens_uv = None
     ray, pose = camera.generate_ray(film, lens_uv, time)
+    if motion is not None:
+        poses = motion.at(ray.time)  # every ray of this sample shares its time: the moving shapes' poses once
 
     # ---------------------------------------------------------- first vertex
     if motion is None:
         si = scene.ray_intersect(ray, mi.RayFlags.All, True)
     else:
-        si, hit_object, hit_local = motion.ray_intersect(scene, ray, True)
+        si, hit_object, hit_local = motion.ray_intersect(scene, ray, True, True, poses)
     for _ in range(opts.null_skips):
         # Cut-outs: pass straight through points whose BSDF is fully transparent (mask opacity 0), so
         # that the first vertex, its features and its motion are what the camera sees. Unbiased: there
@@ -256,7 +258,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
         if motion is None:
             si = dr.select(clear, scene.ray_intersect(ray, mi.RayFlags.All, True, clear), si)
         else:
-            si_next, object_next, local_next = motion.ray_intersect(scene, ray, True, clear)
+            si_next, object_next, local_next = motion.ray_intersect(scene, ray, True, clear, poses)
             si = dr.select(clear, si_next, si)
             hit_object = dr.select(clear, object_next, hit_object)
             hit_local = dr.select(clear, local_next, hit_local)
@@ -309,7 +311,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
         if motion is None:
             ds, em_weight = scene.sample_emitter_direction(si, light_uv, True, active_em)
         else:
-            ds, em_weight = motion.sample_emitter_direction(scene, si, light_uv, active_em)
+            ds, em_weight = motion.sample_emitter_direction(scene, si, light_uv, active_em, poses)
         active_em &= ds.pdf != 0.0
         wo = si.to_local(ds.d)
         sample1 = sampler.next_1d()
@@ -357,7 +359,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             if motion is None:
                 si2 = scene.ray_intersect(ray, mi.RayFlags.All, True, active_next)
             else:
-                si2 = motion.ray_intersect(scene, ray, True, active_next)[0]
+                si2 = motion.ray_intersect(scene, ray, True, active_next, poses)[0]
             hit2 = active_next & si2.is_valid()
             out["position2"] = dr.select(hit2, si2.p, mi.Point3f(0.0))
             out["normal2"] = dr.select(hit2, si2.sh_frame.n, mi.Normal3f(0.0))
@@ -385,7 +387,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             if motion is None:
                 si = scene.ray_intersect(ray, mi.RayFlags.All, False, active)
             else:
-                si = motion.ray_intersect(scene, ray, False, active)[0]
+                si = motion.ray_intersect(scene, ray, False, active, poses)[0]
             prev_si = mi.Interaction3f(dr.zeros(mi.Float), ray.time, mi.Color0f(), prev_p, prev_n)
             ds = mi.DirectionSample3f(scene, si, prev_si)
             em_pdf = scene.pdf_emitter_direction(prev_si, ds, active & ~prev_delta)
@@ -408,7 +410,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             if motion is None:
                 ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
             else:
-                ds, em_weight = motion.sample_emitter_direction(scene, si, sampler.next_2d(), active_em)
+                ds, em_weight = motion.sample_emitter_direction(scene, si, sampler.next_2d(), active_em, poses)
             active_em &= ds.pdf != 0.0
             wo = si.to_local(ds.d)
             val, pdf, bs, weight = bsdf.eval_pdf_sample(ctx, si, wo, sampler.next_1d(), sampler.next_2d(), active_next)

@@ -12,7 +12,8 @@ Analytic spheres never move (moving spheres are tessellated), so they need no at
 
 Motion within the shutter: shapes whose records hold ``shutter_motion`` (rigid shapes of a stage with
 an open shutter) are, when :func:`build_mitsuba_scene` is asked for the feature renderer (no sensor,
-no integrator), left out of the main scene and built in their object space, one Mitsuba scene each;
+no integrator), left out of the main scene and built in their object space (in layout scenes: each
+shape at its own slot, see :func:`~denoisebench.generator.render.motion.plan_layout`);
 the result is a :class:`~denoisebench.generator.render.motion.ShutterMotionScene` that the feature
 integrator intersects at every ray's own time. With a sensor or an integrator (Mitsuba's own
 renders) every shape sits at the frame's pose, as before: Mitsuba cannot move shapes within a frame.
@@ -31,7 +32,7 @@ import numpy as np
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.contract.translated_scene import TranslatedScene
-from denoisebench.generator.render.motion import MovingShapes, ShutterMotionScene, object_space
+from denoisebench.generator.render.motion import MovingShapes, ShutterMotionScene, object_space, plan_layout
 from denoisebench.mitsuba_runtime import load_mitsuba
 
 
@@ -140,8 +141,8 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
     """The ``mi.load_dict`` dictionary of a translated scene with Mitsuba objects (no sensor/integrator).
 
     ``frame`` places moving shapes (ignored for static scenes). ``shutter_motion``: shapes that move
-    within the shutter are returned apart, under ``moving_<index>`` keys, as ``(mesh in object space,
-    shutter_motion record, (bounding-sphere centre, radius) in object space)``."""
+    within the shutter are returned apart, under ``moving_<index>`` keys, as ``((record in object
+    space, BSDF), shutter_motion record, (bounding-sphere centre, radius) in object space)``."""
     mi = load_mitsuba()
     data = translated.scene_dict
 
@@ -168,16 +169,11 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
             bsdf = black
         key = f"shape_{index:04d}"
         if shutter_motion and "shutter_motion" in record:
-            try:
-                local = object_space(record)
-                mesh = _build_mesh(mi, local, bsdf, emitter)
-            except Exception as error:
-                skipped(f"{record['name']}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
-                continue
+            local = object_space(record)
             points = local["positions"].astype(np.float64)
             centre = 0.5 * (points.min(0) + points.max(0))
             radius = float(np.sqrt(np.max(np.sum(np.square(points - centre), axis=1))))
-            out[f"moving_{index:04d}"] = (mesh, record["shutter_motion"], (centre, radius))
+            out[f"moving_{index:04d}"] = ((local, bsdf), record["shutter_motion"], (centre, radius))
         elif record["kind"] == "sphere":
             shape = {"type": "sphere", "center": record["center"], "radius": record["radius"], "bsdf": bsdf}
             if emitter is not None:
@@ -253,9 +249,17 @@ def build_mitsuba_scene(
         base = mi.load_dict(objects)
         if not moving:
             return base
-        scenes = [mi.load_dict({"type": "scene", "shape": mesh}) for mesh, _, _ in moving]
-        shapes = MovingShapes(mi, scenes, [motion for _, motion, _ in moving], [bound for _, _, bound in moving])
-        return ShutterMotionScene(base, shapes)
+        motions, bounds = [m for _, m, _ in moving], [b for _, _, b in moving]
+        groups, offsets, _ = plan_layout(bounds, motions)
+        layouts = []
+        for members in groups:
+            layout = {"type": "scene"}
+            for j in members:
+                local, bsdf = moving[j][0]
+                shifted = dict(local, positions=(local["positions"] + (offsets[j] - bounds[j][0])).astype(np.float32))
+                layout[f"moving_{j:04d}"] = _build_mesh(mi, shifted, bsdf, None)
+            layouts.append(mi.load_dict(layout))
+        return ShutterMotionScene(base, MovingShapes(mi, layouts, groups, motions, bounds, offsets))
     except Exception as error:
         raise UserInputError(
             f"{translated.source or 'stage'}: Mitsuba cannot build the scene ({_short(error)})"
