@@ -8,6 +8,7 @@ types) agrees with the declaration; ``indirect`` is declared where multi-bounce 
 from __future__ import annotations
 
 from denoisebench.scenes.families import (
+    cluttered,
     cornell,
     depth_of_field,
     dim_room,
@@ -111,5 +112,15 @@ ALL: tuple[SceneFamily, ...] = (
         1.0,
         "slow push-in",
         moving_objects.build,
+    ),
+    SceneFamily(
+        "cluttered",
+        cluttered.EFFECTS,
+        "SBMC-style clutter: 10-50 procedural shapes, SBMC's material mix, textured, one rotated environment; "
+        "depth of field and object motion blur each with p=0.5 (effects per seed); held-out test variants.",
+        "Y",
+        1.0,
+        "partial orbit",
+        cluttered.build,
     ),
 )
