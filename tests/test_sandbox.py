@@ -348,6 +348,38 @@ def test_sandboxed_worker_sees_no_host_path_and_keeps_its_frames(setting, tmp_pa
     assert seen["env"].get("PWD", sandbox.SCRATCH) == sandbox.SCRATCH
 
 
+def test_only_the_scratch_folders_are_writable(tmp_path):
+    """The root bwrap builds and /dev are read-only (else they would be memory without a limit);
+    /tmp and /dev/shm are tmpfs of the scratch size."""
+    probe = tmp_path / "writer.py"
+    probe.write_text(
+        textwrap.dedent(f"""
+        import json, os
+        class Writer:
+            name = "writer"
+            def denoise(self, frame):
+                places = ["/x", "/dev/x", "/usr/x", {str(tmp_path / "x")!r}, "/tmp/x", "/dev/shm/x"]
+                written = []
+                for path in places:
+                    try:
+                        open(path, "w").close()
+                        written.append(path)
+                    except OSError:
+                        pass
+                sizes = {{p: os.statvfs(p).f_blocks * os.statvfs(p).f_frsize for p in ("/tmp", "/dev/shm")}}
+                raise RuntimeError(json.dumps([written, sizes]))
+    """)
+    )
+    import json
+
+    denoiser = IsolatedDenoiser(f"{probe}:Writer", limits=Limits(scratch_mb=8))
+    (result,) = run_sequence(denoiser, synthetic_sequence(frames=1, height=4, width=4))
+    denoiser.close()
+    written, sizes = json.loads(result.error.removeprefix("raised RuntimeError: "))
+    assert written == ["/tmp/x", "/dev/shm/x"] and sizes == {"/tmp": 8 << 20, "/dev/shm": 8 << 20}
+    assert not (tmp_path / "x").exists()
+
+
 def test_protected_path_under_a_bound_folder_is_covered(setting, tmp_path, monkeypatch):
     """A sys.path entry above the dataset would expose it: protect() covers it with an empty tmpfs."""
     monkeypatch.syspath_prepend(str(setting["root"]))  # the folder holding the dataset and the plugins

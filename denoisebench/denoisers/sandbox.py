@@ -31,8 +31,11 @@ Files
     ``/dev/null`` (a file) where they lie inside one of those, so a ``sys.path`` entry above them
     exposes nothing. ``/tmp`` is a private tmpfs of ``scratch_bytes`` (``--size``), the worker's
     working folder, ``HOME`` and ``TMPDIR``: the only writable place, gone with the worker.
-    ``/dev`` is a minimal one (null, zero, random, urandom, shm, pts); NVIDIA device nodes are
-    bound where they exist so that a CUDA plugin keeps its GPU.
+    ``/dev`` is a minimal one (null, zero, random, urandom, pts), read-only, with a ``/dev/shm``
+    tmpfs of ``scratch_bytes`` of its own; NVIDIA device nodes are bound where they exist so that
+    a CUDA plugin keeps its GPU. The root that bwrap builds (a tmpfs holding the folders that lead
+    to the bound paths) is remounted read-only last: without that, a plugin could write into it,
+    and into ``/dev``, as much memory as it likes.
 Environment
     ``--clearenv``; then ``PATH``, ``HOME``/``TMPDIR`` (the scratch folder), ``LANG`` and the
     thread-count variables of :data:`ENV_KEEP` where the harness has them: nothing that names a
@@ -240,6 +243,7 @@ def command(worker_argv: list[str], *, readable: Iterable[str], scratch_bytes: i
     for device in sorted(glob.glob("/dev/nvidia*")):
         args += ["--dev-bind-try", device, device]
     args += ["--size", str(int(scratch_bytes)), "--tmpfs", SCRATCH, "--chdir", SCRATCH]
+    args += ["--size", str(int(scratch_bytes)), "--tmpfs", "/dev/shm"]  # bwrap's own /dev/shm has no size limit
     # never the scratch folder or one above it (a script in /tmp has /tmp on sys.path): that would
     # expose every file there and take the worker's writable folder away
     readable = [p for p in readable if p and not _inside(SCRATCH, os.path.abspath(p))]
@@ -254,6 +258,9 @@ def command(worker_argv: list[str], *, readable: Iterable[str], scratch_bytes: i
                 args += ["--perms", "0555", "--tmpfs", hidden, "--remount-ro", hidden]
             else:
                 args += ["--ro-bind", "/dev/null", hidden]
+    # the tmpfs bwrap builds the root from (folders leading to the binds) and its /dev: read-only,
+    # or a plugin could fill memory there past the scratch limit (each remount is of that mount only)
+    args += ["--remount-ro", "/dev", "--remount-ro", "/"]
     env = {"PATH": "/usr/local/bin:/usr/bin:/bin", "HOME": SCRATCH, "TMPDIR": SCRATCH}
     env.update({k: os.environ[k] for k in ENV_KEEP if k in os.environ})
     for key, value in env.items():
