@@ -17,6 +17,7 @@ import subprocess
 import sys
 import textwrap
 import threading
+import time
 import uuid
 from pathlib import Path
 
@@ -151,6 +152,25 @@ class ForkBomb(_Base):
             if os.fork() == 0:
                 time.sleep(60)
                 os._exit(0)
+        return np.array(frame.color, np.float32)
+
+
+class LateBomb(_Base):
+    """Returns at once, and forks 200 sleeping children from a thread afterwards (between calls)."""
+
+    name = "late_bomb"
+
+    def denoise(self, frame):
+        import threading
+
+        def bomb():
+            time.sleep(0.3)
+            for _ in range(200):
+                if os.fork() == 0:
+                    time.sleep(60)
+                    os._exit(0)
+
+        threading.Thread(target=bomb, daemon=True).start()
         return np.array(frame.color, np.float32)
 
 
@@ -407,6 +427,18 @@ def test_small_limits_are_the_kernel_s(setting, tmp_path):
     (bombed,) = run_sequence(bomb, synthetic_sequence(frames=1, height=4, width=4))
     bomb.close()
     assert "process limit" in bombed.error or "BlockingIOError" in bombed.error, bombed.error
+    # forks between calls are counted too: the sandbox is killed, and the next call says why
+    late = IsolatedDenoiser(f"{spec}:LateBomb", limits=Limits(processes=64))
+    (first,) = run_sequence(late, synthetic_sequence(frames=1, height=4, width=4))
+    proc = late._proc
+    for _ in range(100):
+        if proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    again = run_sequence(late, synthetic_sequence(frames=1, height=4, width=4))
+    late.close()
+    assert first.status == "ok" and proc.poll() is not None
+    assert "process limit" in again[0].error or "BlockingIOError" in again[0].error, again[0].error
 
 
 def test_untrusted_plugin_is_refused_where_no_sandbox_starts(setting, tmp_path, monkeypatch, capsys):

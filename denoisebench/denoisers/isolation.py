@@ -27,14 +27,20 @@ What isolation gives
   of its own: making an input writable and changing it reaches nothing outside the worker.
 * **No reference.** The harness hands over the frame after :func:`~.runner.sanitize_frame`, which
   withholds the reference image and every ``reference*`` and file-path entry of ``meta``.
+* **Sandbox** (policies ``plugins`` and ``all``; :mod:`.sandbox`): the worker runs under bubblewrap,
+  without the host's files (but the Python environment, ``sys.path``, the plugin and its option
+  files, read-only), network or a way to outlive its worker, under resource limits
+  (:meth:`Limits.rlimits`, set by the worker on itself) and a task count that a thread of the
+  parent checks every :data:`TASK_POLL_SECONDS`, during calls and between them. Where no sandbox
+  starts, the proxy is refused (:class:`SandboxUnavailableError`); ``process`` is a plain worker.
 * **Replies are not unpickled.** The worker answers with a JSON header and raw array bytes
   (see :mod:`.isolation_worker`), so a plugin cannot run code in the harness through its output.
 
 Pitfalls
 --------
-* Isolation is not a sandbox: the worker runs as the same user and can read what that user can.
-  It keeps a plugin from ending, stalling or bloating the run and from seeing the answer through
-  the harness, not from a determined attacker with file-system access.
+* A plain worker (``--isolation process``) is not a sandbox: it runs as the same user and can
+  read what that user can; it keeps a plugin from ending, stalling or bloating the run and from
+  seeing the answer through the harness only.
 * Denoise time is measured inside the worker around ``denoise()`` only, as in-process; the
   transfer of the frame and the output (the isolation's overhead) is outside it, and is kept in
   :attr:`IsolatedDenoiser.overhead_seconds`.
@@ -55,6 +61,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -70,6 +77,8 @@ DEFAULT_TIME_LIMIT = 120.0
 DEFAULT_MEMORY_LIMIT_MB = 4096
 #: How often the parent looks at the worker while it waits (seconds).
 POLL_SECONDS = 0.02
+#: How often a thread counts a sandbox's tasks, during and between calls (seconds).
+TASK_POLL_SECONDS = 0.05
 #: Tasks (processes and threads) a sandboxed worker may hold at once, itself included.
 DEFAULT_PROCESS_LIMIT = 512
 #: Open files of a sandboxed worker (RLIMIT_NOFILE).
@@ -254,6 +263,9 @@ class IsolatedDenoiser:
             if wrapped is not None:
                 wrapped.close()
         self._conn = ours
+        self._breach = None
+        if self.sandboxed:  # counted between calls too: a plugin's background forks do not wait for a call
+            threading.Thread(target=self._watch_tasks, args=(self._proc,), daemon=True).start()
         _LIVE.add(self)
         try:
             header, _ = self._request(("load", spec, options, list(sys.path), rlimits), "load")
@@ -302,7 +314,7 @@ class IsolatedDenoiser:
             self._conn.send(message)
         except (OSError, ValueError):
             code = self._proc.poll() if self._proc else None
-            raise WorkerFailure(self._kill(_exit_reason(code, self.sandboxed))) from None
+            raise WorkerFailure(self._kill(self._breach or _exit_reason(code, self.sandboxed))) from None
         deadline = time.monotonic() + limit
         while True:
             try:
@@ -313,10 +325,7 @@ class IsolatedDenoiser:
                 break
             code = self._proc.poll()
             if code is not None:
-                raise WorkerFailure(self._kill(_exit_reason(code, self.sandboxed)))
-            breach = self._over_task_limit(what)
-            if breach:
-                raise WorkerFailure(self._kill(breach))
+                raise WorkerFailure(self._kill(self._breach or _exit_reason(code, self.sandboxed)))
             rss = _rss_mb(self._pid())
             if rss is not None and rss > self.limits.memory_limit_mb:
                 raise WorkerFailure(
@@ -348,7 +357,7 @@ class IsolatedDenoiser:
                 except subprocess.TimeoutExpired:
                     code = None
             reason = (
-                _exit_reason(code, self.sandboxed)
+                self._breach or _exit_reason(code, self.sandboxed)
                 if code is not None
                 else f"malformed reply from the worker ({type(error).__name__})"
             )
@@ -366,16 +375,17 @@ class IsolatedDenoiser:
             self._worker_pid = pids[2]
         return self._worker_pid
 
-    def _over_task_limit(self, what: str) -> str | None:
-        """The reason when the sandbox holds more tasks than allowed (the kernel does not enforce
-        RLIMIT_NPROC for a root harness's worker), else None."""
-        if not self.sandboxed or self._proc is None:
-            return None
-        _, tasks = _tree(self._proc.pid)
-        tasks -= 2  # bwrap and the sandbox's init
-        if tasks > self.limits.processes:
-            return f"exceeded the process limit ({tasks} tasks > {self.limits.processes}) in {what}; sandbox killed"
-        return None
+    def _watch_tasks(self, proc: subprocess.Popen) -> None:
+        """Kill the sandbox when it holds more tasks than allowed (the kernel does not enforce
+        RLIMIT_NPROC for a root harness's worker); the next call reports the reason."""
+        while proc.poll() is None:
+            _, tasks = _tree(proc.pid)
+            tasks -= 2  # bwrap and the sandbox's init
+            if tasks > self.limits.processes:
+                self._breach = f"exceeded the process limit ({tasks} tasks > {self.limits.processes}); sandbox killed"
+                proc.kill()
+                return
+            time.sleep(TASK_POLL_SECONDS)
 
     def _ready(self) -> None:
         if self._disabled:
