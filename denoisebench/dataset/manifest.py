@@ -199,6 +199,19 @@ def assign_splits(
     return {"train": sorted(train), "val": sorted(val), "test": sorted(test)}
 
 
+def pin_held_out(splits: Mapping[str, list[str]], held_out: Iterable[str]) -> dict[str, list[str]]:
+    """``splits`` with the scenes of held-out variants (``held_out``: names) moved into test.
+
+    Scenes whose stage records ``variants["pool"] == "held_out"`` (the cluttered family's held-out
+    shapes, textures and environments) must never be trained or validated on, so that a learned
+    model's test score on them measures generalisation. Lists stay sorted; other scenes keep their split."""
+    pinned = set(held_out)
+    out = {split: sorted(name for name in splits.get(split, []) if name not in pinned) for split in SPLITS}
+    everyone = {name for names in splits.values() for name in names}
+    out["test"] = sorted(set(out["test"]) | (pinned & everyone))
+    return out
+
+
 def _stratum(names: list[str], seed: int, fractions: tuple[float, float, float]) -> dict[str, list[str]]:
     """One family of n ≥ 3 scenes: test and val max(1, round(n·f)), train the rest (≥ 1)."""
     order = sorted(names, key=lambda name: hashlib.sha256(f"{int(seed)}:{name}".encode()).hexdigest())

@@ -29,7 +29,7 @@ from importlib import metadata
 from pathlib import Path
 
 from denoisebench.dataset import layout
-from denoisebench.dataset.manifest import assign_splits
+from denoisebench.dataset.manifest import assign_splits, pin_held_out
 from denoisebench.dataset.writer import DatasetWriter
 from denoisebench.errors import UserInputError
 from denoisebench.generator import dataset_scenes as scenes_mod
@@ -216,6 +216,7 @@ def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -
         "stage_sha256": scenes_mod.stage_digest(spec.stage_dir, spec.stage_files),
         "render_seed": spec.render_seed,
         "effects": {"declared": list(translated.effects_declared), "inferred": list(translated.effects_inferred)},
+        **({"variants": dict(translated.variants)} if translated.variants else {}),  # held-out pools
         "plan": plan.to_dict(),
         "camera": {
             "prim_path": camera.prim_path,
@@ -343,9 +344,9 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
         bar.close()
     # stratified by family: every family of >= 3 scenes lands in train, val and test
     families = {name: spec.family for name, spec in by_name.items()}
-    writer.finalize(
-        assign_splits(list(by_name), request.seed, families=families), allow_incomplete=bool(summary.failures)
-    )
+    held_out = [n for n, s in writer.manifest["scenes"].items() if s.get("variants", {}).get("pool") == "held_out"]
+    splits = pin_held_out(assign_splits(list(by_name), request.seed, families=families), held_out)
+    writer.finalize(splits, allow_incomplete=bool(summary.failures))
     summary.complete = bool(writer.manifest["complete"])
     for name, scene in writer.manifest["scenes"].items():
         for frame, record in sorted(scene["renders"].get(layout.REFERENCE, {}).items()):

@@ -45,6 +45,9 @@ class TranslatedScene:
         warnings: one line per prim or property that was skipped or approximated.
         source: path of the stage file, when it came from one.
         family, seed: denoisebench metadata when a scene family authored the stage.
+        variants: the stage's ``/World`` customData ``denoisebench:variants`` (shape, texture and
+            environment variants of a cluttered stage and its ``pool``, ``"train"`` or ``"held_out"``:
+            the dataset pins held-out scenes to the test split); empty when absent.
         max_depth: the stage's own path-depth restriction, ``customLayerData["denoisebench"]["maxDepth"]``
             (None when absent: full transport; see :mod:`~denoisebench.generator.contract.render_plan`).
     """
@@ -58,6 +61,7 @@ class TranslatedScene:
     family: str = ""
     seed: int | None = None
     max_depth: int | None = None
+    variants: dict = field(default_factory=dict)
 
     @property
     def moving(self) -> bool:

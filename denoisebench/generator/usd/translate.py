@@ -221,7 +221,17 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
         family=str(metadata.get("family", "")),
         seed=int(metadata["seed"]) if "seed" in metadata else None,
         max_depth=stage_depth,
+        variants=_variants(stage),
     )
+
+
+def _variants(stage) -> dict:
+    """``/World`` customData ``denoisebench:variants`` as plain data (a cluttered stage's pools)."""
+    prim = stage.GetDefaultPrim() or stage.GetPrimAtPath("/World")
+    data = prim.GetCustomDataByKey("denoisebench:variants") if prim else None
+    if not data:
+        return {}
+    return {str(k): (v if isinstance(v, (str, int, float)) else [str(x) for x in v]) for k, v in dict(data).items()}
 
 
 def _gprim_parts(prim, to_mitsuba, time: float, warnings: list[str], materials: dict, analytic: bool):
