@@ -108,7 +108,7 @@ def assert_agree(z_image, z_blocks):
 
 
 def _compare(mi, translated, frame, plan):
-    scene = build_mitsuba_scene(translated)
+    scene = build_mitsuba_scene(translated, shutter_motion=False)  # one mi.Scene for both (frame poses)
     ours = our_reference(scene, translated, plan, frame)
     theirs = mitsuba_path(mi, translated, scene, frame, aperture_scale=plan.aperture_scale)
     assert ours["color"].mean() > 1e-3, "a black image compares nothing"
@@ -133,6 +133,39 @@ def test_every_family_reference_matches_mitsuba_path(mi, tmp_path, family):
             plan, time_sampling=False, random_parameters=tuple(p for p in plan.random_parameters if p != "time")
         )
     _, _, _, (z_image, z_blocks) = _compare(mi, translated, 1, plan)
+    assert_agree(z_image, z_blocks)
+
+
+def test_cluttered_blurred_reference_matches_a_mitsuba_sub_frame_average(mi, tmp_path):
+    """Object motion blur and a moving camera (cluttered seed 0) against 32 static sub-frames by ``path``.
+
+    Sub-frame times are stratified and jittered over frame 1's shutter; each sub-frame freezes the
+    moving shapes (``translated_at``) and the camera at its time. Their average's variance is the
+    paired-strata estimate (conservative for stratified sampling)."""
+    from denoisebench.generator.render.motion import translated_at
+
+    translated = translate_usd(get_family("cluttered").author(tmp_path, seed=0, frames=2, width=SIZE, height=SIZE))
+    assert translated.shutter_moving
+    plan = make_render_plan(translated.effects, stage_max_depth=translated.max_depth)
+    assert plan.time_sampling
+    ours = our_reference(build_mitsuba_scene(translated, frame=1), translated, plan, 1)
+    camera = translated.camera
+    rng = np.random.default_rng(1)
+    count = 32
+    centre, span = 1 + 0.5 * (camera.shutter_open + camera.shutter_close), camera.shutter_close - camera.shutter_open
+    subs = []
+    for i in range(count):
+        tau = centre + span * ((i + rng.random()) / count - 0.5)
+        scene = build_mitsuba_scene(translated_at(translated, tau), shutter_motion=False)
+        sensor = sensor_dict(camera, tau, SIZE, SIZE, REPLICA_SPP)
+        sensor["to_world"] = mi.ScalarTransform4f(np.asarray(camera.mitsuba_to_world(tau), dtype=np.float64).tolist())
+        image = mi.render(scene, sensor=mi.load_dict(sensor), integrator=mi.load_dict({"type": "path"}), seed=900 + i)
+        subs.append(np.array(image)[..., :3].astype(np.float64))
+    subs = np.stack(subs)
+    var_b = np.sum(np.square(subs[0::2] - subs[1::2]), axis=0) / count**2
+    z_image, z_blocks = z_scores(
+        ours["color"].astype(np.float64), ours["color_var"].astype(np.float64), subs.mean(0), var_b
+    )
     assert_agree(z_image, z_blocks)
 
 
