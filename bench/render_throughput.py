@@ -10,7 +10,7 @@ the medians are compared; the minimum is printed too, since other processes on a
 only ever add time. ``--no-freeze`` traces our passes afresh every frame instead (the cost of a
 one-off frame; Mitsuba's ``path`` traces its C++ integrator every time, which is cheap).
 
-    .venv/bin/python bench/render_throughput.py [--scene cornell|glossy] [--size 128] [--spp 16]
+    .venv/bin/python bench/render_throughput.py [--scene cornell|glossy|cluttered] [--size 128] [--spp 16]
         [--max-depth 8] [--repeats 7] [--target-lanes N] [--no-freeze]
 
 Prints samples per second of each and the ratios ours / path (the target is >= 0.9).
@@ -49,9 +49,29 @@ def cornell_scene(mi, glossy: bool) -> dict:
     return scene
 
 
+def cluttered_scene(mi, size: int, spp: int, max_depth: int):
+    """(scene, camera, plan, sensor) of cluttered seed 4 (a static stage: Mitsuba renders what we do)."""
+    import tempfile
+
+    from denoisebench.generator.render.scene import build_mitsuba_scene, sensor_dict
+    from denoisebench.generator.usd.translate import translate_usd
+    from denoisebench.scenes import get_family
+
+    with tempfile.TemporaryDirectory() as folder:
+        translated = translate_usd(get_family("cluttered").author(folder, seed=4, frames=2))
+        scene = build_mitsuba_scene(translated)
+    plan = make_render_plan(translated.effects, RenderOptions(max_depth=max_depth))
+    return scene, translated.camera, plan, mi.load_dict(sensor_dict(translated.camera, 1, size, size, spp))
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--scene", choices=("cornell", "glossy"), default="cornell")
+    parser.add_argument(
+        "--scene",
+        choices=("cornell", "glossy", "cluttered"),
+        default="cornell",
+        help="cluttered: the cluttered family, seed 4 (static: no depth of field, no object motion blur)",
+    )
     parser.add_argument("--size", type=int, default=128)
     parser.add_argument("--spp", type=int, default=16)
     parser.add_argument("--max-depth", type=int, default=8)
@@ -64,31 +84,37 @@ def main(argv=None) -> int:
     mi = load_mitsuba()
     import drjit as dr
 
-    scene = load_scene(cornell_scene(mi, args.scene == "glossy"))
-    pose = np.eye(4)
-    pose[2, 3] = 3.9  # the Cornell box's own camera, in USD convention (looks down -Z)
-    camera = CameraTrack(poses=np.stack([pose, pose]), fov_x_deg=39.3077)
-    effects = ["area_lights", "indirect"] + (["glossy"] if args.scene == "glossy" else [])
-    plan = make_render_plan(effects, RenderOptions(max_depth=args.max_depth))
     size, spp = args.size, args.spp
-
-    sensor = mi.load_dict(
-        {
-            "type": "perspective",
-            "fov": camera.fov_x_deg,
-            "fov_axis": "x",
-            "near_clip": camera.near_clip,
-            "far_clip": camera.far_clip,
-            "to_world": mi.ScalarTransform4f(camera.mitsuba_to_world(1)),
-            "film": {
-                "type": "hdrfilm",
-                "width": size,
-                "height": size,
-                "rfilter": {"type": "box"},
-                "pixel_format": "rgb",
-            },
-            "sampler": {"type": "independent", "sample_count": spp},
-        }
+    if args.scene == "cluttered":
+        scene, camera, plan, sensor = cluttered_scene(mi, size, spp, args.max_depth)
+    else:
+        scene = load_scene(cornell_scene(mi, args.scene == "glossy"))
+        pose = np.eye(4)
+        pose[2, 3] = 3.9  # the Cornell box's own camera, in USD convention (looks down -Z)
+        camera = CameraTrack(poses=np.stack([pose, pose]), fov_x_deg=39.3077)
+        effects = ["area_lights", "indirect"] + (["glossy"] if args.scene == "glossy" else [])
+        plan = make_render_plan(effects, RenderOptions(max_depth=args.max_depth))
+    sensor = (
+        sensor
+        if args.scene == "cluttered"
+        else mi.load_dict(
+            {
+                "type": "perspective",
+                "fov": camera.fov_x_deg,
+                "fov_axis": "x",
+                "near_clip": camera.near_clip,
+                "far_clip": camera.far_clip,
+                "to_world": mi.ScalarTransform4f(camera.mitsuba_to_world(1)),
+                "film": {
+                    "type": "hdrfilm",
+                    "width": size,
+                    "height": size,
+                    "rfilter": {"type": "box"},
+                    "pixel_format": "rgb",
+                },
+                "sampler": {"type": "independent", "sample_count": spp},
+            }
+        )
     )
     integrator = mi.load_dict({"type": "path", "max_depth": args.max_depth, "rr_depth": plan.rr_depth})
 
