@@ -7,9 +7,10 @@
   their reference-noise floor and the floor-corrected value; and seconds per frame.
 * :func:`indistinguishable_pairs`: pairs of denoisers whose scores differ by less than the
   reference's noise can resolve ("not distinguishable at this reference quality").
-* :func:`accuracy_time`: per denoiser and spp, mean error (relMSE, FLIP) against mean total seconds
-  per frame (render at that spp + denoise); the noisy inputs as the "just render more samples"
-  curve; the Pareto front; and the reading in words (:func:`readings`).
+* :func:`accuracy_time`: per denoiser and spp, mean error (robust relMSE, relMSE, FLIP) against total
+  seconds per frame (render at that spp + denoise, at the time model's resolution); the noisy
+  inputs as the "just render more samples" curve; the Pareto front; and the reading in words
+  (:func:`readings`).
 * :func:`effect_breakdown`: per denoiser and scene effect, the share of the input's error left.
 * :func:`flicker_series`: per denoiser, the per-frame flicker (a scale-free temporal metric of frame
   t against t−1) averaged over scenes, at one spp.
@@ -17,13 +18,20 @@
 Notes
 -----
 * **Equivalent spp.** The noisy input's error falls as a power of spp; a line fitted to
-  log(error) against log(spp) over the measured input spp gives, for a denoiser's error e, the spp
-  that rendering alone would need (extrapolated beyond the largest measured spp; with one spp
-  measured the slope is assumed to be −1, the Monte Carlo rate for relMSE, and −0.5 for FLIP,
-  a root-mean-like error). The time of that rendering comes from a line fitted to the measured
-  render seconds against spp (noisy inputs and the reference): offset + seconds per spp × spp
-  (:func:`fit_render_time`), since part of a frame's render time does not grow with spp. Beyond the reference's own spp the comparison says more about the reference's noise
-  than about the denoiser: the reading says so.
+  log(error) against log(spp) over the measured input spp (:func:`fit_noisy`; with one spp
+  measured the slope is assumed to be −1, the Monte Carlo rate for relMSE, and −0.5 for FLIP)
+  draws the "render more" curve. A reading's verdict uses only the measured rungs: the spp that
+  rendering alone needs for a denoiser's error e is read off the log-log segment between the two
+  rungs around e (:func:`.equal_tables.spp_for`); an e below the top rung's error gets a sentence
+  that says no verdict is given (the equal-quality table carries the extrapolated figure, marked).
+  Beyond the reference's own spp the comparison says more about the reference's noise than about
+  the denoiser: the reading says so.
+* **Time axis.** With a :class:`.time_model.TimeModel` (the report's case) every second is the
+  model's at the resolution it states (``--time-at``, default 1920×1080): render seconds from the
+  ladder's line of seconds against spp, denoise seconds from fixed + per-pixel costs. Without one,
+  seconds are as measured, and the render line is :func:`fit_render_time` over the noisy inputs
+  and the reference (offset + seconds per spp × spp), since part of a frame's render time does not
+  grow with spp.
 * **The reference** has zero error against itself, which a log axis cannot show: it appears as a
   vertical line at its render time, not as a point.
 * Failed units are left out of means and listed separately; a denoiser/spp with no successful
