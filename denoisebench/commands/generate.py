@@ -37,6 +37,7 @@ OUT/usd_<stem>/scene.usda.
 the file, which must lie in its folder), copies it with those files into OUT/xml_<stem>/scene.xml and
 renders it from its first sensor (perspective or thinlens) held still over --frames frames, with effects
 inferred from its plugins. Media and other sensors are refused (exit 2); another integrator gets a warning.
+--auto-camera gives it the orbit --usd stages get (around its bounding box, +Y up) instead of its sensor.
 
 Exit codes: 0 done, 2 bad input (one line, nothing written), 1 some frames failed to render
 (reported; the dataset is left resumable and marked incomplete).
@@ -156,7 +157,8 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--auto-camera",
         action="store_true",
-        help="frame --usd stages with a slow orbiting camera over --frames frames (for stages without one)",
+        help="frame --usd stages and --mitsuba scenes with a slow orbiting camera over --frames frames "
+        "(for scenes without a camera; replaces a --mitsuba scene's sensor)",
     )
     parser.add_argument(
         "--default-light",

@@ -6,6 +6,10 @@ make FAMILY --seed N --out DIR
 preview FILE.usda --out preview.png [--frame i]
                           a quick Mitsuba render of a stage, tone-mapped to PNG
 check FILE.usda           translate a stage and print its effects, render plan and warnings
+
+preview and check read a Mitsuba 3 XML scene (FILE.xml) too, as ``generate-dataset --mitsuba`` does:
+its first sensor, or with --auto-camera the orbit USD stages get (--camera and --default-light are
+for USD stages only).
 """
 
 from __future__ import annotations
@@ -23,6 +27,8 @@ EPILOG = """examples:
   denoisebench scenes check my_shot.usda
   denoisebench scenes preview asset.usdz --auto-camera --default-light --out asset.png
   denoisebench scenes check shot.usda --camera /World/Cameras/Close
+  denoisebench scenes check mitsuba-data/scenes/cbox/cbox.xml
+  denoisebench scenes preview cbox.xml --auto-camera --out cbox_orbit.png --frame 4
 """
 
 
@@ -33,7 +39,8 @@ def _add_stage_options(parser) -> None:
     parser.add_argument(
         "--auto-camera",
         action="store_true",
-        help="frame the stage's bounds with a slow orbiting camera (for stages without a camera)",
+        help="frame the stage's bounds with a slow orbiting camera (for stages without a camera; "
+        "replaces a Mitsuba XML scene's sensor)",
     )
     parser.add_argument(
         "--default-light",
@@ -42,10 +49,24 @@ def _add_stage_options(parser) -> None:
     )
 
 
+def is_xml(path) -> bool:
+    """A Mitsuba XML scene file (by its suffix), not a USD stage."""
+    return str(path).lower().endswith(".xml")
+
+
 def translate_options(args, frames: int = 8) -> dict:
-    """Keywords of ``translate_usd`` from --camera/--auto-camera/--default-light (strict: refuse black stages)."""
+    """Keywords of ``translate_usd`` from --camera/--auto-camera/--default-light (strict: refuse black stages);
+    for a Mitsuba ``.xml`` file, those of ``load_mitsuba_xml`` (frames, --auto-camera)."""
     if args.camera and args.auto_camera:
         raise UserInputError("give --camera or --auto-camera, not both")
+    if is_xml(args.usd):
+        for flag, given in (("--camera", args.camera), ("--default-light", args.default_light)):
+            if given:
+                raise UserInputError(
+                    f"{flag} applies to USD stages; a Mitsuba XML scene uses its first sensor "
+                    "or --auto-camera, and its own emitters"
+                )
+        return {"frames": frames, "auto_camera": bool(args.auto_camera)}
     from denoisebench.generator.dataset_scenes import stage_options
 
     return {**stage_options(args.camera, args.auto_camera, args.default_light, frames), "strict": True}
@@ -61,7 +82,7 @@ def add_arguments(parser) -> None:
     make.add_argument("--frames", type=int, default=8, help="frames in the camera animation (default 8)")
     make.add_argument("--out", required=True, help="output folder: gets scene.usda and textures/")
     preview = actions.add_parser("preview", help="render a quick tone-mapped PNG of a stage")
-    preview.add_argument("usd", help="a .usda/.usdc/.usd/.usdz file")
+    preview.add_argument("usd", help="a .usda/.usdc/.usd/.usdz file, or a Mitsuba 3 .xml scene")
     preview.add_argument("--out", required=True, help="PNG to write")
     preview.add_argument("--frame", type=int, default=0, help="frame index (default 0)")
     preview.add_argument("--width", type=int, default=256)
@@ -77,7 +98,7 @@ def add_arguments(parser) -> None:
     )
     _add_stage_options(preview)
     check = actions.add_parser("check", help="translate a stage; print effects, render plan and warnings")
-    check.add_argument("usd", help="a .usda/.usdc/.usd/.usdz file")
+    check.add_argument("usd", help="a .usda/.usdc/.usd/.usdz file, or a Mitsuba 3 .xml scene")
     _add_stage_options(check)
 
 
@@ -143,9 +164,15 @@ def _preview(args) -> int:
 
 def _check(args) -> int:
     from denoisebench.generator.contract.render_plan import make_render_plan
-    from denoisebench.generator.usd.translate import translate_usd
 
-    translated = translate_usd(args.usd, **translate_options(args))
+    if is_xml(args.usd):
+        from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
+
+        translated, _ = load_mitsuba_xml(args.usd, **translate_options(args))
+    else:
+        from denoisebench.generator.usd.translate import translate_usd
+
+        translated = translate_usd(args.usd, **translate_options(args))
     _report_warnings(translated)
     plan = make_render_plan(translated.effects, stage_max_depth=translated.max_depth)
     print(

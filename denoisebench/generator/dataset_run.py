@@ -141,7 +141,7 @@ def validate_request(request: GenerateRequest) -> None:
     for path in request.usd:
         scenes_mod.check_user_stage(path, request.stage_options())
     for path in request.xml:
-        scenes_mod.check_xml_scene(path, request.frames)
+        scenes_mod.check_xml_scene(path, request.frames, auto_camera=request.auto_camera)
 
 
 def _file_sha256(path: Path) -> str:
@@ -259,7 +259,7 @@ def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names:
     taken = {spec.name for spec in entries}
     for path, name in zip(request.xml, scenes_mod.user_scene_names(list(request.xml), taken, prefix="xml_")):
         folder = writer.scene_dir(name)
-        files = scenes_mod.copy_xml_scene(path, folder, request.frames)
+        files = scenes_mod.copy_xml_scene(path, folder, request.frames, auto_camera=request.auto_camera)
         entries.append(
             SceneSpec(
                 name, "xml", 0, str(path), str(folder.resolve()), files, scenes_mod.render_seed(request.seed, name)

@@ -11,8 +11,8 @@ Names and seeds are deterministic:
   same stage ``denoisebench scenes make FAMILY --seed S`` writes);
 * a user's stage is ``usd_<file stem>`` (other characters become ``_``; a second file with the
   same stem gets ``_2``, in argument order), a Mitsuba XML scene ``xml_<file stem>``: copied
-  verbatim as ``scene.xml`` with the files it names, plus ``camera.json`` (its static camera's
-  frame count), :func:`copy_xml_scene`;
+  verbatim as ``scene.xml`` with the files it names, plus ``camera.json`` (its camera's frame
+  count, and ``"auto_camera": true`` for the ``--auto-camera`` orbit), :func:`copy_xml_scene`;
 * every scene renders with its own ``render_seed``, a hash of the dataset seed and the scene name,
   so no two scenes share random numbers and a scene's pixels do not depend on which others exist.
 
@@ -289,7 +289,7 @@ def load_scene_file(path: str | Path):
     if path.suffix.lower() == ".xml":
         from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
 
-        return load_mitsuba_xml(path, frames=xml_frames(path))
+        return load_mitsuba_xml(path, **xml_camera(path))
     from denoisebench.generator.usd.translate import translate_usd
 
     return translate_usd(path), None
@@ -300,30 +300,35 @@ def translate_scene_file(path: str | Path):
     return load_scene_file(path)[0]
 
 
-def xml_frames(path: Path) -> int:
-    """Frames of a copied XML scene's static camera (its ``camera.json``; 1 without one)."""
+def xml_camera(path: Path) -> dict:
+    """Keywords of ``load_mitsuba_xml`` from a copied XML scene's ``camera.json``: ``frames`` (1 without
+    one) and ``auto_camera`` (False unless it says so; files written before it existed lack it)."""
     import json
 
     sidecar = Path(path).parent / XML_CAMERA
-    return int(json.loads(sidecar.read_text())["frames"]) if sidecar.is_file() else 1
+    record = json.loads(sidecar.read_text()) if sidecar.is_file() else {"frames": 1}
+    return {"frames": int(record["frames"]), "auto_camera": bool(record.get("auto_camera", False))}
 
 
-def check_xml_scene(path: str | Path, frames: int):
+def check_xml_scene(path: str | Path, frames: int, auto_camera: bool = False):
     """Load and check a Mitsuba XML scene before anything is written (UserInputError, one line)."""
     from denoisebench.generator.mitsuba_xml import dependencies, load_mitsuba_xml
 
     path = Path(path)
     if path.suffix.lower() != ".xml":
         raise UserInputError(f"{path}: expected a Mitsuba .xml scene file")
-    translated, _ = load_mitsuba_xml(path, frames=frames)
+    translated, _ = load_mitsuba_xml(path, frames=frames, auto_camera=auto_camera)
     if any(relative == XML_CAMERA for _, relative in dependencies(path)):
         raise UserInputError(f"{path}: a file it names is called {XML_CAMERA}, which the dataset reserves")
     return translated
 
 
-def copy_xml_scene(path: str | Path, scene_dir: Path, frames: int) -> tuple[str, ...]:
+def copy_xml_scene(path: str | Path, scene_dir: Path, frames: int, auto_camera: bool = False) -> tuple[str, ...]:
     """Copy a Mitsuba XML scene to ``scene_dir/scene.xml`` (verbatim) with the files it names, and
-    ``camera.json`` (its static camera's frame count); return the stage files, ``scene.xml`` first."""
+    ``camera.json`` (its camera: frame count, auto camera or not); return the stage files, ``scene.xml`` first.
+
+    Without ``auto_camera`` the sidecar holds what it held before the option existed (same bytes, so
+    datasets made then keep their stage digests)."""
     import json
 
     from denoisebench.generator.mitsuba_xml import XML_NAME, dependencies
@@ -335,6 +340,12 @@ def copy_xml_scene(path: str | Path, scene_dir: Path, frames: int) -> tuple[str,
         atomic_write_bytes(scene_dir / relative, absolute.read_bytes())
         files.append(relative)
     camera = {"frames": int(frames), "camera": "the first sensor of scene.xml, static"}
+    if auto_camera:
+        camera = {
+            "frames": int(frames),
+            "camera": "orbit around the scene's bounding box (generator/contract/orbit.py)",
+            "auto_camera": True,
+        }
     atomic_write_bytes(scene_dir / XML_CAMERA, (json.dumps(camera, sort_keys=True) + "\n").encode())
     atomic_write_bytes(scene_dir / XML_NAME, path.read_bytes())
     return (XML_NAME, XML_CAMERA, *files)

@@ -15,6 +15,12 @@ Notes
   near/far clip, and for ``thinlens`` the aperture radius and focus distance are kept. The image
   size is the dataset's ``--width``/``--height``, not the file's film: with another aspect ratio
   the vertical framing differs from the file's own render (the horizontal field of view is kept).
+* ``auto_camera`` (``--auto-camera``) replaces the sensor, or stands in for a missing one, by the
+  orbit USD stages get (:mod:`~denoisebench.generator.contract.orbit`: same lens, distance,
+  elevation, start azimuth and 2° per frame) around Mitsuba's bounding box of the loaded scene
+  (``scene.bbox()``: every shape, emitting ones included, as USD's bounds include mesh lights).
+  Mitsuba scenes have no up axis: +Y is up (the convention of Mitsuba's and Bitterli's scenes), the
+  azimuth is measured from +X toward +Z. The file's sensor type and its lens are then not used.
 * Effects inferred from the loaded plugins: a ``thinlens`` sensor with a positive aperture →
   ``depth_of_field``; an emitter on a shape → ``area_lights``; an environment emitter
   (``envmap``, ``constant``) → ``environment``; BSDF lobes (Mitsuba's ``BSDFFlags``): glossy →
@@ -43,6 +49,7 @@ import numpy as np
 
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.camera_track import CameraTrack
+from denoisebench.generator.contract.orbit import orbit
 from denoisebench.generator.contract.translated_scene import TranslatedScene
 
 XML_NAME = "scene.xml"
@@ -177,6 +184,26 @@ def camera_track(mi, sensor, frames: int, path: Path) -> CameraTrack:
     )
 
 
+#: ``CameraTrack.prim_path`` of the ``auto_camera`` orbit.
+AUTO_CAMERA = "auto_camera:orbit"
+
+
+def auto_camera_track(scene, frames: int, path: Path) -> CameraTrack:
+    """The ``--auto-camera`` orbit (module Notes) around the loaded scene's bounding box."""
+    box = scene.bbox()
+    low, high = np.array(box.min, dtype=np.float64), np.array(box.max, dtype=np.float64)
+    if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high)) and np.all(high >= low)):
+        raise UserInputError(f"{path}: --auto-camera: the scene has no bounded geometry to frame")
+    track = orbit(low, high, frames)  # Y up, azimuth from +X toward +Z (orbit's defaults)
+    return CameraTrack(
+        poses=track.poses,
+        fov_x_deg=track.fov_x_deg,
+        near_clip=track.near_clip,
+        far_clip=track.far_clip,
+        prim_path=AUTO_CAMERA,
+    )
+
+
 def infer_effects(mi, scene, camera: CameraTrack) -> tuple[str, ...]:
     """Effects read off the loaded scene's plugins (see the module Notes)."""
     found = set()
@@ -204,8 +231,10 @@ def infer_effects(mi, scene, camera: CameraTrack) -> tuple[str, ...]:
     return tuple(sorted(found))
 
 
-def load_mitsuba_xml(path: str | Path, frames: int = 8) -> tuple[TranslatedScene, object]:
+def load_mitsuba_xml(path: str | Path, frames: int = 8, auto_camera: bool = False) -> tuple[TranslatedScene, object]:
     """``(TranslatedScene, mi.Scene)`` of a Mitsuba XML file; UserInputError (one line) on bad input.
+
+    ``frames``: the camera track's length; ``auto_camera``: the orbit instead of the file's sensor.
 
     The TranslatedScene has no shapes of its own (``scene_dict["mitsuba_xml"]`` names the file):
     render the returned ``mi.Scene`` with its ``camera``.
@@ -224,21 +253,24 @@ def load_mitsuba_xml(path: str | Path, frames: int = 8) -> tuple[TranslatedScene
         scene = mi.load_file(str(path.resolve()))
     except Exception as error:
         raise UserInputError(f"{path}: Mitsuba cannot load the scene ({_short(error)})") from None
-    if not scene.sensors():
-        raise UserInputError(f"{path}: the scene has no sensor (camera)")
+    if not scene.sensors() and not auto_camera:
+        raise UserInputError(f"{path}: the scene has no sensor (camera); give --auto-camera to frame it")
     if not scene.emitters():
         raise UserInputError(f"{path}: the scene has no emitter (light)")
     if not scene.shapes():
         raise UserInputError(f"{path}: nothing renderable: the scene has no shape")
     warnings = []
-    if len(scene.sensors()) > 1:
+    if len(scene.sensors()) > 1 and not auto_camera:
         warnings.append(f"{path.name}: {len(scene.sensors())} sensors; the first is the camera")
     if structure.integrator not in (None, *PATH_INTEGRATORS):
         warnings.append(
             f"{path.name}: integrator {structure.integrator!r} is replaced by denoisebench's path tracer "
             "(complete transport)"
         )
-    camera = camera_track(mi, scene.sensors()[0], frames, path)
+    if auto_camera:
+        camera = auto_camera_track(scene, frames, path)
+    else:
+        camera = camera_track(mi, scene.sensors()[0], frames, path)
     translated = TranslatedScene(
         scene_dict={"bsdfs": {}, "shapes": [], "emitters": [], "mitsuba_xml": str(path)},
         camera=camera,

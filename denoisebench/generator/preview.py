@@ -1,5 +1,9 @@
 """A quick look at a stage: one frame's reference color from the feature renderer, tone-mapped to a PNG.
 
+The stage is a USD file (translated by ``translate_usd``) or a Mitsuba 3 XML scene (``.xml``,
+loaded by :func:`~denoisebench.generator.mitsuba_xml.load_mitsuba_xml`, as ``generate-dataset
+--mitsuba`` loads it).
+
 The preview renders with the same renderer, camera model and render plan as the dataset (camera
 motion blur and thin-lens depth of field included, which Mitsuba's own sensors would not show for
 an animated camera), at the spp asked for, so it shows what the dataset will contain.
@@ -44,24 +48,31 @@ def render_preview(
     translate_options: dict | None = None,
     before_render=None,
 ) -> tuple[np.ndarray, object]:
-    """(linear HDR image H×W×3, translated scene) of ``usd_path`` at ``frame``.
+    """(linear HDR image H×W×3, translated scene) of ``usd_path`` (USD, or Mitsuba ``.xml``) at ``frame``.
 
     ``max_depth``: the user's transport restriction (None: the stage's own, else full transport).
-    ``translate_options``: keywords of :func:`translate_usd` (camera, auto camera, default light).
+    ``translate_options``: keywords of :func:`translate_usd` (camera, auto camera, default light),
+    or for a ``.xml`` file those of ``load_mitsuba_xml`` (frames, auto camera).
     ``before_render(translated)`` is called before rendering starts (the CLI prints the warnings
     there, so that they are seen even when rendering fails)."""
     try:
         options = RenderOptions(max_depth=max_depth)
     except ValueError as error:
         raise UserInputError(f"--max-depth: {error}") from None
-    translated = translate_usd(usd_path, **(translate_options or {}))
+    if Path(usd_path).suffix.lower() == ".xml":
+        from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
+
+        translated, loaded = load_mitsuba_xml(usd_path, **(translate_options or {}))
+    else:
+        translated, loaded = translate_usd(usd_path, **(translate_options or {})), None
     if not 0 <= frame < translated.camera.frames:
         raise UserInputError(f"--frame {frame} is out of range: the stage has {translated.camera.frames} frame(s)")
     from denoisebench.generator.render.frame import render_frame
 
     plan = make_render_plan(translated.effects, options, stage_max_depth=translated.max_depth)
     try:
-        scene = build_mitsuba_scene(translated, frame=frame)  # may add warnings (prims Mitsuba refuses)
+        # may add warnings (prims Mitsuba refuses); an XML scene is Mitsuba's already
+        scene = loaded if loaded is not None else build_mitsuba_scene(translated, frame=frame)
     finally:
         if before_render is not None:
             before_render(translated)

@@ -15,8 +15,8 @@ holds exactly the camera and lights that were rendered, and re-translating it ne
   ``R / sin(fov_x / 2) · 1.1`` (the sphere fills the width with 10 % margin; in images wider than
   tall the sphere's top and bottom may be cut), elevation 20° above the up axis' horizon,
   azimuth from 30° (measured in the horizontal plane from the stage's +X toward its forward axis)
-  advancing :data:`ORBIT_DEGREES_PER_FRAME` per frame, so the sequence has camera motion (8 frames:
-  14°). One ``xformOp:transform`` time sample per frame; clipping range ``[d/1000, d + 4R]``.
+  advancing 2° per frame, so the sequence has camera motion (8 frames: 14°); these numbers live in
+  ``generator/contract/orbit.py``, shared with Mitsuba XML scenes. One ``xformOp:transform`` time sample per frame; clipping range ``[d/1000, d + 4R]``.
 * frames: the stage's own time range when it has one (animated stages keep their timing), else
   ``0 .. frames-1`` authored as the stage's start/end time codes.
 
@@ -36,14 +36,15 @@ import math
 import numpy as np
 
 from denoisebench.errors import UserInputError
+from denoisebench.generator.contract.orbit import (  # the orbit's numbers, shared with Mitsuba XML scenes
+    APERTURE,
+    FOCAL_LENGTH,
+    ORBIT_START_DEGREES,
+    orbit,
+)
 
 CAMERA_PATH = "/DenoisebenchAutoCamera"
 LIGHTS_PATH = "/DenoisebenchDefaultLights"
-ORBIT_DEGREES_PER_FRAME = 2.0
-ORBIT_START_DEGREES = 30.0
-ORBIT_ELEVATION_DEGREES = 20.0
-FOCAL_LENGTH = 35.0
-APERTURE = 36.0
 DOME_INTENSITY = 0.3
 KEY_INTENSITY = 2.5
 
@@ -112,25 +113,15 @@ def add_auto_camera(stage, frames: int = 8) -> str:
     bounds = stage_bounds(stage, times[0])
     if bounds is None:
         raise UserInputError("--auto-camera: the stage has no bounded geometry to frame")
-    low, high = bounds
-    center = 0.5 * (low + high)
-    radius = max(0.5 * float(np.linalg.norm(high - low)), 1e-6)
-    fov_x = 2.0 * math.atan(0.5 * APERTURE / FOCAL_LENGTH)
-    distance = radius / math.sin(0.5 * fov_x) * 1.1
-    up, right, forward = _axes(stage)
+    path = orbit(*bounds, len(times), *_axes(stage))  # contract/orbit.py: the numbers of the module docstring
     camera = UsdGeom.Camera.Define(stage, CAMERA_PATH)
     camera.CreateFocalLengthAttr(FOCAL_LENGTH)
     camera.CreateHorizontalApertureAttr(APERTURE)
     camera.CreateVerticalApertureAttr(APERTURE)
-    camera.CreateClippingRangeAttr(Gf.Vec2f(distance / 1000.0, distance + 4.0 * radius))
+    camera.CreateClippingRangeAttr(Gf.Vec2f(path.near_clip, path.far_clip))
     op = camera.MakeMatrixXform()
-    elevation = math.radians(ORBIT_ELEVATION_DEGREES)
-    for index, time in enumerate(times):
-        azimuth = math.radians(ORBIT_START_DEGREES + ORBIT_DEGREES_PER_FRAME * index)
-        direction = (
-            math.cos(elevation) * (math.cos(azimuth) * right + math.sin(azimuth) * forward) + math.sin(elevation) * up
-        )
-        op.Set(_look_at(center + distance * direction, center, up), time)
+    for pose, time in zip(path.poses, times):
+        op.Set(Gf.Matrix4d(*[float(v) for v in pose.T.ravel()]), time)  # Gf stores row vectors
     return CAMERA_PATH
 
 
