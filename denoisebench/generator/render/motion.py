@@ -223,7 +223,27 @@ class MovingShapes:
         iteration one Embree call on the group's *layout* scene (every shape of the group at its own
         slot, :func:`plan_layout`) with the ray carried into that shape's slot and clipped to its
         sphere, so that it cannot meet a neighbour. Most rays meet no candidate and make no call.
+
+        Frozen passes (``dr.freeze``, render/frame.py): :data:`DRJIT_STRUCT` names every Dr.Jit value
+        the kernels read (layout scenes, pose tables, bounds, the first key's time), so that they
+        are inputs of a recording, never constants baked into it (Dr.Jit refuses to record a read of
+        an evaluated array that is not an input). The Python numbers (key count, shape count, bounding
+        radii and centres, whether poses are rigid) shape the code and are literals of the kernels:
+        recordings are kept for one scene object only.
     """
+
+    #: What a frozen pass traverses as its inputs (Dr.Jit PyTree fields; the types are not used).
+    DRJIT_STRUCT = {
+        "layouts": object,
+        "q": object,
+        "t": object,
+        "slerp": object,
+        "s": object,
+        "centre_table": object,
+        "radius_table": object,
+        "shift_table": object,
+        "time0_opaque": object,
+    }
 
     def __init__(self, mi, layouts: list, groups: list, motions: list[dict], bounds: list[tuple], offsets):
         import drjit as dr
@@ -241,8 +261,12 @@ class MovingShapes:
         self.rigid = all(np.allclose(p["stretch"], np.eye(3), atol=1e-6) for p in parts)
 
         def table(kind, rows):
-            rows = np.ascontiguousarray(np.concatenate(rows), dtype=np.float32)
-            return dr.unravel(kind, mi.Float(rows.reshape(-1)))
+            # Columns copied into Dr.Jit's own memory (lists, never mapped NumPy buffers: a frozen
+            # pass's input layout includes each buffer's alignment) and evaluated: frozen-pass inputs.
+            rows = np.concatenate(rows).astype(np.float32)
+            out = kind(*[mi.Float(rows[:, c].tolist()) for c in range(rows.shape[1])])
+            dr.make_opaque(out)
+            return out
 
         self.q = table(mi.Vector4f, [p["rotation"] for p in parts])
         self.t = table(mi.Vector3f, [p["translation"] for p in parts])
@@ -253,6 +277,7 @@ class MovingShapes:
             sin = np.sin(theta)
             slerp.append(np.stack([theta, np.where(sin < 1e-5, 0.0, 1.0 / np.where(sin < 1e-5, 1.0, sin))], 1))
         self.slerp = table(mi.Vector2f, slerp)
+        self.s = []
         if not self.rigid:
             self.s = [table(mi.Vector3f, [p["stretch"][:, :, c] for p in parts]) for c in range(3)]
         centres, radii = [], []
@@ -260,17 +285,19 @@ class MovingShapes:
             largest = max(np.linalg.svd(s, compute_uv=False).max() for s in part["stretch"])
             centres.append(np.asarray(centre, dtype=np.float64))
             radii.append(radius * largest * (1.0 + 1e-4) + 1e-5)
-        self.centres = [mi.Point3f(*[float(v) for v in c]) for c in centres]
+        self.centres = [tuple(float(v) for v in c) for c in centres]  # literals of the kernel
         self.radii = [float(r) for r in radii]
         self.centre_table = table(mi.Vector3f, [c[None] for c in centres])
-        self.radius_table = mi.Float(np.asarray(radii, dtype=np.float32))
+        self.radius_table = mi.Float([float(np.float32(r)) for r in radii])
+        dr.make_opaque(self.radius_table)
+        self.time0_opaque = dr.opaque(mi.Float, self.time0)
         # Object space → layout space: + (offset - centre).
         self.shift_table = table(mi.Vector3f, [(np.asarray(offsets[j]) - centres[j])[None] for j in range(len(parts))])
 
     # ------------------------------------------------------------------ poses
     def _key(self, time):
         dr, mi = self.dr, self.mi
-        u = dr.clip((time - dr.opaque(mi.Float, self.time0)) * SUBSTEPS, 0.0, float(self.count - 1))
+        u = dr.clip((time - self.time0_opaque) * SUBSTEPS, 0.0, float(self.count - 1))
         k = mi.UInt32(dr.minimum(dr.floor(u), float(self.count - 2)))
         return k, u - mi.Float(k)
 
@@ -383,7 +410,9 @@ class MovingShapes:
         """Every moving shape's bounding-sphere centre at per-lane ``time`` (and the pose key): computed
         once per sample, since all rays of a path (camera, bounces, shadow rays) share its time."""
         key = self._key(time)
-        centres = [self._to_world_point(self.pose(j, key), self.centres[j]) for j in range(self.shapes_count)]
+        centres = [
+            self._to_world_point(self.pose(j, key), self.mi.Point3f(*self.centres[j])) for j in range(self.shapes_count)
+        ]
         return PosesAt(key, centres)
 
     def ray_intersect(self, base, ray, coherent: bool, active=True, poses: PosesAt | None = None):
@@ -504,11 +533,17 @@ class ShutterMotionScene:
     """A Mitsuba scene plus the shapes that move within the shutter (what ``render_frame`` takes).
 
     ``base`` is the ``mi.Scene`` of everything static (and of lights); :meth:`shapes` lists both kinds
-    so that the renderer's scans (delta and null BSDFs, previous positions) see every shape. Passes
-    over such a scene are traced, not frozen (``frozen = False``): it is rebuilt per frame anyway.
+    so that the renderer's scans (delta and null BSDFs, previous positions) see every shape.
+
+    Notes:
+        Passes over such a scene are frozen like any other (``dr.freeze``, render/frame.py): the
+        scene is a Dr.Jit PyTree (:data:`DRJIT_STRUCT`: the base scene and :class:`MovingShapes`),
+        so its scenes, shapes, BSDFs and pose tables are inputs of the recording. Attribute reads
+        other than these fields fall through to ``base``.
     """
 
-    frozen = False
+    #: What a frozen pass traverses as its inputs (Dr.Jit PyTree fields; the types are not used).
+    DRJIT_STRUCT = {"base": object, "moving": object}
 
     def __init__(self, base, moving: MovingShapes):
         self.base = base
