@@ -33,9 +33,11 @@ Conventions and pitfalls:
   convention (the ray's own time).
 * Moving *emitters* are not supported: the translator keeps emissive shapes at each frame's pose (no
   shutter motion) and says so in one warning; light sampling therefore never meets a moving emitter.
-* Shadow rays towards infinite emitters end ``2 R`` beyond the shading point (Mitsuba's convention,
-  ``R`` the main scene's bounding-sphere radius): a moving shape further out than that casts no
-  shadow from the sky.
+* Shadow rays towards infinite emitters (environment, constant, directional) are unbounded here.
+  Mitsuba's own test ends them ``2 R`` beyond the shading point (``R`` the main scene's
+  bounding-sphere radius, which leaves the moving shapes out), so a moving shape further out than
+  that, or static geometry seen from a point on a moving shape outside the sphere, would cast no
+  shadow: light is never lost that way (tests/test_object_motion_shadows.py).
 """
 
 from __future__ import annotations
@@ -502,10 +504,14 @@ class MovingShapes:
 
     def sample_emitter_direction(self, base, si, sample, active, poses: PosesAt | None = None):
         """``base.sample_emitter_direction`` with its visibility test extended to the moving shapes."""
-        dr = self.dr
+        dr, mi = self.dr, self.mi
         ds, weight = base.sample_emitter_direction(si, sample, False, active)
-        shadow = si.spawn_ray_to(ds.p)
         live = active & (dr.max(weight) != 0.0)
+        # Infinite emitters (environment, constant, directional) put ds.p 2 R beyond the shading point,
+        # R the *main* scene's bounding radius: moving shapes (and static geometry, seen from a point
+        # on a moving shape outside that sphere) can lie further out. Their shadow rays are unbounded.
+        infinite = live & mi.has_flag(ds.emitter.flags(), mi.EmitterFlags.Infinite)
+        shadow = dr.select(infinite, si.spawn_ray(ds.d), si.spawn_ray_to(ds.p))
         blocked = base.ray_test(shadow, live)
         blocked |= self.ray_test(shadow, live & ~blocked, poses)
         return ds, dr.select(blocked, 0.0, weight)
