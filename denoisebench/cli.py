@@ -13,6 +13,7 @@ import importlib
 import sys
 import textwrap
 
+from denoisebench import __version__
 from denoisebench.errors import UserInputError
 
 #: command name -> (module under denoisebench.commands, one-line help). Order is the --help order.
@@ -48,7 +49,6 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    from denoisebench import __version__
 
     parser.add_argument("--version", action="version", version=f"denoisebench {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

@@ -21,7 +21,16 @@ import sys
 import time
 from pathlib import Path
 
+from denoisebench.dataset import disk_space, open_dataset
+from denoisebench.denoisers.isolation import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, limits_from_args
+from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
+from denoisebench.denoisers.sandbox import protect
 from denoisebench.errors import UserInputError
+from denoisebench.leaderboard.benchmark_run import run_benchmark
+from denoisebench.leaderboard.runner import BenchmarkConfig
+from denoisebench.leaderboard.store import ResultsStore, utc_now
+from denoisebench.leaderboard.time_model import DEFAULT_TIME_BUDGET, parse_size
+from denoisebench.outputs import check_writable_dir, check_writable_file
 
 EPILOG = """examples:
   run-benchmark --data out/dataset --out report/
@@ -127,7 +136,6 @@ def add_arguments(parser) -> None:
         action="store_true",
         help="skip the sha256 check of the dataset's files before the run (recorded in the run)",
     )
-    from denoisebench.leaderboard.time_model import DEFAULT_TIME_BUDGET
 
     parser.add_argument(
         "--time-at",
@@ -154,27 +162,17 @@ def add_arguments(parser) -> None:
         action="store_true",
         help="do not time one render of the dataset's stage at --time-size (render offsets are then held fixed)",
     )
-    from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
 
     add_isolation_arguments(parser)
 
 
 def run(args) -> int:
-    from denoisebench.dataset import disk_space
-
     need = lambda: disk_space.store_need(args.db)  # noqa: E731
     with disk_space.full_disk_is_one_line(Path(args.db).absolute().parent, "--db", "the results store", need):
         return _run(args)
 
 
 def _run(args) -> int:
-    from denoisebench.dataset import open_dataset
-    from denoisebench.denoisers.isolation import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, limits_from_args
-    from denoisebench.leaderboard.benchmark_run import run_benchmark
-    from denoisebench.leaderboard.runner import BenchmarkConfig
-    from denoisebench.leaderboard.store import ResultsStore, utc_now
-    from denoisebench.outputs import check_writable_dir, check_writable_file
-
     limits = limits_from_args(args)  # bad limits are exit 2 before anything else
     trim = None
     if args.trim is not None:
@@ -184,8 +182,6 @@ def _run(args) -> int:
             trim = check_trim(args.trim)
         except ValueError as exc:
             raise UserInputError(f"--trim: {exc}") from None
-
-    from denoisebench.leaderboard.time_model import parse_size
 
     time_at = parse_size(args.time_at, "--time-at")
     time_size = parse_size(args.time_size, "--time-size")
@@ -221,7 +217,6 @@ def _run(args) -> int:
     if not args.no_report:
         check_writable_dir(args.out, "--out")
     dataset = open_dataset(args.data)
-    from denoisebench.denoisers.sandbox import protect
 
     protect(dataset.root, args.db, None if args.no_report else args.out)  # hidden from every sandboxed worker
     started = time.perf_counter()

@@ -20,7 +20,10 @@ from __future__ import annotations
 import json
 import sys
 
+from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
+from denoisebench.denoisers.registry import available_denoisers
 from denoisebench.errors import UserInputError
+from denoisebench.sampling.registry import available_samplers
 
 EPILOG = """examples:
   denoisebench check-plugin cross_bilateral
@@ -52,7 +55,6 @@ def add_arguments(parser) -> None:
         help="SPEC is a sampler (group denoisebench.samplers): run its convergence check on a frame of known truth "
         "(denoisebench.sampling.checks) instead of the hard cases; a plugin sampler runs in a worker process",
     )
-    from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
 
     add_isolation_arguments(parser)
 
@@ -73,7 +75,6 @@ def parse_options(items: list[str]) -> dict:
 
 def _list() -> int:
     from denoisebench.denoisers.hard_cases import CASES
-    from denoisebench.denoisers.registry import available_denoisers
 
     print("denoisers:")
     for name, origin in available_denoisers().items():
@@ -81,7 +82,6 @@ def _list() -> int:
     print("hard cases:")
     for case in CASES:
         print(f"  {case.name:<22} {case.description}")
-    from denoisebench.sampling.registry import available_samplers
 
     print("samplers (--sampler):")
     for name, origin in available_samplers().items():

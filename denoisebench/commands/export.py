@@ -21,6 +21,9 @@ from __future__ import annotations
 
 import sys
 
+from denoisebench.dataset.export.selection import select_scenes
+from denoisebench.dataset.export.staging import check_target, staged_folder
+from denoisebench.dataset.reader import open_dataset
 from denoisebench.errors import UserInputError
 
 FORMATS = ("oidn", "noisebase")
@@ -55,10 +58,6 @@ def add_arguments(parser) -> None:
 
 def run(args) -> int:
     from pathlib import Path
-
-    from denoisebench.dataset.export.selection import select_scenes
-    from denoisebench.dataset.export.staging import check_target, staged_folder
-    from denoisebench.dataset.reader import open_dataset
 
     if not (Path(args.data) / "dataset.json").is_file():
         raise UserInputError(f"{args.data}: not a dataset folder (no dataset.json)")

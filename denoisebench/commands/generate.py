@@ -48,7 +48,19 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from denoisebench.dataset import disk_space
 from denoisebench.errors import UserInputError
+from denoisebench.generator.dataset_run import (
+    DEFAULT_REF_ERROR,
+    DEFAULT_REF_SPP,
+    REFERENCE_SPP_FACTOR,
+    GenerateRequest,
+    generate_dataset,
+    validate_request,
+)
+from denoisebench.generator.executors import make_executor
+from denoisebench.outputs import check_writable_dir
+from denoisebench.scenes import list_families
 
 EPILOG = """examples:
   generate-dataset --out data/small --families cornell,glossy_fireflies --scenes 2 --frames 4 \\
@@ -75,8 +87,6 @@ def _int_list(text: str) -> tuple[int, ...]:
 
 
 def _families(text: str | None, have_usd: bool) -> tuple[str, ...]:
-    from denoisebench.scenes import list_families
-
     if text is None:
         return () if have_usd else tuple(f.name for f in list_families())
     if text.strip() == "all":
@@ -86,8 +96,6 @@ def _families(text: str | None, have_usd: bool) -> tuple[str, ...]:
 
 
 def _defaults() -> tuple[float, int]:
-    from denoisebench.generator.dataset_run import DEFAULT_REF_ERROR, DEFAULT_REF_SPP
-
     return DEFAULT_REF_ERROR, DEFAULT_REF_SPP
 
 
@@ -188,8 +196,6 @@ def _ref_error(value: float | None) -> float | None:
 
 
 def request_from_args(args):
-    from denoisebench.generator.dataset_run import GenerateRequest
-
     return GenerateRequest(
         out=Path(args.out),
         families=_families(args.families, bool(args.usd or args.xml)),
@@ -251,12 +257,8 @@ def print_summary(summary) -> None:
 
 
 def run(args) -> int:
-    from denoisebench.generator.dataset_run import REFERENCE_SPP_FACTOR, generate_dataset, validate_request
-    from denoisebench.generator.executors import make_executor
-
     request = request_from_args(args)
     validate_request(request)  # before a Ray cluster is started for nothing
-    from denoisebench.outputs import check_writable_dir
 
     check_writable_dir(request.out, "--out")  # one line and exit 2, not a traceback after set-up
     if request.ref_spp < REFERENCE_SPP_FACTOR * max(request.spp):
@@ -265,7 +267,6 @@ def run(args) -> int:
             f"({max(request.spp)}): references will likely be flagged too noisy",
             file=sys.stderr,
         )
-    from denoisebench.dataset import disk_space
 
     # a lower bound of the dataset's size against the free space, before anything is rendered
     frames = (len(request.families) * request.scenes + len(request.usd) + len(request.xml)) * request.frames

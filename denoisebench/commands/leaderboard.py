@@ -6,6 +6,9 @@ Each denoiser is shown from the newest run that measured it (its run id and date
 
 from __future__ import annotations
 
+from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.leaderboard.table import format_leaderboard, leaderboard
+
 EPILOG = """examples:
   denoisebench leaderboard --db benchmark.sqlite
   denoisebench leaderboard --db benchmark.sqlite --metric flip --spp 4
@@ -28,9 +31,6 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    from denoisebench.leaderboard.store import ResultsStore
-    from denoisebench.leaderboard.table import format_leaderboard, leaderboard
-
     with ResultsStore(args.db, readonly=True) as store:
         print(format_leaderboard(*leaderboard(store, args.metric, args.spp, args.dataset)))
     return 0

@@ -18,6 +18,10 @@ import json
 import sys
 
 from denoisebench.errors import UserInputError
+from denoisebench.generator.contract.render_plan import make_render_plan
+from denoisebench.generator.dataset_scenes import stage_options
+from denoisebench.generator.preview import render_preview, tone_map_preview, write_png
+from denoisebench.scenes import get_family, list_families
 
 EPILOG = """examples:
   denoisebench scenes list
@@ -67,7 +71,6 @@ def translate_options(args, frames: int = 8) -> dict:
                     "or --auto-camera, and its own emitters"
                 )
         return {"frames": frames, "auto_camera": bool(args.auto_camera)}
-    from denoisebench.generator.dataset_scenes import stage_options
 
     return {**stage_options(args.camera, args.auto_camera, args.default_light, frames), "strict": True}
 
@@ -107,8 +110,6 @@ def run(args) -> int:
 
 
 def _family(name: str):
-    from denoisebench.scenes import get_family
-
     try:
         return get_family(name)
     except (KeyError, ValueError) as error:
@@ -116,8 +117,6 @@ def _family(name: str):
 
 
 def _list(args) -> int:
-    from denoisebench.scenes import list_families
-
     families = list_families()
     width = max(len(f.name) for f in families)
     for family in families:
@@ -144,8 +143,6 @@ def _report_warnings(translated) -> None:
 
 
 def _preview(args) -> int:
-    from denoisebench.generator.preview import render_preview, tone_map_preview, write_png
-
     if args.width < 1 or args.height < 1 or args.spp < 1:
         raise UserInputError("--width, --height and --spp must be positive")
     image, translated = render_preview(
@@ -163,8 +160,6 @@ def _preview(args) -> int:
 
 
 def _check(args) -> int:
-    from denoisebench.generator.contract.render_plan import make_render_plan
-
     if is_xml(args.usd):
         from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
 

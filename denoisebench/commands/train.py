@@ -26,7 +26,13 @@ import json
 import sys
 from pathlib import Path
 
+from denoisebench.dataset.errors import DatasetError
+from denoisebench.dataset.reader import open_dataset
+from denoisebench.denoisers.registry import load_denoiser
+from denoisebench.denoisers.runner import run_sequence
 from denoisebench.errors import UserInputError
+from denoisebench.metrics.spatial import relmse
+from denoisebench.models.card import render_card
 
 EPILOG = """examples:
   denoisebench train --model kpcn --data data/small --config small --steps 2000 --out kpcn.pt
@@ -158,8 +164,6 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    from denoisebench.dataset.errors import DatasetError
-
     if args.steps < 0:
         raise UserInputError(f"--steps must be >= 0 (got {args.steps})")
     if args.batch_size < 1 or (args.crop is not None and args.crop < 4):
@@ -233,7 +237,6 @@ def run(args) -> int:
 
 def ship(checkpoint: str, args, evaluation: dict) -> str:
     """Write the stripped weights and the model card into ``args.ship``; return a one-line summary."""
-    from denoisebench.models.card import render_card
     from denoisebench.models.catalog import model_config, parameter_count
     from denoisebench.models.checkpoint import load_checkpoint, model_from_checkpoint
     from denoisebench.models.training import strip_for_shipping
@@ -278,11 +281,6 @@ def evaluate_on_split(
     """
     import numpy as np
     from tqdm import tqdm
-
-    from denoisebench.dataset.reader import open_dataset
-    from denoisebench.denoisers.registry import load_denoiser
-    from denoisebench.denoisers.runner import run_sequence
-    from denoisebench.metrics.spatial import relmse
 
     ds = open_dataset(data)
     scenes = ds.split(split)

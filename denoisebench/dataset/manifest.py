@@ -80,6 +80,7 @@ from denoisebench.dataset import layout
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.dataset.errors import DatasetError
 from denoisebench.dataset.exr_io import canonical_json
+from denoisebench.dataset.frame_index import FrameIndexWriter
 
 SCHEMA = "denoisebench-dataset"
 SCHEMA_VERSION = 2
@@ -302,7 +303,6 @@ def save_manifest(path: str | os.PathLike, manifest: Mapping) -> None:
 
     O(records): for tools and tests that edit a dataset wholesale (and for migrating version 1);
     the writer records frames one by one instead."""
-    from denoisebench.dataset.frame_index import FrameIndexWriter
 
     path = Path(path)
     renders = {name: scene.get("renders", {}) for name, scene in manifest["scenes"].items()}

@@ -42,6 +42,9 @@ from pathlib import Path
 from denoisebench.dataset import layout
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.errors import UserInputError
+from denoisebench.generator.mitsuba_xml import XML_NAME, dependencies, load_mitsuba_xml
+from denoisebench.generator.usd.translate import apply_additions, translate_usd
+from denoisebench.scenes.effects import METADATA_KEY
 
 USD_SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
 PACKAGE_NAME = "package.usdz"
@@ -232,9 +235,6 @@ def _with_additions(stage_path: Path, options: dict) -> str:
     """The copied root layer's text with the camera choice, auto camera and default lights authored into it."""
     from pxr import Sdf, Usd
 
-    from denoisebench.generator.usd.translate import apply_additions
-    from denoisebench.scenes.effects import METADATA_KEY
-
     cached = Sdf.Layer.Find(str(stage_path))
     if cached is not None:
         cached.Reload(force=True)  # USD keeps open layers by path: read the bytes just written
@@ -264,7 +264,6 @@ def check_user_stage(path: str | Path, options: dict | None = None):
     light (unless ``default_light``), with nothing renderable, or a dependency outside the stage's
     folder is a UserInputError (one line naming the file).
     """
-    from denoisebench.generator.usd.translate import translate_usd
 
     path = Path(path)
     if not path.is_file():
@@ -290,7 +289,6 @@ def load_scene_file(path: str | Path):
         from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
 
         return load_mitsuba_xml(path, **xml_camera(path))
-    from denoisebench.generator.usd.translate import translate_usd
 
     return translate_usd(path), None
 
@@ -312,7 +310,6 @@ def xml_camera(path: Path) -> dict:
 
 def check_xml_scene(path: str | Path, frames: int, auto_camera: bool = False):
     """Load and check a Mitsuba XML scene before anything is written (UserInputError, one line)."""
-    from denoisebench.generator.mitsuba_xml import dependencies, load_mitsuba_xml
 
     path = Path(path)
     if path.suffix.lower() != ".xml":
@@ -330,8 +327,6 @@ def copy_xml_scene(path: str | Path, scene_dir: Path, frames: int, auto_camera: 
     Without ``auto_camera`` the sidecar holds what it held before the option existed (same bytes, so
     datasets made then keep their stage digests)."""
     import json
-
-    from denoisebench.generator.mitsuba_xml import XML_NAME, dependencies
 
     path = Path(path)
     scene_dir.mkdir(parents=True, exist_ok=True)

@@ -50,6 +50,12 @@ from pathlib import Path
 import numpy as np
 
 from denoisebench.dataset import layout
+from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
+from denoisebench.generator.dataset_scenes import load_scene_file
+from denoisebench.generator.render.frame import render_frame, render_ladder
+from denoisebench.generator.render.progressive import RenderClock
+from denoisebench.generator.render.reference import render_adaptive, round_seed
+from denoisebench.generator.render.scene import build_mitsuba_scene
 
 #: Reference layers besides color and color_var (the renderer's reference output).
 REFERENCE_EXTRA = ("diffuse", "diffuse_var", "specular", "specular_var")
@@ -117,10 +123,6 @@ class _LoadedScene:
     """A translated stage, its render plan and its Mitsuba scene, ready to render."""
 
     def __init__(self, usd_path: Path, options: dict):
-        from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
-        from denoisebench.generator.dataset_scenes import load_scene_file
-        from denoisebench.generator.render.scene import build_mitsuba_scene
-
         self.translated, loaded = load_scene_file(usd_path)  # scene.usda (USD) or scene.xml (Mitsuba XML)
         self.plan = make_render_plan(
             self.translated.effects, RenderOptions(**options), stage_max_depth=self.translated.max_depth
@@ -132,7 +134,6 @@ class _LoadedScene:
         """The Mitsuba scene of ``frame``: the one scene, or for moving objects that frame's (the last kept)."""
         if not self.translated.moving:
             return self.scene
-        from denoisebench.generator.render.scene import build_mitsuba_scene
 
         if self._frame_scene[0] != frame:
             self._frame_scene = (frame, build_mitsuba_scene(self.translated, frame=frame))
@@ -214,8 +215,6 @@ def _timed_render(loaded: _LoadedScene, job: FrameJob, spp: int, reference: bool
     """Render, and split the renderer's seconds into rendering and kernel compilation.
 
     ``seed``: the sampler seed (default: the job's ``render_seed``; adaptive reference rounds pass their own)."""
-    from denoisebench.generator.render.frame import render_frame
-    from denoisebench.generator.render.progressive import RenderClock
 
     clock = RenderClock()
     out = render_frame(
@@ -235,8 +234,6 @@ def _timed_render(loaded: _LoadedScene, job: FrameJob, spp: int, reference: bool
 
 def _timed_ladder(loaded: _LoadedScene, job: FrameJob) -> list[Render]:
     """The job's noisy rungs from one progressive render; each rung's seconds is the time to reach it."""
-    from denoisebench.generator.render.frame import render_ladder
-    from denoisebench.generator.render.progressive import RenderClock
 
     clock = RenderClock()
     renders = []
@@ -281,7 +278,6 @@ def _render_reference(loaded: _LoadedScene, job: FrameJob) -> Render:
     """The frame's reference: one render at ``ref_spp``, or adaptive rounds when ``ref_error`` is set."""
     if job.ref_error is None:
         return _timed_render(loaded, job, job.ref_spp, reference=True)
-    from denoisebench.generator.render.reference import render_adaptive, round_seed
 
     def render_round(index: int, round_spp: int):
         render = _timed_render(

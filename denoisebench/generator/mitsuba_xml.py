@@ -51,6 +51,7 @@ from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.contract.orbit import orbit
 from denoisebench.generator.contract.translated_scene import TranslatedScene
+from denoisebench.mitsuba_runtime import load_mitsuba
 
 XML_NAME = "scene.xml"
 SENSORS = {"PerspectiveCamera": "perspective", "ThinLensCamera": "thinlens"}
@@ -239,7 +240,6 @@ def load_mitsuba_xml(path: str | Path, frames: int = 8, auto_camera: bool = Fals
     The TranslatedScene has no shapes of its own (``scene_dict["mitsuba_xml"]`` names the file):
     render the returned ``mi.Scene`` with its ``camera``.
     """
-    from denoisebench.mitsuba_runtime import load_mitsuba
 
     path = Path(path)
     if not path.is_file():

@@ -42,6 +42,7 @@ from denoisebench.generator.contract.orbit import (  # the orbit's numbers, shar
     ORBIT_START_DEGREES,
     orbit,
 )
+from denoisebench.generator.usd.stage import frame_range
 
 CAMERA_PATH = "/DenoisebenchAutoCamera"
 LIGHTS_PATH = "/DenoisebenchDefaultLights"
@@ -96,7 +97,6 @@ def _look_at(eye: np.ndarray, target: np.ndarray, up: np.ndarray):
 
 def orbit_frames(stage, frames: int) -> list[float]:
     """The time codes the camera is sampled at (the stage's own range, or 0..frames-1 authored now)."""
-    from denoisebench.generator.usd.stage import frame_range
 
     if stage.HasAuthoredTimeCodeRange():
         return frame_range(stage)

@@ -28,6 +28,7 @@ from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.render_plan import STAGE_MAX_DEPTH_KEY, check_max_depth
 from denoisebench.generator.contract.translated_scene import TranslatedScene, shutter_keys
 from denoisebench.generator.usd import geometry
+from denoisebench.generator.usd.additions import add_auto_camera, add_default_lights, stage_has_light
 from denoisebench.generator.usd.camera import find_camera, read_camera
 from denoisebench.generator.usd.effects import infer_effects
 from denoisebench.generator.usd.lights import read_light
@@ -81,7 +82,6 @@ def translate_usd(
 
 def apply_additions(stage, camera_path: str | None, auto_camera: bool, default_light: bool, frames: int) -> str | None:
     """Author ``--auto-camera`` / ``--default-light`` into the stage's current edit target; return the camera path."""
-    from denoisebench.generator.usd.additions import add_auto_camera, add_default_lights, stage_has_light
 
     if auto_camera:
         if camera_path:
