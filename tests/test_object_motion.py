@@ -62,6 +62,18 @@ def _z_scores(ours, ours_var, subs):
     return (a - blocks.mean(0)) / np.sqrt(va + vb + 1e-12)
 
 
+def sub_frame_renders(mi, translated, count: int, spp: int) -> list[np.ndarray]:
+    """Mitsuba ``path`` renders of frame 1 at ``count`` stratified, jittered shutter times (-0.5..0.5)."""
+    rng = np.random.default_rng(0)
+    subs = []
+    for i in range(count):
+        tau = 0.5 + (i + rng.random()) / count
+        sensor = sensor_dict(translated.camera, 1, SIZE, SIZE, spp, seed=i)
+        sub = build_mitsuba_scene(translated_at(translated, tau), sensor, {"type": "path"})
+        subs.append(np.asarray(mi.render(sub, spp=spp, seed=i))[..., :3])
+    return subs
+
+
 @pytest.mark.parametrize("kind", ["rigid", "stretch"])
 def test_blur_converges_to_sub_frame_average(tmp_path, kind):
     mi = load_mitsuba()
@@ -71,14 +83,7 @@ def test_blur_converges_to_sub_frame_average(tmp_path, kind):
     scene = build_mitsuba_scene(translated, frame=1)
     assert isinstance(scene, ShutterMotionScene)
     blur = render_frame(scene, translated.camera, 1, plan, width=SIZE, height=SIZE, spp=1024, seed=3, reference=True)
-    rng = np.random.default_rng(0)
-    subs = []
-    count, spp = 32, 64
-    for i in range(count):
-        tau = 0.5 + (i + rng.random()) / count  # frame 1, shutter -0.5..0.5: stratified, jittered
-        sensor = sensor_dict(translated.camera, 1, SIZE, SIZE, spp, seed=i)
-        sub = build_mitsuba_scene(translated_at(translated, tau), sensor, {"type": "path"})
-        subs.append(np.asarray(mi.render(sub, spp=spp, seed=i))[..., :3])
+    subs = sub_frame_renders(mi, translated, 32, 64)
     z = _z_scores(blur.buffers["color"], blur.buffers["color_var"], subs)
     assert np.abs(z).max() < 4.5 and np.mean(z**2) < 1.8, (np.abs(z).max(), np.mean(z**2))
 

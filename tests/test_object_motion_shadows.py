@@ -16,11 +16,11 @@ import copy
 
 import numpy as np
 from pxr import Gf, UsdGeom
-from test_object_motion import SIZE, _z_scores
+from test_object_motion import SIZE, _z_scores, sub_frame_renders
 
 from denoisebench.generator.contract.render_plan import make_render_plan
 from denoisebench.generator.render.frame import render_frame
-from denoisebench.generator.render.motion import ShutterMotionScene, translated_at
+from denoisebench.generator.render.motion import ShutterMotionScene
 from denoisebench.generator.render.scene import build_mitsuba_scene, sensor_dict
 from denoisebench.generator.usd.translate import translate_stage
 from denoisebench.mitsuba_runtime import load_mitsuba
@@ -54,14 +54,7 @@ def test_moving_occluder_beyond_twice_the_scene_radius_shadows_the_sky(tmp_path)
     assert SLAB_HEIGHT - 0.1 > 2.0 * radius  # the slab lies beyond Mitsuba's shadow-ray length
     plan = make_render_plan(translated.effects)
     ours = render_frame(scene, translated.camera, 1, plan, width=SIZE, height=SIZE, spp=256, seed=3, reference=True)
-    rng = np.random.default_rng(0)
-    subs = []
-    count, spp = 16, 64
-    for i in range(count):
-        tau = 0.5 + (i + rng.random()) / count  # frame 1, shutter -0.5..0.5: stratified, jittered
-        sensor = sensor_dict(translated.camera, 1, SIZE, SIZE, spp, seed=i)
-        sub = build_mitsuba_scene(translated_at(translated, tau), sensor, {"type": "path"})
-        subs.append(np.asarray(mi.render(sub, spp=spp, seed=i))[..., :3])
+    subs = sub_frame_renders(mi, translated, 16, 64)
     z = _z_scores(ours.buffers["color"], ours.buffers["color_var"], subs)
     assert np.abs(z).max() < 4.5 and np.mean(z**2) < 1.8, (np.abs(z).max(), np.mean(z**2))
     # Control: the image without the slab's shadow (what the 2 R shadow rays rendered) is rejected.
