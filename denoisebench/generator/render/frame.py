@@ -220,8 +220,8 @@ def _compiled_pass(scene, config: _PassConfig):
     """
     import drjit as dr
 
-    if not FREEZE_PASSES or not getattr(scene, "frozen", True):
-        return _render_pass  # (scenes with motion within the shutter say frozen = False: render/motion.py)
+    if not FREEZE_PASSES:
+        return _render_pass
     if _COMPILED_SCENE[0] is not scene:
         _COMPILED.clear()
         _COMPILED_SCENE[0] = scene

@@ -37,7 +37,7 @@ Conventions and pitfalls:
   Mitsuba's own test ends them ``2 R`` beyond the shading point (``R`` the main scene's
   bounding-sphere radius, which leaves the moving shapes out), so a moving shape further out than
   that, or static geometry seen from a point on a moving shape outside the sphere, would cast no
-  shadow: light is never lost that way (tests/test_object_motion_shadows.py).
+  shadow in next-event estimation (tests/test_object_motion_shadows.py).
 """
 
 from __future__ import annotations
@@ -541,11 +541,12 @@ class ShutterMotionScene:
     ``base`` is the ``mi.Scene`` of everything static (and of lights); :meth:`shapes` lists both kinds
     so that the renderer's scans (delta and null BSDFs, previous positions) see every shape.
 
-    Notes:
-        Passes over such a scene are frozen like any other (``dr.freeze``, render/frame.py): the
-        scene is a Dr.Jit PyTree (:data:`DRJIT_STRUCT`: the base scene and :class:`MovingShapes`),
-        so its scenes, shapes, BSDFs and pose tables are inputs of the recording. Attribute reads
-        other than these fields fall through to ``base``.
+    Notes
+    -----
+    Passes over such a scene are frozen like any other (``dr.freeze``, render/frame.py): the scene
+    is a Dr.Jit PyTree (:data:`DRJIT_STRUCT`: the base scene and :class:`MovingShapes`), so its
+    scenes, shapes, BSDFs and pose tables are inputs of the recording. Attribute reads other than
+    these fields fall through to ``base``.
     """
 
     #: What a frozen pass traverses as its inputs (Dr.Jit PyTree fields; the types are not used).
