@@ -4,7 +4,7 @@ For every scene of ``--data`` (a dataset with references, e.g. the demo families
 ``--frames`` frames, each built-in sampler renders live (``denoisebench/sampling/live.py``: the
 scene's own stage and plan, a seed disjoint from the stored inputs' and the reference's, the same
 seed for every sampler) at each ``--spp`` mean budget; its image is scored against the dataset's
-reference with relMSE (DESIGN.md: ``mean((p − r)² / (r² + 0.01))``) as it is and after each of
+reference with relMSE (docs/architecture.md: ``mean((p − r)² / (r² + 0.01))``) as it is and after each of
 ``--denoisers`` (run under the harness contract, ``denoisers/runner.run_frame``, fed the sampler's
 buffers). Equal time: uniform is rendered again at the spp that takes the adaptive sampler's seconds
 (render + decision, scaled from uniform's seconds per sample in the same run), and scored the same

@@ -2,7 +2,7 @@
 
 Each command lives in ``denoisebench/commands/<name>.py`` with two functions:
 ``add_arguments(parser)`` and ``run(args) -> int``. This file only wires them up and maps errors
-to exit codes (DESIGN.md): 0 success, 2 bad input with a one-line message and no traceback,
+to exit codes (docs/architecture.md): 0 success, 2 bad input with a one-line message and no traceback,
 1 internal failure.
 """
 

@@ -1,4 +1,4 @@
-"""Exceptions shared by every stage. The CLI maps them to exit codes (DESIGN.md, Command line)."""
+"""Exceptions shared by every stage. The CLI maps them to exit codes (docs/architecture.md, Command line)."""
 
 
 class DenoisebenchError(Exception):

@@ -7,7 +7,7 @@ symmetries of the square uniformly. Arrays are ``...×H×W×C`` (a frame, or K f
 
 What each buffer needs besides moving its pixels:
 
-* ``motion`` (x = towards larger column, y = towards larger row, in pixels; DESIGN.md): a vector
+* ``motion`` (x = towards larger column, y = towards larger row, in pixels; docs/architecture.md): a vector
   field, so its components transform with the image. Pixel centre (x, y) goes to
   (x', y') = (y, W − x) under one quarter turn, so (mx, my) → (my, −mx); a horizontal flip
   negates mx; a vertical flip negates my. Then warping the transformed previous frame with the

@@ -1,4 +1,4 @@
-"""Multi-layer OpenEXR files for frames and per-sample data (DESIGN.md, "Buffers").
+"""Multi-layer OpenEXR files for frames and per-sample data (docs/architecture.md, "Buffers").
 
 Channel names are ``layer.channel``: ``color.R/G/B``, ``diffuse.R/G/B``, ``specular.R/G/B``,
 ``albedo.R/G/B``, ``normal.X/Y/Z``, ``depth.Z``, ``position.X/Y/Z``, ``roughness.Y``,

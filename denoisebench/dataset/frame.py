@@ -1,6 +1,6 @@
 """In-memory frames and sequences: what readers yield and denoisers receive (torch-free).
 
-Buffers follow DESIGN.md's table: ``Frame.buffers["color"]`` is H×W×3 float32 linear radiance,
+Buffers follow docs/architecture.md's table: ``Frame.buffers["color"]`` is H×W×3 float32 linear radiance,
 ``"albedo"``, ``"normal"``, ``"depth"`` (H×W×1) and so on, ``"<name>_var"`` the per-pixel variance of
 the mean. Per-sample data, when present, is ``Frame.samples``: a mapping of buffer name to
 S×H×W×C arrays (S samples per pixel), including the random parameters ``pixel`` (2 channels),
@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: Channel count of every buffer DESIGN.md names (variances have their base buffer's count).
+#: Channel count of every buffer docs/architecture.md names (variances have their base buffer's count).
 BUFFER_CHANNELS: dict[str, int] = {
     "color": 3,
     "diffuse": 3,

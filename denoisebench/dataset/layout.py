@@ -1,4 +1,4 @@
-"""Where files live inside a dataset folder (DESIGN.md, "Dataset on disk").
+"""Where files live inside a dataset folder (docs/architecture.md, "Dataset on disk").
 
 ::
 

@@ -1,4 +1,4 @@
-"""The ``dataset.json`` model (DESIGN.md, "Dataset on disk"): schema, config hash, splits, quality.
+"""The ``dataset.json`` model (docs/architecture.md, "Dataset on disk"): schema, config hash, splits, quality.
 
 Layout of the manifest (all keys sorted when saved; paths relative to the dataset folder), as
 :func:`load_manifest` returns it whatever the schema version on disk::

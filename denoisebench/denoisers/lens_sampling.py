@@ -1,7 +1,7 @@
 """The lens sample → lens point map our renderer uses, in numpy (for filters and synthetic frames).
 
 Per-sample data stores the lens random parameter as the uniform square sample (u, v) ∈ [0, 1)²
-that drove the ray (DESIGN.md, "Buffers"); the renderer maps it to the unit disk with Shirley and
+that drove the ray (docs/architecture.md, "Buffers"); the renderer maps it to the unit disk with Shirley and
 Chiu's concentric map, as Mitsuba's ``square_to_uniform_disk_concentric`` does. A defocused hit point
 moves linearly with the *disk* point, not with (u, v), so statistics about lens dependence (RPF's
 mutual information) are taken on the disk point.

@@ -1,4 +1,4 @@
-"""The Denoiser protocol (DESIGN.md) and a small base class that fills in its defaults.
+"""The Denoiser protocol (docs/architecture.md) and a small base class that fills in its defaults.
 
 A denoiser is any object with::
 

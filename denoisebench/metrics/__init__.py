@@ -3,7 +3,7 @@
 Spatial (``spatial``), gradient (``gradient``) and temporal (``temporal``) metrics, their cost
 (``cost``), the one tone map (``tonemap``), input checks and the non-finite policy
 (``validation``), a registry by name (``registry``) and ``compute_metrics`` for a chosen set on a
-frame or a sequence. DESIGN.md, section "Metrics", is the contract. This package imports nothing
+frame or a sequence. docs/architecture.md, section "Metrics", is the contract. This package imports nothing
 else of denoisebench; bad input raises ``ValueError``.
 """
 

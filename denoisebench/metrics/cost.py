@@ -10,7 +10,7 @@ Notes
   ``trace_memory=False`` for timings that must not carry that overhead.
 * If tracemalloc was already tracing, it is left running and the peak is measured from the
   current traced size (``tracemalloc.reset_peak``).
-* Total cost of a denoised frame (DESIGN.md): render seconds at the input spp + denoise seconds,
+* Total cost of a denoised frame (docs/architecture.md): render seconds at the input spp + denoise seconds,
   ``total_seconds(render_seconds_per_spp, spp, denoise_seconds)``.
 """
 

@@ -45,7 +45,7 @@ Notes
   comparable to its signal has no meaningful relMSE floor. tests/test_metrics_floors.py checks
   unbiasedness over hundreds of noise draws.
 * **se**: with Gaussian noise, Var_n[(e − n)²] = 4e²v + 2v²; e² is estimated by max(d² − v, 0),
-  d = p − r; values are taken as independent (box-filtered noise: DESIGN.md), so
+  d = p − r; values are taken as independent (box-filtered noise: docs/architecture.md), so
   se = sqrt(Σ (4ê²v + 2v²)/D²) / N over the N values (pixels × channels). Measured against the
   spread of 300 noise draws: within 15 %; up to 1.5× above it (conservative) for a near-perfect
   prediction, where max(d² − v, 0) overestimates e².

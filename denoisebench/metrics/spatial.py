@@ -20,7 +20,7 @@ deltae2000            Reinhard    no               +inf
 Notes
 -----
 * relMSE = mean((p−r)² / (r² + 0.01)) and SMAPE = mean(|p−r| / (|p| + |r| + 0.01)) per channel
-  (DESIGN.md). ε is absolute, in radiance units: errors on very dark images (radiance ≪ 0.1) are
+  (docs/architecture.md). ε is absolute, in radiance units: errors on very dark images (radiance ≪ 0.1) are
   divided by ≈ ε rather than by r², so relMSE is *not* scale-invariant there.
 * "Tone-mapped" means :func:`denoisebench.metrics.tonemap.tonemap` (clamp, Reinhard, sRGB OETF)
   applied to both images; PSNR and SSIM then use data_range = 1.

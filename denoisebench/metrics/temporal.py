@@ -15,7 +15,7 @@ Notes
   ``|(p_t − p_{t−1}) − (r_t − r_{t−1})|``, pooled (every valid pixel of every pair weighs the
   same). It is 0 when p = r and when p = r + c for a constant c.
 * ``temporal_l1_warped``: the same with frame t−1 warped to frame t by frame t's motion buffer.
-  Motion convention (DESIGN.md): ``motion[t]`` is H×W×2, (x, y) in pixels from a pixel of frame t
+  Motion convention (docs/architecture.md): ``motion[t]`` is H×W×2, (x, y) in pixels from a pixel of frame t
   to where its surface point was in frame t−1. Pixel (row i, col j) has its centre at
   (x = j + 0.5, y = i + 0.5); its previous position is (j + 0.5 + mx, i + 0.5 + my) and the
   warped frame samples frame t−1 there **bilinearly** (edge-clamped within the outer half pixel).

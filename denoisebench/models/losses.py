@@ -13,7 +13,7 @@
   ``exposure`` is ``log`` in the network's own range (everything divided by the exposure the model
   normalised its input by, ``out["exposure"]``).
 * :func:`relmse_loss`: relative MSE of linear radiance, LBF's training loss (Kalantari et al.).
-* :func:`relmse`: the validation figure, mean((p−r)²/(r²+0.01)) as DESIGN.md defines it (linear).
+* :func:`relmse`: the validation figure, mean((p−r)²/(r²+0.01)) as docs/architecture.md defines it (linear).
 
 Notes
 -----
@@ -186,7 +186,7 @@ def pcn_loss(
 
 
 def relmse(pred: torch.Tensor, ref: torch.Tensor) -> float:
-    """mean((p − r)² / (r² + 0.01)) over every value, linear radiance (DESIGN.md's relMSE): the value of
+    """mean((p − r)² / (r² + 0.01)) over every value, linear radiance (docs/architecture.md's relMSE): the value of
     :func:`relmse_loss`, computed in float64 (a sum over whole validation frames)."""
     value = relmse_loss(pred.double(), ref.double()).item()
     return value if math.isfinite(value) else math.inf

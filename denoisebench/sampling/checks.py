@@ -4,7 +4,7 @@
 (known truth; skewed, heteroscedastic noise; edges; a dark corner) at rising mean spp budgets,
 several seeds each, and compares its image with the truth. It passes when
 
-* **the error falls**: the relative MSE ``mean((p − t)² / (t² + 0.01))`` (DESIGN.md's epsilon) at the
+* **the error falls**: the relative MSE ``mean((p − t)² / (t² + 0.01))`` (docs/architecture.md's epsilon) at the
   largest budget is at most :data:`MAX_ERROR_RATIO` of the one at the smallest (an unbiased
   estimator at 16× the samples has 1/16; a sampler stuck on a biased image stays near 1);
 * **the mean converges to the truth**: the relative bias ``mean((p − t) / (t + 0.01))`` over the

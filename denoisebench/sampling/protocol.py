@@ -1,4 +1,4 @@
-"""The Sampler protocol (DESIGN.md, Sampler protocol), the budget, and the errors a sampler is told.
+"""The Sampler protocol (docs/architecture.md, Sampler protocol), the budget, and the errors a sampler is told.
 
 A sampler is any object with::
 

@@ -21,7 +21,7 @@ Notes
 * As in the renderer's progressive frame, a pixel without samples has mean 0 and variance inf,
   one with a single sample variance 0.
 * ``diffuse`` is ``diffuse_fraction`` of ``color`` and ``specular`` the rest (their sum is ``color``,
-  as in DESIGN.md's buffer table); ``albedo``, ``normal`` and ``depth`` are noise-free features with
+  as in docs/architecture.md's buffer table); ``albedo``, ``normal`` and ``depth`` are noise-free features with
   zero variance.
 * ``seconds`` is the measured wall time of the round's numpy work, a stand-in for render time:
   figures made with this frame are labelled synthetic.

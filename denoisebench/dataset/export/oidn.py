@@ -25,7 +25,7 @@ read by OIDN through OpenImageIO (``load_image`` in ``training/image.py``, first
 Values are clipped as OIDN clips them when it loads (``load_image_features``), so the files hold
 what OIDN trains on: ``hdr`` ≥ 0, ``alb`` in [0, 1], ``nrm`` in [−1, 1], ``z`` ≥ 0.
 
-Conversions from our buffers (DESIGN.md, Buffers):
+Conversions from our buffers (docs/architecture.md, Buffers):
 
 * ``hdr``: ``color`` (linear radiance, the mean of the rung's samples); the target's is the
   reference's ``color``.

@@ -1,4 +1,6 @@
-"""The render plan: what a scene's effects call for, and nothing more (DESIGN.md, "Effects").
+"""The render plan: what a scene's effects call for, and nothing more.
+
+docs/architecture.md, "Effects and the render plan", states the rule this module implements.
 
 :func:`make_render_plan` is a pure function of the effects and the user's :class:`RenderOptions`.
 No depth of field means a pinhole camera and no lens channels; no motion blur means no time

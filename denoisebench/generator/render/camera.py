@@ -1,7 +1,7 @@
 """Ray generation for the feature renderer: pinhole / thin lens, camera motion blur, reprojection.
 
 Mitsuba 3.9 samples a time per ray but moves nothing with it, so the renderer builds its own camera
-rays (DESIGN.md, "Effects and the render plan"). Conventions, shared with Mitsuba's ``perspective``
+rays (docs/architecture.md, "Effects and the render plan"). Conventions, shared with Mitsuba's ``perspective``
 and ``thinlens`` sensors so that both render the same image:
 
 * Pixel ``(i, j)`` (row ``i`` from the top, column ``j`` from the left) takes samples at film

@@ -2,7 +2,7 @@
 
 A reference is noisy too. Its **noise floor** is the relMSE a perfect denoiser would score against
 it, ``mean(var / (ref² + 0.01))`` over pixels and channels, where ``var`` is the variance of the
-reference's per-pixel mean (the relMSE epsilon of DESIGN.md, "Metrics"). :func:`render_adaptive`
+reference's per-pixel mean (the relMSE epsilon of docs/architecture.md, "Metrics"). :func:`render_adaptive`
 renders a frame's reference in rounds of equal sample count until the floor estimate is at most
 ``ref_error``, or until the next round would pass ``cap`` samples per pixel (``--ref-spp``); such a
 frame is marked ``stopped_at_cap``.
@@ -53,7 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-#: relMSE epsilon (DESIGN.md, "Metrics"): relMSE = mean((p − r)² / (r² + 0.01)).
+#: relMSE epsilon (docs/architecture.md, "Metrics"): relMSE = mean((p − r)² / (r² + 0.01)).
 RELMSE_EPSILON = 0.01
 #: A frame is rendered in at most this many rounds of equal size (``round_spp = cap // MAX_ROUNDS``).
 MAX_ROUNDS = 64
