@@ -27,9 +27,11 @@ from denoisebench.denoisers.isolation import add_arguments as add_isolation_argu
 from denoisebench.denoisers.sandbox import protect
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard.benchmark_run import run_benchmark
+from denoisebench.leaderboard.report import write_report
 from denoisebench.leaderboard.runner import BenchmarkConfig
 from denoisebench.leaderboard.store import ResultsStore, utc_now
-from denoisebench.leaderboard.time_model import DEFAULT_TIME_BUDGET, parse_size
+from denoisebench.leaderboard.time_model import DEFAULT_TIME_BUDGET, measure_run_timings, parse_size
+from denoisebench.metrics.robust import check_trim
 from denoisebench.outputs import check_writable_dir, check_writable_file
 
 EPILOG = """examples:
@@ -176,8 +178,6 @@ def _run(args) -> int:
     limits = limits_from_args(args)  # bad limits are exit 2 before anything else
     trim = None
     if args.trim is not None:
-        from denoisebench.metrics.robust import check_trim
-
         try:
             trim = check_trim(args.trim)
         except ValueError as exc:
@@ -231,7 +231,6 @@ def _run(args) -> int:
         for d in plan.denoisers:
             if d.load_error:
                 print(f"  {d.spec}: not run: {d.load_error}")
-        from denoisebench.leaderboard.time_model import measure_run_timings
 
         instances = {d.label: d.instance for d in plan.denoisers if d.instance is not None}
         measure_run_timings(
@@ -245,7 +244,6 @@ def _run(args) -> int:
         )
         if args.no_report:
             return 0
-        from denoisebench.leaderboard.report import write_report
 
         index = write_report(
             store, plan.run_id, dataset, Path(args.out), instances, time_at, include_unresolved=args.include_unresolved

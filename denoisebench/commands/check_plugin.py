@@ -23,6 +23,7 @@ import sys
 from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
 from denoisebench.denoisers.registry import available_denoisers
 from denoisebench.errors import UserInputError
+from denoisebench.sampling.checks import check_sampler
 from denoisebench.sampling.registry import available_samplers
 
 EPILOG = """examples:
@@ -116,8 +117,6 @@ def run(args) -> int:
     if not args.spec:
         raise UserInputError("give a denoiser SPEC (or --list)")
     if args.sampler:
-        from denoisebench.sampling.checks import check_sampler
-
         limits = {"time_limit": args.time_limit, "memory_limit_mb": args.memory_limit}
         options = parse_options(args.option)
         return check_sampler(args.spec, options, as_json=args.json, isolation=args.isolation, **limits)

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import sys
 
+from denoisebench.dataset.export import noisebase, oidn
 from denoisebench.dataset.export.selection import select_scenes
 from denoisebench.dataset.export.staging import check_target, staged_folder
 from denoisebench.dataset.reader import open_dataset
@@ -64,8 +65,6 @@ def run(args) -> int:
     dataset = select_scenes(open_dataset(args.data), args.scenes)
     target = check_target(args.out, args.force, dataset.root)
     if args.format == "oidn":
-        from denoisebench.dataset.export import oidn
-
         features = oidn.parse_features(args.features)
         oidn.check_exportable(dataset, features, args.tile_size)
         with staged_folder(target) as staging:
@@ -77,7 +76,6 @@ def run(args) -> int:
             import zarr  # noqa: F401
         except ImportError:
             raise UserInputError("--format noisebase needs the zarr package (pip install zarr==2.18.7)") from None
-        from denoisebench.dataset.export import noisebase
 
         noisebase.plan_export(dataset, args.spp, args.layout)
         with staged_folder(target) as staging:

@@ -20,7 +20,9 @@ import sys
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.render_plan import make_render_plan
 from denoisebench.generator.dataset_scenes import stage_options
+from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
 from denoisebench.generator.preview import render_preview, tone_map_preview, write_png
+from denoisebench.generator.usd.translate import translate_usd
 from denoisebench.scenes import get_family, list_families
 
 EPILOG = """examples:
@@ -161,12 +163,8 @@ def _preview(args) -> int:
 
 def _check(args) -> int:
     if is_xml(args.usd):
-        from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
-
         translated, _ = load_mitsuba_xml(args.usd, **translate_options(args))
     else:
-        from denoisebench.generator.usd.translate import translate_usd
-
         translated = translate_usd(args.usd, **translate_options(args))
     _report_warnings(translated)
     plan = make_render_plan(translated.effects, stage_max_depth=translated.max_depth)

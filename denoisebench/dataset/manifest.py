@@ -80,7 +80,7 @@ from denoisebench.dataset import layout
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.dataset.errors import DatasetError
 from denoisebench.dataset.exr_io import canonical_json
-from denoisebench.dataset.frame_index import FrameIndexWriter
+from denoisebench.dataset.frame_index import FrameIndexReader, FrameIndexWriter
 
 SCHEMA = "denoisebench-dataset"
 SCHEMA_VERSION = 2
@@ -372,8 +372,6 @@ def load_manifest(path: str | os.PathLike) -> dict:
     frames use :func:`~denoisebench.dataset.reader.open_dataset`, which loads records on demand."""
     manifest = load_header(path)
     if manifest["schema_version"] >= 2:
-        from denoisebench.dataset.frame_index import FrameIndexReader
-
         renders: dict = {}
         if manifest["scenes"]:
             index = FrameIndexReader(index_path(path))

@@ -25,6 +25,8 @@ import os
 
 import numpy as np
 
+from denoisebench.dataset.frame import Frame
+
 ALIGN = 64
 
 
@@ -119,8 +121,6 @@ class WorkerView:
 
     def unpack(self, descriptor: dict):
         """The frame the descriptor describes, as read-only arrays this process owns."""
-        from denoisebench.dataset.frame import Frame
-
         data = self._mapped(descriptor["size"])
         groups: dict[str, dict] = {"buffers": {}, "samples": {}}
         for group, name, dtype, shape, offset in descriptor["entries"]:

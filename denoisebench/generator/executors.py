@@ -28,6 +28,7 @@ from dataclasses import dataclass
 from denoisebench.errors import UserInputError, one_line
 from denoisebench.generator.dataset_scenes import SceneSpec, read_stage_files
 from denoisebench.generator.frame_jobs import FrameJob, RenderedJob, render_job
+from denoisebench.mitsuba_runtime import load_mitsuba
 
 EXECUTORS = ("local", "ray")
 
@@ -44,8 +45,6 @@ class JobFailure:
 def _run_guarded(job: FrameJob, stage_files=None, threads: int | None = None) -> RenderedJob | JobFailure:
     try:
         if threads:
-            from denoisebench.mitsuba_runtime import load_mitsuba
-
             load_mitsuba()  # sets DRJIT_LIBLLVM_PATH before drjit's first import
             import drjit as dr
 
