@@ -16,7 +16,8 @@ Notes
   the same image.
 * A sampler that fails (raises, or the renderer refuses its round) fails its pairs' units with the
   reason; a sampler that leaves pixels with fewer than 1 sample is warned about on stderr (their
-  value is 0, not an estimate).
+  value is 0, not an estimate), and every unit keeps its frames' spp maps and counts
+  (:mod:`.sampler_maps`), so that the report shows them.
 * Plugin samplers run in a worker of their own under the run's ``--isolation``, ``--time-limit`` and
   ``--memory-limit`` (:mod:`denoisebench.sampling.isolation`); built-ins in this process.
 """
@@ -96,8 +97,10 @@ def register_pairs(store, run_id: str, pairs: list[SamplerPair], denoisers) -> N
         store.add_denoiser(run_id, pair.label, spec, "sampler", needs, bool(denoiser and denoiser.temporal), None)
 
 
-def live_sequence(dataset, scene: str, spp: int, pair: SamplerPair, live=None):
-    """(the scene's sequence at ``spp`` with every frame rendered live by the sampler, None) or (None, reason)."""
+def live_sequence(dataset, scene: str, spp: int, pair: SamplerPair, live=None, maps: list | None = None):
+    """(the scene's sequence at ``spp`` with every frame rendered live by the sampler, None) or (None, reason).
+
+    ``maps``: a list to append (frame index, H×W spp map) of every frame to (the report shows them)."""
     from denoisebench.dataset.frame import Frame
     from denoisebench.sampling.live import LiveScene, run_live
     from denoisebench.sampling.protocol import Budget
@@ -121,6 +124,8 @@ def live_sequence(dataset, scene: str, spp: int, pair: SamplerPair, live=None):
                 file=sys.stderr,
             )
         meta = {**frame.meta, "seconds": result.seconds, "sampler": result.summary()}
+        if maps is not None:
+            maps.append((frame.index, result.spp))
         buffers = {name: np.ascontiguousarray(value, dtype=np.float32) for name, value in result.buffers.items()}
         frames.append(
             Frame(buffers=buffers, spp=int(spp), scene=scene, index=frame.index, reference=frame.reference, meta=meta)
@@ -131,16 +136,20 @@ def live_sequence(dataset, scene: str, spp: int, pair: SamplerPair, live=None):
 def measure_pairs(dataset, plan, scene: str, spp: int, pairs: list[SamplerPair], instances: dict):
     """Yield the UnitRecord of every pair on ``scene`` at ``spp`` (one live render per sampler)."""
     from denoisebench.leaderboard.runner import measure_unit
+    from denoisebench.leaderboard.sampler_maps import frame_records
     from denoisebench.leaderboard.store import UnitRecord
 
     by_sampler: dict[str, list[SamplerPair]] = {}
     for pair in pairs:
         by_sampler.setdefault(pair.sampler, []).append(pair)
     for sampler, group in by_sampler.items():
-        sequence, error = live_sequence(dataset, scene, spp, group[0])
+        maps: list = []
+        sequence, error = live_sequence(dataset, scene, spp, group[0], maps=maps)
         for pair in group:
             if sequence is None:
                 yield UnitRecord(pair.label, scene, spp, "failed", error, [])
                 continue
             denoiser = instances.get(pair.denoiser) if pair.denoiser else None
-            yield measure_unit(pair.label, denoiser, sequence, plan.spatial, plan.temporal, plan.trim)
+            unit = measure_unit(pair.label, denoiser, sequence, plan.spatial, plan.temporal, plan.trim)
+            unit.sampler_frames = frame_records(maps)  # spp maps and empty pixels, for the report
+            yield unit

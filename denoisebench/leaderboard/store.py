@@ -52,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from denoisebench.errors import UserInputError
+from denoisebench.leaderboard import sampler_maps
 
 SCHEMA_VERSION = 4
 #: Versions this code reads (older ones are migrated when opened for writing).
@@ -213,6 +214,7 @@ class UnitRecord:
     strip_first: int | None = None  # first frame of the strip
     strip_window: tuple[int, int, int] | None = None  # (top, left, side) of its crop
     strip: np.ndarray | None = None  # F×side×side×3 float32 crops of consecutive outputs
+    sampler_frames: list = field(default_factory=list)  # live sampler units: sampler_maps.SamplerFrame per frame
 
     @property
     def denoise_seconds(self) -> float | None:
@@ -268,6 +270,7 @@ class ResultsStore:
             # one statement at a time: executescript() would COMMIT our transaction for us
             for statement in filter(str.strip, _SCHEMA.split(";")):
                 self.conn.execute(statement)
+            self.conn.execute(sampler_maps.SCHEMA)  # spp maps of live sampler units (report)
             if self.conn.execute("SELECT COUNT(*) FROM schema_version").fetchone()[0] == 0:
                 self.conn.execute("INSERT INTO schema_version (version) VALUES (?)", (SCHEMA_VERSION,))
             version = self.conn.execute("SELECT MAX(version) FROM schema_version").fetchone()[0]
@@ -493,6 +496,7 @@ class ResultsStore:
                     for name, value in unit.sequence_metrics.items()
                 ],
             )
+            sampler_maps.write(conn, key, unit.sampler_frames)  # the table is created with the schema
             if unit.image is not None and unit.image_frame is not None:
                 height, width = unit.image.shape[:2]
                 conn.execute(
