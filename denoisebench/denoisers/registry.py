@@ -20,20 +20,21 @@ the command line, ``--option radius=7``.
 Failures are :class:`UnknownDenoiserError` (the name is nowhere; the message lists the known names)
 or :class:`DenoiserLoadError` (found but it failed to import or construct, e.g. OIDN without
 ``pyoidn``): both one-line :class:`~denoisebench.errors.UserInputError`, so the CLI exits 2.
+
+Notes
+-----
+The resolution itself is :mod:`denoisebench.plugin_loading`'s, shared with the samplers' registry;
+this module holds what is the denoisers' own: the group, the built-ins, the error classes.
 """
 
 from __future__ import annotations
 
-import importlib
 import importlib.metadata
-import importlib.util
-import inspect
-import sys
-from pathlib import Path
 from typing import Any
 
+from denoisebench import plugin_loading
 from denoisebench.denoisers.protocol import describe
-from denoisebench.errors import UserInputError, one_line
+from denoisebench.errors import UserInputError
 
 ENTRY_POINT_GROUP = "denoisebench.denoisers"
 
@@ -73,134 +74,28 @@ class DenoiserUnavailableError(RuntimeError):
 
 
 def _entry_points() -> dict[str, importlib.metadata.EntryPoint]:
-    found: dict[str, importlib.metadata.EntryPoint] = {}
-    for entry_point in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
-        found.setdefault(entry_point.name, entry_point)
-    return found
+    return plugin_loading.entry_points(ENTRY_POINT_GROUP)
+
+
+KIND = plugin_loading.PluginKind(
+    noun="denoiser",
+    group=ENTRY_POINT_GROUP,
+    builtins=BUILTINS,
+    method="denoise",
+    validate=lambda instance, spec: describe(instance, fallback_name=spec),
+    unknown_error=UnknownDenoiserError,
+    load_error=DenoiserLoadError,
+    option_error=UnknownOptionError,
+    ready_options_error=TypeError,
+    file_noun="plugin file",
+)
 
 
 def available_denoisers() -> dict[str, str]:
     """Every name a spec may use, mapped to where it comes from (nothing is imported)."""
-    names = {name: f"built-in ({target})" for name, (target, _) in BUILTINS.items()}
-    for name, entry_point in sorted(_entry_points().items()):
-        if name not in names:
-            dist = getattr(entry_point, "dist", None)
-            origin = f"{dist.name} {dist.version}" if dist is not None else entry_point.value
-            names[name] = f"entry point ({origin}: {entry_point.value})"
-    return names
-
-
-def _import_target(target: str) -> Any:
-    module_name, _, attr_path = target.partition(":")
-    if not module_name or not attr_path:
-        raise UnknownDenoiserError(f"bad denoiser spec {target!r}: expected NAME or MODULE:ATTR")
-    if module_name.endswith(".py"):
-        path = Path(module_name)
-        if not path.is_file():
-            raise UnknownDenoiserError(f"no such plugin file {module_name!r}")
-        unique = f"denoisebench_plugin_{abs(hash(str(path.resolve())))}"
-        spec = importlib.util.spec_from_file_location(unique, path)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[unique] = module
-        try:
-            spec.loader.exec_module(module)
-        except BaseException:
-            sys.modules.pop(unique, None)
-            raise
-    else:
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as error:
-            if error.name == module_name or module_name.startswith(f"{error.name}."):
-                raise UnknownDenoiserError(f"no module named {module_name!r} (from spec {target!r})") from None
-            raise
-    obj: Any = module
-    for part in attr_path.split("."):
-        try:
-            obj = getattr(obj, part)
-        except AttributeError:
-            raise UnknownDenoiserError(f"module {module_name!r} has no attribute {attr_path!r}") from None
-    return obj
-
-
-def check_options(obj: Any, spec: str, options: dict[str, Any]) -> None:
-    """UnknownOptionError when ``obj`` (class or factory) takes no keyword named like an option.
-
-    A constructor with ``**kwargs``, or one whose signature cannot be read, accepts anything.
-    """
-    if not options or not callable(obj):
-        return
-    try:
-        parameters = inspect.signature(obj).parameters.values()
-    except (TypeError, ValueError):
-        return
-    if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters):
-        return
-    known = [
-        p.name
-        for p in parameters
-        if p.kind in (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
-    ]
-    unknown = [key for key in options if key not in known]
-    if unknown:
-        raise UnknownOptionError(
-            f"denoiser {spec!r} has no option {', '.join(map(repr, unknown))}; it takes {', '.join(known) or 'no options'}"
-        )
-
-
-def _instantiate(obj: Any, spec: str, options: dict[str, Any]) -> Any:
-    if isinstance(obj, type) or not callable(getattr(obj, "denoise", None)):
-        check_options(obj, spec, options)
-    if isinstance(obj, type):
-        instance = obj(**options)
-    elif callable(getattr(obj, "denoise", None)):
-        if options:
-            raise TypeError(f"{spec!r} is a ready instance; it takes no options ({', '.join(options)})")
-        instance = obj
-    elif callable(obj):
-        instance = obj(**options)
-    else:
-        raise TypeError(f"{spec!r} is a {type(obj).__name__}, not a denoiser class, factory or instance")
-    if getattr(instance, "name", None) is None:
-        try:
-            instance.name = spec
-        except Exception:  # noqa: BLE001 - an object that refuses attributes keeps describe()'s default
-            pass
-    describe(instance, fallback_name=spec)  # raises TypeError for a non-denoiser
-    return instance
+    return plugin_loading.available(KIND, _entry_points())
 
 
 def load_denoiser(spec: str, **options: Any):
     """The denoiser ``spec`` names, constructed with ``options``. See the module docstring."""
-    if not isinstance(spec, str) or not spec.strip():
-        raise UnknownDenoiserError("empty denoiser spec")
-    spec = spec.strip()
-    if spec in BUILTINS:
-        target, defaults = BUILTINS[spec]
-        kwargs = {**defaults, **options}
-        where = f"built-in {spec!r}"
-        loader = lambda: _import_target(target)  # noqa: E731
-    elif ":" in spec:
-        kwargs = dict(options)
-        where = f"{spec!r}"
-        loader = lambda: _import_target(spec)  # noqa: E731
-    else:
-        entry_point = _entry_points().get(spec)
-        if entry_point is None:
-            known = ", ".join(available_denoisers())
-            raise UnknownDenoiserError(f"unknown denoiser {spec!r}; known: {known} (or give MODULE:ATTR)")
-        kwargs = dict(options)
-        where = f"entry point {spec!r} ({entry_point.value})"
-        loader = entry_point.load
-    try:
-        obj = loader()
-    except UserInputError:
-        raise
-    except Exception as error:  # noqa: BLE001 - a broken plugin is a one-line load error
-        raise DenoiserLoadError(f"cannot import {where}: {one_line(error)}") from error
-    try:
-        return _instantiate(obj, spec, kwargs)
-    except UserInputError:
-        raise
-    except Exception as error:  # noqa: BLE001
-        raise DenoiserLoadError(f"cannot construct {where}: {one_line(error)}") from error
+    return plugin_loading.load(KIND, spec, options, _entry_points)
