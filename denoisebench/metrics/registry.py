@@ -39,6 +39,7 @@ from denoisebench.metrics import colorvideovdp as cv
 from denoisebench.metrics import floors, gradient, robust, spatial, temporal
 from denoisebench.metrics import msssim as ms
 from denoisebench.metrics import noisebase as nb
+from denoisebench.metrics import oidn_compare as oc
 
 __all__ = [
     "Metric",
@@ -54,7 +55,7 @@ __all__ = [
     "ALIASES",
 ]
 
-Domain = Literal["linear", "tonemapped", "reinhard", "noisebase"]
+Domain = Literal["linear", "tonemapped", "reinhard", "noisebase", "oidn"]
 Kind = Literal["spatial", "gradient", "temporal"]
 Aggregate = Literal["mean", "geomean", "relative_to_input"]
 #: The aggregation rules a Metric may state (module docstring).
@@ -66,8 +67,9 @@ class Metric:
     """A named metric.
 
     ``domain``: ``"linear"`` (HDR radiance as given), ``"tonemapped"`` (the documented tone map,
-    [0, 1)), ``"reinhard"`` (its linear Reinhard stage, for ΔE2000) or ``"noisebase"`` (Noisebase's
-    8-bit ACES encoding, :mod:`.noisebase`). ``worst`` is the value a
+    [0, 1)), ``"reinhard"`` (its linear Reinhard stage, for ΔE2000), ``"noisebase"`` (Noisebase's
+    8-bit ACES encoding, :mod:`.noisebase`) or ``"oidn"`` (OIDN's Hable filmic + sRGB transfer,
+    :mod:`.oidn_compare`). ``worst`` is the value a
     non-finite prediction gets; ``perfect`` the value of prediction == reference. ``aggregate``:
     how values combine over scenes (module docstring); ``floor_fn``: reference-noise floor.
     """
@@ -167,7 +169,7 @@ def metric_names(kind: str | None = None) -> list[str]:
     return [m.name for m in _REGISTRY.values() if kind is None or m.kind == kind]
 
 
-#: Named sets a metrics option may name besides single metrics (``--metrics noisebase``).
+#: Named sets a metrics option may name besides single metrics (``--metrics noisebase``, ``--metrics oidn``).
 METRIC_SETS: dict[str, tuple[str, ...]] = {}
 _OPT_IN: set[str] = set()
 
@@ -394,7 +396,8 @@ def _builtin() -> None:
             accepts=("motion", "depth", "masks", "trim"),
             floor_fn=robust.temporal_relmse_robust_floor,
         ),
-        # Scores comparable with the field (issue 20): msssim.py, colorvideovdp.py, noisebase.py.
+        # Scores comparable with the field (issues 20, 32): msssim.py, colorvideovdp.py, noisebase.py,
+        # oidn_compare.py.
         Metric(
             "msssim",
             ms.msssim,
@@ -486,9 +489,33 @@ def _builtin() -> None:
             None,
             "Noisebase tRMAE: mean over pairs of mean(|dp-dr|/(|dr|+0.01))/3 of 8-bit frames",
         ),
+        Metric(
+            "oidn_psnr",
+            oc.oidn_psnr,
+            True,
+            "oidn",
+            "spatial",
+            oc.WORST["oidn_psnr"],
+            inf,
+            None,
+            "OIDN compare_image.py PSNR: Hable filmic + sRGB of max(x, 0), peak 1",
+            "dB",
+        ),
+        Metric(
+            "oidn_ssim",
+            oc.oidn_ssim,
+            True,
+            "oidn",
+            "spatial",
+            oc.WORST["oidn_ssim"],
+            1.0,
+            None,
+            "OIDN compare_image.py SSIM (win 11, sigma 1.5, data_range 1) of the Hable + sRGB images, mean of R, G, B",
+        ),
     ):
         register_metric(m)
     register_metric_set("noisebase", nb.NOISEBASE_METRICS, opt_in=True)
+    register_metric_set("oidn", oc.OIDN_METRICS, opt_in=True)
 
 
 _builtin()
