@@ -78,3 +78,40 @@ def crop(image: np.ndarray, top: int, left: int, size: int) -> np.ndarray:
 def crop_scale(size: int, target: int = 128) -> int:
     """Pixel repetition that brings a crop to about ``target`` pixels."""
     return max(1, target // max(size, 1))
+
+
+#: Colour of pixels with fewer than one sample in an spp map (outside the colour map's range).
+NO_SAMPLE_RGB = (255, 0, 0)
+
+
+def _viridis(values: np.ndarray) -> np.ndarray:
+    """uint8 RGB of ``values`` in [0, 1] on matplotlib's viridis map (perceptually uniform, grey-scale safe)."""
+    from matplotlib import colormaps
+
+    rgba = colormaps["viridis"](np.clip(values, 0.0, 1.0))
+    return np.round(rgba[..., :3] * 255.0).astype(np.uint8)
+
+
+def _png(pixels: np.ndarray, scale: int = 1) -> bytes:
+    from PIL import Image
+
+    if scale > 1:
+        pixels = np.repeat(np.repeat(pixels, scale, axis=0), scale, axis=1)
+    buffer = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(pixels), mode="RGB").save(buffer, format="PNG", optimize=True)
+    return buffer.getvalue()
+
+
+def spp_map_png(counts: np.ndarray, top: int, scale: int = 1) -> bytes:
+    """PNG of an H×W samples-per-pixel map: viridis, linear from 0 spp to ``top`` spp (brighter: more
+    samples; above ``top`` clips); pixels with fewer than one sample in :data:`NO_SAMPLE_RGB`."""
+    counts = np.asarray(counts, dtype=np.float64)
+    pixels = _viridis(counts / max(float(top), 1.0))
+    pixels[counts < 1] = NO_SAMPLE_RGB
+    return _png(pixels, scale)
+
+
+def colour_bar_png(width: int = 128, height: int = 10) -> bytes:
+    """The spp maps' colour bar: viridis from 0 (left) to the map's ``top`` (right), ``width``×``height`` px."""
+    row = _viridis(np.linspace(0.0, 1.0, width))
+    return _png(np.repeat(row[None], height, axis=0))

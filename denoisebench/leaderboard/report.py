@@ -24,6 +24,7 @@ Notes
 
 from __future__ import annotations
 
+import base64
 import csv
 import io
 import json
@@ -35,7 +36,7 @@ import numpy as np
 from denoisebench.dataset import Dataset
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.leaderboard import aggregate as agg
-from denoisebench.leaderboard import analysis, figures, images, strips
+from denoisebench.leaderboard import analysis, figures, images, report_samplers, strips
 from denoisebench.leaderboard.runner import NOISY
 from denoisebench.leaderboard.store import ResultsStore
 
@@ -117,8 +118,11 @@ def _reference_info(dataset: Dataset, scenes: list[str]) -> dict:
     }
 
 
-def _comparisons(store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: int) -> list[dict]:
-    """Per scene: the noisy input, each denoiser and the reference at one frame, with worst-region crops."""
+def _comparisons(
+    store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: int, samplers: dict | None = None
+) -> list[dict]:
+    """Per scene: the noisy input, each denoiser and the reference at one frame, with worst-region crops;
+    a live sampler's entry has its ``spp_map`` of that frame (:mod:`.report_samplers`)."""
     from denoisebench.metrics import relmse_map
 
     out = []
@@ -156,6 +160,9 @@ def _comparisons(store: ResultsStore, data: analysis.RunData, dataset: Dataset, 
                     "crops": [images.data_uri(images.to_png(images.crop(img, t, l, size), scale)) for t, l in windows],
                 }
             )
+            spp_map = report_samplers.map_entry(samplers, label, scene, spp, int(frame_index), full_scale)
+            if spp_map is not None:
+                entries[-1]["spp_map"] = spp_map
         out.append(
             {
                 "scene": scene,
@@ -244,6 +251,46 @@ def _strips(store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: 
     return out
 
 
+def _cvvdp_viewing(dataset: Dataset, data: analysis.RunData) -> dict:
+    """cvvdp's viewing conditions (:func:`denoisebench.metrics.colorvideovdp.viewing_conditions`): the
+    display once, and per scene the frame's visual angle and the exposure from its reference sequence
+    (the one cvvdp set for every denoiser of that scene)."""
+    from denoisebench.metrics.colorvideovdp import viewing_conditions
+
+    display = viewing_conditions()
+    scenes = {}
+    spp = data.spp[0] if data.spp else None
+    for scene in data.scenes:
+        if spp is None:
+            break
+        count = dataset.scene(scene).frame_count
+        refs = [dataset.frame(scene, spp, i, samples=False, buffers=["color"]).reference for i in range(count)]
+        found = viewing_conditions(np.stack(refs))
+        keys = ("frame_px", "field_deg", "exposure", "key", "lit_fraction", "clipped_fraction", "text")
+        scenes[scene] = {k: found[k] for k in keys}
+    return {"display": display, "scenes": scenes}
+
+
+def _not_applicable_detail(store: ResultsStore, run_id: str) -> list[dict]:
+    """Per metric that did not apply somewhere: the scenes, the frames and sequences concerned, the reasons."""
+    by_metric: dict[str, dict] = {}
+    for row in store.not_applicable(run_id):
+        entry = by_metric.setdefault(row["metric"], {"scenes": set(), "frames": 0, "sequences": 0, "reasons": set()})
+        entry["scenes"].add(row["scene"])
+        entry["sequences" if row["frame"] < 0 else "frames"] += 1
+        entry["reasons"].add(row["reason"])
+    return [
+        {
+            "metric": metric,
+            "scenes": sorted(e["scenes"]),
+            "frames": e["frames"],
+            "sequences": e["sequences"],
+            "reasons": sorted(e["reasons"]),
+        }
+        for metric, e in sorted(by_metric.items())
+    ]
+
+
 def _dataset_size(dataset: Dataset, scenes: list[str]) -> tuple[int, int]:
     """(width, height) of the run's frames (the first scene's: a run's scenes share one size)."""
     record = dataset.scene(scenes[0]).record if scenes else {}
@@ -288,6 +335,7 @@ def build_report(
     if flicker["series"]:
         figure_files["flicker"] = figures.flicker_figure(flicker["series"], palette)
     scene_effects = _scene_effects(dataset, data.scenes)
+    samplers = report_samplers.sampler_section(store, data.run)
     failures = [
         {"denoiser": u["denoiser"], "scene": u["scene"], "spp": u["spp"], "error": u["error"]}
         for u in data.units
@@ -320,7 +368,13 @@ def build_report(
         },
         # metrics whose preconditions the frames do not meet (SSIM under 11×11 px): frames count, reason
         "not_applicable": store.not_applicable_summary(run_id),
-        "comparisons": _comparisons(store, data, dataset, data.spp[0]) if data.spp else [],
+        "comparisons": _comparisons(store, data, dataset, data.spp[0], samplers) if data.spp else [],
+        # live samplers: per-frame spp counts, maps (on comparison entries) and pixels left without a sample
+        "samplers": samplers,
+        # cvvdp's display, pixels per degree and each scene's exposure (None: cvvdp not measured)
+        "cvvdp_viewing": _cvvdp_viewing(dataset, data) if "cvvdp" in data.sequence_metric_names else None,
+        # which scenes and frames each not-applicable metric lacks, and why
+        "not_applicable_detail": _not_applicable_detail(store, run_id),
         "stability": stability_table(denoisers) if denoisers else None,
         "figures": figure_files,
         "palette": palette,
@@ -385,6 +439,8 @@ def results_json(report: dict) -> dict:
             "failures": report["failures"],
             "unresolved_references": report.get("unresolved_references"),
             "not_applicable": report.get("not_applicable", {}),
+            **({"samplers": report_samplers.as_json(report["samplers"])} if report.get("samplers") else {}),
+            **({"cvvdp_viewing": report["cvvdp_viewing"]} if report.get("cvvdp_viewing") else {}),
             "stability": report["stability"],
             "frames": report["frames"],
             "sequence_metrics": report["sequences"],
@@ -456,6 +512,21 @@ def results_csv(report: dict) -> str:
     return buffer.getvalue()
 
 
+def spp_map_files(report: dict) -> dict[str, bytes]:
+    """report.md's spp map images: ``figures/spp_maps/<comparison>_<entry>.png`` (numbers, not user-given
+    names), the sampler's image beside it (``..._image.png``) and the colour bar
+    ``figures/spp_maps/colour_bar.png``; {} without maps."""
+    files = {}
+    for n, comp in enumerate(report["comparisons"]):
+        for k, entry in enumerate(comp["entries"]):
+            if "spp_map" in entry:
+                files[f"figures/spp_maps/{n}_{k}.png"] = entry["spp_map"]["png"]
+                files[f"figures/spp_maps/{n}_{k}_image.png"] = base64.b64decode(entry["image"].split(",", 1)[1])
+    if files:
+        files["figures/spp_maps/colour_bar.png"] = images.colour_bar_png()
+    return files
+
+
 def write_report(
     store: ResultsStore,
     run_id: str,
@@ -474,6 +545,8 @@ def write_report(
     for name, (png, svg) in report["figures"].items():
         atomic_write_bytes(out / "figures" / f"{name}.png", png)
         atomic_write_bytes(out / "figures" / f"{name}.svg", svg.encode("utf-8"))
+    for path, png in spp_map_files(report).items():
+        atomic_write_bytes(out / path, png)
     atomic_write_bytes(
         out / "results.json", (json.dumps(results_json(report), indent=1, allow_nan=False) + "\n").encode("utf-8")
     )

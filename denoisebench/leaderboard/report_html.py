@@ -18,6 +18,8 @@ from html import escape
 
 from denoisebench.denoisers.isolation import isolation_text
 from denoisebench.leaderboard import formatting as fmt
+from denoisebench.leaderboard import report_notes as notes
+from denoisebench.leaderboard.report_samplers import undersampled_lines
 
 STYLE = """
 body{font:14px/1.45 system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:0;color:#1d1d1f;background:#fafafa}
@@ -48,6 +50,8 @@ td.worst{background:#ffe3e0;font-weight:600}
 .error{color:#b00020}
 .scroll{overflow-x:auto;max-width:100%}
 .note{color:#555;font-size:12.5px}
+.tile.sppmap{border-color:#440154}.bar{display:flex;gap:4px;align-items:center;justify-content:center;margin-top:3px}
+.bar img{width:96px;height:8px}
 """
 
 SCRIPT = """
@@ -179,6 +183,10 @@ def _results(report: dict) -> str:
         "noise-free image.</p>"
     ]
     parts += [f'<p class="error">Not held-out: {e(line)}</p>' for line in fmt.not_held_out_lines(report)]
+    parts += [
+        f'<p class="error">Pixels without a sample: {e(line)}</p>'
+        for line in undersampled_lines(report.get("samplers"))
+    ]
     for spp in report["spp"]:
         header, rows = fmt.summary_rows(report, spp)
         classes = ["input" if r[0] == "noisy" else "" for r in rows]
@@ -188,6 +196,14 @@ def _results(report: dict) -> str:
         parts.append(
             "<h3>Not distinguishable at this reference quality</h3><ul class=\"readings\">"
             + "".join(f"<li>{e(line)}</li>" for line in lines)
+            + "</ul>"
+        )
+    missing = notes.not_applicable_lines(report)
+    if missing:
+        parts.append(
+            '<h3>Metrics that did not apply</h3><p class="note">These metrics have no value where their '
+            "preconditions fail; the frames keep their other scores.</p><ul class=\"readings\">"
+            + "".join(f"<li>{e(line)}</li>" for line in missing)
             + "</ul>"
         )
     return "".join(parts)
@@ -252,7 +268,16 @@ def _flicker(report: dict) -> str:
         header, rows = fmt.flicker_rows(report, spp)
         classes = ["input" if r[0] == "noisy" else "" for r in rows]
         parts.append(f"<h3>{spp} spp</h3>" + _table(header, rows, classes))
-    return "".join(parts) + _strip_section(report)
+    return "".join(parts) + _viewing(report) + _strip_section(report)
+
+
+def _viewing(report: dict) -> str:
+    """cvvdp's display, pixels per degree and each scene's exposure (when cvvdp was measured)."""
+    if not report.get("cvvdp_viewing"):
+        return ""
+    return f'<h3>cvvdp viewing conditions</h3><p class="note">{e(notes.viewing_text(report))}</p>' + _table(
+        *notes.viewing_rows(report)
+    )
 
 
 def _tile(entry: dict, element_id: str) -> str:
@@ -266,6 +291,35 @@ def _tile(entry: dict, element_id: str) -> str:
     )
 
 
+def _spp_tile(entry: dict) -> str:
+    """The spp map of a sampler's entry, beside its image: the map, its numbers and the colour bar."""
+    from denoisebench.leaderboard.images import colour_bar_png, data_uri
+
+    m = entry["spp_map"]
+    return (
+        f'<div class="tile sppmap"><img alt="spp map of {e(entry["label"])}" src="{m["image"]}">'
+        f'<div class="bar"><span>0</span><img alt="colour bar" src="{data_uri(colour_bar_png())}">'
+        f"<span>{m['top']} spp</span></div>"
+        f"<div>{e(entry['label'])}: spp map<br>mean {m['mean']:.3g}, {m['min']}\u2013{m['max']} spp"
+        + (
+            f', <span class="error">{m["pixels_without_samples"]} px &lt; 1 spp</span>'
+            if m["pixels_without_samples"]
+            else ""
+        )
+        + "</div></div>"
+    )
+
+
+def _samplers(report: dict) -> str:
+    """The live samplers: unsampled-pixel warnings, how to read the maps, and their counts."""
+    section = report.get("samplers")
+    if not section:
+        return ""
+    parts = [f'<p class="error">Pixels without a sample: {e(line)}</p>' for line in undersampled_lines(section)]
+    parts.append(f'<p class="note">{e(notes.sampler_scale_text())} The maps are under Image comparisons.</p>')
+    return "".join(parts) + _table(*notes.sampler_rows(report))
+
+
 def _comparisons(report: dict) -> str:
     parts = [
         '<p class="note">The last frame of each test sequence at the lowest input spp (temporal denoisers have seen '
@@ -275,7 +329,10 @@ def _comparisons(report: dict) -> str:
     ]
     for n, comp in enumerate(report["comparisons"]):
         ids = [f"img-{n}-{i}" for i in range(len(comp["entries"]))]
-        tiles = "".join(_tile(entry, ids[i]) for i, entry in enumerate(comp["entries"]))
+        tiles = "".join(
+            _tile(entry, ids[i]) + (_spp_tile(entry) if "spp_map" in entry else "")
+            for i, entry in enumerate(comp["entries"])
+        )
         choices = [(ids[i], entry) for i, entry in enumerate(comp["entries"]) if entry["kind"] != "reference"]
         ref_id = ids[-1]
         # open on the denoiser closest to the reference in this frame
@@ -350,6 +407,7 @@ def render_html(report: dict) -> str:
         ("effects", "Per-effect breakdown", _effects(report)),
         ("flicker", "Temporal flicker", _flicker(report)),
         ("images", "Image comparisons", _comparisons(report)),
+        *([("samplers", "Samplers", _samplers(report))] if report.get("samplers") else []),
         ("stability", "Hard-case stability", _stability(report)),
         ("failures", "Failures", _failures(report)),
     ]

@@ -13,6 +13,8 @@ import re
 
 from denoisebench.denoisers.isolation import isolation_text
 from denoisebench.leaderboard import formatting as fmt
+from denoisebench.leaderboard import report_notes as notes
+from denoisebench.leaderboard.report_samplers import undersampled_lines
 
 _SPECIAL = re.compile(r"([\\`*_\[\]|<>#])")
 
@@ -65,12 +67,18 @@ def render_markdown(report: dict) -> str:
         "",
     ]
     lines += [f"> **Not held-out:** {md(line)}\n" for line in fmt.not_held_out_lines(report)]
+    lines += [f"> **Pixels without a sample:** {md(line)}\n" for line in undersampled_lines(report.get("samplers"))]
     for spp in report["spp"]:
         header, rows = fmt.summary_rows(report, spp)
         lines += [f"### {spp} spp", ""] + _table(header, rows)
     pairs = fmt.indistinguishable_lines(report)
     if pairs:
         lines += ["### Not distinguishable at this reference quality", ""] + [f"- {md(p)}" for p in pairs] + [""]
+    missing = notes.not_applicable_lines(report)
+    if missing:
+        lines += ["### Metrics that did not apply", ""]
+        lines += ["These metrics have no value where their preconditions fail; the frames keep their other scores.", ""]
+        lines += [f"- {md(line)}" for line in missing] + [""]
     header, rows, worst = fmt.effect_rows(report)
     lines += [
         "## Per-effect breakdown",
@@ -99,6 +107,9 @@ def render_markdown(report: dict) -> str:
             lines += [f"### {spp} spp", ""] + _table(header, rows)
         if report.get("strips"):
             lines += ["Frame strips of one crop per denoiser are in index.html.", ""]
+        if report.get("cvvdp_viewing"):
+            lines += ["### cvvdp viewing conditions", "", md(notes.viewing_text(report)), ""]
+            lines += _table(*notes.viewing_rows(report))
     else:
         lines += ["Sequences of one frame: no flicker to measure.", ""]
     lines += [
@@ -107,6 +118,8 @@ def render_markdown(report: dict) -> str:
         "Open index.html for the images, zoomed crops and the interactive compare.",
         "",
     ]
+    if report.get("samplers"):
+        lines += _samplers(report)
     lines += ["## Hard-case stability", ""]
     lines += _stability(report["stability"])
     if report["failures"]:
@@ -145,6 +158,35 @@ def _times(report: dict) -> list[str]:
         lines += [f"### Equal quality: {md(table.metric)}", ""] + _table(*fmt.equal_quality_rows(table))
     if report.get("verdicts"):
         lines += ["**Verdicts** (measured rungs only)", ""] + [f"- {md(v)}" for v in report["verdicts"]] + [""]
+    return lines
+
+
+def _samplers(report: dict) -> list[str]:
+    """The live samplers: unsampled-pixel warnings, spp counts, and each map beside its image."""
+    lines = ["## Samplers", ""]
+    lines += [f"- **Pixels without a sample:** {md(line)}" for line in undersampled_lines(report["samplers"])]
+    lines += [""] + _table(*notes.sampler_rows(report))
+    lines += [
+        md(notes.sampler_scale_text()),
+        "",
+        "Colour bar (0 → top): ![spp colour bar](figures/spp_maps/colour_bar.png)",
+        "",
+    ]
+    for n, comp in enumerate(report["comparisons"]):
+        mapped = [(k, entry) for k, entry in enumerate(comp["entries"]) if "spp_map" in entry]
+        if not mapped:
+            continue
+        lines += [f"### {md(comp['scene'])}, frame {comp['frame']}, {comp['spp']} spp", ""]
+        header = ["sampler", "image", "spp map", "mean spp", "min–max spp", "pixels < 1 spp", "scale"]
+        lines += ["| " + " | ".join(md(h) for h in header) + " |", "|" + "---|" * len(header)]
+        for k, entry in mapped:
+            m = entry["spp_map"]
+            lines.append(
+                f"| {md(entry['label'])} | ![{md(entry['label'])}](figures/spp_maps/{n}_{k}_image.png) "
+                f"| ![spp map of {md(entry['label'])}](figures/spp_maps/{n}_{k}.png) | {m['mean']:.3g} | "
+                f"{m['min']}–{m['max']} | {m['pixels_without_samples']} | 0–{m['top']} spp |"
+            )
+        lines.append("")
     return lines
 
 

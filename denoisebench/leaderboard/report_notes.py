@@ -1,0 +1,99 @@
+"""Text both renderers share for the report's conditions: cvvdp's viewing, metrics that did not apply, samplers.
+
+Each function takes the report model (:func:`.report.build_report`) and returns sentences or
+(header, rows) for :mod:`.report_markdown` and :mod:`.report_html`, which escape them.
+"""
+
+from __future__ import annotations
+
+from denoisebench.leaderboard import formatting as fmt
+
+
+def viewing_text(report: dict) -> str:
+    """cvvdp's display in one sentence: model, size, peak, ambient light, pixels per degree, fps, exposure rule."""
+    d = report["cvvdp_viewing"]["display"]
+    width, height = d["resolution"]
+    return (
+        f"cvvdp models the viewer of display {d['display']}: {width}×{height} px, peak {d['peak_cd_m2']:.0f} cd/m², "
+        f"black {d['black_cd_m2']:.3g} cd/m², {d['ambient_lux']:.0f} lux ambient, {d['ppd']:.1f} pixels per degree, "
+        f"{d['fps']:.0f} fps. Exposure (cd/m² per unit radiance), one per scene from its reference: the "
+        f"log-average luminance of the reference's lit pixels is shown at {d['target_key_cd_m2']:.0f} cd/m²; "
+        "every denoiser of a scene gets the same exposure."
+    )
+
+
+def viewing_rows(report: dict) -> tuple[list[str], list[list[str]]]:
+    """Per scene: frame size, the visual angle it spans, exposure, lit and clipped share of the reference."""
+    header = ["scene", "frame px", "field of view", "exposure (cd/m² per unit)", "lit pixels", "clipped at peak"]
+    rows = []
+    for scene, v in report["cvvdp_viewing"]["scenes"].items():
+        w, h = v["frame_px"]
+        rows.append(
+            [
+                scene,
+                f"{w}×{h}",
+                f"{v['field_deg'][0]:.2f}°×{v['field_deg'][1]:.2f}°",
+                fmt.num(v["exposure"]),
+                f"{100 * v['lit_fraction']:.0f} %",
+                f"{100 * v['clipped_fraction']:.1f} %",
+            ]
+        )
+    return header, rows
+
+
+def not_applicable_lines(report: dict) -> list[str]:
+    """One sentence per metric that had no value somewhere: where (scenes, frames, sequences) and why."""
+    lines = []
+    for item in report.get("not_applicable_detail") or []:
+        where = []
+        if item["frames"]:
+            where.append(f"{item['frames']} frame(s)")
+        if item["sequences"]:
+            where.append(f"{item['sequences']} sequence(s)")
+        lines.append(
+            f"{item['metric']}: no value on {' and '.join(where)} of scene(s) {', '.join(item['scenes'])} "
+            f"(all labels counted): {'; '.join(item['reasons'])}"
+        )
+    return lines
+
+
+def sampler_scale_text() -> str:
+    """How to read the spp maps."""
+    return (
+        "Each sampler's samples per pixel at the frame shown, beside its image: viridis colours, linear from "
+        "0 spp (dark violet) to the largest count any sampler gave a pixel of that scene (yellow, stated under "
+        "each map); red: a pixel with fewer than 1 sample (its value is 0, not an estimate). A sampler's pairs "
+        "with denoisers share its render and its map."
+    )
+
+
+def sampler_rows(report: dict) -> tuple[list[str], list[list[str]]]:
+    """Per sampler, scene and spp: frames, mean and largest spp, frames and pixels left without a sample."""
+    header = [
+        "sampler",
+        "scene",
+        "spp",
+        "frames",
+        "mean spp",
+        "max spp",
+        "frames with pixels < 1 spp",
+        "pixels < 1 spp",
+    ]
+    groups: dict[tuple, list[dict]] = {}
+    for f in report["samplers"]["frames"]:
+        groups.setdefault((f["sampler"], f["scene"], f["spp"]), []).append(f)
+    rows = []
+    for (sampler, scene, spp), group in groups.items():
+        rows.append(
+            [
+                sampler,
+                scene,
+                str(spp),
+                str(len(group)),
+                f"{sum(f['mean_spp'] for f in group) / len(group):.3g}",
+                str(max(f["max_spp"] for f in group)),
+                str(sum(f["pixels_without_samples"] > 0 for f in group)),
+                str(sum(f["pixels_without_samples"] for f in group)),
+            ]
+        )
+    return header, rows
