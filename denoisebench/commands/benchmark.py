@@ -17,6 +17,7 @@ plugins").
 
 from __future__ import annotations
 
+import json
 import sys
 import time
 from pathlib import Path
@@ -24,7 +25,6 @@ from pathlib import Path
 from denoisebench.dataset import disk_space, open_dataset
 from denoisebench.denoisers.isolation import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, limits_from_args
 from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
-from denoisebench.denoisers.sandbox import protect
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard.benchmark_run import run_benchmark
 from denoisebench.leaderboard.report import write_report
@@ -33,6 +33,7 @@ from denoisebench.leaderboard.store import ResultsStore, utc_now
 from denoisebench.leaderboard.time_model import DEFAULT_TIME_BUDGET, measure_run_timings, parse_size
 from denoisebench.metrics.robust import check_trim
 from denoisebench.outputs import check_writable_dir, check_writable_file
+from denoisebench.sandbox import protect
 
 EPILOG = """examples:
   run-benchmark --data out/dataset --out report/
@@ -58,8 +59,6 @@ def _int_list(text: str) -> list[int]:
 
 def _options(items: list[str]) -> dict[str, dict]:
     """``SPEC:KEY=VALUE`` (SPEC may itself contain ':') → {spec: {key: value}}; values parsed as JSON when they can be."""
-    import json
-
     options: dict[str, dict] = {}
     for item in items:
         head, eq, value = item.rpartition("=")

@@ -20,6 +20,8 @@ from __future__ import annotations
 import json
 import sys
 
+from tqdm import tqdm
+
 from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
 from denoisebench.denoisers.registry import available_denoisers
 from denoisebench.errors import UserInputError
@@ -120,7 +122,6 @@ def run(args) -> int:
         limits = {"time_limit": args.time_limit, "memory_limit_mb": args.memory_limit}
         options = parse_options(args.option)
         return check_sampler(args.spec, options, as_json=args.json, isolation=args.isolation, **limits)
-    from tqdm import tqdm
 
     from denoisebench.denoisers import hard_cases, isolation
 

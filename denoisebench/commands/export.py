@@ -20,6 +20,7 @@ input (one line, nothing written), 1 internal failure.
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from denoisebench.dataset.export import noisebase, oidn
 from denoisebench.dataset.export.selection import select_scenes
@@ -58,7 +59,6 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    from pathlib import Path
 
     if not (Path(args.data) / "dataset.json").is_file():
         raise UserInputError(f"{args.data}: not a dataset folder (no dataset.json)")

@@ -26,6 +26,9 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
+from tqdm import tqdm
+
 from denoisebench.dataset.errors import DatasetError
 from denoisebench.dataset.reader import open_dataset
 from denoisebench.denoisers.registry import load_denoiser
@@ -279,9 +282,6 @@ def evaluate_on_split(
     "relmse_ci95": {name: [lo, hi]}, "ratio_ci95": {peer: [lo, hi]}, "bootstrap": {...}}``: the
     intervals are 95% percentile bootstraps over scenes (:func:`bootstrap_over_scenes`).
     """
-    import numpy as np
-    from tqdm import tqdm
-
     ds = open_dataset(data)
     scenes = ds.split(split)
     if not scenes:
@@ -337,8 +337,6 @@ def bootstrap_over_scenes(
     scene: each draw picks len(scenes) scenes with replacement and takes the mean over all their
     frames, for every denoiser with the same draw (the ratios are paired). Deterministic (seed 0).
     """
-    import numpy as np
-
     scenes = sorted(set(frame_scene))
     index = {scene: i for i, scene in enumerate(scenes)}
     owner = np.array([index[s] for s in frame_scene])

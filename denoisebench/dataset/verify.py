@@ -17,6 +17,8 @@ import hashlib
 import sys
 from dataclasses import dataclass
 
+from tqdm import tqdm
+
 from denoisebench.dataset import layout
 from denoisebench.dataset.errors import DatasetError
 
@@ -68,8 +70,6 @@ def file_sha256(path) -> str:
 
 def verify_files(dataset, files: list[ListedFile], *, progress: bool = True) -> int:
     """Check every file of ``files``; return how many bytes were hashed. DatasetError on the first problem."""
-    from tqdm import tqdm
-
     total = 0
     for listed in tqdm(
         files, desc="verify: sha256 of dataset files", unit="file", file=sys.stderr, disable=not progress, leave=False

@@ -34,6 +34,7 @@ Notes:
 from __future__ import annotations
 
 import hashlib
+import json
 import re
 import struct
 from dataclasses import dataclass
@@ -264,7 +265,6 @@ def check_user_stage(path: str | Path, options: dict | None = None):
     light (unless ``default_light``), with nothing renderable, or a dependency outside the stage's
     folder is a UserInputError (one line naming the file).
     """
-
     path = Path(path)
     if not path.is_file():
         raise UserInputError(f"{path}: no such USD file")
@@ -301,8 +301,6 @@ def translate_scene_file(path: str | Path):
 def xml_camera(path: Path) -> dict:
     """Keywords of ``load_mitsuba_xml`` from a copied XML scene's ``camera.json``: ``frames`` (1 without
     one) and ``auto_camera`` (False unless it says so; files written before it existed lack it)."""
-    import json
-
     sidecar = Path(path).parent / XML_CAMERA
     record = json.loads(sidecar.read_text()) if sidecar.is_file() else {"frames": 1}
     return {"frames": int(record["frames"]), "auto_camera": bool(record.get("auto_camera", False))}
@@ -310,7 +308,6 @@ def xml_camera(path: Path) -> dict:
 
 def check_xml_scene(path: str | Path, frames: int, auto_camera: bool = False):
     """Load and check a Mitsuba XML scene before anything is written (UserInputError, one line)."""
-
     path = Path(path)
     if path.suffix.lower() != ".xml":
         raise UserInputError(f"{path}: expected a Mitsuba .xml scene file")
@@ -326,8 +323,6 @@ def copy_xml_scene(path: str | Path, scene_dir: Path, frames: int, auto_camera: 
 
     Without ``auto_camera`` the sidecar holds what it held before the option existed (same bytes, so
     datasets made then keep their stage digests)."""
-    import json
-
     path = Path(path)
     scene_dir.mkdir(parents=True, exist_ok=True)
     files = []

@@ -21,6 +21,7 @@ import numpy as np
 
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
+from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
 from denoisebench.generator.render.scene import build_mitsuba_scene
 from denoisebench.generator.usd.translate import translate_usd
 
@@ -60,8 +61,6 @@ def render_preview(
     except ValueError as error:
         raise UserInputError(f"--max-depth: {error}") from None
     if Path(usd_path).suffix.lower() == ".xml":
-        from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
-
         translated, loaded = load_mitsuba_xml(usd_path, **(translate_options or {}))
     else:
         translated, loaded = translate_usd(usd_path, **(translate_options or {})), None

@@ -28,7 +28,13 @@ import hashlib
 import struct
 from pathlib import Path
 
+from denoisebench.dataset import open_dataset
 from denoisebench.errors import UserInputError
+from denoisebench.generator.contract.render_plan import RenderPlan
+from denoisebench.generator.dataset_scenes import load_scene_file
+from denoisebench.generator.render.progressive import ProgressiveFrame
+from denoisebench.generator.render.scene import build_mitsuba_scene
+from denoisebench.sampling.harness import run_sampler
 
 #: Stream tag of live sampler renders, hashed with the render seed.
 LIVE_STREAM = 11
@@ -45,8 +51,6 @@ class LiveScene:
     """A stage loaded for progressive rendering with ``plan`` at ``width``×``height`` (module docstring)."""
 
     def __init__(self, usd_path, plan, *, width: int, height: int, render_seed: int = 0, name: str = ""):
-        from denoisebench.generator.dataset_scenes import load_scene_file
-        from denoisebench.generator.render.scene import build_mitsuba_scene
 
         self.usd_path = Path(usd_path)
         self.name = name or self.usd_path.parent.name
@@ -60,9 +64,6 @@ class LiveScene:
     @classmethod
     def from_dataset(cls, dataset, scene: str) -> LiveScene:
         """Scene ``scene`` of ``dataset`` (a :class:`~denoisebench.dataset.reader.Dataset` or its folder) as it was rendered."""
-        from denoisebench.dataset import open_dataset
-        from denoisebench.generator.contract.render_plan import RenderPlan
-
         if not hasattr(dataset, "manifest"):
             dataset = open_dataset(dataset)
         record = dataset.scene(scene, renders=False).record
@@ -82,7 +83,6 @@ class LiveScene:
     def _scene_at(self, frame: int):
         if not self.translated.moving:
             return self._scene
-        from denoisebench.generator.render.scene import build_mitsuba_scene
 
         if self._frame_scene[0] != frame:
             self._frame_scene = (frame, build_mitsuba_scene(self.translated, frame=frame))
@@ -90,8 +90,6 @@ class LiveScene:
 
     def open(self, frame: int, *, seed: int | None = None, repeat: int = 0, keep_samples: bool = False):
         """A fresh ProgressiveFrame of ``frame`` (seed: :func:`live_seed` of the render seed unless given)."""
-        from denoisebench.generator.render.progressive import ProgressiveFrame
-
         if not 0 <= frame < self.frames:
             raise UserInputError(f"scene {self.name!r} has {self.frames} frame(s), not frame {frame}")
         return ProgressiveFrame(
@@ -108,6 +106,4 @@ class LiveScene:
 
 def run_live(sampler, scene: LiveScene, frame: int, budget, *, repeat: int = 0, keep_samples: bool = False):
     """``run_sampler`` on a fresh progressive frame of ``scene`` (common random numbers; module Notes)."""
-    from denoisebench.sampling.harness import run_sampler
-
     return run_sampler(sampler, scene.open(frame, repeat=repeat, keep_samples=keep_samples), budget)

@@ -71,6 +71,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from denoisebench.dataset.atomic import atomic_write_bytes, temporary_path
 from denoisebench.dataset.export.oidn import split_of
@@ -396,8 +397,6 @@ def export_noisebase(
 
     Call :func:`plan_export` first to refuse bad input before writing (the command does).
     """
-    from tqdm import tqdm
-
     plan = plan_export(dataset, spp, layout)
     pad = TEST_PAD if layout == "test" else 0
     total = sum(dataset.scene(s).frame_count for entries in plan.values() for s, _ in entries)

@@ -63,6 +63,7 @@ from pathlib import Path
 
 import numpy as np
 import OpenEXR
+from tqdm import tqdm
 
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.dataset.manifest import SPLITS
@@ -183,8 +184,6 @@ def export_oidn(
     Call :func:`check_exportable` first (the command does). The summary counts files per split
     and is also written to ``out/denoisebench_export.json``.
     """
-    from tqdm import tqdm
-
     splits = split_of(dataset)
     jobs = [(scene, frame) for scene in dataset.scenes for frame in range(dataset.scene(scene).frame_count)]
     counts = {split: 0 for split in SPLITS}
