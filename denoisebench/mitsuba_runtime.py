@@ -16,6 +16,9 @@ import os
 import re
 import warnings
 
+# Lazy imports: Mitsuba is imported only inside load_mitsuba, which finds libLLVM and picks
+# the variant first: importing it anywhere else would fix the variant too early.
+
 MIN_LLVM_MAJOR = 16
 LLVM_VARIANT = "llvm_ad_rgb"
 SCALAR_VARIANT = "scalar_rgb"

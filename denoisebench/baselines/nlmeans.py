@@ -15,6 +15,9 @@ import numpy as np
 from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.protocol import DenoiserBase
 
+# Lazy imports: scipy and scikit-image (0.3-0.9 s) are imported inside the filter, so that
+# the registry can list this denoiser without loading them.
+
 
 def immerkaer_sigma(image: np.ndarray) -> float:
     """Gaussian noise σ of an H×W×C image (Immerkær 1996), averaged over channels."""

@@ -25,6 +25,9 @@ from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.protocol import DenoiserBase
 from denoisebench.denoisers.registry import DenoiserUnavailableError
 
+# Lazy imports: pyoidn (optional: a missing package is this denoiser's load error, not an
+# import error of the registry) and scipy are imported where they are used.
+
 QUALITIES = ("high", "balanced", "fast")
 PYOIDN_PIN = "pyoidn==2.5.1.0"
 FIREFLY_FACTOR = 16.0

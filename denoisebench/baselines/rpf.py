@@ -112,6 +112,9 @@ from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.lens_sampling import square_to_disk_concentric
 from denoisebench.denoisers.protocol import DenoiserBase
 
+# Lazy imports: scipy (0.3 s) is imported inside the functions that need it, so that the
+# registry can list RPF without loading it.
+
 DEFAULT_FEATURES = ("position", "normal", "albedo", "position2", "normal2")
 CLUSTER_FEATURES = ("normal", "albedo")
 PAPER_BOXES = (55, 35, 17, 7)  # at the paper's image size

@@ -28,6 +28,9 @@ from denoisebench.dataset.export.staging import check_target, staged_folder
 from denoisebench.dataset.reader import open_dataset
 from denoisebench.errors import UserInputError
 
+# Lazy imports: zarr is optional (only --format noisebase needs it); it is imported there, with
+# a one-line error when it is missing.
+
 FORMATS = ("oidn", "noisebase")
 
 EPILOG = """examples:

@@ -75,6 +75,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 
 import numpy as np
+import OpenEXR
 
 from denoisebench.dataset import layout
 from denoisebench.dataset.atomic import atomic_write_bytes
@@ -129,7 +130,6 @@ def config_hash(config: Mapping) -> str:
 
 def software_versions(extra: Mapping[str, str] | None = None) -> dict[str, str]:
     """Python, numpy and OpenEXR versions, plus the caller's (mitsuba, drjit, usd...: passed in)."""
-    import OpenEXR
 
     versions = {
         "python": platform.python_version(),

@@ -47,6 +47,9 @@ from denoisebench.generator.mitsuba_xml import XML_NAME, dependencies, load_mits
 from denoisebench.generator.usd.translate import apply_additions, translate_usd
 from denoisebench.scenes.effects import METADATA_KEY
 
+# Lazy imports: pxr is imported only where a stage is authored or copied, so that Ray workers
+# and Mitsuba XML runs do not load USD.
+
 USD_SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
 PACKAGE_NAME = "package.usdz"
 

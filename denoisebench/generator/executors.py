@@ -30,6 +30,9 @@ from denoisebench.generator.dataset_scenes import SceneSpec, read_stage_files
 from denoisebench.generator.frame_jobs import FrameJob, RenderedJob, render_job
 from denoisebench.mitsuba_runtime import load_mitsuba
 
+# Lazy imports: Dr.Jit (after mitsuba_runtime has picked Mitsuba's variant) and Ray (an optional
+# executor, 0.4 s) are imported inside the functions that use them.
+
 EXECUTORS = ("local", "ray")
 
 

@@ -25,6 +25,9 @@ from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
 from denoisebench.generator.render.scene import build_mitsuba_scene
 from denoisebench.generator.usd.translate import translate_usd
 
+# Lazy imports: render_frame is looked up when a preview renders (tests replace it on its
+# module), and PIL only where a PNG is written.
+
 
 def tone_map_preview(image: np.ndarray) -> np.ndarray:
     """Linear HDR → 8-bit sRGB with auto exposure (finite input assumed; NaN/Inf become 0)."""

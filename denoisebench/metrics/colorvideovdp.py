@@ -89,6 +89,9 @@ import numpy as np
 from denoisebench.metrics.torch_threads import one_torch_thread
 from denoisebench.metrics.validation import check_sequences
 
+# Lazy imports: torch (1 s) and pycvvdp are imported when cvvdp is computed, so that the
+# metric registry stays cheap to import.
+
 __all__ = [
     "DISPLAY",
     "DISPLAY_DESCRIPTION",

@@ -26,6 +26,8 @@ import numpy as np
 
 from denoisebench.metrics.validation import Checked, check_pair
 
+# Lazy imports: scipy (0.3 s) is imported inside the functions that filter.
+
 __all__ = [
     "HFEN_SIGMA",
     "HFEN_SIZE",

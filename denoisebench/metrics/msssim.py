@@ -31,6 +31,9 @@ from denoisebench.metrics.tonemap import tonemap
 from denoisebench.metrics.torch_threads import one_torch_thread
 from denoisebench.metrics.validation import MetricNotApplicable, check_pair
 
+# Lazy imports: torch (1 s) and pytorch-msssim are imported when MS-SSIM is computed, so that
+# the metric registry stays cheap to import.
+
 __all__ = ["WEIGHTS", "WIN_SIZE", "WIN_SIGMA", "WORST", "msssim", "msssim_scales", "ms_ssim_tensor"]
 
 WEIGHTS = (0.0448, 0.2856, 0.3001, 0.2363, 0.1333)

@@ -55,6 +55,9 @@ from denoisebench.metrics.msssim import ms_ssim_tensor
 from denoisebench.metrics.torch_threads import one_torch_thread
 from denoisebench.metrics.validation import MetricNotApplicable, check_pair, check_sequences
 
+# Lazy imports: torch (1 s), pytorch-msssim and flip-evaluator are imported when a Noisebase
+# score is computed, so that the metric registry stays cheap to import.
+
 __all__ = [
     "ACES_INPUT",
     "ACES_OUTPUT",

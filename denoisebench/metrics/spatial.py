@@ -54,6 +54,9 @@ import numpy as np
 from denoisebench.metrics.tonemap import reinhard, tonemap
 from denoisebench.metrics.validation import Checked, MetricNotApplicable, check_pair
 
+# Lazy imports: scikit-image, colour-science (0.9 s) and flip-evaluator are imported by the
+# metric that needs each, so that the metric registry stays cheap to import.
+
 __all__ = [
     "EPS_RELMSE",
     "EPS_SMAPE",

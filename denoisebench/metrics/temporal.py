@@ -67,6 +67,8 @@ from denoisebench.metrics.floors import Floor, as_variance, squared_error_floor
 from denoisebench.metrics.tonemap import tonemap
 from denoisebench.metrics.validation import Checked, as_depth, as_mask, as_motion, check_sequences
 
+# Lazy imports: scipy (0.3 s) is imported inside the functions that need it.
+
 __all__ = [
     "DEPTH_TOLERANCE",
     "WORST",

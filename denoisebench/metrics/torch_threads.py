@@ -12,6 +12,8 @@ from __future__ import annotations
 
 from contextlib import contextmanager
 
+# Lazy imports: torch (1 s) is imported only when a torch metric sets its thread count.
+
 __all__ = ["one_torch_thread"]
 
 

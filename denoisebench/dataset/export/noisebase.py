@@ -79,6 +79,9 @@ from denoisebench.dataset.manifest import SPLITS
 from denoisebench.dataset.reader import Dataset
 from denoisebench.errors import UserInputError
 
+# Lazy imports: zarr is optional (only this export format needs it) and imported where the
+# stores are written.
+
 NEAR = 0.01
 FAR = 1.0e4
 TEST_PAD = 28  # rows TestSampleLoader_v1 crops from the top and the bottom

@@ -14,6 +14,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+# Lazy imports: scipy (0.3 s) is imported only where a track is interpolated with rotations,
+# so that the contract stays a cheap plain-data module.
+
 # USD cameras look down -Z; Mitsuba's look down +Z (with +X pointing left in the image).
 _USD_TO_MITSUBA_CAMERA = np.diag([-1.0, 1.0, -1.0, 1.0])
 

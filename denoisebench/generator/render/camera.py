@@ -35,6 +35,9 @@ import numpy as np
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.contract.render_plan import RenderPlan
 
+# Lazy imports: Dr.Jit only after mitsuba_runtime has picked Mitsuba's variant, and scipy (0.3 s)
+# only where rotations are interpolated; both inside the functions that need them.
+
 
 @dataclass(frozen=True)
 class CameraSetup:

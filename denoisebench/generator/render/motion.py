@@ -48,6 +48,9 @@ import numpy as np
 
 from denoisebench.generator.contract.translated_scene import SHUTTER_SUBSTEPS as SUBSTEPS
 
+# Lazy imports: Dr.Jit is imported inside the functions, after mitsuba_runtime has picked
+# Mitsuba's variant.
+
 #: Hit-object index of a sample whose hit is not on a moving shape.
 NO_OBJECT = 0xFFFFFFFF
 
