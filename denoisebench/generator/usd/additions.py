@@ -44,6 +44,8 @@ from denoisebench.generator.contract.orbit import (  # the orbit's numbers, shar
 )
 from denoisebench.generator.usd.stage import frame_range
 
+# Lazy imports: pxr, inside the functions that use it (generator/usd/__init__.py says why).
+
 CAMERA_PATH = "/DenoisebenchAutoCamera"
 LIGHTS_PATH = "/DenoisebenchDefaultLights"
 DOME_INTENSITY = 0.3

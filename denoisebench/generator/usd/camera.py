@@ -17,6 +17,8 @@ from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.usd.stage import check_finite, stage_meters_per_unit, to_numpy
 
+# Lazy imports: pxr, inside the functions that use it (generator/usd/__init__.py says why).
+
 
 def find_camera(stage, camera_path: str | None = None):
     """The camera prim to render: ``camera_path`` if given, else the first camera in the stage."""

@@ -24,6 +24,8 @@ import numpy as np
 from denoisebench.errors import UserInputError
 from denoisebench.generator.usd.stage import check_finite, to_numpy
 
+# Lazy imports: pxr, inside the functions that use it (generator/usd/__init__.py says why).
+
 
 def _transform_points(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
     return points @ matrix[:3, :3].T + matrix[:3, 3]

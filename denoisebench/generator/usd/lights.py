@@ -37,6 +37,8 @@ from denoisebench.generator.usd.geometry import area_of, mesh_entry, tessellate_
 from denoisebench.generator.usd.stage import check_finite
 from denoisebench.generator.usd.textures import read_environment
 
+# Lazy imports: pxr, inside the functions that use it (generator/usd/__init__.py says why).
+
 #: Widest DistantLight ``angle`` (degrees) rendered as a delta light without a warning.
 SUN_ANGLE_LIMIT = 1.0
 AREA_LIGHT_TYPES = ("RectLight", "DiskLight", "SphereLight")

@@ -35,6 +35,8 @@ from denoisebench.generator.usd.textures import connected_shader as _connected_s
 from denoisebench.generator.usd.textures import read_texture
 from denoisebench.generator.usd.textures import shader_id as _shader_id
 
+# Lazy imports: pxr, inside the functions that use it (generator/usd/__init__.py says why).
+
 DEFAULT_GREY = (0.18, 0.18, 0.18)
 _SKIPPED_INPUTS = ("normal", "displacement", "occlusion")
 

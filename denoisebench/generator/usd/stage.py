@@ -14,6 +14,8 @@ import numpy as np
 
 from denoisebench.errors import UserInputError
 
+# Lazy imports: pxr, inside the functions that use it (generator/usd/__init__.py says why).
+
 
 def open_stage(path: str | Path):
     """Open a stage read-only; a file that is missing or does not parse is a UserInputError."""

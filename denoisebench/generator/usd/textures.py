@@ -34,6 +34,8 @@ import numpy as np
 
 from denoisebench.generator.image_codec import decode_image
 
+# Lazy imports: pxr, inside the functions that use it (generator/usd/__init__.py says why).
+
 CHANNELS = {"r": 0, "g": 1, "b": 2, "a": 3}
 
 

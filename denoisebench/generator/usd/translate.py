@@ -36,6 +36,8 @@ from denoisebench.generator.usd.materials import bound_material
 from denoisebench.generator.usd.stage import frame_range, open_stage, stage_to_mitsuba_matrix
 from denoisebench.scenes.effects import METADATA_KEY, validate_effects
 
+# Lazy imports: pxr, inside the functions that use it (generator/usd/__init__.py says why).
+
 # Prim types that carry no geometry of their own and are silently traversed.
 _STRUCTURAL = {
     "",
