@@ -208,6 +208,167 @@ def _first_vertex_bsdf(split, want_features, bsdf, ctx, ctx_diffuse, si, wo, sam
     return val, pdf, bs, weight, val_diffuse, albedo, rough
 
 
+@dataclass
+class _PreviousVertex:
+    """The vertex a ray leaves from, as the next hit's MIS weight needs it (a Dr.Jit PyTree: loop state).
+
+    ``p``, ``n``: position and geometric normal; ``pdf``: the solid-angle density with which the BSDF
+    sampled the ray; ``delta``: the sampled lobe was a delta lobe (no emitter sampling could have
+    produced the direction, so an emitter it hits has MIS weight 1).
+    """
+
+    p: object
+    n: object
+    pdf: object
+    delta: object
+
+    @classmethod
+    def of(cls, mi, si, bs):
+        """The vertex at ``si`` whose BSDF sample ``bs`` spawned the next ray (fresh copies: loop state)."""
+        return cls(
+            p=mi.Point3f(si.p),
+            n=mi.Normal3f(si.n),
+            pdf=mi.Float(bs.pdf),
+            delta=mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta),
+        )
+
+
+@dataclass
+class _DeltaAlbedo:
+    """The albedo feature of a camera path that first meets delta surfaces (mirror, glass).
+
+    ``pending`` is True while the path has seen only delta surfaces and has not escaped; at the first
+    smooth hit ``albedo`` becomes the throughput times that surface's diffuse reflectance and
+    ``pending`` turns False (it stays 0 where the chain escapes or the path ends).
+    """
+
+    albedo: object
+    pending: object
+
+
+@dataclass
+class _PathState:
+    """The bounce loop's state: one path per lane past its first vertex (a Dr.Jit PyTree).
+
+    Attributes
+    ----------
+    sampler : SampleStream
+        The lane's random stream (a ``DRJIT_STRUCT``; its PCG32 state advances in the loop).
+    ray : mi.Ray3f
+        The ray the next iteration traces.
+    beta : mi.Spectrum
+        Path throughput up to ``ray``'s origin, Russian-roulette weights included.
+    eta : mi.Float
+        Product of the relative indices of refraction sampled so far (Mitsuba's roulette uses it).
+    depth : mi.UInt32
+        Vertices so far (Mitsuba's ``depth``: 1 after the first hit).
+    radiance : mi.Color3f
+        Light gathered past the first vertex (emission the bounces hit, next-event estimation at
+        later vertices); ``trace`` gives it to the lobe sampled at the first vertex.
+    prev : _PreviousVertex
+        Where ``ray`` leaves from.
+    active : mi.Bool
+        The lane's path goes on.
+    delta_albedo : _DeltaAlbedo or None
+        The delta-chain albedo, only when it is followed (``KernelOptions.follow_delta_albedo`` and
+        features); None otherwise.
+
+    Notes
+    -----
+    ``delta_albedo`` is a field only when followed because an unchanging loop variable makes Dr.Jit
+    record the loop body twice (loop-invariant detection). Fields are traversed in declaration order.
+    """
+
+    sampler: object
+    ray: object
+    beta: object
+    eta: object
+    depth: object
+    radiance: object
+    prev: _PreviousVertex
+    active: object
+    delta_albedo: _DeltaAlbedo | None = None
+
+    def roulette(self, rr_depth: int, active_next) -> None:
+        """Russian roulette after a vertex: reweight ``beta`` and decide ``active`` from ``active_next``.
+
+        From depth ``rr_depth`` on, a path survives with Mitsuba's probability
+        ``min(max(beta) * eta^2, 0.95)`` and is divided by it; below that depth it always survives.
+        A path of zero throughput ends either way.
+
+        Notes
+        -----
+        It draws one number from ``sampler`` on every lane, whether roulette applies there or not,
+        so the random stream (and the image bytes) never depend on depth or throughput.
+        """
+        import drjit as dr
+
+        beta_max = dr.max(self.beta)
+        rr_prob = dr.minimum(beta_max * dr.square(self.eta), 0.95)
+        rr_active = self.depth >= rr_depth
+        rr_continue = self.sampler.next_1d() < rr_prob
+        self.beta = dr.select(rr_active, self.beta * dr.rcp(rr_prob), self.beta)
+        self.active = active_next & (~rr_active | rr_continue) & (beta_max != 0.0)
+
+
+def _bounce(mi, scene, motion, poses, ctx, opts: KernelOptions, state: _PathState):
+    """One iteration of the bounce loop: the vertex ``state.ray`` hits, and the ray it sends on.
+
+    In order: the emission the ray hits (MIS against the emitter sampling at ``state.prev``), the
+    delta-chain albedo when followed, next-event estimation, the BSDF sample that spawns the next
+    ray, then :meth:`_PathState.roulette`. ``motion`` (a ``MovingShapes`` or None) with ``poses`` adds
+    the shapes that move within the shutter to every intersection and shadow test.
+
+    Notes
+    -----
+    Random numbers per iteration, in order: emitter sample (2), BSDF sample (1 + 2), roulette (1).
+    Returns a one-tuple, the shape of ``dr.while_loop``'s state.
+    """
+    import drjit as dr
+
+    ray, beta, prev, active = state.ray, state.beta, state.prev, state.active
+    sampler = state.sampler
+    if motion is None:
+        si = scene.ray_intersect(ray, mi.RayFlags.All, False, active)
+    else:
+        si = motion.ray_intersect(scene, ray, False, active, poses)[0]
+    prev_si = mi.Interaction3f(dr.zeros(mi.Float), ray.time, mi.Color0f(), prev.p, prev.n)
+    ds = mi.DirectionSample3f(scene, si, prev_si)
+    em_pdf = scene.pdf_emitter_direction(prev_si, ds, active & ~prev.delta)
+    mis = _mis_weight(dr, prev.pdf, em_pdf)
+    emitted = ds.emitter.eval(si, active & (prev.pdf > 0.0))
+    radiance = dr.select(active, state.radiance + beta * mis * emitted, state.radiance)
+
+    active_next = active & si.is_valid()
+    if opts.bounded:
+        active_next &= state.depth + 1 < opts.max_depth
+    bsdf = si.bsdf(ray)
+    smooth = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
+    chain = state.delta_albedo
+    if chain is not None:
+        here = chain.pending & active & si.is_valid() & smooth
+        chain.albedo = dr.select(here, beta * bsdf.eval_diffuse_reflectance(si, here), chain.albedo)
+        chain.pending = chain.pending & active & si.is_valid() & ~smooth
+    active_em = active_next & smooth
+    if motion is None:
+        ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
+    else:
+        ds, em_weight = motion.sample_emitter_direction(scene, si, sampler.next_2d(), active_em, poses)
+    active_em &= ds.pdf != 0.0
+    wo = si.to_local(ds.d)
+    val, pdf, bs, weight = bsdf.eval_pdf_sample(ctx, si, wo, sampler.next_1d(), sampler.next_2d(), active_next)
+    mis_em = dr.select(ds.delta, 1.0, _mis_weight(dr, ds.pdf, pdf))
+    state.radiance = dr.select(active_em, radiance + beta * val * em_weight * mis_em, radiance)
+
+    state.ray = si.spawn_ray(si.to_world(bs.wo))
+    state.beta = beta * weight
+    state.eta = state.eta * bs.eta
+    state.prev = _PreviousVertex(p=si.p, n=si.n, pdf=bs.pdf, delta=mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta))
+    state.depth = dr.select(si.is_valid(), state.depth + 1, state.depth)
+    state.roulette(opts.rr_depth, active_next)
+    return (state,)
+
+
 def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pixel_y):
     """Trace one sample per lane (lane → pixel ``(pixel_x, pixel_y)``); returns a dict of Dr.Jit arrays.
 
@@ -241,8 +402,8 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     else:
         lens_uv = None
     ray, pose = camera.generate_ray(film, lens_uv, time)
-    if motion is not None:
-        poses = motion.at(ray.time)  # every ray of this sample shares its time: the moving shapes' poses once
+    # Every ray of this sample shares its time: the moving shapes' poses once.
+    poses = None if motion is None else motion.at(ray.time)
 
     # ---------------------------------------------------------- first vertex
     if motion is None:
@@ -363,92 +524,33 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             hit2 = active_next & si2.is_valid()
             out["position2"] = dr.select(hit2, si2.p, mi.Point3f(0.0))
             out["normal2"] = dr.select(hit2, si2.sh_frame.n, mi.Normal3f(0.0))
-        prev_p = mi.Point3f(si.p)
-        prev_n = mi.Normal3f(si.n)
-        prev_pdf = mi.Float(bs.pdf)
-        prev_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-        depth = dr.select(valid, mi.UInt32(1), mi.UInt32(0))
-        beta_max = dr.max(beta)
-        rr_prob = dr.minimum(beta_max * dr.square(eta), 0.95)
-        rr_active = depth >= opts.rr_depth
-        rr_continue = sampler.next_1d() < rr_prob
-        beta = dr.select(rr_active, beta * dr.rcp(rr_prob), beta)
-        active = active_next & (~rr_active | rr_continue) & (beta_max != 0.0)
-        rest = mi.Color3f(0.0)
-        follow = opts.features and opts.follow_delta_albedo
-        # The delta-chain albedo rides in the loop state only when it is followed: an unchanging
-        # state variable makes Dr.Jit record the loop body twice (loop-invariant detection).
-        follow_state = (albedo, albedo_pending) if follow else ()
-
-        def cond(sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active, *follow_state):
-            return active
-
-        def body(sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active, *follow_state):
-            if motion is None:
-                si = scene.ray_intersect(ray, mi.RayFlags.All, False, active)
-            else:
-                si = motion.ray_intersect(scene, ray, False, active, poses)[0]
-            prev_si = mi.Interaction3f(dr.zeros(mi.Float), ray.time, mi.Color0f(), prev_p, prev_n)
-            ds = mi.DirectionSample3f(scene, si, prev_si)
-            em_pdf = scene.pdf_emitter_direction(prev_si, ds, active & ~prev_delta)
-            mis = _mis_weight(dr, prev_pdf, em_pdf)
-            emitted = ds.emitter.eval(si, active & (prev_pdf > 0.0))
-            rest = dr.select(active, rest + beta * mis * emitted, rest)
-
-            active_next = active & si.is_valid()
-            if opts.bounded:
-                active_next &= depth + 1 < opts.max_depth
-            bsdf = si.bsdf(ray)
-            smooth = mi.has_flag(bsdf.flags(), mi.BSDFFlags.Smooth)
-            if follow:
-                albedo, pending = follow_state
-                here = pending & active & si.is_valid() & smooth
-                albedo = dr.select(here, beta * bsdf.eval_diffuse_reflectance(si, here), albedo)
-                pending = pending & active & si.is_valid() & ~smooth
-                follow_state = (albedo, pending)
-            active_em = active_next & smooth
-            if motion is None:
-                ds, em_weight = scene.sample_emitter_direction(si, sampler.next_2d(), True, active_em)
-            else:
-                ds, em_weight = motion.sample_emitter_direction(scene, si, sampler.next_2d(), active_em, poses)
-            active_em &= ds.pdf != 0.0
-            wo = si.to_local(ds.d)
-            val, pdf, bs, weight = bsdf.eval_pdf_sample(ctx, si, wo, sampler.next_1d(), sampler.next_2d(), active_next)
-            mis_em = dr.select(ds.delta, 1.0, _mis_weight(dr, ds.pdf, pdf))
-            rest = dr.select(active_em, rest + beta * val * em_weight * mis_em, rest)
-
-            ray = si.spawn_ray(si.to_world(bs.wo))
-            beta = beta * weight
-            eta = eta * bs.eta
-            prev_p = si.p
-            prev_n = si.n
-            prev_pdf = bs.pdf
-            prev_delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
-
-            depth = dr.select(si.is_valid(), depth + 1, depth)
-            beta_max = dr.max(beta)
-            rr_prob = dr.minimum(beta_max * dr.square(eta), 0.95)
-            rr_active = depth >= opts.rr_depth
-            rr_continue = sampler.next_1d() < rr_prob
-            beta = dr.select(rr_active, beta * dr.rcp(rr_prob), beta)
-            active = active_next & (~rr_active | rr_continue) & (beta_max != 0.0)
-            return (sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active, *follow_state)
-
-        state = dr.while_loop(
-            state=(sampler, ray, beta, eta, depth, rest, prev_p, prev_n, prev_pdf, prev_delta, active, *follow_state),
-            cond=cond,
-            body=body,
+        state = _PathState(
+            sampler=sampler,
+            ray=ray,
+            beta=beta,
+            eta=eta,
+            depth=dr.select(valid, mi.UInt32(1), mi.UInt32(0)),
+            radiance=mi.Color3f(0.0),
+            prev=_PreviousVertex.of(mi, si, bs),
+            active=active_next,
+        )
+        state.roulette(opts.rr_depth, active_next)
+        if opts.features and opts.follow_delta_albedo:
+            state.delta_albedo = _DeltaAlbedo(albedo=albedo, pending=albedo_pending)
+        (state,) = dr.while_loop(
+            state=(state,),
+            cond=lambda state: state.active,
+            body=functools.partial(_bounce, mi, scene, motion, poses, ctx, opts),
             label="denoisebench feature path tracer",
             max_iterations=max(opts.max_depth - 1, 1) if opts.bounded else None,
         )
-        rest = state[5]
-        if follow:
-            albedo = state[11]
+        if state.delta_albedo is not None:
+            albedo = state.delta_albedo.albedo
         if opts.lobe_split:
-            diffuse += dr.select(first_is_diffuse, rest, 0.0)
-            specular += dr.select(first_is_diffuse, 0.0, rest)
+            diffuse += dr.select(first_is_diffuse, state.radiance, 0.0)
+            specular += dr.select(first_is_diffuse, 0.0, state.radiance)
         else:
-            diffuse += rest
+            diffuse += state.radiance
 
     if opts.features:
         out["albedo"] = albedo
