@@ -382,7 +382,9 @@ def _fresh_start(spec, options: TrainOptions, device: torch.device) -> _Start:
 
 def _resume_start(spec, options: TrainOptions, device: torch.device, ds: Dataset) -> _Start:
     """``--resume``: continue a run on its own dataset (optimiser state included), or score its weights."""
-    start = _fresh_start(spec, options, device)  # the seed is drawn as for a new run, as before
+    # Seeded and drawn as a new run (the checkpoint's model is then drawn and overwritten), so torch's
+    # generator is where --init-from leaves it too.
+    start = _fresh_start(spec, options, device)
     config = start.config
     payload = load_checkpoint(options.resume, expect_model=spec.name)
     if not options.overrides and (options.steps == 0 or payload.get("config_name") in (None, options.config)):
@@ -419,6 +421,8 @@ def _resume_start(spec, options: TrainOptions, device: torch.device, ds: Dataset
 
 def _init_from_start(spec, options: TrainOptions, device: torch.device) -> _Start:
     """``--init-from``: fine-tune a checkpoint's weights (its own shape) with a fresh optimiser."""
+    # Draw the named configuration's model from the seed, as --resume does, then overwrite it with the
+    # checkpoint's: torch's generator is left where it leaves it.
     torch.manual_seed(options.seed)
     build_model(spec.name, apply_overrides(spec, model_config(spec.name, options.config), options.overrides))
     payload = load_checkpoint(options.init_from, expect_model=spec.name)

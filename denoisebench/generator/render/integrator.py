@@ -128,12 +128,13 @@ def scene_has_delta_only_bsdf(mi, scene) -> bool:
 def _diffuse_part(mi, bsdf, ctx_diffuse, si, wo, val, active):
     """The diffuse lobes' share of ``val`` (the full BSDF value): a second evaluation only when needed.
 
-    Notes:
-        Inside :func:`drjit.dispatch` ``bsdf`` is one concrete instance, so its lobe flags are known
-        while the kernel is traced. A BSDF whose lobes are all diffuse (``diffuse``, ``twosided``
-        diffuse) has ``val`` as its diffuse part, one without diffuse lobes (conductors, dielectrics)
-        has 0: both are exactly what the Diffuse-masked evaluation returns, without paying for it.
-        Only mixed BSDFs (principled, plastics) evaluate twice.
+    Notes
+    -----
+    Inside :func:`drjit.dispatch` ``bsdf`` is one concrete instance, so its lobe flags are known
+    while the kernel is traced. A BSDF whose lobes are all diffuse (``diffuse``, ``twosided``
+    diffuse) has ``val`` as its diffuse part, one without diffuse lobes (conductors, dielectrics)
+    has 0: both are exactly what the Diffuse-masked evaluation returns, without paying for it.
+    Only mixed BSDFs (principled, plastics) evaluate twice.
     """
     # Lobe bits only (BSDFFlags.All also holds Anisotropic, Delta1D, ...).
     lobes = int(bsdf.flags()) & int(mi.BSDFFlags.Diffuse | mi.BSDFFlags.Glossy | mi.BSDFFlags.Delta)
@@ -372,8 +373,17 @@ def _bounce(mi, scene, motion, poses, ctx, opts: KernelOptions, state: _PathStat
 def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pixel_y):
     """Trace one sample per lane (lane → pixel ``(pixel_x, pixel_y)``); returns a dict of Dr.Jit arrays.
 
+    The first vertex is traced here (features, lobe split, next-event estimation, the first bounce
+    and its roulette); later vertices run in a ``dr.while_loop`` over :class:`_PathState`, one
+    :func:`_bounce` per iteration.
+
+    Notes
+    -----
     Random numbers are drawn in a fixed order: sub-pixel offset (2), then time (1, only with time
-    sampling), lens (2, only with a thin lens), then the path's own.
+    sampling), lens (2, only with a thin lens), then, when paths bounce, the first vertex's light
+    sample (2), BSDF sample (1 + 2) and roulette (1), then :func:`_bounce`'s per vertex. Every
+    vertex draws them on every live lane, whatever it hits and whichever buffers are asked for, so
+    the image bytes do not depend on ``second_hit`` or on the features.
     """
     import drjit as dr
 
@@ -598,13 +608,14 @@ def sample_stream(mi, key, pixel_index, sample_index):
     ``independent`` sampler seeds with): ``(h0, h1) = TEA(pixel, key0)``, then
     ``(state, seq) = TEA(h0 + sample, h1 ^ key1)``.
 
-    Notes:
-        A sample's random numbers depend on nothing but (key, pixel, sample): not on the lane that
-        traces it, the pass it falls in, the other samples of the pass or how many samples a pixel
-        gets. That is what makes a k-spp render the prefix of any longer one (nested spp ladders)
-        and lets per-pixel sample counts continue each pixel's own stream. For a fixed key the map
-        from (pixel, sample) to the TEA input is one to one for samples below 2^32, and TEA is a
-        permutation, so no two samples of a frame share a stream.
+    Notes
+    -----
+    A sample's random numbers depend on nothing but (key, pixel, sample): not on the lane that
+    traces it, the pass it falls in, the other samples of the pass or how many samples a pixel
+    gets. That is what makes a k-spp render the prefix of any longer one (nested spp ladders)
+    and lets per-pixel sample counts continue each pixel's own stream. For a fixed key the map
+    from (pixel, sample) to the TEA input is one to one for samples below 2^32, and TEA is a
+    permutation, so no two samples of a frame share a stream.
     """
     h0, h1 = mi.sample_tea_32(pixel_index, key[0])
     state, seq = mi.sample_tea_32(h0 + sample_index, h1 ^ key[1])
@@ -690,12 +701,13 @@ def pixel_moments(mi, moments: dict, names: dict, groups: int, total):
     Float, pixel-major, ``stride`` values per pixel; ``layout`` maps each name of ``names`` (name →
     channels) to the column offsets of its mean and M2, and ``"stride"`` to the row length.
 
-    Notes:
-        One kernel merges and packs: each pixel gathers its lanes in a loop, in group order, so the
-        sums are the same bits on every run and thread count (scatter-adds from lanes that two
-        threads share would add in either order). Packing makes the host transfer one copy instead
-        of one per channel, which for small frames cost as much as the merge. With one lane per
-        pixel nothing is merged and the moments are copied as they are.
+    Notes
+    -----
+    One kernel merges and packs: each pixel gathers its lanes in a loop, in group order, so the
+    sums are the same bits on every run and thread count (scatter-adds from lanes that two
+    threads share would add in either order). Packing makes the host transfer one copy instead
+    of one per channel, which for small frames cost as much as the merge. With one lane per
+    pixel nothing is merged and the moments are copied as they are.
     """
     import drjit as dr
 
