@@ -10,6 +10,12 @@ executor is *not* part of it: local and Ray runs give the same bytes, so a run s
 be finished on a cluster. Running again with the same config resumes; another config is refused
 unless ``force`` (:class:`~denoisebench.dataset.writer.DatasetWriter`).
 
+The options applied to user scenes (``--camera``, ``--auto-camera``, ``--default-light``; for
+``--usd`` stages and ``--mitsuba`` files alike) sit under the config key ``stage_options``.
+Datasets written before that name was chosen carry them as ``usd_options``, and the config hash
+covers the key: :func:`resumable_config` gives such a dataset its own spelling back when the
+options are the same, so it resumes under its original hash instead of being refused or rebuilt.
+
 Notes:
     User stages are checked (opened, translated, dependencies inside their folder) before
     anything is written: one bad ``--usd`` file refuses the whole command with a one-line error
@@ -29,7 +35,8 @@ from importlib import metadata
 from pathlib import Path
 
 from denoisebench.dataset import layout
-from denoisebench.dataset.manifest import assign_splits, pin_held_out
+from denoisebench.dataset.errors import DatasetError
+from denoisebench.dataset.manifest import assign_splits, config_hash, load_header, pin_held_out
 from denoisebench.dataset.writer import DatasetWriter
 from denoisebench.errors import UserInputError
 from denoisebench.generator import dataset_scenes as scenes_mod
@@ -45,6 +52,10 @@ REFERENCE_SPP_FACTOR = 16
 DEFAULT_REF_ERROR = 1e-3
 #: Default cap of reference samples per pixel when the reference is adaptive.
 DEFAULT_REF_SPP = 4096
+#: Config key of the options applied to user scenes (--camera, --auto-camera, --default-light).
+STAGE_OPTIONS_KEY = "stage_options"
+#: The same key in datasets written before it was renamed (it also covered --mitsuba files).
+LEGACY_STAGE_OPTIONS_KEY = "usd_options"
 
 
 @dataclass(frozen=True)
@@ -172,7 +183,7 @@ def dataset_config(request: GenerateRequest) -> dict:
         ),
         **(
             {
-                "usd_options": {
+                STAGE_OPTIONS_KEY: {
                     "camera": request.camera,
                     "auto_camera": request.auto_camera,
                     "default_light": request.default_light,
@@ -182,6 +193,30 @@ def dataset_config(request: GenerateRequest) -> dict:
             else {}
         ),
     }
+
+
+def legacy_config(config: dict) -> dict | None:
+    """``config`` as datasets before the rename spelled it (``usd_options``), or None when it has no stage options."""
+    if STAGE_OPTIONS_KEY not in config:
+        return None
+    return {(LEGACY_STAGE_OPTIONS_KEY if k == STAGE_OPTIONS_KEY else k): v for k, v in config.items()}
+
+
+def resumable_config(out: str | Path, config: dict) -> dict:
+    """The config to open ``out`` with: ``config``, or its legacy spelling when ``out`` was written with it.
+
+    Only an existing manifest whose hash is that of :func:`legacy_config` (the same options, the old
+    key) gets the legacy spelling; anything else (no dataset, an unreadable manifest, another config)
+    gets ``config`` and the writer's usual rules (resume, refuse, or ``--force``).
+    """
+    legacy = legacy_config(config)
+    if legacy is None:
+        return config
+    try:
+        header = load_header(Path(out) / layout.MANIFEST_NAME)
+    except DatasetError:
+        return config
+    return legacy if header.get("config_hash") == config_hash(legacy) else config
 
 
 def render_versions() -> dict[str, str]:
@@ -292,7 +327,8 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
     }
     user_names = scenes_mod.user_scene_names(list(request.usd), family_names)
 
-    writer = DatasetWriter(request.out, dataset_config(request), render_versions(), force=request.force)
+    config = resumable_config(request.out, dataset_config(request))
+    writer = DatasetWriter(request.out, config, render_versions(), force=request.force)
     specs = _prepare_scenes(request, writer, user_names)
     by_name = {spec.name: spec for spec in specs}
     options = render_options(request)
