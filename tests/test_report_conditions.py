@@ -1,6 +1,11 @@
 """Report conditions on a synthetic run (8×8 px, so SSIM cannot apply): metrics that did not apply are
 named in report.md and index.html with their scenes, counts and reason; no sampler or cvvdp section
-appears in a run without them."""
+appears in a run without them; the report model is a typed record whose results.json keeps its keys.
+
+Checked by hand when the model became a dataclass: on a fixed store (2 cornell scenes, 16×16, 2 frames,
+spp 1 and 2, identity and cross_bilateral_fast, samplers uniform and a half-frame plugin, cvvdp) the
+report written before and after the change is byte-identical (results.json, results.csv, report.md,
+index.html, PNGs)."""
 
 from __future__ import annotations
 
@@ -21,6 +26,32 @@ def report(tmp_path_factory):
     return root / "report"
 
 
+#: results.json's top-level keys, in order, for a run without samplers or cvvdp (``samplers`` and
+#: ``cvvdp_viewing`` come after ``not_applicable`` when measured).
+RESULTS_KEYS = [
+    "run",
+    "denoisers",
+    "scenes",
+    "scene_effects",
+    "spp",
+    "reference",
+    "summary",
+    "accuracy_time",
+    "readings",
+    "time_model",
+    "equal_tables",
+    "effects",
+    "flicker",
+    "not_distinguishable",
+    "failures",
+    "unresolved_references",
+    "not_applicable",
+    "stability",
+    "frames",
+    "sequence_metrics",
+]
+
+
 def test_metrics_that_did_not_apply_are_named_with_their_scenes_and_reason(report):
     results = json.loads((report / "results.json").read_text())
     assert results["not_applicable"]["ssim"]["count"] == 2 * 2 * 2  # scenes × frames × (noisy, identity)
@@ -38,3 +69,42 @@ def test_a_run_without_samplers_or_cvvdp_has_no_such_sections(report):
     md, page = (report / "report.md").read_text(), (report / "index.html").read_text()
     assert "## Samplers" not in md and "cvvdp viewing conditions" not in md
     assert 'id="samplers"' not in page and "cvvdp viewing conditions" not in page
+
+
+def test_the_report_model_is_a_documented_record_read_by_attribute_or_key(report, tmp_path):
+    import ast
+    import dataclasses
+    import inspect
+
+    from denoisebench.dataset import open_dataset
+    from denoisebench.leaderboard import report_model
+    from denoisebench.leaderboard.report import build_report, write_report
+    from denoisebench.leaderboard.report_model import ReportModel
+    from denoisebench.leaderboard.store import ResultsStore
+
+    # every field typed and followed by its docstring
+    body = next(n for n in ast.parse(inspect.getsource(report_model)).body if getattr(n, "name", "") == "ReportModel")
+    documented = {
+        a.target.id
+        for a, doc in zip(body.body, body.body[1:])
+        if isinstance(a, ast.AnnAssign) and isinstance(doc, ast.Expr) and isinstance(doc.value, ast.Constant)
+    }
+    names = [f.name for f in dataclasses.fields(ReportModel)]
+    assert set(names) == documented and len(names) == 31
+    root = report.parent
+    with ResultsStore(root / "db.sqlite", readonly=True) as store:
+        (run,) = store.runs()
+        data = open_dataset(root / "ds")
+        model = build_report(store, run["run_id"], data)
+        for out in ("one", "two"):  # without denoiser instances: no stability table, else as the CLI's
+            write_report(store, run["run_id"], data, tmp_path / out)
+    assert isinstance(model, ReportModel)
+    assert all(model[name] is getattr(model, name) for name in names) and "summary" in model
+    assert model.get("nope", 7) == 7 and "nope" not in model
+    with pytest.raises(KeyError):
+        model["nope"]
+    # the same store gives the same bytes, and results.json keeps its keys in their order
+    for name in ("results.json", "results.csv", "report.md", "index.html"):
+        assert (tmp_path / "one" / name).read_bytes() == (tmp_path / "two" / name).read_bytes(), name
+    assert list(json.loads((report / "results.json").read_text())) == RESULTS_KEYS
+    assert json.loads((tmp_path / "one" / "results.json").read_text())["stability"] is None

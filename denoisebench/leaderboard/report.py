@@ -1,8 +1,8 @@
 """Write a run's report folder: index.html, report.md, results.json, results.csv, figures/.
 
 :func:`build_report` gathers everything (plain data, images as data URIs) from the results store
-and the dataset; :mod:`.report_html` and :mod:`.report_markdown` render it; this module writes
-the files.
+and the dataset into a :class:`~.report_model.ReportModel`; :mod:`.report_html` and
+:mod:`.report_markdown` render it; this module writes the files.
 
 Notes
 -----
@@ -37,12 +37,15 @@ from denoisebench.dataset import Dataset
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.leaderboard import aggregate as agg
 from denoisebench.leaderboard import analysis, figures, images, report_samplers, strips
+from denoisebench.leaderboard.report_model import ReportModel
 from denoisebench.leaderboard.runner import NOISY
 from denoisebench.leaderboard.store import ResultsStore
 
 
 def _clean(value):
-    """JSON-safe: NaN/Inf → None, numpy scalars → Python."""
+    """JSON-safe: NaN/Inf → None, numpy scalars → Python, store rows (``as_dict``) → dicts."""
+    if callable(getattr(value, "as_dict", None)):
+        return _clean(value.as_dict())
     if isinstance(value, dict):
         return {str(k): _clean(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -304,8 +307,8 @@ def build_report(
     denoisers: dict[str, object] | None = None,
     time_at: tuple[int, int] | None = None,
     include_unresolved: bool = False,
-) -> dict:
-    """Everything the report shows, as plain data (figures as PNG/SVG, images as data URIs).
+) -> ReportModel:
+    """Everything the report shows, as a ReportModel (figures as PNG/SVG, images as data URIs).
 
     ``time_at``: the resolution of the report's time axis (default
     :data:`.time_model.DEFAULT_TIME_AT`), projected from the run's timings (:mod:`.time_model`)."""
@@ -341,60 +344,60 @@ def build_report(
         for u in data.units
         if u["status"] != "ok"
     ]
-    return {
-        "run": data.run,
-        "denoisers": data.denoisers,
-        "scenes": data.scenes,
-        "spp": data.spp,
-        "scene_effects": scene_effects,
-        "reference": reference,
-        "frame_metrics": data.frame_metric_names,
-        "sequence_metrics": data.sequence_metric_names,
-        "summary": summary,
-        "accuracy": panels,
-        "readings": {p.metric: analysis.readings(p) for p in panels},
-        "time_model": model,
-        "equal_tables": tables,
-        "verdicts": [v for t in tables for v in equal_tables.verdicts(t)],
-        "effects": analysis.effect_breakdown(data, scene_effects),
-        "flicker": flicker,
-        "temporal_metrics": temporal_metric_order(data.sequence_metric_names),
-        "indistinguishable": analysis.indistinguishable_pairs(data, summary),
-        "strips": _strips(store, data, dataset, data.spp[0]) if data.spp else [],
-        "failures": failures,
-        "unresolved_references": {
+    return ReportModel(
+        run=data.run,
+        denoisers=data.denoisers,
+        scenes=data.scenes,
+        spp=data.spp,
+        scene_effects=scene_effects,
+        reference=reference,
+        frame_metrics=data.frame_metric_names,
+        sequence_metrics=data.sequence_metric_names,
+        summary=summary,
+        accuracy=panels,
+        readings={p.metric: analysis.readings(p) for p in panels},
+        time_model=model,
+        equal_tables=tables,
+        verdicts=[v for t in tables for v in equal_tables.verdicts(t)],
+        effects=analysis.effect_breakdown(data, scene_effects),
+        flicker=flicker,
+        temporal_metrics=temporal_metric_order(data.sequence_metric_names),
+        indistinguishable=analysis.indistinguishable_pairs(data, summary),
+        strips=_strips(store, data, dataset, data.spp[0]) if data.spp else [],
+        failures=failures,
+        unresolved_references={
             "included": include_unresolved,
             "scenes": [u.as_dict() for u in unresolved],
         },
         # metrics whose preconditions the frames do not meet (SSIM under 11×11 px): frames count, reason
-        "not_applicable": store.not_applicable_summary(run_id),
-        "comparisons": _comparisons(store, data, dataset, data.spp[0], samplers) if data.spp else [],
+        not_applicable=store.not_applicable_summary(run_id),
+        comparisons=_comparisons(store, data, dataset, data.spp[0], samplers) if data.spp else [],
         # live samplers: per-frame spp counts, maps (on comparison entries) and pixels left without a sample
-        "samplers": samplers,
+        samplers=samplers,
         # cvvdp's display, pixels per degree and each scene's exposure (None: cvvdp not measured)
-        "cvvdp_viewing": _cvvdp_viewing(dataset, data) if "cvvdp" in data.sequence_metric_names else None,
+        cvvdp_viewing=_cvvdp_viewing(dataset, data) if "cvvdp" in data.sequence_metric_names else None,
         # which scenes and frames each not-applicable metric lacks, and why
-        "not_applicable_detail": _not_applicable_detail(store, run_id),
-        "stability": stability_table(denoisers) if denoisers else None,
-        "figures": figure_files,
-        "palette": palette,
-        "frames": data.frames,
-        "sequences": data.sequences,
-    }
+        not_applicable_detail=_not_applicable_detail(store, run_id),
+        stability=stability_table(denoisers) if denoisers else None,
+        figures=figure_files,
+        palette=palette,
+        frames=data.frames,
+        sequences=data.sequences,
+    )
 
 
-def results_json(report: dict) -> dict:
+def results_json(report: ReportModel) -> dict:
     """The machine-readable part of the report (no images)."""
     from denoisebench.leaderboard import equal_tables
 
     return _clean(
         {
-            "run": report["run"],
-            "denoisers": report["denoisers"],
-            "scenes": report["scenes"],
-            "scene_effects": report["scene_effects"],
-            "spp": report["spp"],
-            "reference": report["reference"],
+            "run": report.run,
+            "denoisers": report.denoisers,
+            "scenes": report.scenes,
+            "scene_effects": report.scene_effects,
+            "spp": report.spp,
+            "reference": report.reference,
             "summary": [
                 {
                     "denoiser": r.denoiser,
@@ -416,7 +419,7 @@ def results_json(report: dict) -> dict:
                         for m, c in r.metrics.items()
                     },
                 }
-                for r in report["summary"]
+                for r in report.summary
             ],
             "accuracy_time": [
                 {
@@ -428,22 +431,22 @@ def results_json(report: dict) -> dict:
                     "reference_spp": p.reference_spp,
                     "time_axis": p.time_label,
                 }
-                for p in report["accuracy"]
+                for p in report.accuracy
             ],
-            "readings": report["readings"],
-            "time_model": report["time_model"].as_dict(),
-            "equal_tables": [equal_tables.as_dict(t) for t in report["equal_tables"]],
-            "effects": report["effects"],
-            "flicker": report["flicker"],
-            "not_distinguishable": [vars(p) for p in report["indistinguishable"]],
-            "failures": report["failures"],
-            "unresolved_references": report.get("unresolved_references"),
-            "not_applicable": report.get("not_applicable", {}),
-            **({"samplers": report_samplers.as_json(report["samplers"])} if report.get("samplers") else {}),
-            **({"cvvdp_viewing": report["cvvdp_viewing"]} if report.get("cvvdp_viewing") else {}),
-            "stability": report["stability"],
-            "frames": report["frames"],
-            "sequence_metrics": report["sequences"],
+            "readings": report.readings,
+            "time_model": report.time_model.as_dict(),
+            "equal_tables": [equal_tables.as_dict(t) for t in report.equal_tables],
+            "effects": report.effects,
+            "flicker": report.flicker,
+            "not_distinguishable": [vars(p) for p in report.indistinguishable],
+            "failures": report.failures,
+            "unresolved_references": report.unresolved_references,
+            "not_applicable": report.not_applicable,
+            **({"samplers": report_samplers.as_json(report.samplers)} if report.samplers else {}),
+            **({"cvvdp_viewing": report.cvvdp_viewing} if report.cvvdp_viewing else {}),
+            "stability": report.stability,
+            "frames": report.frames,
+            "sequence_metrics": report.sequences,
         }
     )
 
@@ -463,12 +466,12 @@ def csv_cell(value):
     return value
 
 
-def results_csv(report: dict) -> str:
+def results_csv(report: ReportModel) -> str:
     """One row per frame: ids, status, seconds, then every frame metric, the floor and corrected value
     (``<metric>_floor``, ``<metric>_corrected``) of those that have a floor, and the per-frame flicker."""
-    flicker = sorted({m for f in report["frames"] for m in f["metrics"] if m.startswith("flicker")})
-    floored = [m for m in report["frame_metrics"] if any(m in f.get("floors", {}) for f in report["frames"])]
-    metrics = report["frame_metrics"] + flicker
+    flicker = sorted({m for f in report.frames for m in f["metrics"] if m.startswith("flicker")})
+    floored = [m for m in report.frame_metrics if any(m in f.get("floors", {}) for f in report.frames)]
+    metrics = report.frame_metrics + flicker
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(
@@ -488,14 +491,14 @@ def results_csv(report: dict) -> str:
             *(f"{m}_{part}" for m in floored for part in ("floor", "corrected")),
         ]
     )
-    for f in report["frames"]:
+    for f in report.frames:
         values = [f["metrics"].get(m) for m in metrics]
         for m in floored:
             value, floor = f["metrics"].get(m), f.get("floors", {}).get(m)
             values += [floor, None if value is None or floor is None else value - floor]
         writer.writerow(
             [
-                report["run"]["run_id"],
+                report.run["run_id"],
                 csv_cell(f["denoiser"]),
                 csv_cell(f["scene"]),
                 f["spp"],
@@ -512,12 +515,12 @@ def results_csv(report: dict) -> str:
     return buffer.getvalue()
 
 
-def spp_map_files(report: dict) -> dict[str, bytes]:
+def spp_map_files(report: ReportModel) -> dict[str, bytes]:
     """report.md's spp map images: ``figures/spp_maps/<comparison>_<entry>.png`` (numbers, not user-given
     names), the sampler's image beside it (``..._image.png``) and the colour bar
     ``figures/spp_maps/colour_bar.png``; {} without maps."""
     files = {}
-    for n, comp in enumerate(report["comparisons"]):
+    for n, comp in enumerate(report.comparisons):
         for k, entry in enumerate(comp["entries"]):
             if "spp_map" in entry:
                 files[f"figures/spp_maps/{n}_{k}.png"] = entry["spp_map"]["png"]
@@ -542,7 +545,7 @@ def write_report(
 
     out = Path(out_dir)
     report = build_report(store, run_id, dataset, denoisers, time_at, include_unresolved)
-    for name, (png, svg) in report["figures"].items():
+    for name, (png, svg) in report.figures.items():
         atomic_write_bytes(out / "figures" / f"{name}.png", png)
         atomic_write_bytes(out / "figures" / f"{name}.svg", svg.encode("utf-8"))
     for path, png in spp_map_files(report).items():

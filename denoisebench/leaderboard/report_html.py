@@ -15,11 +15,15 @@ Notes
 from __future__ import annotations
 
 from html import escape
+from typing import TYPE_CHECKING
 
 from denoisebench.denoisers.isolation import isolation_text
 from denoisebench.leaderboard import formatting as fmt
 from denoisebench.leaderboard import report_notes as notes
 from denoisebench.leaderboard.report_samplers import undersampled_lines
+
+if TYPE_CHECKING:
+    from denoisebench.leaderboard.report_model import ReportModel
 
 STYLE = """
 body{font:14px/1.45 system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:0;color:#1d1d1f;background:#fafafa}
@@ -114,16 +118,16 @@ def _table(header: list[str], rows: list[list[str]], row_classes: list[str] | No
     return f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>'
 
 
-def _figure(report: dict, name: str, alt: str) -> str:
+def _figure(report: ReportModel, name: str, alt: str) -> str:
     from denoisebench.leaderboard.images import data_uri
 
-    if name not in report["figures"]:
+    if name not in report.figures:
         return ""
-    png, _ = report["figures"][name]
+    png, _ = report.figures[name]
     return f'<div class="figure"><img alt="{e(alt)}" src="{data_uri(png)}"></div>'
 
 
-def _accuracy(report: dict) -> str:
+def _accuracy(report: ReportModel) -> str:
     parts = [
         _figure(report, "accuracy_time", "error against seconds per frame"),
         '<p class="note">Each point is a denoiser at one input spp (the number beside it): mean error over the test '
@@ -132,14 +136,14 @@ def _accuracy(report: dict) -> str:
         "line is the reference's render time (its error against itself is zero, which a log axis cannot show). Circled "
         "points are on the Pareto front.</p>",
     ]
-    for metric, sentences in report["readings"].items():
+    for metric, sentences in report.readings.items():
         items = "".join(f"<li>{e(s)}</li>" for s in sentences)
         parts.append(f"<h3>{e(metric)}</h3><ul class=\"readings\">{items}</ul>")
-    hidden = [h for p in report["accuracy"] for h in p.hidden]
+    hidden = [h for p in report.accuracy for h in p.hidden]
     if hidden:
         parts.append("<p class=\"note\">Not drawn: " + e("; ".join(hidden)) + "</p>")
-    if "time_model" in report:
-        notes = "".join(f"<li>{e(n)}</li>" for n in report["time_model"].notes)
+    if report.time_model is not None:
+        notes = "".join(f"<li>{e(n)}</li>" for n in report.time_model.notes)
         parts.append(
             f'<h3>Times</h3><p class="note">{e(fmt.time_axis_text(report))} {e(fmt.machine_text(report))}</p>'
             + (f'<ul class="readings">{notes}</ul>' if notes else "")
@@ -148,7 +152,7 @@ def _accuracy(report: dict) -> str:
     return "".join(parts)
 
 
-def _equal_tables(report: dict) -> str:
+def _equal_tables(report: ReportModel) -> str:
     """Equal-time and equal-quality tables per lead metric, then the verdicts (measured rungs only)."""
     parts = [
         '<p class="note"><em>Equal time</em>: for each budget (the seconds rendering s spp takes), the (denoiser, '
@@ -159,19 +163,19 @@ def _equal_tables(report: dict) -> str:
         + e(fmt.time_axis_text(report))
         + "</p>"
     ]
-    for table in report.get("equal_tables", []):
+    for table in report.equal_tables:
         if not table.equal_time and not table.equal_quality:
             parts.append(f'<p class="note">{e(fmt.empty_table_text(table))}</p>')
             continue
         parts.append(f"<h3>Equal time: {e(table.metric)}</h3>" + _table(*fmt.equal_time_rows(table)))
         parts.append(f"<h3>Equal quality: {e(table.metric)}</h3>" + _table(*fmt.equal_quality_rows(table)))
-    if report.get("verdicts"):
-        items = "".join(f"<li>{e(v)}</li>" for v in report["verdicts"])
+    if report.verdicts:
+        items = "".join(f"<li>{e(v)}</li>" for v in report.verdicts)
         parts.append(f'<h3>Verdicts (measured rungs only)</h3><ul class="readings">{items}</ul>')
     return "".join(parts)
 
 
-def _results(report: dict) -> str:
+def _results(report: ReportModel) -> str:
     parts = [
         '<p class="note">Scores combined over scenes by each metric\'s rule: scale-free scores by their mean; '
         "linear-radiance ones (marked) by the geometric mean, or per scene relative to the noisy input (\u00d7 input: "
@@ -184,10 +188,9 @@ def _results(report: dict) -> str:
     ]
     parts += [f'<p class="error">Not held-out: {e(line)}</p>' for line in fmt.not_held_out_lines(report)]
     parts += [
-        f'<p class="error">Pixels without a sample: {e(line)}</p>'
-        for line in undersampled_lines(report.get("samplers"))
+        f'<p class="error">Pixels without a sample: {e(line)}</p>' for line in undersampled_lines(report.samplers)
     ]
-    for spp in report["spp"]:
+    for spp in report.spp:
         header, rows = fmt.summary_rows(report, spp)
         classes = ["input" if r[0] == "noisy" else "" for r in rows]
         parts.append(f"<h3>{spp} spp</h3>" + _table(header, rows, classes))
@@ -209,26 +212,26 @@ def _results(report: dict) -> str:
     return "".join(parts)
 
 
-def _effects(report: dict) -> str:
-    if not report["effects"]["effects"]:
+def _effects(report: ReportModel) -> str:
+    if not report.effects["effects"]:
         return '<p class="note">The scenes declare no effects.</p>'
     header, rows, worst = fmt.effect_rows(report)
-    names = ["overall", *report["effects"]["effects"]]
+    names = ["overall", *report.effects["effects"]]
     labels = [r[0] for r in rows]
 
     def worst_cell(i, j):
         return "worst" if j >= 2 and worst.get(labels[i]) == names[j - 1] else ""
 
     note = (
-        f'<p class="note">Share of the noisy input\'s {e(report["effects"]["metric"])} left after denoising: geometric mean '
+        f'<p class="note">Share of the noisy input\'s {e(report.effects["metric"])} left after denoising: geometric mean '
         "over the scenes that exercise each effect and over spp (lower is better). Highlighted: the effect that costs "
         "each denoiser most.</p>"
     )
     return note + _table(header, rows, cell_classes=worst_cell)
 
 
-def _strip_section(report: dict) -> str:
-    if not report.get("strips"):
+def _strip_section(report: ReportModel) -> str:
+    if not report.strips:
         return ""
     parts = [
         '<h3>Frame strips</h3><p class="note">One crop (where the noisy input flickers most) of the first frames '
@@ -236,7 +239,7 @@ def _strip_section(report: dict) -> str:
         "tone-mapped like the metrics. Flicker is a change from frame to frame that the reference's row does not "
         "have.</p>"
     ]
-    for strip in report["strips"]:
+    for strip in report.strips:
         w = strip["window"]
         parts.append(
             f'<h3>{e(strip["scene"])} \u2014 frames {strip["first_frame"]}\u2013{strip["first_frame"] + strip["frames"] - 1}, '
@@ -252,8 +255,8 @@ def _strip_section(report: dict) -> str:
     return "".join(parts)
 
 
-def _flicker(report: dict) -> str:
-    if not report["flicker"]["series"]:
+def _flicker(report: ReportModel) -> str:
+    if not report.flicker["series"]:
         return '<p class="note">Sequences of one frame: no flicker to measure.</p>' + _strip_section(report)
     parts = [
         _figure(report, "flicker", "flicker per frame, one panel per input spp"),
@@ -264,16 +267,16 @@ def _flicker(report: dict) -> str:
         "100 cd/m²; tPSNR: PSNR of the tone-mapped frame differences. These lead; other temporal metrics follow, and "
         "the linear temporal_l1 scores, kept as diagnostics, are shown relative to the noisy input.</p>",
     ]
-    for spp in report["spp"]:
+    for spp in report.spp:
         header, rows = fmt.flicker_rows(report, spp)
         classes = ["input" if r[0] == "noisy" else "" for r in rows]
         parts.append(f"<h3>{spp} spp</h3>" + _table(header, rows, classes))
     return "".join(parts) + _viewing(report) + _strip_section(report)
 
 
-def _viewing(report: dict) -> str:
+def _viewing(report: ReportModel) -> str:
     """cvvdp's display, pixels per degree and each scene's exposure (when cvvdp was measured)."""
-    if not report.get("cvvdp_viewing"):
+    if not report.cvvdp_viewing:
         return ""
     return f'<h3>cvvdp viewing conditions</h3><p class="note">{e(notes.viewing_text(report))}</p>' + _table(
         *notes.viewing_rows(report)
@@ -310,9 +313,9 @@ def _spp_tile(entry: dict) -> str:
     )
 
 
-def _samplers(report: dict) -> str:
+def _samplers(report: ReportModel) -> str:
     """The live samplers: unsampled-pixel warnings, how to read the maps, and their counts."""
-    section = report.get("samplers")
+    section = report.samplers
     if not section:
         return ""
     parts = [f'<p class="error">Pixels without a sample: {e(line)}</p>' for line in undersampled_lines(section)]
@@ -320,14 +323,14 @@ def _samplers(report: dict) -> str:
     return "".join(parts) + _table(*notes.sampler_rows(report))
 
 
-def _comparisons(report: dict) -> str:
+def _comparisons(report: ReportModel) -> str:
     parts = [
         '<p class="note">The last frame of each test sequence at the lowest input spp (temporal denoisers have seen '
         "the frames before it), tone-mapped like the metrics. Below each image: zoomed crops of the regions where the "
         "denoisers' mean relMSE is worst. In the compare box, pick the left image, drag the wipe or the slider, or press "
         "the button to flip between the left image and the reference.</p>"
     ]
-    for n, comp in enumerate(report["comparisons"]):
+    for n, comp in enumerate(report.comparisons):
         ids = [f"img-{n}-{i}" for i in range(len(comp["entries"]))]
         tiles = "".join(
             _tile(entry, ids[i]) + (_spp_tile(entry) if "spp_map" in entry else "")
@@ -360,13 +363,13 @@ def _comparisons(report: dict) -> str:
             '<button class="cmp-toggle" type="button">flip left / reference</button></div></div>'
             f'<div class="gallery">{tiles}</div>'
         )
-    if not report["comparisons"]:
+    if not report.comparisons:
         parts.append('<p class="note">No denoised images were stored for this run.</p>')
     return "".join(parts)
 
 
-def _stability(report: dict) -> str:
-    table = report["stability"]
+def _stability(report: ReportModel) -> str:
+    table = report.stability
     if table is None:
         return (
             '<p class="note">The hard-case suite (<code>denoisebench.denoisers.hard_cases</code>) is not available in '
@@ -375,27 +378,27 @@ def _stability(report: dict) -> str:
     return _table(*fmt.stability_rows(table))
 
 
-def _failures(report: dict) -> str:
+def _failures(report: ReportModel) -> str:
     parts = []
-    if report["failures"]:
+    if report.failures:
         parts.append(
             _table(
                 ["denoiser", "scene", "spp", "error"],
-                [[f["denoiser"], f["scene"], str(f["spp"]), f["error"] or ""] for f in report["failures"]],
+                [[f["denoiser"], f["scene"], str(f["spp"]), f["error"] or ""] for f in report.failures],
             )
         )
-    for d in report["denoisers"]:
+    for d in report.denoisers:
         if d["load_error"]:
             parts.append(f'<p class="error">{e(d["spec"])} was not run: {e(d["load_error"])}</p>')
     return "".join(parts) or '<p class="note">Every denoiser ran on every sequence.</p>'
 
 
-def render_html(report: dict) -> str:
-    run = report["run"]
+def render_html(report: ReportModel) -> str:
+    run = report.run
     meta = (
         f"run {e(run['run_id'])} \u00b7 dataset {e(run['dataset_hash'][:12])} ({e(run['dataset_path'])}) \u00b7 split "
-        f"{e(run['config'].get('split'))} \u00b7 {len(report['scenes'])} scene(s) \u00b7 input spp "
-        f"{e(', '.join(map(str, report['spp'])))} \u00b7 reference {e(report['reference'].get('description', str(report['reference']['spp']) + ' spp'))} \u00b7 started "
+        f"{e(run['config'].get('split'))} \u00b7 {len(report.scenes)} scene(s) \u00b7 input spp "
+        f"{e(', '.join(map(str, report.spp)))} \u00b7 reference {e(report.reference.get('description', str(report.reference['spp']) + ' spp'))} \u00b7 started "
         f"{e(run['created_at'])}, finished {e(run['finished_at'] or 'not yet (partial results)')}"
         f" \u00b7 {e(isolation_text(run['config'], run['versions']))}"
     )
@@ -407,7 +410,7 @@ def render_html(report: dict) -> str:
         ("effects", "Per-effect breakdown", _effects(report)),
         ("flicker", "Temporal flicker", _flicker(report)),
         ("images", "Image comparisons", _comparisons(report)),
-        *([("samplers", "Samplers", _samplers(report))] if report.get("samplers") else []),
+        *([("samplers", "Samplers", _samplers(report))] if report.samplers else []),
         ("stability", "Hard-case stability", _stability(report)),
         ("failures", "Failures", _failures(report)),
     ]

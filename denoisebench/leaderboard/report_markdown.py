@@ -10,11 +10,15 @@ Notes
 from __future__ import annotations
 
 import re
+from typing import TYPE_CHECKING
 
 from denoisebench.denoisers.isolation import isolation_text
 from denoisebench.leaderboard import formatting as fmt
 from denoisebench.leaderboard import report_notes as notes
 from denoisebench.leaderboard.report_samplers import undersampled_lines
+
+if TYPE_CHECKING:
+    from denoisebench.leaderboard.report_model import ReportModel
 
 _SPECIAL = re.compile(r"([\\`*_\[\]|<>#])")
 
@@ -29,14 +33,14 @@ def _table(header: list[str], rows: list[list[str]]) -> list[str]:
     return lines + [""]
 
 
-def render_markdown(report: dict) -> str:
-    run = report["run"]
+def render_markdown(report: ReportModel) -> str:
+    run = report.run
     lines = [
         "# denoisebench report",
         "",
         f"Run `{run['run_id']}` on dataset `{run['dataset_hash'][:12]}` ({md(run['dataset_path'])}), split "
-        f"{md(run['config'].get('split'))}: {len(report['scenes'])} scene(s), input spp {', '.join(map(str, report['spp']))}, "
-        f"reference {report['reference'].get('description', str(report['reference']['spp']) + ' spp')}. Started {run['created_at']}, finished {run['finished_at'] or 'not yet (partial)'}.",
+        f"{md(run['config'].get('split'))}: {len(report.scenes)} scene(s), input spp {', '.join(map(str, report.spp))}, "
+        f"reference {report.reference.get('description', str(report.reference['spp']) + ' spp')}. Started {run['created_at']}, finished {run['finished_at'] or 'not yet (partial)'}.",
         "",
         md(isolation_text(run["config"], run["versions"])),
         "",
@@ -49,12 +53,12 @@ def render_markdown(report: dict) -> str:
         "more samples buys. Circled points are on the Pareto front.",
         "",
     ]
-    for metric, sentences in report["readings"].items():
+    for metric, sentences in report.readings.items():
         lines += [f"**{metric}**", ""] + [f"- {md(s)}" for s in sentences] + [""]
-    for panel in report["accuracy"]:
+    for panel in report.accuracy:
         for hidden in panel.hidden:
             lines.append(f"- not drawn: {md(hidden)}")
-    if "time_model" in report:
+    if report.time_model is not None:
         lines += [""] + _times(report)
     lines += [
         "## Results",
@@ -67,8 +71,8 @@ def render_markdown(report: dict) -> str:
         "",
     ]
     lines += [f"> **Not held-out:** {md(line)}\n" for line in fmt.not_held_out_lines(report)]
-    lines += [f"> **Pixels without a sample:** {md(line)}\n" for line in undersampled_lines(report.get("samplers"))]
-    for spp in report["spp"]:
+    lines += [f"> **Pixels without a sample:** {md(line)}\n" for line in undersampled_lines(report.samplers)]
+    for spp in report.spp:
         header, rows = fmt.summary_rows(report, spp)
         lines += [f"### {spp} spp", ""] + _table(header, rows)
     pairs = fmt.indistinguishable_lines(report)
@@ -83,17 +87,17 @@ def render_markdown(report: dict) -> str:
     lines += [
         "## Per-effect breakdown",
         "",
-        f"Share of the noisy input's {report['effects']['metric']} left after denoising (geometric mean over the scenes "
+        f"Share of the noisy input's {report.effects['metric']} left after denoising (geometric mean over the scenes "
         "with the effect and over spp; lower is better).",
         "",
     ]
-    if report["effects"]["effects"]:
+    if report.effects["effects"]:
         lines += _table(header, rows)
         lines += [f"- {md(label)} suffers most from **{md(effect)}**" for label, effect in worst.items()] + [""]
     else:
         lines += ["The scenes declare no effects.", ""]
     lines += ["## Temporal flicker", ""]
-    if report["flicker"]["series"]:
+    if report.flicker["series"]:
         lines += [
             "![flicker per frame](figures/flicker.png)",
             "",
@@ -102,12 +106,12 @@ def render_markdown(report: dict) -> str:
             "tPSNR lead; linear temporal scores follow relative to the noisy input.",
             "",
         ]
-        for spp in report["spp"]:
+        for spp in report.spp:
             header, rows = fmt.flicker_rows(report, spp)
             lines += [f"### {spp} spp", ""] + _table(header, rows)
-        if report.get("strips"):
+        if report.strips:
             lines += ["Frame strips of one crop per denoiser are in index.html.", ""]
-        if report.get("cvvdp_viewing"):
+        if report.cvvdp_viewing:
             lines += ["### cvvdp viewing conditions", "", md(notes.viewing_text(report)), ""]
             lines += _table(*notes.viewing_rows(report))
     else:
@@ -118,16 +122,16 @@ def render_markdown(report: dict) -> str:
         "Open index.html for the images, zoomed crops and the interactive compare.",
         "",
     ]
-    if report.get("samplers"):
+    if report.samplers:
         lines += _samplers(report)
     lines += ["## Hard-case stability", ""]
-    lines += _stability(report["stability"])
-    if report["failures"]:
+    lines += _stability(report.stability)
+    if report.failures:
         lines += ["## Failures", ""] + _table(
             ["denoiser", "scene", "spp", "error"],
-            [[f["denoiser"], f["scene"], str(f["spp"]), f["error"] or ""] for f in report["failures"]],
+            [[f["denoiser"], f["scene"], str(f["spp"]), f["error"] or ""] for f in report.failures],
         )
-    not_loaded = [d for d in report["denoisers"] if d["load_error"]]
+    not_loaded = [d for d in report.denoisers if d["load_error"]]
     if not_loaded:
         lines += ["## Not run", ""] + [f"- {md(d['spec'])}: {md(d['load_error'])}" for d in not_loaded] + [""]
     versions = ", ".join(f"{k} {v}" for k, v in sorted(run["versions"].items()))
@@ -135,10 +139,10 @@ def render_markdown(report: dict) -> str:
     return "\n".join(lines)
 
 
-def _times(report: dict) -> list[str]:
+def _times(report: ReportModel) -> list[str]:
     """The time axis' resolution and machine, the fixed and per-pixel costs, and the two tables."""
     lines = ["### Times", "", md(fmt.time_axis_text(report)) + " " + md(fmt.machine_text(report)), ""]
-    lines += [f"- {md(note)}" for note in report["time_model"].notes]
+    lines += [f"- {md(note)}" for note in report.time_model.notes]
     lines += _table(*fmt.time_model_rows(report))
     lines += [
         "## Equal time and equal quality",
@@ -150,21 +154,21 @@ def _times(report: dict) -> list[str]:
         "and make no verdict; ≤: met at the lowest measured spp already.",
         "",
     ]
-    for table in report.get("equal_tables", []):
+    for table in report.equal_tables:
         if not table.equal_time and not table.equal_quality:
             lines += [f"- {md(fmt.empty_table_text(table))}", ""]
             continue
         lines += [f"### Equal time: {md(table.metric)}", ""] + _table(*fmt.equal_time_rows(table))
         lines += [f"### Equal quality: {md(table.metric)}", ""] + _table(*fmt.equal_quality_rows(table))
-    if report.get("verdicts"):
-        lines += ["**Verdicts** (measured rungs only)", ""] + [f"- {md(v)}" for v in report["verdicts"]] + [""]
+    if report.verdicts:
+        lines += ["**Verdicts** (measured rungs only)", ""] + [f"- {md(v)}" for v in report.verdicts] + [""]
     return lines
 
 
-def _samplers(report: dict) -> list[str]:
+def _samplers(report: ReportModel) -> list[str]:
     """The live samplers: unsampled-pixel warnings, spp counts, and each map beside its image."""
     lines = ["## Samplers", ""]
-    lines += [f"- **Pixels without a sample:** {md(line)}" for line in undersampled_lines(report["samplers"])]
+    lines += [f"- **Pixels without a sample:** {md(line)}" for line in undersampled_lines(report.samplers)]
     lines += [""] + _table(*notes.sampler_rows(report))
     lines += [
         md(notes.sampler_scale_text()),
@@ -172,7 +176,7 @@ def _samplers(report: dict) -> list[str]:
         "Colour bar (0 → top): ![spp colour bar](figures/spp_maps/colour_bar.png)",
         "",
     ]
-    for n, comp in enumerate(report["comparisons"]):
+    for n, comp in enumerate(report.comparisons):
         mapped = [(k, entry) for k, entry in enumerate(comp["entries"]) if "spp_map" in entry]
         if not mapped:
             continue

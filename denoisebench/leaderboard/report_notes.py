@@ -6,12 +6,17 @@ Each function takes the report model (:func:`.report.build_report`) and returns 
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 from denoisebench.leaderboard import formatting as fmt
 
+if TYPE_CHECKING:
+    from denoisebench.leaderboard.report_model import ReportModel
 
-def viewing_text(report: dict) -> str:
+
+def viewing_text(report: ReportModel) -> str:
     """cvvdp's display in one sentence: model, size, peak, ambient light, pixels per degree, fps, exposure rule."""
-    d = report["cvvdp_viewing"]["display"]
+    d = report.cvvdp_viewing["display"]
     width, height = d["resolution"]
     return (
         f"cvvdp models the viewer of display {d['display']}: {width}×{height} px, peak {d['peak_cd_m2']:.0f} cd/m², "
@@ -22,11 +27,11 @@ def viewing_text(report: dict) -> str:
     )
 
 
-def viewing_rows(report: dict) -> tuple[list[str], list[list[str]]]:
+def viewing_rows(report: ReportModel) -> tuple[list[str], list[list[str]]]:
     """Per scene: frame size, the visual angle it spans, exposure, lit and clipped share of the reference."""
     header = ["scene", "frame px", "field of view", "exposure (cd/m² per unit)", "lit pixels", "clipped at peak"]
     rows = []
-    for scene, v in report["cvvdp_viewing"]["scenes"].items():
+    for scene, v in report.cvvdp_viewing["scenes"].items():
         w, h = v["frame_px"]
         rows.append(
             [
@@ -41,10 +46,10 @@ def viewing_rows(report: dict) -> tuple[list[str], list[list[str]]]:
     return header, rows
 
 
-def not_applicable_lines(report: dict) -> list[str]:
+def not_applicable_lines(report: ReportModel) -> list[str]:
     """One sentence per metric that had no value somewhere: where (scenes, frames, sequences) and why."""
     lines = []
-    for item in report.get("not_applicable_detail") or []:
+    for item in report.not_applicable_detail or []:
         where = []
         if item["frames"]:
             where.append(f"{item['frames']} frame(s)")
@@ -67,7 +72,7 @@ def sampler_scale_text() -> str:
     )
 
 
-def sampler_rows(report: dict) -> tuple[list[str], list[list[str]]]:
+def sampler_rows(report: ReportModel) -> tuple[list[str], list[list[str]]]:
     """Per sampler, scene and spp: frames, mean and largest spp, frames and pixels left without a sample."""
     header = [
         "sampler",
@@ -80,7 +85,7 @@ def sampler_rows(report: dict) -> tuple[list[str], list[list[str]]]:
         "pixels < 1 spp",
     ]
     groups: dict[tuple, list[dict]] = {}
-    for f in report["samplers"]["frames"]:
+    for f in report.samplers["frames"]:
         groups.setdefault((f["sampler"], f["scene"], f["spp"]), []).append(f)
     rows = []
     for (sampler, scene, spp), group in groups.items():
