@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Plugins run in a bubblewrap sandbox (denoisebench/denoisers/sandbox.py): install Debian's
+# Plugins run in a bubblewrap sandbox (denoisebench/sandbox.py): install Debian's
 # bubblewrap when we can (root with apt-get). Called by `make setup`. Without root/apt we say what
 # to install and go on: run-benchmark then refuses untrusted plugins unless given
 # `--isolation process`, and the sandbox tests skip with the reason.

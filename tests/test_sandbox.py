@@ -23,11 +23,11 @@ from pathlib import Path
 
 import pytest
 
-from denoisebench import cli
+from denoisebench import cli, sandbox
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.synthetic import make_synthetic_dataset
 from denoisebench.dataset.verify import run_files, verify_files
-from denoisebench.denoisers import isolation, sandbox
+from denoisebench.denoisers import isolation
 from denoisebench.denoisers.isolation import IsolatedDenoiser, Limits
 from denoisebench.denoisers.runner import run_sequence
 from denoisebench.denoisers.synthetic import synthetic_sequence
@@ -430,7 +430,7 @@ def test_small_limits_are_the_kernel_s(setting, tmp_path):
     # forks between calls are counted too: the sandbox is killed, and the next call says why
     late = IsolatedDenoiser(f"{spec}:LateBomb", limits=Limits(processes=64))
     (first,) = run_sequence(late, synthetic_sequence(frames=1, height=4, width=4))
-    proc = late._proc
+    proc = late._worker.proc
     for _ in range(100):
         if proc.poll() is not None:
             break

@@ -20,19 +20,23 @@ What isolation gives
   reason), so a hanging plugin costs one time limit per run, not one per frame.
 * **Memory limit** (``memory_limit_mb`` MiB of resident memory of the worker; default
   :data:`DEFAULT_MEMORY_LIMIT_MB`): the parent reads the worker's RSS from ``/proc`` every
-  :data:`POLL_SECONDS` while it waits and kills it when over. Address space that is reserved but
-  not touched does not count; a very fast allocation may overshoot by what it touches in one poll.
+  :data:`~denoisebench.plugin_worker.POLL_SECONDS` while it waits and kills it when over. Address
+  space that is reserved but not touched does not count; a very fast allocation may overshoot by
+  what it touches in one poll.
 * **Copies.** The frame reaches the worker through a shared memory file (:mod:`.shared_frames`;
   pickled through the pipe where ``memfd_create`` is missing) and the worker copies it into arrays
   of its own: making an input writable and changing it reaches nothing outside the worker.
 * **No reference.** The harness hands over the frame after :func:`~.runner.sanitize_frame`, which
   withholds the reference image and every ``reference*`` and file-path entry of ``meta``.
-* **Sandbox** (policies ``plugins`` and ``all``; :mod:`.sandbox`): the worker runs under bubblewrap,
-  without the host's files (but the Python environment, ``sys.path``, the plugin and its option
-  files, read-only), network or a way to outlive its worker, under resource limits
+* **Sandbox** (policies ``plugins`` and ``all``; :mod:`denoisebench.sandbox`): the worker runs
+  under bubblewrap, without the host's files (but the Python environment, ``sys.path``, the plugin
+  and its option files, read-only), network or a way to outlive its worker, under resource limits
   (:meth:`Limits.rlimits`, set by the worker on itself) and a task count that a thread of the
-  parent checks every :data:`TASK_POLL_SECONDS`, during calls and between them. Where no sandbox
-  starts, the proxy is refused (:class:`SandboxUnavailableError`); ``process`` is a plain worker.
+  parent checks every :data:`~denoisebench.plugin_worker.TASK_POLL_SECONDS`, during calls and
+  between them. Where no sandbox starts, the proxy is refused
+  (:class:`~denoisebench.plugin_worker.SandboxUnavailableError`); ``process`` is a plain worker.
+  The worker process itself (start, limits, end) is :class:`~denoisebench.plugin_worker.WorkerProcess`,
+  shared with the samplers' isolation.
 * **Replies are not unpickled.** The worker answers with a JSON header and raw array bytes
   (see :mod:`.isolation_worker`), so a plugin cannot run code in the harness through its output.
 
@@ -55,38 +59,27 @@ Pitfalls
 
 from __future__ import annotations
 
-import atexit
-import json
-import os
-import signal
-import subprocess
 import sys
-import threading
 import time
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from denoisebench.denoisers import sandbox, shared_frames
+from denoisebench import plugin_worker
+from denoisebench.denoisers import shared_frames
 from denoisebench.errors import UserInputError
+from denoisebench.plugin_worker import (
+    DEFAULT_OPEN_FILES,
+    DEFAULT_PROCESS_LIMIT,
+    DEFAULT_SCRATCH_MB,
+    WorkerGone,
+)
 
 #: Seconds one call (load, reset or denoise) of an isolated denoiser may take.
 DEFAULT_TIME_LIMIT = 120.0
 #: Resident memory (MiB) an isolated denoiser's worker may hold.
 DEFAULT_MEMORY_LIMIT_MB = 4096
-#: How often the parent looks at the worker while it waits (seconds).
-POLL_SECONDS = 0.02
-#: How often a thread counts a sandbox's tasks, during and between calls (seconds).
-TASK_POLL_SECONDS = 0.05
-#: Tasks (processes and threads) a sandboxed worker may hold at once, itself included.
-DEFAULT_PROCESS_LIMIT = 512
-#: Open files of a sandboxed worker (RLIMIT_NOFILE).
-DEFAULT_OPEN_FILES = 1024
-#: Size of a sandboxed worker's private scratch tmpfs, and its largest file (RLIMIT_FSIZE), MiB.
-DEFAULT_SCRATCH_MB = 1024
-#: Address space (RLIMIT_AS, MiB) of a sandboxed worker: at least this, and 4x the memory limit.
-MIN_ADDRESS_SPACE_MB = 32768
 #: Who runs in a worker: "plugins" (everything but the built-ins, sandboxed), "all" (built-ins too,
 #: sandboxed), "process" (plugins in plain worker processes, no sandbox), "none".
 POLICIES = ("plugins", "all", "process", "none")
@@ -98,11 +91,6 @@ _ARRAY_KINDS = "fiub"
 
 class WorkerFailure(Exception):
     """An isolated call failed; the message is the one-line reason recorded for it."""
-
-
-class SandboxUnavailableError(UserInputError):
-    """No sandbox starts on this machine; an untrusted plugin is refused (exit 2) unless the user
-    accepts plain worker processes with ``--isolation process``."""
 
 
 @dataclass(frozen=True)
@@ -117,74 +105,16 @@ class Limits:
     scratch_mb: int = DEFAULT_SCRATCH_MB
 
     def rlimits(self) -> dict[str, int]:
-        """What a sandboxed worker sets on itself before it imports the plugin (resource.RLIMIT_*).
+        """What a sandboxed worker sets on itself before it imports the plugin.
 
-        No address-space limit where NVIDIA devices exist: CUDA reserves terabytes of it."""
-        import glob
-
-        limits = {"NPROC": self.processes, "NOFILE": self.open_files, "FSIZE": self.scratch_mb << 20}
-        if not glob.glob("/dev/nvidia[0-9]*"):
-            limits["AS"] = max(MIN_ADDRESS_SPACE_MB, 4 * self.memory_limit_mb) << 20
-        return limits
+        See :func:`~denoisebench.plugin_worker.rlimits`."""
+        return plugin_worker.rlimits(self.processes, self.open_files, self.scratch_mb, self.memory_limit_mb)
 
     def __post_init__(self) -> None:
-        from denoisebench.errors import UserInputError
-
         if not self.time_limit > 0:
             raise UserInputError(f"--time-limit must be > 0 seconds (got {self.time_limit})")
         if not self.memory_limit_mb > 0:
             raise UserInputError(f"--memory-limit must be > 0 MiB (got {self.memory_limit_mb})")
-
-
-_LIVE: set[IsolatedDenoiser] = set()
-
-
-@atexit.register
-def _close_all() -> None:
-    for proxy in list(_LIVE):
-        proxy.close()
-
-
-def _rss_mb(pid: int) -> float | None:
-    """Resident memory of ``pid`` in MiB (Linux /proc), or None where it cannot be read."""
-    try:
-        with open(f"/proc/{pid}/statm", "rb") as handle:
-            return int(handle.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
-    except (OSError, ValueError, IndexError):
-        return None
-
-
-def _tree(root: int) -> tuple[list[int], int]:
-    """The processes of the tree under ``root`` (itself first) and their task count (threads)."""
-    pids, tasks, queue = [], 0, [root]
-    while queue:
-        pid = queue.pop(0)
-        try:
-            tids = os.listdir(f"/proc/{pid}/task")
-        except OSError:
-            continue
-        pids.append(pid)
-        tasks += len(tids)
-        for tid in tids:
-            try:
-                with open(f"/proc/{pid}/task/{tid}/children", "rb") as handle:
-                    queue += [int(n) for n in handle.read().split()]
-            except (OSError, ValueError):
-                continue
-    return pids, tasks
-
-
-def _exit_reason(code: int | None, sandboxed: bool = False) -> str:
-    if code is None:
-        return "worker stopped answering"
-    if sandboxed and sandbox.exit_signal(code):  # bwrap: 128 + N for a worker ended by signal N
-        code = -sandbox.exit_signal(code)
-    if code < 0:
-        try:
-            return f"worker killed by {signal.Signals(-code).name}"
-        except ValueError:
-            return f"worker killed by signal {-code}"
-    return f"worker exited with status {code} (sys.exit/os._exit or a crash in the denoiser)"
 
 
 class IsolatedDenoiser:
@@ -193,8 +123,9 @@ class IsolatedDenoiser:
     ``name``, ``needs``, ``temporal`` and ``trained_scenes`` are what the worker's instance declared.
     ``last_seconds`` is the time inside the worker's ``denoise()`` of the last call,
     ``overhead_seconds`` the total time spent around those calls (transfer, checks).
-    ``sandboxed``: the worker runs in the sandbox of :mod:`.sandbox` (refused with
-    :class:`SandboxUnavailableError` where none starts); False is a plain worker process.
+    ``sandboxed``: the worker runs in the sandbox of :mod:`denoisebench.sandbox` (refused with
+    :class:`~denoisebench.plugin_worker.SandboxUnavailableError` where none starts); False is a
+    plain worker process.
     """
 
     def __init__(self, spec: str, options: dict | None = None, limits: Limits | None = None, sandboxed: bool = True):
@@ -203,17 +134,10 @@ class IsolatedDenoiser:
         self.limits = limits or Limits()
         self.sandboxed = bool(sandboxed)
         if self.sandboxed:
-            reason = sandbox.unavailable_reason()
-            if reason:
-                raise SandboxUnavailableError(
-                    f"cannot sandbox {spec!r}: {reason}; --isolation process runs plugins in plain worker "
-                    "processes instead (they can then read your files and reach the network; the run records it)"
-                )
-        self._worker_pid: int | None = None
+            plugin_worker.require_sandbox(spec)
         self.last_seconds: float | None = None
         self.overhead_seconds = 0.0
-        self._proc: subprocess.Popen | None = None
-        self._conn = None
+        self._worker: plugin_worker.WorkerProcess | None = None
         self._disabled: str | None = None  # reason, after a time-limit kill
         self._broken: str | None = None  # reason, after the worker died; cleared by reset()
         self._channel = None
@@ -231,42 +155,22 @@ class IsolatedDenoiser:
     # ------------------------------------------------------------------ process
 
     def _start(self) -> dict:
-        from multiprocessing import Pipe
-
-        ours, theirs = Pipe(duplex=True)
-        command = [sys.executable, "-m", "denoisebench.denoisers.isolation_worker", str(theirs.fileno())]
-        fds = (theirs.fileno(),)
-        if self._channel is not None:
-            command.append(str(self._channel.fd))
-            fds += (self._channel.fd,)
-        spec, options, rlimits, wrapped = self.spec, self.options, None, None
+        args, fds = ((str(self._channel.fd),), (self._channel.fd,)) if self._channel is not None else ((), ())
+        spec, options, rlimits = self.spec, self.options, None
         if self.sandboxed:
-            module, colon, attr = spec.partition(":")
-            if colon and module.endswith(".py"):
-                spec = f"{os.path.abspath(module)}:{attr}"  # the worker's folder is its scratch
-            options, rlimits = sandbox.absolute_options(options), self.limits.rlimits()
-            wrapped = sandbox.command(
-                command, readable=sandbox.readable_paths(spec, options), scratch_bytes=self.limits.scratch_mb << 20
-            )
-            command, fds = wrapped.argv, fds + (wrapped.args_fd,)
-        self._worker_pid = None
-        try:
-            self._proc = subprocess.Popen(
-                command,
-                pass_fds=fds,
-                stdin=subprocess.DEVNULL,
-                stdout=sys.__stderr__.fileno() if sys.__stderr__ is not None else subprocess.DEVNULL,
-                close_fds=True,
-            )
-        finally:
-            theirs.close()
-            if wrapped is not None:
-                wrapped.close()
-        self._conn = ours
-        self._breach = None
-        if self.sandboxed:  # counted between calls too: a plugin's background forks do not wait for a call
-            threading.Thread(target=self._watch_tasks, args=(self._proc,), daemon=True).start()
-        _LIVE.add(self)
+            spec, options = plugin_worker.confined_spec(spec, options)
+            rlimits = self.limits.rlimits()
+        self._worker = plugin_worker.WorkerProcess(
+            "denoisebench.denoisers.isolation_worker",
+            noun="denoiser",
+            sandboxed=self.sandboxed,
+            spec=spec,
+            options=options,
+            args=args,
+            fds=fds,
+            scratch_mb=self.limits.scratch_mb,
+            processes=self.limits.processes,
+        )
         try:
             header, _ = self._request(("load", spec, options, list(sys.path), rlimits), "load")
         except WorkerFailure as failure:
@@ -278,114 +182,35 @@ class IsolatedDenoiser:
             raise _load_error(header.get("error_type", ""), header.get("error", "load failed"), self.spec)
         return header
 
-    def _kill(self, reason: str) -> str:
-        if self._proc is not None and self._proc.poll() is None:
-            self._proc.kill()
-            try:
-                self._proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                pass
-        self.close()
-        return reason
-
     def close(self) -> None:
         """Stop the worker (a closed proxy starts a new one on the next ``reset()``)."""
-        if self._conn is not None:
-            try:
-                if self._proc is not None and self._proc.poll() is None:
-                    self._conn.send(("close",))
-            except (OSError, ValueError):
-                pass
-            self._conn.close()
-            self._conn = None
-        if self._proc is not None:
-            try:
-                self._proc.wait(timeout=2)
-            except subprocess.TimeoutExpired:
-                self._proc.kill()
-                self._proc.wait()
-            self._proc = None
-        _LIVE.discard(self)
+        if self._worker is not None:
+            self._worker.close()
+            self._worker = None
 
     def _request(self, message: tuple, what: str, max_bytes: int = 0) -> tuple[dict, bytes | None]:
         """Send ``message``; wait for the reply under the limits. WorkerFailure on any breach."""
-        limit = self.limits.time_limit
+        worker, limits = self._worker, self.limits
         try:
-            self._conn.send(message)
-        except (OSError, ValueError):
-            code = self._proc.poll() if self._proc else None
-            raise WorkerFailure(self._kill(self._breach or _exit_reason(code, self.sandboxed))) from None
-        deadline = time.monotonic() + limit
-        while True:
-            try:
-                ready = self._conn.poll(POLL_SECONDS)
-            except (OSError, ValueError):
-                ready = True  # a closed pipe: recv below reports it
-            if ready:
-                break
-            code = self._proc.poll()
-            if code is not None:
-                raise WorkerFailure(self._kill(self._breach or _exit_reason(code, self.sandboxed)))
-            rss = _rss_mb(self._pid())
-            if rss is not None and rss > self.limits.memory_limit_mb:
-                raise WorkerFailure(
-                    self._kill(
-                        f"exceeded the memory limit ({rss:.0f} MiB > {self.limits.memory_limit_mb} MiB) in {what}; worker killed"
-                    )
-                )
-            if time.monotonic() > deadline:
-                reason = f"exceeded the time limit ({limit:g} s per call) in {what}; worker killed, denoiser disabled for this run"
-                self._disabled = reason
-                raise WorkerFailure(self._kill(reason))
-        try:
-            header = json.loads(self._conn.recv_bytes(1 << 20).decode("utf-8"))
-            if not isinstance(header, dict):
-                raise ValueError("reply is not an object")
+            worker.send(message)
+            header = worker.receive_header(what, limits.time_limit, limits.memory_limit_mb)
             if header.get("payload") and header.get("kind") == "array":
-                shape = tuple(int(n) for n in header.get("shape", ()))
-                declared = int(np.prod(shape, dtype=np.int64)) * np.dtype(str(header.get("dtype"))).itemsize
-                if declared > max_bytes:  # not read: the harness bounds what it takes in
-                    raise WorkerFailure(
-                        self._kill(f"returned shape {shape}, expected H×W×3 of the frame; worker killed")
-                    )
-            payload = self._conn.recv_bytes(max_bytes + 1) if header.get("payload") else None
-        except (EOFError, OSError, ValueError, TypeError, UnicodeDecodeError) as error:
-            code = None
-            if self._proc is not None:
                 try:
-                    code = self._proc.wait(timeout=2)
-                except subprocess.TimeoutExpired:
-                    code = None
-            reason = (
-                self._breach or _exit_reason(code, self.sandboxed)
-                if code is not None
-                else f"malformed reply from the worker ({type(error).__name__})"
-            )
-            raise WorkerFailure(self._kill(reason)) from None
+                    shape = tuple(int(n) for n in header.get("shape", ()))
+                    declared = int(np.prod(shape, dtype=np.int64)) * np.dtype(str(header.get("dtype"))).itemsize
+                except (TypeError, ValueError) as error:
+                    raise WorkerGone(
+                        worker.kill(f"malformed message from the worker ({type(error).__name__})")
+                    ) from None
+                if declared > max_bytes:  # not read: the harness bounds what it takes in
+                    reason = f"returned shape {shape}, expected H×W×3 of the frame; worker killed"
+                    raise WorkerGone(worker.kill(reason))
+            payload = worker.receive_payload(max_bytes) if header.get("payload") else None
+        except WorkerGone as gone:
+            if gone.timed_out:
+                self._disabled = str(gone)
+            raise WorkerFailure(str(gone)) from None
         return header, payload
-
-    def _pid(self) -> int:
-        """The worker's process id on this machine (sandboxed: the child of the sandbox's init)."""
-        if not self.sandboxed or self._proc is None:
-            return self._proc.pid if self._proc is not None else -1
-        if self._worker_pid is None:
-            pids, _ = _tree(self._proc.pid)  # bwrap, its init (PID 1 inside), the worker, ...
-            if len(pids) < 3:
-                return self._proc.pid
-            self._worker_pid = pids[2]
-        return self._worker_pid
-
-    def _watch_tasks(self, proc: subprocess.Popen) -> None:
-        """Kill the sandbox when it holds more tasks than allowed (the kernel does not enforce
-        RLIMIT_NPROC for a root harness's worker); the next call reports the reason."""
-        while proc.poll() is None:
-            _, tasks = _tree(proc.pid)
-            tasks -= 2  # bwrap and the sandbox's init
-            if tasks > self.limits.processes:
-                self._breach = f"exceeded the process limit ({tasks} tasks > {self.limits.processes}); sandbox killed"
-                proc.kill()
-                return
-            time.sleep(TASK_POLL_SECONDS)
 
     def _ready(self) -> None:
         if self._disabled:
@@ -407,9 +232,9 @@ class IsolatedDenoiser:
         """Start of a sequence: a dead worker is replaced (plugin loaded afresh), then its reset()."""
         if self._disabled:
             raise WorkerFailure(self._disabled)
-        if self._broken or self._conn is None:
+        if self._broken or self._worker is None or self._worker.conn is None:
             self._broken = None
-            self._kill("restart")
+            self.close()
             try:
                 self._start()
             except Exception as error:  # noqa: BLE001 - a plugin that no longer loads fails the sequence
@@ -514,8 +339,6 @@ def isolated(spec: str, policy: str = DEFAULT_POLICY) -> bool:
     from denoisebench.denoisers.registry import BUILTINS
 
     if policy not in POLICIES:
-        from denoisebench.errors import UserInputError
-
         raise UserInputError(f"--isolation must be one of {', '.join(POLICIES)} (got {policy!r})")
     if policy == "none":
         return False

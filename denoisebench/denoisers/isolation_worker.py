@@ -25,6 +25,7 @@ import sys
 import time
 
 from denoisebench.errors import one_line
+from denoisebench.plugin_worker import set_rlimits
 
 
 def _reply(conn, header: dict, payload: bytes | memoryview | None = None) -> None:
@@ -34,21 +35,11 @@ def _reply(conn, header: dict, payload: bytes | memoryview | None = None) -> Non
         conn.send_bytes(payload)
 
 
-def _set_rlimits(rlimits: dict[str, int] | None) -> None:
-    import resource
-
-    for name, value in (rlimits or {}).items():
-        kind = getattr(resource, f"RLIMIT_{name}")
-        _, hard = resource.getrlimit(kind)
-        value = int(value) if hard == resource.RLIM_INFINITY else min(int(value), hard)
-        resource.setrlimit(kind, (value, value))
-
-
 def _load(conn, spec: str, options: dict, sys_path: list[str], rlimits: dict[str, int] | None = None):
     from denoisebench.denoisers.protocol import describe
     from denoisebench.denoisers.registry import load_denoiser
 
-    _set_rlimits(rlimits)
+    set_rlimits(rlimits)
     sys.path[:] = list(sys_path)
     try:
         denoiser = load_denoiser(spec, **options)

@@ -155,7 +155,7 @@ def software_versions() -> dict[str, str]:
             versions[dist] = importlib.metadata.version(dist)
         except importlib.metadata.PackageNotFoundError:
             continue
-    from denoisebench.denoisers.sandbox import version as sandbox_version
+    from denoisebench.sandbox import version as sandbox_version
 
     if sandbox_version():  # the plugin sandbox (reports say whether the run used it)
         versions["bubblewrap"] = sandbox_version().split()[-1]

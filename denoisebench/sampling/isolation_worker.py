@@ -2,7 +2,7 @@
 
 Started as ``python -m denoisebench.sampling.isolation_worker FD``, FD one end of a socket pair (a
 :class:`multiprocessing.connection.Connection`). The parent is trusted, so what it sends is pickled:
-``("load", spec, options, sys_path)``, ``("sample", spp, seconds, width, height)``, the answers to the
+``("load", spec, options, sys_path, rlimits)``, ``("sample", spp, seconds, width, height)``, the answers to the
 worker's requests (``("rendered", state)``, ``("refused", kind, message)``, ``("value", number)``) and
 ``("close",)``. The worker is not trusted, so what it sends is **never a pickle**: a JSON header
 (``send_bytes``), followed for a round request by the count map's raw bytes.
@@ -12,6 +12,13 @@ the map to the parent, whose harness renders it (cutting it to the budget as in-
 back the accumulated buffers; ``remaining_samples()`` and ``seconds_left()`` ask the parent too.
 Everything the sampler raises (``SystemExit`` included) goes back as one line; ``os._exit()``, a
 crash or a signal ends the process, which the parent reports with the exit status.
+
+Notes
+-----
+Under the sandbox (:mod:`denoisebench.sandbox`) this process sees no file of the host but Python,
+``sys.path``, the plugin and its option files; it needs no more, since the parent renders every
+round. ``rlimits`` (None outside the sandbox) are set on this process before the plugin is imported
+(:func:`denoisebench.plugin_worker.set_rlimits`), so the plugin can lower them but never raise them.
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ import sys
 import numpy as np
 
 from denoisebench.errors import one_line
+from denoisebench.plugin_worker import set_rlimits
 from denoisebench.sampling.protocol import Budget, BudgetExhausted, SamplerRequestError
 from denoisebench.sampling.synthetic import RoundBuffers
 
@@ -93,7 +101,8 @@ def main(fd: int) -> int:
         if message[0] == "close":
             return 0
         if message[0] == "load":
-            _, spec, options, sys_path = message
+            _, spec, options, sys_path, rlimits = message
+            set_rlimits(rlimits)
             sys.path[:] = list(sys_path)
             try:
                 sampler = load_sampler(spec, **options)

@@ -1,4 +1,4 @@
-"""The bubblewrap command that confines an isolated denoiser's worker (issue 33).
+"""The bubblewrap command that confines a plugin's worker (an isolated denoiser's or sampler's).
 
 :func:`command` turns the worker's argv into a ``bwrap`` (Debian package ``bubblewrap``, the
 sandbox under Flatpak) command line. Each choice, and why:
@@ -50,9 +50,9 @@ Pitfalls
 * What ``sys.path`` holds is readable: a harness started by ``python -m`` or pytest has its
   working folder there. The console scripts (``run-benchmark``) have only the environment.
 * Resource limits (address space, processes, file size, open files) are set by the worker on
-  itself before it imports the plugin (:mod:`.isolation_worker`); the kernel does not enforce
+  itself before it imports the plugin (:func:`denoisebench.plugin_worker.set_rlimits`); the kernel does not enforce
   ``RLIMIT_NPROC`` for a worker whose user is root outside the sandbox, so the parent also counts
-  the sandbox's tasks (:mod:`.isolation`).
+  the sandbox's tasks (:class:`denoisebench.plugin_worker.WorkerProcess`).
 * bwrap reports a worker killed by signal N as exit status 128 + N (:func:`exit_signal`).
 """
 
