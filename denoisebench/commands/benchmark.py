@@ -108,8 +108,9 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--metrics",
         default="",
-        help="comma-separated metrics or metric sets (noisebase: Noisebase's definitions, "
-        "nb_*); default every registered metric outside the sets; relmse and flip always",
+        help="comma-separated metrics or metric sets (noisebase: Noisebase's definitions, nb_*; "
+        "oidn: the PSNR and SSIM of OIDN's compare_image.py, oidn_*); default every registered metric "
+        "outside the sets; relmse and flip always",
     )
     parser.add_argument(
         "--trim",
