@@ -26,7 +26,7 @@ ALLOWED = {
     "leaderboard": {"dataset", "denoisers", "baselines", "models", "metrics", "sampling", "generator", "scenes"},
 }
 #: Top-level helper modules every stage may use (no stage of their own).
-HELPERS = {"errors", "mitsuba_runtime", "outputs", "plugin_loading", "progress", "sandbox"}
+HELPERS = {"errors", "mitsuba_runtime", "outputs", "plugin_loading", "plugin_worker", "progress", "sandbox"}
 
 
 def _module_name(path: Path) -> str:

@@ -364,9 +364,9 @@ def add_arguments(parser) -> None:
         "--isolation",
         choices=POLICIES,
         default=DEFAULT_POLICY,
-        help="which denoisers run in a sandboxed worker process of their own: plugins (every non-built-in, "
-        "default), all; process: plugins in plain worker processes without the sandbox (where none starts; "
-        "recorded); none (trusted code only)",
+        help="which denoisers and samplers run in a sandboxed worker process of their own: plugins (every "
+        "non-built-in, default), all; process: plugins in plain worker processes without the sandbox (where none "
+        "starts; recorded); none (trusted code only)",
     )
     parser.add_argument(
         "--time-limit",
