@@ -50,6 +50,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from denoisebench.leaderboard.finite import is_finite
+
 #: Bootstrap resamples and seed (fixed: the same run gives the same report).
 BOOTSTRAP_RESAMPLES = 2000
 BOOTSTRAP_SEED = 0
@@ -88,10 +90,6 @@ def rule_of(metric_name: str) -> str:
         return "mean"
 
 
-def _ok(v) -> bool:
-    return v is not None and math.isfinite(v)
-
-
 def log_se(se: float | None, value: float) -> float:
     """Standard deviation on the log scale of a positive value with standard error ``se`` (log-normal)."""
     if not se or value <= 0:
@@ -106,7 +104,7 @@ def scene_terms(rule: str, mine: dict, noisy: dict | None = None, ses: dict | No
     mean is 0 (a value ≤ 0).
     """
     ses = ses or {}
-    scenes = sorted(s for s, v in mine.items() if _ok(v))
+    scenes = sorted(s for s, v in mine.items() if is_finite(v))
     if rule == "mean":
         return [mine[s] for s in scenes], [ses.get(s) or 0.0 for s in scenes], (lambda x: x)
     if rule == "geomean":
@@ -115,7 +113,7 @@ def scene_terms(rule: str, mine: dict, noisy: dict | None = None, ses: dict | No
         return ([math.log(mine[s]) for s in scenes], [log_se(ses.get(s), mine[s]) for s in scenes], math.exp)
     if rule == "relative_to_input":
         noisy = noisy or {}
-        keep = [s for s in scenes if _ok(noisy.get(s)) and noisy[s] > 0 and mine[s] > 0]
+        keep = [s for s in scenes if is_finite(noisy.get(s)) and noisy[s] > 0 and mine[s] > 0]
         return ([math.log(mine[s] / noisy[s]) for s in keep], [log_se(ses.get(s), mine[s]) for s in keep], math.exp)
     raise ValueError(f"unknown aggregation rule {rule!r}")
 
@@ -152,7 +150,7 @@ def aggregate(rule: str, mine: dict, noisy: dict | None = None, ses: dict | None
     """(value, low, high, scenes used) of per-scene values ``mine`` under ``rule`` (module docstring)."""
     terms, term_ses, back = scene_terms(rule, mine, noisy, ses)
     if back is None:  # geometric mean with a zero
-        return 0.0, None, None, len([v for v in mine.values() if _ok(v)])
+        return 0.0, None, None, len([v for v in mine.values() if is_finite(v)])
     if not terms:
         return None, None, None, 0
     low, high = bootstrap_mean(terms, term_ses)
@@ -166,8 +164,8 @@ def reference_resolution(rule: str, mine_a: dict, ses_a: dict, mine_b: dict, ses
     On the rule's scale (``mean``: score units; the geometric rules: log units, i.e. a ratio)
     over the scenes both have; None without stored ses.
     """
-    scenes = sorted(s for s in mine_a if s in mine_b and _ok(mine_a[s]) and _ok(mine_b[s]))
-    if not scenes or not any(_ok(ses_a.get(s)) or _ok(ses_b.get(s)) for s in scenes):
+    scenes = sorted(s for s in mine_a if s in mine_b and is_finite(mine_a[s]) and is_finite(mine_b[s]))
+    if not scenes or not any(is_finite(ses_a.get(s)) or is_finite(ses_b.get(s)) for s in scenes):
         return None
     total = 0.0
     for s in scenes:

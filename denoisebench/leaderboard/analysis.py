@@ -42,42 +42,50 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from denoisebench.leaderboard import aggregate as agg
 from denoisebench.leaderboard.aggregate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401 (re-exported)
-from denoisebench.leaderboard.runner import FLICKER_METRICS, FLICKER_PREFIX, NOISY
+from denoisebench.leaderboard.finite import finite_mean, is_finite
+from denoisebench.leaderboard.names import (  # noqa: F401 (ERROR_METRICS: re-exported for the report)
+    ERROR_METRICS,
+    FLICKER_METRICS,
+    FLICKER_PREFIX,
+    NOISY,
+)
+from denoisebench.leaderboard.run_index import RunIndex
 
-ERROR_METRICS = ("relmse_robust", "relmse", "flip")  # the first leads (metrics.robust; issue 29)
 #: Assumed slope of log(error) vs log(spp) when only one input spp was measured.
 DEFAULT_SLOPE = {"relmse_robust": -1.0, "relmse": -1.0, "mse": -1.0, "flip": -0.5}
-
-
-def _finite(values) -> list[float]:
-    return [float(v) for v in values if v is not None and math.isfinite(v)]
 
 
 def bootstrap_interval(values, ses=None) -> tuple[float | None, float | None]:
     """Percentile bootstrap 95 % interval of the mean; ``ses`` widen it by the reference's noise."""
     values = list(values)
-    keep = [i for i, v in enumerate(values) if v is not None and math.isfinite(v)]
+    keep = [i for i, v in enumerate(values) if is_finite(v)]
     return agg.bootstrap_mean([float(values[i]) for i in keep], None if ses is None else [ses[i] for i in keep])
 
 
 @dataclass
 class Cell:
-    """A metric aggregated over scenes. ``mean`` is the aggregate under ``rule`` (the name is kept
-    from when every rule was the mean); ``floor``/``corrected``: reference-noise floor and
-    ``mean − floor`` aggregated by the same rule (MSE-family metrics with a reference variance)."""
+    """A metric aggregated over scenes: ``value`` is the aggregate under ``rule`` (:mod:`.aggregate`),
+    ``low``/``high`` its 95 % interval; ``floor``/``corrected``: reference-noise floor and
+    ``value − floor`` aggregated by the same rule (MSE-family metrics with a reference variance)."""
 
-    mean: float | None
+    value: float | None
     low: float | None
     high: float | None
     scenes: int
     rule: str = "mean"
     floor: float | None = None
     corrected: float | None = None
+
+    @property
+    def mean(self) -> float | None:
+        """``value``, under the name results.json (``"mean"``) and older readers use."""
+        return self.value
 
 
 @dataclass
@@ -93,84 +101,44 @@ class SummaryRow:
     errors: list[str] = field(default_factory=list)
 
 
-class RunData:
-    """One run's rows from the store, indexed for the analyses."""
+class RunData(RunIndex):
+    """One run's rows from the store, indexed once for the analyses (:class:`.run_index.RunIndex`).
+
+    Typed rows: ``run_row``, ``entries``, ``unit_rows``, ``frame_rows``, ``sequence_rows``. The
+    report reads ``run``, ``denoisers``, ``units``, ``frames`` and ``sequences``: the same rows as
+    plain dicts (results.json writes them), made when first read.
+    """
 
     def __init__(self, store, run_id: str):
-        self.run = store.run(run_id)
+        self.run_row = store.run(run_id)
         self.run_id = run_id
-        self.denoisers = store.denoisers(run_id)
-        self.units = store.units(run_id)
-        self.frames = store.frames(run_id)
-        self.sequences = store.sequence_metrics(run_id)
-        self.labels = [d["label"] for d in self.denoisers if not d["load_error"]]
-        self.spp = sorted({u["spp"] for u in self.units})
-        self.scenes = sorted({u["scene"] for u in self.units})
-        self.frame_metric_names = sorted({m for f in self.frames for m in f["metrics"] if not m.startswith("flicker")})
-        self.sequence_metric_names = sorted({s["metric"] for s in self.sequences})
+        self.entries = store.denoisers(run_id)
+        super().__init__(store.units(run_id), store.frames(run_id), store.sequence_metrics(run_id))
+        self.labels = [d.label for d in self.entries if not d.load_error]
 
-    def ok_frames(self, label: str, spp: int, scene: str | None = None) -> list[dict]:
-        return [
-            f
-            for f in self.frames
-            if f["denoiser"] == label
-            and f["spp"] == spp
-            and f["status"] == "ok"
-            and (scene is None or f["scene"] == scene)
-        ]
+    @cached_property
+    def run(self) -> dict:
+        return self.run_row.as_dict()
+
+    @cached_property
+    def denoisers(self) -> list[dict]:
+        return [d.as_dict() for d in self.entries]
+
+    @cached_property
+    def units(self) -> list[dict]:
+        return [u.as_dict() for u in self.unit_rows]
+
+    @cached_property
+    def frames(self) -> list[dict]:
+        return [f.as_dict() for f in self.frame_rows]
+
+    @cached_property
+    def sequences(self) -> list[dict]:
+        return [s.as_dict() for s in self.sequence_rows]
 
     def scene_mean(self, label: str, spp: int, scene: str, metric: str) -> float | None:
-        """Mean of a frame metric over the frames of one scene, or the scene's temporal value."""
-        if metric in self.sequence_metric_names and metric not in self.frame_metric_names:
-            values = [
-                s["value"]
-                for s in self.sequences
-                if (s["denoiser"], s["spp"], s["scene"], s["metric"]) == (label, spp, scene, metric)
-            ]
-        else:
-            values = [f["metrics"].get(metric) for f in self.ok_frames(label, spp, scene)]
-        values = _finite(values)
-        return float(np.mean(values)) if values else None
-
-    def scene_floor(self, label: str, spp: int, scene: str, metric: str) -> tuple[float | None, float | None]:
-        """(floor, ref_se) of a metric on one scene: frames' mean floor, se of the frames' mean."""
-        if metric in self.sequence_metric_names and metric not in self.frame_metric_names:
-            rows = [
-                s
-                for s in self.sequences
-                if (s["denoiser"], s["spp"], s["scene"], s["metric"]) == (label, spp, scene, metric)
-            ]
-            floors, ses = _finite(r.get("floor") for r in rows), _finite(r.get("ref_se") for r in rows)
-        else:
-            frames = self.ok_frames(label, spp, scene)
-            floors = _finite(f.get("floors", {}).get(metric) for f in frames)
-            ses = _finite(f.get("ref_se", {}).get(metric) for f in frames)
-            if len(floors) != len(frames):
-                floors = []
-            ses = ses if len(ses) == len(frames) else []
-        floor = float(np.mean(floors)) if floors else None
-        se = float(math.sqrt(sum(x * x for x in ses)) / len(ses)) if ses else None
-        return floor, se
-
-    def per_scene(self, label: str, spp: int, metric: str, scenes=None) -> tuple[dict, dict, dict]:
-        """({scene: value}, {scene: floor}, {scene: ref_se}) over ``scenes`` (default: every scene)."""
-        values, floors, ses = {}, {}, {}
-        for scene in self.scenes if scenes is None else scenes:
-            value = self.scene_mean(label, spp, scene, metric)
-            if value is None:
-                continue
-            values[scene] = value
-            floor, se = self.scene_floor(label, spp, scene, metric)
-            if floor is not None:
-                floors[scene] = floor
-            if se is not None:
-                ses[scene] = se
-        return values, floors, ses
-
-    def unit_ok(self, label: str, spp: int, scene: str) -> bool:
-        return any(
-            u["status"] == "ok" for u in self.units if (u["denoiser"], u["spp"], u["scene"]) == (label, spp, scene)
-        )
+        """:meth:`.run_index.RunIndex.scene_value` (the name older callers use)."""
+        return self.scene_value(label, spp, scene, metric)
 
 
 def summary_table(data: RunData, exclude=()) -> list[SummaryRow]:
@@ -180,28 +148,25 @@ def summary_table(data: RunData, exclude=()) -> list[SummaryRow]:
     rows = []
     for spp in data.spp:
         for label in data.labels:
-            units = [u for u in data.units if u["denoiser"] == label and u["spp"] == spp]
+            units = data.units_of(label, spp)
             if not units:
                 continue
-            ok_scenes = [u["scene"] for u in units if u["status"] == "ok" and u["scene"] not in exclude]
+            ok_scenes = [u.scene for u in units if u.status == "ok" and u.scene not in exclude]
             cells = {}
             for metric in data.frame_metric_names + data.sequence_metric_names:
                 cells[metric] = metric_cell(data, label, spp, metric, ok_scenes)
             frames = [f for s in ok_scenes for f in data.ok_frames(label, spp, s)]
-            mean = lambda key: (
-                float(np.mean(_finite(f[key] for f in frames))) if _finite(f[key] for f in frames) else None
-            )  # noqa: E731
             rows.append(
                 SummaryRow(
                     label,
                     spp,
                     cells,
-                    mean("denoise_seconds"),
-                    mean("total_seconds"),
-                    mean("render_seconds"),
+                    finite_mean(f.denoise_seconds for f in frames),
+                    finite_mean(f.total_seconds for f in frames),
+                    finite_mean(f.render_seconds for f in frames),
                     len(frames),
-                    sum(u["status"] != "ok" for u in units),
-                    sorted({u["error"] for u in units if u["error"]}),
+                    sum(u.status != "ok" for u in units),
+                    sorted({u.error for u in units if u.error}),
                 )
             )
     return rows
@@ -373,21 +338,20 @@ def accuracy_time(data: RunData, summary: list[SummaryRow], metric: str, referen
     for row in summary:
         cell = row.metrics.get(metric)
         seconds = row.total_seconds if model is None else model.total_seconds(row.denoiser, row.spp)
-        if cell is None or cell.mean is None:
+        if cell is None or cell.value is None:
             continue
         if seconds is None:
             if model is not None:
                 hidden.append(f"{row.denoiser} at {row.spp} spp: no time at {model.time_at[0]}×{model.time_at[1]}")
             continue
-        if cell.mean <= 0 or seconds <= 0:
+        if cell.value <= 0 or seconds <= 0:
             hidden.append(
-                f"{row.denoiser} at {row.spp} spp ({metric} {cell.mean:.3g}, {seconds:.3g} s): not positive, off a log axis"
+                f"{row.denoiser} at {row.spp} spp ({metric} {cell.value:.3g}, {seconds:.3g} s): not positive, off a log axis"
             )
             continue
-        points.append(Point(row.denoiser, row.spp, seconds, cell.mean))
+        points.append(Point(row.denoiser, row.spp, seconds, cell.value))
     pareto_front(points)
-    noisy_frames = [f for f in data.frames if f["denoiser"] == NOISY and f["render_seconds"]]
-    render_times = [(f["spp"], f["render_seconds"]) for f in noisy_frames]
+    render_times = [(f.spp, f.render_seconds) for f in data.frames_of(NOISY) if f.render_seconds]
     if reference.get("seconds") and reference.get("spp") and model is None:
         render_times.append((reference["spp"], reference["seconds"]))  # the reference is a render time too
     fit = fit_noisy(points, render_times, metric)
@@ -488,7 +452,7 @@ def effect_breakdown(data: RunData, scene_effects: dict[str, list[str]], metric:
         shares: dict[str, list[float]] = {}
         for scene in data.scenes:
             for spp in data.spp:
-                mine, noisy = data.scene_mean(label, spp, scene, metric), data.scene_mean(NOISY, spp, scene, metric)
+                mine, noisy = data.scene_value(label, spp, scene, metric), data.scene_value(NOISY, spp, scene, metric)
                 if mine is None or not noisy or mine <= 0 or not data.unit_ok(label, spp, scene):
                     continue
                 for key in ["overall", *scene_effects.get(scene, [])]:
@@ -502,7 +466,7 @@ def effect_breakdown(data: RunData, scene_effects: dict[str, list[str]], metric:
 
 def flicker_metrics(data: RunData) -> list[str]:
     """The per-frame flicker metrics a run stored: FLICKER_METRICS, or ``temporal_l1`` of old runs."""
-    stored = {m for f in data.frames for m in f["metrics"] if m.startswith("flicker")}
+    stored = data.flicker_names
     names = [m for m in FLICKER_METRICS if FLICKER_PREFIX + m in stored]
     if not names and "flicker" in stored:
         names = ["temporal_l1"]  # runs before issue 15: "flicker" was temporal_l1 (linear: not averaged in a figure)
@@ -519,9 +483,9 @@ def flicker_series(data: RunData, spp: int, metric: str = FLICKER_METRICS[0]) ->
     for label in data.labels:
         by_frame: dict[int, list[float]] = {}
         for f in data.ok_frames(label, spp):
-            value = f["metrics"].get(key)
-            if value is not None and math.isfinite(value):
-                by_frame.setdefault(f["frame"], []).append(value)
+            value = f.metrics.get(key)
+            if is_finite(value):
+                by_frame.setdefault(f.frame, []).append(value)
         if by_frame:
             last = max(by_frame)
             series[label] = [float(np.mean(by_frame[i])) if i in by_frame else None for i in range(1, last + 1)]

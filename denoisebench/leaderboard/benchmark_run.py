@@ -12,8 +12,9 @@ import sys
 
 from denoisebench.dataset import Dataset
 from denoisebench.errors import UserInputError
+from denoisebench.leaderboard.records import UnitRecord
 from denoisebench.leaderboard.runner import BenchmarkConfig, RunPlan, prepare_run, run_local
-from denoisebench.leaderboard.store import ResultsStore, UnitRecord
+from denoisebench.leaderboard.store import ResultsStore
 
 #: Executors ``run_benchmark`` accepts.
 EXECUTORS = ("local", "ray")
@@ -66,11 +67,6 @@ def run_benchmark(
             raise UserInputError(f"unknown executor {executor!r}; use one of {', '.join(EXECUTORS)}")
     finally:
         bar.close()
-    missing = plan.total_units - len(store.done_units(plan.run_id) & _expected(plan))
-    if missing == 0:
+    if not plan.missing(store.done_units(plan.run_id)):
         store.finish_run(plan.run_id)
     return plan
-
-
-def _expected(plan: RunPlan) -> set[tuple[str, str, int]]:
-    return {(label, scene, spp) for label in plan.labels for scene in plan.scenes for spp in plan.spp}

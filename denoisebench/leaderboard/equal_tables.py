@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from denoisebench.leaderboard.runner import NOISY
+from denoisebench.leaderboard.names import NOISY
 
 #: Multiples of the top rung the equal-quality table adds as (extrapolated) targets.
 EXTRA_TARGETS = (4, 16)
@@ -130,9 +130,9 @@ class Curves:
         cells: dict[str, dict] = {}
         for row in summary:
             cell = row.metrics.get(metric)
-            if cell is None or cell.mean is None or row.failed_units:
+            if cell is None or cell.value is None or row.failed_units:
                 continue
-            cells.setdefault(row.denoiser, {})[int(row.spp)] = (float(cell.mean), cell.low, cell.high)
+            cells.setdefault(row.denoiser, {})[int(row.spp)] = (float(cell.value), cell.low, cell.high)
         return cls(metric, cells)
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from denoisebench.leaderboard.runner import NOISY
+from denoisebench.leaderboard.names import NOISY
 
 #: Metrics shown in the summary tables, in this order.
 LEAD_METRICS = (
@@ -40,11 +40,11 @@ def num(value, digits: int = 3) -> str:
 
 def cell_text(cell) -> str:
     """``mean [low, high]`` (the interval only when there were ≥ 2 scenes)."""
-    if cell is None or cell.mean is None:
+    if cell is None or cell.value is None:
         return "—"
     if cell.low is None:
-        return num(cell.mean)
-    return f"{num(cell.mean)} [{num(cell.low)}, {num(cell.high)}]"
+        return num(cell.value)
+    return f"{num(cell.value)} [{num(cell.low)}, {num(cell.high)}]"
 
 
 def metric_heading(name: str) -> str:
@@ -91,7 +91,7 @@ def summary_rows(report: dict, spp: int) -> tuple[list[str], list[list[str]]]:
     lead = next((m for m in metrics if m in ("relmse_robust", "relmse")), "relmse")
     key = lambda r: (
         r.denoiser != NOISY,
-        r.metrics.get(lead).mean if r.metrics.get(lead) and r.metrics[lead].mean is not None else math.inf,
+        r.metrics.get(lead).value if r.metrics.get(lead) and r.metrics[lead].value is not None else math.inf,
     )  # noqa: E731
     body = []
     for r in sorted(rows, key=key):
@@ -111,7 +111,7 @@ def flicker_rows(report: dict, spp: int) -> tuple[list[str], list[list[str]]]:
 
     def key(r):
         cell = r.metrics.get(lead) if lead else None
-        return (r.denoiser != NOISY, sign * cell.mean if cell is not None and cell.mean is not None else math.inf)
+        return (r.denoiser != NOISY, sign * cell.value if cell is not None and cell.value is not None else math.inf)
 
     return ["denoiser", *headings], [[r.denoiser, *(make(r) for make in makers)] for r in sorted(rows, key=key)]
 

@@ -11,16 +11,33 @@ Notes
   times are then measured while other tasks share the machine: on a small machine prefer the
   local executor for timings that will be compared.
 * Only ``noisy`` and denoisers that loaded in the driver are sent; a denoiser that fails to load
-  in a worker fails its units with that error.
+  in a worker fails its units with that error (and those of the sampler pairs it is in).
+* The plan travels as :func:`light_plan`: the same plan with every denoiser's instance left
+  behind, every other field (``trained_scenes``, the sampler pairs) kept.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 from denoisebench.dataset import Dataset
-from denoisebench.leaderboard.runner import NOISY, BenchmarkConfig, RunPlan, measure_group, pending_groups
-from denoisebench.leaderboard.store import ResultsStore, UnitRecord
+from denoisebench.leaderboard.names import NOISY
+from denoisebench.leaderboard.records import UnitRecord
+from denoisebench.leaderboard.runner import BenchmarkConfig, RunPlan, measure_group, pending_groups
+from denoisebench.leaderboard.store import ResultsStore
+
+
+def light_plan(plan: RunPlan) -> RunPlan:
+    """``plan`` without its denoiser instances (they stay in the driver; tasks load their own)."""
+    return replace(plan, denoisers=[replace(d, instance=None) for d in plan.denoisers])
+
+
+def needed_denoisers(plan: RunPlan, labels: list[str]) -> set[str]:
+    """Labels of the denoisers a task measuring ``labels`` must load: those among them, and the
+    denoiser of every sampler pair among them."""
+    pairs = {p.label: p.denoiser for p in plan.samplers}
+    return {label for label in labels if label not in pairs} | {pairs[label] for label in labels if pairs.get(label)}
 
 
 def _measure_remote(
@@ -38,8 +55,9 @@ def _measure_remote(
 
     instances: dict[str, object] = {}
     errors: dict[str, str] = {}
+    needed = needed_denoisers(plan, labels)
     for d in plan.denoisers:
-        if d.label in labels and d.label != NOISY:
+        if d.label in needed and d.label != NOISY:
             try:
                 # plugins in worker processes of their own here too (a Ray task is no sandbox)
                 instances[d.label] = isolation_mod.load(
@@ -47,8 +65,10 @@ def _measure_remote(
                 )
             except Exception as exc:  # noqa: BLE001 - recorded as the units' failure
                 errors[d.label] = f"load in worker: {exc}"
-    units = list(measure_group(open_dataset(root), plan, scene, spp, [l for l in labels if l not in errors], instances))
-    for label, error in errors.items():
+    pairs = {p.label: p.denoiser for p in plan.samplers}
+    failed = {label: errors.get(pairs.get(label, label)) for label in labels if errors.get(pairs.get(label, label))}
+    units = list(measure_group(open_dataset(root), plan, scene, spp, [l for l in labels if l not in failed], instances))
+    for label, error in failed.items():
         units.append(UnitRecord(label, scene, spp, "failed", error, []))
     return units
 
@@ -64,17 +84,7 @@ def run_ray(
 
     if not ray.is_initialized():
         ray.init(include_dashboard=False, log_to_driver=False, logging_level="ERROR")
-    # instances stay in the driver; the plan travels without them
-    light = RunPlan(
-        plan.run_id,
-        plan.scenes,
-        plan.spp,
-        [type(d)(d.label, d.spec, None, d.needs, d.temporal, d.load_error) for d in plan.denoisers],
-        plan.spatial,
-        plan.temporal,
-        plan.resumed,
-        plan.trim,
-    )
+    light = light_plan(plan)  # instances stay in the driver
     task = ray.remote(_measure_remote)
     root = str(dataset.root.resolve())
     pending = [

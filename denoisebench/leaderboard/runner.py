@@ -44,16 +44,17 @@ import numpy as np
 from denoisebench.dataset import Dataset, DatasetError, layout
 from denoisebench.dataset.exr_io import canonical_json
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard.store import FrameRecord, ResultsStore, UnitRecord
+from denoisebench.leaderboard.names import (  # noqa: F401 (NOISY, REQUIRED_METRICS: re-exported for older importers)
+    FLICKER_METRICS,
+    FLICKER_PREFIX,
+    NOISY,
+    REQUIRED_METRICS,
+)
+from denoisebench.leaderboard.records import FrameRecord, UnitRecord
+from denoisebench.leaderboard.store import ResultsStore
 
-NOISY = "noisy"
-#: Metrics the report leads with; always computed (temporal ones on sequences of ≥ 2 frames).
-REQUIRED_METRICS = ("relmse_robust", "relmse", "flip", "temporal_relmse_robust", "temporal_relmse", "tpsnr")
-#: Per-frame flicker: these temporal metrics of frames (t−1, t), stored as frame metrics
-#: ``flicker.<name>`` of frame t (scale-free ones: the flicker figure averages them over scenes).
-#: Runs before issue 15 stored temporal_l1 as ``flicker``.
-FLICKER_METRICS = ("temporal_relmse_robust", "temporal_relmse", "tpsnr")
-FLICKER_PREFIX = "flicker."
+#: A unit's key: (label, scene, spp).
+UnitKey = tuple[str, str, int]
 #: Distributions whose versions a run records (those installed).
 VERSIONED = (
     "denoisebench",
@@ -206,7 +207,17 @@ def load_denoisers(
         while label in taken:  # two specs with one name (or a plugin called "noisy") stay apart
             label, n = f"{base}#{n}", n + 1
         taken.add(label)
-        loaded.append(LoadedDenoiser(label, spec, instance, needs, temporal, error, trained))
+        loaded.append(
+            LoadedDenoiser(
+                label=label,
+                spec=spec,
+                instance=instance,
+                needs=needs,
+                temporal=temporal,
+                load_error=error,
+                trained_scenes=trained,
+            )
+        )
     return loaded
 
 
@@ -411,9 +422,17 @@ class RunPlan:
     def labels(self) -> list[str]:
         return [NOISY] + [d.label for d in self.denoisers if d.instance is not None] + [p.label for p in self.samplers]
 
+    def unit_keys(self) -> list[UnitKey]:
+        """Every unit of the run, (label, scene, spp), scene by scene and spp by spp, labels in order."""
+        return [(label, scene, spp) for scene in self.scenes for spp in self.spp for label in self.labels]
+
     @property
     def total_units(self) -> int:
-        return len(self.labels) * len(self.scenes) * len(self.spp)
+        return len(self.unit_keys())
+
+    def missing(self, done: set[UnitKey]) -> list[UnitKey]:
+        """The units of the run without a row in ``done`` (:meth:`.store.ResultsStore.done_units`)."""
+        return [key for key in self.unit_keys() if key not in done]
 
     def trained_on(self) -> dict[str, list[str]]:
         """Denoisers (label) that were trained on some of this run's scenes, and those scenes."""
@@ -479,15 +498,12 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     return plan
 
 
-def pending_groups(plan: RunPlan, done: set[tuple[str, str, int]]) -> list[tuple[str, int, list[str]]]:
-    """(scene, spp, labels still to measure) for every sequence with work left."""
-    groups = []
-    for scene in plan.scenes:
-        for spp in plan.spp:
-            labels = [label for label in plan.labels if (label, scene, spp) not in done]
-            if labels:
-                groups.append((scene, spp, labels))
-    return groups
+def pending_groups(plan: RunPlan, done: set[UnitKey]) -> list[tuple[str, int, list[str]]]:
+    """(scene, spp, labels still to measure) for every sequence with work left, in the plan's order."""
+    groups: dict[tuple[str, int], list[str]] = {}
+    for label, scene, spp in plan.missing(done):
+        groups.setdefault((scene, spp), []).append(label)
+    return [(scene, spp, labels) for (scene, spp), labels in groups.items()]
 
 
 def measure_group(
@@ -516,6 +532,8 @@ def run_local(
     for scene, spp, _ in pending_groups(plan, store.done_units(plan.run_id)):
         # re-read what is done: another process may be working on the same run
         done = store.done_units(plan.run_id)
-        labels = [label for label in plan.labels if (label, scene, spp) not in done]
+        labels = [label for label, s, p in plan.missing(done) if (s, p) == (scene, spp)]
+        if not labels:
+            continue
         for unit in measure_group(dataset, plan, scene, spp, labels, instances):
             on_unit(unit, store.write_unit(plan.run_id, unit))

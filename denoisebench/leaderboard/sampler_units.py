@@ -30,8 +30,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from denoisebench.errors import UserInputError
+from denoisebench.leaderboard.names import PAIR_LABEL_SEPARATOR, PAIR_SPEC_SEPARATOR, SAMPLER_SPEC_PREFIX
+from denoisebench.leaderboard.records import UnitRecord
 
-SEPARATOR = "+"
+SEPARATOR = PAIR_LABEL_SEPARATOR  # between a pair's sampler and denoiser labels
 
 
 @dataclass(frozen=True)
@@ -92,9 +94,19 @@ def register_pairs(store, run_id: str, pairs: list[SamplerPair], denoisers) -> N
     by_label = {d.label: d for d in denoisers}
     for pair in pairs:
         denoiser = by_label.get(pair.denoiser) if pair.denoiser else None
-        spec = f"sampler {pair.sampler}" + (f" + {denoiser.spec}" if denoiser else "")
+        spec = f"{SAMPLER_SPEC_PREFIX}{pair.sampler}" + (f"{PAIR_SPEC_SEPARATOR}{denoiser.spec}" if denoiser else "")
         needs = denoiser.needs if denoiser else {"color"}
-        store.add_denoiser(run_id, pair.label, spec, "sampler", needs, bool(denoiser and denoiser.temporal), None)
+        store.add_denoiser(
+            run_id,
+            pair.label,
+            spec,
+            "sampler",
+            needs,
+            bool(denoiser and denoiser.temporal),
+            None,
+            sampler=pair.sampler,
+            denoiser_label=pair.denoiser,
+        )
 
 
 def live_sequence(dataset, scene: str, spp: int, pair: SamplerPair, live=None, maps: list | None = None):
@@ -137,7 +149,6 @@ def measure_pairs(dataset, plan, scene: str, spp: int, pairs: list[SamplerPair],
     """Yield the UnitRecord of every pair on ``scene`` at ``spp`` (one live render per sampler)."""
     from denoisebench.leaderboard.runner import measure_unit
     from denoisebench.leaderboard.sampler_maps import frame_records
-    from denoisebench.leaderboard.store import UnitRecord
 
     by_sampler: dict[str, list[SamplerPair]] = {}
     for pair in pairs:

@@ -3,8 +3,11 @@
 Tables (schema version :data:`SCHEMA_VERSION`, kept in ``schema_version``):
 
 ``runs``            one row per benchmark run: dataset hash, config (JSON), software versions (JSON)
-``run_denoisers``   the denoisers of a run: label, spec, needs, temporal, load error (if any), and
-                    ``trained_on``: the run's scenes the denoiser declared it was trained on (JSON list)
+``run_denoisers``   the labels of a run (noisy input, denoisers, sampler pairs): label, spec, needs,
+                    temporal, load error (if any), ``trained_on``: the run's scenes the denoiser
+                    declared it was trained on (JSON list), and the run's **sampler dimension**:
+                    ``sampler`` (the live sampler whose image the label scores; NULL: the dataset's
+                    stored input) and ``denoiser_label`` (the denoiser run on it; NULL: none)
 ``units``           one denoiser on one sequence (scene) at one input spp: status, error, seconds
 ``frames``          one row per frame of a unit: status, error, render/denoise/total seconds
 ``frame_metrics``   metric values per frame (spatial, gradient, and per-frame flicker), with the
@@ -32,7 +35,12 @@ Notes
   NULL floors); opened read-only it is read as it is, every floor None. Version 3 added
   ``run_denoisers.trained_on`` (migrated the same way; NULL: not declared). Version 4 added the
   ``not_applicable`` table (created when an older database is opened for writing; read as empty
-  from an older one opened read-only). A newer version than this code knows is refused.
+  from an older one opened read-only). Version 5 added ``run_denoisers.sampler`` and
+  ``run_denoisers.denoiser_label``; migrating fills them in from each row's kind, label and spec
+  (:func:`sampler_dimension`, the rule :mod:`.sampler_units` labels pairs by), and an older
+  database opened read-only gets the same values from the same rule when read. A newer version
+  than this code knows is refused.
+* **Rows.** Readers return typed rows (:mod:`.records`), readable by attribute or by key.
 * The WAL journal mode is a property of the database file; network file systems do not support it
   (SQLite's documentation): keep the database on a local disk.
 """
@@ -45,7 +53,6 @@ import sqlite3
 import zlib
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -53,10 +60,23 @@ import numpy as np
 
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard import sampler_maps
+from denoisebench.leaderboard.finite import finite_or_none
+from denoisebench.leaderboard.names import PAIR_LABEL_SEPARATOR, PAIR_SPEC_SEPARATOR, SAMPLER_SPEC_PREFIX
+from denoisebench.leaderboard.records import (  # noqa: F401 (FrameRecord, UnitRecord: re-exported from records)
+    EntryRow,
+    FrameRecord,
+    FrameRow,
+    NotApplicableRow,
+    RunRow,
+    SequenceRow,
+    StripRow,
+    UnitRecord,
+    UnitRow,
+)
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 #: Versions this code reads (older ones are migrated when opened for writing).
-READABLE_VERSIONS = (1, 2, 3, 4)
+READABLE_VERSIONS = (1, 2, 3, 4, 5)
 #: Seconds a writer waits for another's transaction before giving up.
 BUSY_TIMEOUT_S = 120.0
 
@@ -80,6 +100,8 @@ CREATE TABLE IF NOT EXISTS run_denoisers (
     temporal INTEGER NOT NULL,
     load_error TEXT,
     trained_on TEXT,
+    sampler TEXT,
+    denoiser_label TEXT,
     PRIMARY KEY (run_id, label)
 );
 CREATE TABLE IF NOT EXISTS units (
@@ -171,67 +193,29 @@ CREATE TABLE IF NOT EXISTS strips (
 
 _UNIT_TABLES = ("frames", "frame_metrics", "sequence_metrics", "images", "strips", "not_applicable")
 #: The tables of a unit that exist in a database of each schema version.
-_UNIT_TABLES_OF = {1: _UNIT_TABLES[:4], 2: _UNIT_TABLES[:5], 3: _UNIT_TABLES[:5], 4: _UNIT_TABLES}
+_UNIT_TABLES_OF = {1: _UNIT_TABLES[:4], 2: _UNIT_TABLES[:5], 3: _UNIT_TABLES[:5], 4: _UNIT_TABLES, 5: _UNIT_TABLES}
 
 
 def utc_now() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
 
 
-@dataclass
-class FrameRecord:
-    """One frame of a unit: what the runner measured."""
+def sampler_dimension(kind: str, label: str, spec: str) -> tuple[str | None, str | None]:
+    """(sampler, denoiser_label) of a ``run_denoisers`` row from its kind, label and spec.
 
-    frame: int
-    status: str
-    error: str | None
-    render_seconds: float | None
-    denoise_seconds: float | None
-    total_seconds: float | None
-    sanitized: int = 0
-    metrics: dict[str, float] = field(default_factory=dict)
-    floors: dict[str, float] = field(default_factory=dict)  # reference-noise floor per MSE-family metric
-    ref_se: dict[str, float] = field(default_factory=dict)  # the score's standard error from the reference's noise
-    not_applicable: dict[str, str] = field(default_factory=dict)  # metric → why it does not apply to this frame
-
-
-@dataclass
-class UnitRecord:
-    """One denoiser on one scene's sequence at one spp, ready to be written in one transaction."""
-
-    denoiser: str
-    scene: str
-    spp: int
-    status: str
-    error: str | None
-    frames: list[FrameRecord]
-    sequence_metrics: dict[str, float] = field(default_factory=dict)
-    sequence_floors: dict[str, float] = field(default_factory=dict)
-    sequence_ref_se: dict[str, float] = field(default_factory=dict)
-    sequence_not_applicable: dict[str, str] = field(default_factory=dict)  # temporal metric → reason
-    image_frame: int | None = None
-    image: np.ndarray | None = None  # H×W×3 float32: the denoised frame ``image_frame``
-    strip_first: int | None = None  # first frame of the strip
-    strip_window: tuple[int, int, int] | None = None  # (top, left, side) of its crop
-    strip: np.ndarray | None = None  # F×side×side×3 float32 crops of consecutive outputs
-    sampler_frames: list = field(default_factory=list)  # live sampler units: sampler_maps.SamplerFrame per frame
-
-    @property
-    def denoise_seconds(self) -> float | None:
-        values = [f.denoise_seconds for f in self.frames if f.denoise_seconds is not None]
-        return float(sum(values)) if values else None
-
-    @property
-    def render_seconds(self) -> float | None:
-        values = [f.render_seconds for f in self.frames if f.render_seconds is not None]
-        return float(sum(values)) if values else None
-
-
-def _finite_or_none(value) -> float | None:
-    if value is None:
-        return None
-    value = float(value)
-    return value if np.isfinite(value) else None
+    The rule rows written before schema version 5 are read (and migrated) by: the noisy input (kind
+    ``input``) has neither; a denoiser is its own label on the stored inputs; a ``sampler`` row's
+    spec is ``sampler SPEC`` (the sampler alone, labelled ``SPEC``) or ``sampler SPEC + DSPEC``
+    (labelled ``SPEC+DLABEL``), as :mod:`.sampler_units` writes them (:mod:`.names`).
+    """
+    if kind == "input":
+        return None, None
+    if kind != "sampler":
+        return None, label
+    sampler = spec.removeprefix(SAMPLER_SPEC_PREFIX).split(PAIR_SPEC_SEPARATOR)[0]
+    if not label.startswith(sampler + PAIR_LABEL_SEPARATOR):
+        return sampler, None
+    return sampler, label[len(sampler) + len(PAIR_LABEL_SEPARATOR) :]
 
 
 def encode_image(image: np.ndarray) -> bytes:
@@ -290,6 +274,18 @@ class ResultsStore:
                 version = 3
             if version == 3:  # 3 → 4: the not_applicable table (created above)
                 self.conn.execute("UPDATE schema_version SET version = 4")
+                version = 4
+            if version == 4:  # 4 → 5: the sampler dimension, filled in from the rows' kind, label and spec
+                have = {row[1] for row in self.conn.execute("PRAGMA table_info(run_denoisers)")}
+                for column in ("sampler", "denoiser_label"):
+                    if column not in have:
+                        self.conn.execute(f"ALTER TABLE run_denoisers ADD COLUMN {column} TEXT")
+                rows = self.conn.execute("SELECT rowid, kind, label, spec FROM run_denoisers").fetchall()
+                self.conn.executemany(
+                    "UPDATE run_denoisers SET sampler = ?, denoiser_label = ? WHERE rowid = ?",
+                    [(*sampler_dimension(kind, label, spec), rowid) for rowid, kind, label, spec in rows],
+                )
+                self.conn.execute("UPDATE schema_version SET version = 5")
 
     def _check_version(self) -> None:
         try:
@@ -306,6 +302,7 @@ class ResultsStore:
         self.version = int(row[0])
         self._floor_columns = "floor, ref_se" if self.version >= 2 else "NULL, NULL"
         self._trained_column = "trained_on" if self.version >= 3 else "NULL"
+        self._sampler_columns = "sampler, denoiser_label" if self.version >= 5 else "NULL, NULL"
 
     @contextmanager
     def transaction(self) -> Iterator[sqlite3.Connection]:
@@ -358,12 +355,23 @@ class ResultsStore:
         temporal: bool,
         load_error: str | None,
         trained_on=None,
+        *,
+        sampler: str | None = None,
+        denoiser_label: str | None = None,
     ) -> None:
-        """``trained_on``: the run's scenes the denoiser was trained on (None: it declared none)."""
+        """Record a label of the run.
+
+        ``trained_on``: the run's scenes the denoiser was trained on (None: it declared none);
+        ``sampler``/``denoiser_label``: the label's place in the sampler dimension
+        (:class:`~.records.EntryRow`); a plain denoiser (kind ``denoiser``, no sampler) is its own
+        denoiser label.
+        """
+        if sampler is None and denoiser_label is None and kind == "denoiser":
+            denoiser_label = label
         with self.transaction() as conn:
             conn.execute(
-                "INSERT OR REPLACE INTO run_denoisers (run_id, label, spec, kind, needs, temporal, load_error, trained_on) "
-                "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                "INSERT OR REPLACE INTO run_denoisers (run_id, label, spec, kind, needs, temporal, load_error, trained_on, "
+                "sampler, denoiser_label) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
                 (
                     run_id,
                     label,
@@ -373,6 +381,8 @@ class ResultsStore:
                     int(bool(temporal)),
                     load_error,
                     None if trained_on is None else json.dumps(sorted(trained_on)),
+                    sampler,
+                    denoiser_label,
                 ),
             )
 
@@ -380,20 +390,17 @@ class ResultsStore:
         with self.transaction() as conn:
             conn.execute("UPDATE runs SET finished_at = ? WHERE run_id = ?", (utc_now(), run_id))
 
-    def run(self, run_id: str) -> dict:
+    def run(self, run_id: str) -> RunRow:
         row = self.conn.execute(
             "SELECT run_id, dataset_hash, dataset_path, config, versions, created_at, finished_at FROM runs WHERE run_id = ?",
             (run_id,),
         ).fetchone()
         if row is None:
             raise UserInputError(f"{self.path}: no run {run_id!r}")
-        keys = ("run_id", "dataset_hash", "dataset_path", "config", "versions", "created_at", "finished_at")
-        record = dict(zip(keys, row))
-        record["config"] = json.loads(record["config"])
-        record["versions"] = json.loads(record["versions"])
-        return record
+        run, data_hash, path, config, versions, created, finished = row
+        return RunRow(run, data_hash, path, json.loads(config), json.loads(versions), created, finished)
 
-    def runs(self, dataset_hash: str | None = None) -> list[dict]:
+    def runs(self, dataset_hash: str | None = None) -> list[RunRow]:
         """Every run (newest first), optionally only those on one dataset."""
         query = (
             "SELECT run_id FROM runs"
@@ -402,24 +409,31 @@ class ResultsStore:
         )
         return [self.run(r[0]) for r in self.conn.execute(query, (dataset_hash,) if dataset_hash else ())]
 
-    def denoisers(self, run_id: str) -> list[dict]:
+    def denoisers(self, run_id: str) -> list[EntryRow]:
+        """The labels of a run in the order they were added (noisy input, denoisers, sampler pairs)."""
         rows = self.conn.execute(
-            f"SELECT label, spec, kind, needs, temporal, load_error, {self._trained_column} FROM run_denoisers "
-            "WHERE run_id = ? ORDER BY rowid",
+            f"SELECT label, spec, kind, needs, temporal, load_error, {self._trained_column}, {self._sampler_columns} "
+            "FROM run_denoisers WHERE run_id = ? ORDER BY rowid",
             (run_id,),
         )
-        return [
-            {
-                "label": r[0],
-                "spec": r[1],
-                "kind": r[2],
-                "needs": json.loads(r[3]),
-                "temporal": bool(r[4]),
-                "load_error": r[5],
-                "trained_on": json.loads(r[6]) if r[6] else [],
-            }
-            for r in rows
-        ]
+        out = []
+        for label, spec, kind, needs, temporal, load_error, trained, sampler, denoiser_label in rows:
+            if self.version < 5:  # not stored yet: the rule the migration fills them in by
+                sampler, denoiser_label = sampler_dimension(kind, label, spec)
+            out.append(
+                EntryRow(
+                    label,
+                    spec,
+                    kind,
+                    json.loads(needs),
+                    bool(temporal),
+                    load_error,
+                    json.loads(trained) if trained else [],
+                    sampler,
+                    denoiser_label,
+                )
+            )
+        return out
 
     # ------------------------------------------------------------------ units
 
@@ -452,9 +466,9 @@ class ResultsStore:
                         f.frame,
                         f.status,
                         f.error,
-                        _finite_or_none(f.render_seconds),
-                        _finite_or_none(f.denoise_seconds),
-                        _finite_or_none(f.total_seconds),
+                        finite_or_none(f.render_seconds),
+                        finite_or_none(f.denoise_seconds),
+                        finite_or_none(f.total_seconds),
                         int(f.sanitized),
                     ),
                 )
@@ -466,9 +480,9 @@ class ResultsStore:
                             *key,
                             f.frame,
                             name,
-                            _finite_or_none(value),
-                            _finite_or_none(f.floors.get(name)),
-                            _finite_or_none(f.ref_se.get(name)),
+                            finite_or_none(value),
+                            finite_or_none(f.floors.get(name)),
+                            finite_or_none(f.ref_se.get(name)),
                         )
                         for name, value in f.metrics.items()
                     ],
@@ -489,9 +503,9 @@ class ResultsStore:
                     (
                         *key,
                         name,
-                        _finite_or_none(value),
-                        _finite_or_none(unit.sequence_floors.get(name)),
-                        _finite_or_none(unit.sequence_ref_se.get(name)),
+                        finite_or_none(value),
+                        finite_or_none(unit.sequence_floors.get(name)),
+                        finite_or_none(unit.sequence_ref_se.get(name)),
                     )
                     for name, value in unit.sequence_metrics.items()
                 ],
@@ -527,8 +541,8 @@ class ResultsStore:
                     unit.error,
                     len(unit.frames),
                     sum(f.status == "ok" for f in unit.frames),
-                    _finite_or_none(unit.denoise_seconds),
-                    _finite_or_none(unit.render_seconds),
+                    finite_or_none(unit.denoise_seconds),
+                    finite_or_none(unit.render_seconds),
                     utc_now(),
                 ),
             )
@@ -536,44 +550,24 @@ class ResultsStore:
 
     # ------------------------------------------------------------------ reading
 
-    def units(self, run_id: str) -> list[dict]:
+    def units(self, run_id: str) -> list[UnitRow]:
         rows = self.conn.execute(
             "SELECT denoiser, scene, spp, status, error, frames, frames_ok, denoise_seconds, render_seconds "
             "FROM units WHERE run_id = ? ORDER BY denoiser, scene, spp",
             (run_id,),
         )
-        keys = (
-            "denoiser",
-            "scene",
-            "spp",
-            "status",
-            "error",
-            "frames",
-            "frames_ok",
-            "denoise_seconds",
-            "render_seconds",
-        )
-        return [dict(zip(keys, r)) for r in rows]
+        return [UnitRow(*r) for r in rows]
 
-    def frames(self, run_id: str) -> list[dict]:
+    def frames(self, run_id: str) -> list[FrameRow]:
         """Every frame row of ``run_id`` with its metrics as ``metrics: {name: value}``, and
         ``floors``/``ref_se`` ``{name: value}`` for the metrics that have them."""
-        keys = (
-            "denoiser",
-            "scene",
-            "spp",
-            "frame",
-            "status",
-            "error",
-            "render_seconds",
-            "denoise_seconds",
-            "total_seconds",
-            "sanitized",
+        columns = (
+            "denoiser, scene, spp, frame, status, error, render_seconds, denoise_seconds, total_seconds, sanitized"
         )
         rows = {
-            tuple(r[:4]): dict(zip(keys, r), metrics={}, floors={}, ref_se={})
+            tuple(r[:4]): FrameRow(*r, metrics={}, floors={}, ref_se={})
             for r in self.conn.execute(
-                f"SELECT {', '.join(keys)} FROM frames WHERE run_id = ? ORDER BY denoiser, scene, spp, frame", (run_id,)
+                f"SELECT {columns} FROM frames WHERE run_id = ? ORDER BY denoiser, scene, spp, frame", (run_id,)
             )
         }
         for denoiser, scene, spp, frame, metric, value, floor, se in self.conn.execute(
@@ -581,15 +575,15 @@ class ResultsStore:
             (run_id,),
         ):
             row = rows.get((denoiser, scene, spp, frame))
-            if row is not None:
-                row["metrics"][metric] = value
+            if row is not None:  # a frozen row: its dicts are filled in here, once
+                row.metrics[metric] = value
                 if floor is not None:
-                    row["floors"][metric] = floor
+                    row.floors[metric] = floor
                 if se is not None:
-                    row["ref_se"][metric] = se
+                    row.ref_se[metric] = se
         return list(rows.values())
 
-    def not_applicable(self, run_id: str) -> list[dict]:
+    def not_applicable(self, run_id: str) -> list[NotApplicableRow]:
         """Rows of metrics that did not apply: denoiser, scene, spp, frame (-1: the sequence), metric, reason."""
         if self.version < 4:
             return []
@@ -598,7 +592,7 @@ class ResultsStore:
             "ORDER BY denoiser, scene, spp, frame, metric",
             (run_id,),
         )
-        return [dict(zip(("denoiser", "scene", "spp", "frame", "metric", "reason"), r)) for r in rows]
+        return [NotApplicableRow(*r) for r in rows]
 
     def not_applicable_summary(self, run_id: str) -> dict[str, dict]:
         """Per metric: how many frames (or sequences, frame -1) it did not apply to, and one reason."""
@@ -610,14 +604,14 @@ class ResultsStore:
         )
         return {metric: {"count": int(count), "reason": reason} for metric, count, reason in rows}
 
-    def sequence_metrics(self, run_id: str) -> list[dict]:
+    def sequence_metrics(self, run_id: str) -> list[SequenceRow]:
         """Temporal metric rows: denoiser, scene, spp, metric, value, floor, ref_se (None without)."""
         rows = self.conn.execute(
             f"SELECT denoiser, scene, spp, metric, value, {self._floor_columns} FROM sequence_metrics WHERE run_id = ? "
             "ORDER BY denoiser, scene, spp, metric",
             (run_id,),
         )
-        return [dict(zip(("denoiser", "scene", "spp", "metric", "value", "floor", "ref_se"), r)) for r in rows]
+        return [SequenceRow(*r) for r in rows]
 
     def image(self, run_id: str, denoiser: str, scene: str, spp: int) -> tuple[int, np.ndarray] | None:
         """(frame index, H×W×3 float32) of the stored output of a unit, or None."""
@@ -629,7 +623,7 @@ class ResultsStore:
             return None
         return int(row[0]), decode_image(row[3], row[1], row[2])
 
-    def strip(self, run_id: str, denoiser: str, scene: str, spp: int) -> dict | None:
+    def strip(self, run_id: str, denoiser: str, scene: str, spp: int) -> StripRow | None:
         """The unit's strip: {first_frame, top, left, side, crops F×side×side×3}, or None (none, or a v1 database)."""
         if self.version < 2:
             return None
@@ -641,7 +635,7 @@ class ResultsStore:
             return None
         first, count, top, left, side, blob = row
         crops = np.frombuffer(zlib.decompress(blob), dtype="<f4").reshape(count, side, side, 3).astype(np.float32)
-        return {"first_frame": int(first), "top": int(top), "left": int(left), "side": int(side), "crops": crops}
+        return StripRow(int(first), int(top), int(left), int(side), crops)
 
     def integrity_problems(self) -> list[str]:
         """SQLite's integrity check plus ours: every frame row belongs to a unit row and vice versa."""

@@ -14,16 +14,22 @@ Notes
   dataset moved to another folder is the same dataset; one regenerated with another seed is not.
 * Seconds are those of the run the entry comes from; runs made on different machines or under
   different load are not comparable in time, only in accuracy.
+* **Samplers are a dimension.** Every entry says which live sampler made its input (None: the
+  dataset's stored input) and which denoiser ran on it (:class:`~.records.EntryRow`);
+  ``leaderboard(sampler=...)`` ranks one sampler's entries (``""``: the stored inputs' only), and
+  :func:`by_sampler` groups a ranking by sampler.
+* Per-scene values come from :class:`.run_index.RunIndex`, the one place they are computed.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard.aggregate import aggregate
-from denoisebench.leaderboard.runner import NOISY
+from denoisebench.leaderboard.finite import finite_mean
+from denoisebench.leaderboard.names import NOISY
+from denoisebench.leaderboard.run_index import RunIndex
 from denoisebench.leaderboard.store import ResultsStore
 
 
@@ -37,11 +43,8 @@ class Entry:
     total_seconds: float | None  # per frame: render at the spp + denoise
     run_id: str
     created_at: str
-
-
-def _mean(values):
-    values = [v for v in values if v is not None and math.isfinite(v)]
-    return sum(values) / len(values) if values else None
+    sampler: str | None = None  # the live sampler that made the input (None: the dataset's stored input)
+    denoiser_label: str | None = None  # the denoiser run on it (None: none)
 
 
 def pick_dataset(store: ResultsStore, dataset: str | None) -> str:
@@ -50,35 +53,29 @@ def pick_dataset(store: ResultsStore, dataset: str | None) -> str:
     if not runs:
         raise UserInputError(f"{store.path} holds no runs")
     if dataset is None:
-        return runs[0]["dataset_hash"]
+        return runs[0].dataset_hash
     matches = {
-        r["dataset_hash"]
+        r.dataset_hash
         for r in runs
-        if r["dataset_hash"].startswith(dataset) or r["dataset_path"].rstrip("/") == dataset.rstrip("/")
+        if r.dataset_hash.startswith(dataset) or r.dataset_path.rstrip("/") == dataset.rstrip("/")
     }
     if len(matches) != 1:
-        known = ", ".join(sorted({f"{r['dataset_hash'][:12]} ({r['dataset_path']})" for r in runs}))
+        known = ", ".join(sorted({f"{r.dataset_hash[:12]} ({r.dataset_path})" for r in runs}))
         raise UserInputError(f"dataset {dataset!r} matches {len(matches)} datasets in {store.path}; known: {known}")
     return matches.pop()
 
 
-def _per_scene(m, label: str, ok_frames: list[dict], sequences: list[dict]) -> dict[str, float]:
-    """{scene: value} of one denoiser: its sequence value (temporal) or the mean over its frames."""
-    if m.temporal:
-        return {
-            s["scene"]: s["value"]
-            for s in sequences
-            if s["denoiser"] == label and s["metric"] == m.name and s["value"] is not None
-        }
-    by_scene: dict[str, list] = {}
-    for f in ok_frames:
-        if f["denoiser"] == label:
-            by_scene.setdefault(f["scene"], []).append(f["metrics"].get(m.name))
-    return {scene: v for scene, values in by_scene.items() if (v := _mean(values)) is not None}
+def leaderboard(
+    store: ResultsStore,
+    metric: str = "relmse_robust",
+    spp: int | None = None,
+    dataset: str | None = None,
+    sampler: str | None = None,
+):
+    """(metric object, spp, dataset hash, entries ranked best first).
 
-
-def leaderboard(store: ResultsStore, metric: str = "relmse_robust", spp: int | None = None, dataset: str | None = None):
-    """(metric object, spp, dataset hash, entries ranked best first)."""
+    ``sampler``: rank only the entries whose input that live sampler made (``""``: only those on the
+    dataset's stored inputs, the noisy input among them); None: every entry."""
     from denoisebench.metrics import get_metric
 
     try:
@@ -87,7 +84,7 @@ def leaderboard(store: ResultsStore, metric: str = "relmse_robust", spp: int | N
         raise UserInputError(str(exc)) from None
     data_hash = pick_dataset(store, dataset)
     runs = store.runs(data_hash)  # newest first
-    available = sorted({u["spp"] for r in runs for u in store.units(r["run_id"])})
+    available = sorted({u.spp for r in runs for u in store.units(r.run_id)})
     if not available:
         raise UserInputError(f"{store.path}: no results for dataset {data_hash[:12]}")
     if spp is None:
@@ -97,32 +94,36 @@ def leaderboard(store: ResultsStore, metric: str = "relmse_robust", spp: int | N
     entries: dict[str, Entry] = {}
     unmeasured: dict[str, Entry] = {}
     for run in runs:
-        run_id = run["run_id"]
-        units = [u for u in store.units(run_id) if u["spp"] == spp]
-        labels = {u["denoiser"] for u in units} - set(entries)
+        run_id = run.run_id
+        dimension = {d.label: (d.sampler, d.denoiser_label) for d in store.denoisers(run_id)}
+        all_units = store.units(run_id)
+        labels = {
+            u.denoiser
+            for u in all_units
+            if u.spp == spp and (sampler is None or (dimension.get(u.denoiser, (None,))[0] or "") == sampler)
+        } - set(entries)
         if not labels:
             continue
-        frames = [f for f in store.frames(run_id) if f["spp"] == spp and f["denoiser"] in labels | {NOISY}]
-        sequences = [s for s in store.sequence_metrics(run_id) if s["spp"] == spp and s["denoiser"] in labels | {NOISY}]
-        ok_frames = [f for f in frames if f["status"] == "ok"]
-        noisy = _per_scene(m, NOISY, ok_frames, sequences) if m.aggregate == "relative_to_input" else None
+        run_index = RunIndex(all_units, store.frames(run_id), store.sequence_metrics(run_id))
+        noisy = run_index.per_scene(NOISY, spp, m.name)[0] if m.aggregate == "relative_to_input" else None
         for label in sorted(labels):
-            mine = [f for f in frames if f["denoiser"] == label]
-            ok = [f for f in mine if f["status"] == "ok"]
-            value = aggregate(m.aggregate, _per_scene(m, label, ok_frames, sequences), noisy)[0]
-            failed = sum(1 for u in units if u["denoiser"] == label and u["status"] != "ok")
+            ok = run_index.ok_frames(label, spp)
+            value = aggregate(m.aggregate, run_index.per_scene(label, spp, m.name)[0], noisy)[0]
+            failed = sum(1 for u in run_index.units_of(label, spp) if u.status != "ok")
+            where = dimension.get(label, (None, label))
             if value is None and not failed:  # this run did not compute the metric: look further back
-                unmeasured.setdefault(label, Entry(label, None, len(ok), 0, None, None, run_id, run["created_at"]))
+                unmeasured.setdefault(label, Entry(label, None, len(ok), 0, None, None, run_id, run.created_at, *where))
                 continue
             entries[label] = Entry(
                 label,
                 value if not failed else None,
                 len(ok),
                 failed,
-                _mean(f["denoise_seconds"] for f in ok),
-                _mean(f["total_seconds"] for f in ok),
+                finite_mean(f.denoise_seconds for f in ok),
+                finite_mean(f.total_seconds for f in ok),
                 run_id,
-                run["created_at"],
+                run.created_at,
+                *where,
             )
     for label, entry in unmeasured.items():
         entries.setdefault(label, entry)
@@ -131,6 +132,14 @@ def leaderboard(store: ResultsStore, metric: str = "relmse_robust", spp: int | N
         entries.values(), key=lambda e: (e.value is None, sign * e.value if e.value is not None else 0.0, e.denoiser)
     )
     return m, spp, data_hash, ranked
+
+
+def by_sampler(entries: list[Entry]) -> dict[str | None, list[Entry]]:
+    """A ranking grouped by the sampler that made each entry's input (None: the stored inputs), in rank order."""
+    groups: dict[str | None, list[Entry]] = {}
+    for entry in entries:
+        groups.setdefault(entry.sampler, []).append(entry)
+    return groups
 
 
 def _fmt(value: float | None, digits: int = 4) -> str:

@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from denoisebench.errors import UserInputError
+from denoisebench.leaderboard.names import NOISY
 
 #: The resolution a report's time axis is for unless ``--time-at`` says otherwise.
 DEFAULT_TIME_AT = (1920, 1080)
@@ -253,8 +254,6 @@ class TimeModel:
 
     def denoise_seconds(self, label: str, spp: float) -> float | None:
         """Seconds per frame of ``label`` at the time axis' resolution (0 for the noisy input)."""
-        from denoisebench.leaderboard.runner import NOISY
-
         if label == NOISY:
             return 0.0
         cost = self.denoisers.get(label)
@@ -311,8 +310,6 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
 
     ``time_at`` None: :data:`DEFAULT_TIME_AT`. Without any second-size timing the model stays at the
     dataset's resolution (``projected`` False) and says so in ``notes``."""
-    from denoisebench.leaderboard.runner import NOISY
-
     width0, height0 = dataset_size
     pixels0 = int(width0 * height0)
     requested = tuple(time_at or DEFAULT_TIME_AT)

@@ -1,0 +1,29 @@
+"""Names every part of the leaderboard shares: the noisy input's label and the metric groups.
+
+The runner stores rows under these names and the analyses and reports read them back by the same
+names, so they live here, below all of them, rather than in any one of them.
+"""
+
+from __future__ import annotations
+
+#: The label of the noisy input itself (the "just render more samples" point of a run).
+NOISY = "noisy"
+
+#: Metrics the report leads with; always computed (temporal ones on sequences of ≥ 2 frames).
+REQUIRED_METRICS = ("relmse_robust", "relmse", "flip", "temporal_relmse_robust", "temporal_relmse", "tpsnr")
+
+#: Per-frame flicker: these temporal metrics of frames (t−1, t), stored as frame metrics
+#: ``flicker.<name>`` of frame t (scale-free ones: the flicker figure averages them over scenes).
+#: Runs before issue 15 stored temporal_l1 as ``flicker``.
+FLICKER_METRICS = ("temporal_relmse_robust", "temporal_relmse", "tpsnr")
+FLICKER_PREFIX = "flicker."
+
+#: The error metrics of the accuracy-against-time figure, in panel order (the first leads:
+#: :mod:`denoisebench.metrics.robust`).
+ERROR_METRICS = ("relmse_robust", "relmse", "flip")
+
+#: A sampler × denoiser pair is labelled ``SAMPLER+DENOISER`` (the sampler alone: ``SAMPLER``).
+PAIR_LABEL_SEPARATOR = "+"
+#: A pair's ``spec`` in the store: ``sampler SAMPLER_SPEC`` then, with a denoiser, `` + DENOISER_SPEC``.
+SAMPLER_SPEC_PREFIX = "sampler "
+PAIR_SPEC_SEPARATOR = " + "

@@ -1,0 +1,118 @@
+"""One run's rows indexed once, and the one place a metric's per-scene value is computed.
+
+Everything that combines scenes (the report's summary table, ``denoisebench leaderboard``, the
+effect breakdown, the unresolved-reference rule) asks :class:`RunIndex` for a label's value on a
+scene, so they all read the same number the same way.
+
+Notes
+-----
+* **Per-scene value.** A metric the run stored per sequence (temporal metrics, :mod:`.store`'s
+  ``sequence_metrics``) and not per frame has the sequence's value on a scene; any other metric the
+  mean over the scene's successful frames. Which table holds it decides, not the metric registry, so
+  a run whose plugin metric is no longer installed reads the same. Values that are not finite are
+  left out (:mod:`.finite`).
+* **Floors.** A scene's floor is the mean of its frames' floors (all frames must have one) and its
+  reference standard error that of the mean over frames, sqrt(Σ se²)/n.
+* **Indexed once.** Frames are grouped by (label, spp) and (label, spp, scene), sequence values by
+  (label, spp, scene, metric), units by (label, spp), when the index is built: a lookup never
+  rescans the run's rows. Lists keep the store's order (label, scene, spp, frame).
+"""
+
+from __future__ import annotations
+
+import math
+
+from denoisebench.leaderboard.finite import finite_mean, finite_values
+from denoisebench.leaderboard.records import FrameRow, SequenceRow, UnitRow
+
+
+class RunIndex:
+    """A run's units, frames and sequence values, indexed by label, spp and scene."""
+
+    def __init__(self, units: list[UnitRow], frames: list[FrameRow], sequences: list[SequenceRow]):
+        self.unit_rows, self.frame_rows, self.sequence_rows = units, frames, sequences
+        self.spp = sorted({u.spp for u in units})
+        self.scenes = sorted({u.scene for u in units})
+        stored = {m for f in frames for m in f.metrics}
+        self.frame_metric_names = sorted(m for m in stored if not m.startswith("flicker"))
+        self.sequence_metric_names = sorted({s.metric for s in sequences})
+        #: the per-frame flicker names stored (``flicker.<metric>``, or ``flicker`` of older runs)
+        self.flicker_names = {m for m in stored if m.startswith("flicker")}
+        self._units: dict[tuple[str, int], list[UnitRow]] = {}
+        self._unit_ok: set[tuple[str, int, str]] = set()
+        for u in units:
+            self._units.setdefault((u.denoiser, u.spp), []).append(u)
+            if u.status == "ok":
+                self._unit_ok.add((u.denoiser, u.spp, u.scene))
+        self._frames_of: dict[str, list[FrameRow]] = {}
+        self._ok: dict[tuple, list[FrameRow]] = {}
+        for f in frames:
+            self._frames_of.setdefault(f.denoiser, []).append(f)
+            if f.status == "ok":
+                self._ok.setdefault((f.denoiser, f.spp), []).append(f)
+                self._ok.setdefault((f.denoiser, f.spp, f.scene), []).append(f)
+        self._sequences: dict[tuple[str, int, str, str], list[SequenceRow]] = {}
+        for s in sequences:
+            self._sequences.setdefault((s.denoiser, s.spp, s.scene, s.metric), []).append(s)
+
+    # ------------------------------------------------------------------ rows
+
+    def units_of(self, label: str, spp: int) -> list[UnitRow]:
+        """The units of ``label`` at ``spp`` (one per scene it was run on)."""
+        return self._units.get((label, spp), [])
+
+    def frames_of(self, label: str) -> list[FrameRow]:
+        """Every frame row of ``label``, failed ones included."""
+        return self._frames_of.get(label, [])
+
+    def ok_frames(self, label: str, spp: int, scene: str | None = None) -> list[FrameRow]:
+        """The successful frames of ``label`` at ``spp`` (on one scene, or on every scene in order)."""
+        return self._ok.get((label, spp) if scene is None else (label, spp, scene), [])
+
+    def unit_ok(self, label: str, spp: int, scene: str) -> bool:
+        return (label, spp, scene) in self._unit_ok
+
+    # ------------------------------------------------------------------ per-scene values
+
+    def is_sequence_metric(self, metric: str) -> bool:
+        """True when the run holds ``metric`` per sequence only (a temporal metric)."""
+        return metric in self.sequence_metric_names and metric not in self.frame_metric_names
+
+    def scene_value(self, label: str, spp: int, scene: str, metric: str) -> float | None:
+        """The value of ``metric`` for ``label`` on one scene: its sequence value, or its frames' mean."""
+        if self.is_sequence_metric(metric):
+            values = [s.value for s in self._sequences.get((label, spp, scene, metric), [])]
+        else:
+            values = [f.metrics.get(metric) for f in self.ok_frames(label, spp, scene)]
+        return finite_mean(values)
+
+    def scene_floor(self, label: str, spp: int, scene: str, metric: str) -> tuple[float | None, float | None]:
+        """(floor, ref_se) of a metric on one scene: frames' mean floor, se of the frames' mean."""
+        if self.is_sequence_metric(metric):
+            rows = self._sequences.get((label, spp, scene, metric), [])
+            floors, ses = finite_values(r.floor for r in rows), finite_values(r.ref_se for r in rows)
+        else:
+            frames = self.ok_frames(label, spp, scene)
+            floors = finite_values(f.floors.get(metric) for f in frames)
+            ses = finite_values(f.ref_se.get(metric) for f in frames)
+            if len(floors) != len(frames):
+                floors = []
+            ses = ses if len(ses) == len(frames) else []
+        floor = finite_mean(floors)
+        se = float(math.sqrt(sum(x * x for x in ses)) / len(ses)) if ses else None
+        return floor, se
+
+    def per_scene(self, label: str, spp: int, metric: str, scenes=None) -> tuple[dict, dict, dict]:
+        """({scene: value}, {scene: floor}, {scene: ref_se}) over ``scenes`` (default: every scene)."""
+        values, floors, ses = {}, {}, {}
+        for scene in self.scenes if scenes is None else scenes:
+            value = self.scene_value(label, spp, scene, metric)
+            if value is None:
+                continue
+            values[scene] = value
+            floor, se = self.scene_floor(label, spp, scene, metric)
+            if floor is not None:
+                floors[scene] = floor
+            if se is not None:
+                ses[scene] = se
+        return values, floors, ses
