@@ -96,7 +96,7 @@ def test_results_json_counts_the_plugins_unsampled_half(run):
     (row,) = samplers["undersampled"]
     assert (row["sampler"], row["spp"], row["frames_affected"], row["pixels_max"]) == (spec, SPP, FRAMES, 128)
     assert row["pixels_total"] == FRAMES * 128
-    assert samplers["map_scale"] == {row["scene"]: 2 * SPP}
+    assert samplers["map_scale"] == [{"scene": row["scene"], "spp": SPP, "top": 2 * SPP}]
 
 
 def test_the_warning_is_in_report_md_and_index_html(run):

@@ -66,7 +66,7 @@ def sampler_scale_text() -> str:
     """How to read the spp maps."""
     return (
         "Each sampler's samples per pixel at the frame shown, beside its image: viridis colours, linear from "
-        "0 spp (dark violet) to the largest count any sampler gave a pixel of that scene (yellow, stated under "
+        "0 spp (dark violet) to the largest count any sampler gave a pixel of that scene at that spp (yellow, stated under "
         "each map); red: a pixel with fewer than 1 sample (its value is 0, not an estimate). A sampler's pairs "
         "with denoisers share its render and its map."
     )

@@ -7,8 +7,8 @@ Notes
 -----
 * **Whose map.** A sampler's pairs (``SAMPLER+DENOISER``) share its live render, so the maps and
   counts shown are those of the sampler alone (the labels in the run's ``samplers`` config).
-* **Scale.** The maps of one scene share one linear scale, from 0 spp to the largest count any of
-  its samplers gave a pixel, so that they compare at a glance (:func:`~.images.spp_map_png`;
+* **Scale.** The maps of one scene at one spp share one linear scale, from 0 spp to the largest
+  count any of its samplers gave a pixel, so that they compare at a glance (:func:`~.images.spp_map_png`;
   viridis, pixels with fewer than one sample in red).
 * **Unsampled pixels.** A pixel with fewer than one sample has the value 0, not an estimate, and
   its error counts against the sampler; the report lists every (sampler, scene, spp) where that
@@ -24,7 +24,7 @@ def sampler_section(store, run: dict) -> dict | None:
     """{samplers, frames, maps, undersampled, scale} of the run's live samplers, or None without samplers.
 
     ``frames``: one row per sampler, scene, spp and frame (samples, mean and max spp, pixels without a
-    sample); ``maps``: {(sampler, scene, spp): (frame, H×W int32)}; ``scale``: {scene: top spp};
+    sample); ``maps``: {(sampler, scene, spp): (frame, H×W int32)}; ``scale``: {(scene, spp): top spp};
     ``undersampled``: one row per (sampler, scene, spp) that left pixels with fewer than one sample.
     """
     samplers = list((run.get("config") or {}).get("samplers") or [])
@@ -37,7 +37,8 @@ def sampler_section(store, run: dict) -> dict | None:
         frames.append({"sampler": r["denoiser"], **{k: r[k] for k in keys}})
         if r["spp_map"] is not None:
             maps[(r["denoiser"], r["scene"], r["spp"])] = (r["frame"], r["spp_map"])
-            scale[r["scene"]] = max(scale.get(r["scene"], 1), int(r["spp_map"].max()) if r["spp_map"].size else 1)
+            top = int(r["spp_map"].max()) if r["spp_map"].size else 1
+            scale[(r["scene"], r["spp"])] = max(scale.get((r["scene"], r["spp"]), 1), top)
     undersampled = []
     groups: dict[tuple, list[dict]] = {}
     for f in frames:
@@ -79,7 +80,7 @@ def map_entry(section: dict | None, label: str, scene: str, spp: int, frame: int
     kept, counts = section["maps"][(label, scene, spp)]
     if kept != frame:
         return None
-    top = section["scale"][scene]
+    top = section["scale"][(scene, spp)]
     png = images.spp_map_png(counts, top, scale)
     return {
         "image": images.data_uri(png),
@@ -99,6 +100,6 @@ def as_json(section: dict | None) -> dict | None:
     return {
         "samplers": section["samplers"],
         "frames": section["frames"],
-        "map_scale": section["scale"],
+        "map_scale": [{"scene": scene, "spp": spp, "top": top} for (scene, spp), top in section["scale"].items()],
         "undersampled": section["undersampled"],
     }
