@@ -134,6 +134,12 @@ class LoadedDenoiser:
     load_error: str | None = None
     trained_scenes: frozenset[str] = frozenset()  # what the denoiser declared (learned models: their checkpoint's)
 
+    @property
+    def loaded(self) -> bool:
+        """It loaded (and is measured): judged by the error, so that a plan sent without its
+        instances (:func:`.ray_executor.light_plan`) has the same labels."""
+        return self.load_error is None
+
 
 # --------------------------------------------------------------------------------------------------
 # identity of a run
@@ -420,7 +426,7 @@ class RunPlan:
 
     @property
     def labels(self) -> list[str]:
-        return [NOISY] + [d.label for d in self.denoisers if d.instance is not None] + [p.label for p in self.samplers]
+        return [NOISY] + [d.label for d in self.denoisers if d.loaded] + [p.label for p in self.samplers]
 
     def unit_keys(self) -> list[UnitKey]:
         """Every unit of the run, (label, scene, spp), scene by scene and spp by spp, labels in order."""
@@ -436,7 +442,7 @@ class RunPlan:
 
     def trained_on(self) -> dict[str, list[str]]:
         """Denoisers (label) that were trained on some of this run's scenes, and those scenes."""
-        seen = {d.label: sorted(set(self.scenes) & d.trained_scenes) for d in self.denoisers if d.instance is not None}
+        seen = {d.label: sorted(set(self.scenes) & d.trained_scenes) for d in self.denoisers if d.loaded}
         return {label: scenes for label, scenes in seen.items() if scenes}
 
 
