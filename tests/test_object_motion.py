@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from motion_helpers import sub_frame_renders
 from pxr import Gf, UsdGeom
 
 from denoisebench.generator.contract.render_plan import make_render_plan
@@ -60,18 +61,6 @@ def _z_scores(ours, ours_var, subs):
     n = len(subs)
     vb = np.sum(np.square(blocks[0::2] - blocks[1::2]), axis=0) / n**2
     return (a - blocks.mean(0)) / np.sqrt(va + vb + 1e-12)
-
-
-def sub_frame_renders(mi, translated, count: int, spp: int) -> list[np.ndarray]:
-    """Mitsuba ``path`` renders of frame 1 at ``count`` stratified, jittered shutter times (-0.5..0.5)."""
-    rng = np.random.default_rng(0)
-    subs = []
-    for i in range(count):
-        tau = 0.5 + (i + rng.random()) / count
-        sensor = sensor_dict(translated.camera, 1, SIZE, SIZE, spp, seed=i)
-        sub = build_mitsuba_scene(translated_at(translated, tau), sensor, {"type": "path"})
-        subs.append(np.asarray(mi.render(sub, spp=spp, seed=i))[..., :3])
-    return subs
 
 
 @pytest.mark.parametrize("kind", ["rigid", "stretch"])

@@ -36,9 +36,11 @@ SIZE = 24
 BLOCK = 4
 OURS_SPP = 256  # 64 rounds of 4 (the adaptive reference's schedule at this cap)
 REPLICAS, REPLICA_SPP = 16, 16
+#: Cluttered seed with depth of field and six objects moving within the shutter; their motion scaled ×SPEED_UP.
+BLUR_SEED, SPEED_UP = 152, 6.0
 
 
-def our_reference(scene, translated, plan, frame, spp=OURS_SPP, seed=11):
+def our_reference(scene, translated, plan, frame, spp=OURS_SPP, seed=11, size=SIZE):
     """The reference as the dataset renders it: adaptive rounds (target unreachable: all rounds run)."""
 
     def render_round(index, round_spp):
@@ -47,8 +49,8 @@ def our_reference(scene, translated, plan, frame, spp=OURS_SPP, seed=11):
             translated.camera,
             frame,
             plan,
-            width=SIZE,
-            height=SIZE,
+            width=size,
+            height=size,
             spp=round_spp,
             seed=round_seed(seed, frame, index),
             reference=True,
@@ -136,42 +138,91 @@ def test_every_family_reference_matches_mitsuba_path(mi, tmp_path, family):
     assert_agree(z_image, z_blocks)
 
 
-def test_cluttered_blurred_reference_matches_a_mitsuba_sub_frame_average(mi, tmp_path):
-    """Object motion blur and a moving camera (cluttered seed 0) against 32 static sub-frames by ``path``.
+def _speed_up_movers(usd_path, factor: float, frame: float = 1.0) -> None:
+    """Scale every time-sampled op of the cluttered objects about its value at ``frame`` (travel and turn ×factor)."""
+    from pxr import Usd, UsdGeom
 
-    Sub-frame times are stratified and jittered over frame 1's shutter; each sub-frame freezes the
-    moving shapes (``translated_at``) and the camera at its time. Their average's variance is the
-    paired-strata estimate (conservative for stratified sampling).
+    stage = Usd.Stage.Open(str(usd_path))
+    for prim in stage.Traverse():
+        if not prim.GetName().startswith("Object"):
+            continue
+        for op in UsdGeom.Xformable(prim).GetOrderedXformOps():
+            times = op.GetTimeSamples()
+            if len(times) < 2:
+                continue
+            pivot = op.Get(frame)
+            for t in times:
+                value = op.Get(t)
+                op.Set(type(value)(pivot + factor * (value - pivot)), t)
+    stage.GetRootLayer().Save()
 
-    Pitfall: at 24 px this scene's blur is about a pixel, so the frame frozen at its time code passes
-    too (measured: worst block z 2.9); the power against a wrong blur is in tests/test_object_motion.py,
-    whose control rejects the frozen frame. This one checks the whole path on a real cluttered stage
-    (moving camera, several moving shapes, glass and mirrors, environment) for bias."""
-    from denoisebench.generator.render.motion import translated_at
 
-    translated = translate_usd(get_family("cluttered").author(tmp_path, seed=0, frames=2, width=SIZE, height=SIZE))
-    assert translated.shutter_moving
+def test_cluttered_blurred_dataset_reference_matches_a_sub_frame_average_and_a_frozen_one_does_not(mi, tmp_path):
+    """A cluttered stage with depth of field, object motion blur and a moving camera, rendered by
+    ``generate-dataset``: its stored reference of frame 1 agrees with 32 static sub-frame renders by ``path``
+    (tests/motion_helpers.py), and the same frame with the objects frozen at its time code (the camera
+    still moving, the lens still open: the image before object motion blur existed) is rejected.
+
+    Notes
+    -----
+    The family's movers travel 0.04-0.13 units and turn up to 20 degrees within the half-frame shutter,
+    objects 0.3-0.9 units across seen whole: over seeds 0-193 no 4×4 block of a 32 px albedo image
+    changes by more than 0.02 between blurred and frozen, far below what a CI-sized render resolves
+    (seed 152 as authored: frozen frame worst block z 3.1, like the blurred one). So the stage is seed
+    152 (six movers, depth of field) with its movers' travel and turn scaled ×6 about frame 1: measured
+    at 32 px, 256 spp, 32×16 sub-frame spp, blurred worst block z 3.1, mean z² 0.93; frozen worst block
+    z 9.8, mean z² 4.0, 8 % of blocks beyond 4. Frame 1 is the last of two, so USD holds the poses
+    after it: half the shutter moves, the sub-frames see the same clamp."""
+    from motion_helpers import paired_strata_variance, sub_frame_renders
+
+    from denoisebench.cli import main
+    from denoisebench.dataset import open_dataset
+
+    size, spp = 32, 256
+    shot = get_family("cluttered").author(tmp_path / "shot", seed=BLUR_SEED, frames=2, width=size, height=size)
+    _speed_up_movers(shot, SPEED_UP)
+    translated = translate_usd(shot)
+    assert {"depth_of_field", "motion_blur"} <= set(translated.effects) and translated.shutter_moving
     plan = make_render_plan(translated.effects, stage_max_depth=translated.max_depth)
-    assert plan.time_sampling
-    ours = our_reference(build_mitsuba_scene(translated, frame=1), translated, plan, 1)
-    camera = translated.camera
-    rng = np.random.default_rng(1)
-    count = 32
-    centre, span = 1 + 0.5 * (camera.shutter_open + camera.shutter_close), camera.shutter_close - camera.shutter_open
-    subs = []
-    for i in range(count):
-        tau = centre + span * ((i + rng.random()) / count - 0.5)
-        scene = build_mitsuba_scene(translated_at(translated, tau), shutter_motion=False)
-        sensor = sensor_dict(camera, tau, SIZE, SIZE, REPLICA_SPP)
-        sensor["to_world"] = mi.ScalarTransform4f(np.asarray(camera.mitsuba_to_world(tau), dtype=np.float64).tolist())
-        image = mi.render(scene, sensor=mi.load_dict(sensor), integrator=mi.load_dict({"type": "path"}), seed=900 + i)
-        subs.append(np.array(image)[..., :3].astype(np.float64))
-    subs = np.stack(subs)
-    var_b = np.sum(np.square(subs[0::2] - subs[1::2]), axis=0) / count**2
-    z_image, z_blocks = z_scores(
-        ours["color"].astype(np.float64), ours["color_var"].astype(np.float64), subs.mean(0), var_b
+    assert plan.time_sampling and plan.camera_model == "thin_lens"
+    common = ["--width", str(size), "--height", str(size), "--spp", "1", "--ref-spp", str(spp)]
+    assert (
+        main(["generate", "--out", str(tmp_path / "ds"), "--usd", str(shot), *common, "--ref-error", "0", "--quiet"])
+        == 0
+    )
+    dataset = open_dataset(tmp_path / "ds", verify=True)
+    (scene_name,) = dataset.scenes
+    assert {"depth_of_field", "motion_blur"} <= set(dataset.scene(scene_name).effects["inferred"])
+    layers, record = dataset.reference(scene_name, 1)
+    assert record["spp"] == spp
+    subs = sub_frame_renders(mi, translated, 32, 16, size=size, frame=1)
+    mean_b, var_b = np.mean(subs, axis=0, dtype=np.float64), paired_strata_variance(subs)
+    ours = layers["color"].astype(np.float64), layers["color_var"].astype(np.float64)
+    assert ours[0].mean() > 1e-2, "a black image compares nothing"
+    z_image, z_blocks = z_scores(*ours, mean_b, var_b)
+    frozen = render_frame(
+        build_mitsuba_scene(translated, frame=1, shutter_motion=False),
+        translated.camera,
+        1,
+        plan,
+        width=size,
+        height=size,
+        spp=spp,
+        seed=12,
+        reference=True,
+    ).buffers
+    z_frozen_image, z_frozen = z_scores(
+        frozen["color"].astype(np.float64), frozen["color_var"].astype(np.float64), mean_b, var_b
+    )
+    print(
+        "blurred", np.abs(z_blocks).max(), np.mean(z_blocks**2), "frozen", np.abs(z_frozen).max(), np.mean(z_frozen**2)
     )
     assert_agree(z_image, z_blocks)
+    assert np.mean(z_blocks**2) < 1.8, np.mean(z_blocks**2)
+    # The control: the frozen objects fail the same criterion, and clearly.
+    with pytest.raises(AssertionError):
+        assert_agree(z_frozen_image, z_frozen)
+    assert np.mean(z_frozen**2) > 2.5, np.mean(z_frozen**2)
 
 
 def test_plain_box_without_metadata_matches_mitsuba_path_and_a_cut_does_not(mi, tmp_path):
