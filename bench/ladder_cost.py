@@ -6,11 +6,14 @@ top rung's spp (``render_frame``), which is what the ladder would ideally cost, 
 ``--independent-rungs``' way (one render per rung, each with its own seed), what it cost before.
 All three render the same family scene, frame and plan as ``generate-dataset`` (every feature
 buffer and variance, returned as host arrays). Start-up is subtracted: each is warmed up once
-(Dr.Jit compilation and the ``dr.freeze`` recordings), then timed ``--repeats`` times, interleaved,
-and the medians are compared (the minima are printed too: other processes only ever add time).
+(Dr.Jit compilation and the ``dr.freeze`` recordings), then timed ``--repeats`` times, interleaved
+(the order reversed every other repeat). The ratio is the median over repeats of each repeat's
+ladder / top rung: the two run back to back, so a shared machine's load, which changes over
+seconds, weighs on both alike. The ratio of the medians and of the minima are printed beside it
+(other processes only ever add time).
 
     .venv/bin/python bench/ladder_cost.py [--family cornell] [--size 160] [--rungs 1,2,4,8,16,32,64]
-        [--repeats 5]
+        [--repeats 9]
 
 Prints seconds of each and the ratios ladder / top rung (target <= 1.15) and independent / top rung.
 """
@@ -40,7 +43,7 @@ def main(argv=None) -> int:
     parser.add_argument("--family", default="cornell")
     parser.add_argument("--size", type=int, default=160)
     parser.add_argument("--rungs", default="1,2,4,8,16,32,64")
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=9)
     args = parser.parse_args(argv)
     rungs = sorted({int(k) for k in args.rungs.split(",")})
     mi = load_mitsuba()
@@ -66,10 +69,11 @@ def main(argv=None) -> int:
     for run in runs.values():  # warm-up: compilation and freeze recordings
         run()
     times = {name: [] for name in runs}
-    for _ in range(args.repeats):
-        for name, run in runs.items():
+    for repeat in range(args.repeats):
+        order = list(runs) if repeat % 2 == 0 else list(reversed(runs))  # drift in load hits both sides alike
+        for name in order:
             start = time.perf_counter()
-            run()
+            runs[name]()
             times[name].append(time.perf_counter() - start)
     print(
         f"{args.family} {args.size}x{args.size}, rungs {','.join(map(str, rungs))}, "
@@ -80,8 +84,12 @@ def main(argv=None) -> int:
     base = statistics.median(times["top rung"])
     base_min = min(times["top rung"])
     for name in ("ladder", "independent"):
+        paired = statistics.median(a / b for a, b in zip(times[name], times["top rung"]))
         ratio = statistics.median(times[name]) / base
-        print(f"  {name} / top rung: {ratio:.3f}  [minima {min(times[name]) / base_min:.3f}]")
+        print(
+            f"  {name} / top rung: {paired:.3f}  [median of medians {ratio:.3f}, "
+            f"minima {min(times[name]) / base_min:.3f}]"
+        )
     return 0
 
 

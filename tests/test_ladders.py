@@ -184,3 +184,30 @@ def test_frozen_ladder_passes_replay_what_a_fresh_trace_computes(monkeypatch, fa
         for name in b.samples:
             assert np.array_equal(a.samples[name], b.samples[name]), (b.spp, name)
     assert not np.array_equal(frozen[0][-1].buffers["color"], frozen[1][-1].buffers["color"])
+
+
+def test_buffers_read_finished_rounds_while_a_launched_round_traces(family_scene):
+    """launch() queues a round; until finish(), buffers() and counts are those of the rounds before (bytes of plain renders)."""
+    from denoisebench.generator.render.frame import FrameStream
+
+    translated, scene = family_scene("cornell")
+    plan = make_render_plan(translated.effects, RenderOptions(per_sample=True))
+    kw = dict(width=SIZE, height=SIZE, seed=6)
+    stream = FrameStream(scene, translated.camera, 1, plan, **kw)
+    stream.advance(2)
+    stream.launch(3)
+    with pytest.raises(RuntimeError):
+        stream.launch(1)  # one round in flight at a time
+    during = stream.buffers()
+    assert (stream.counts == 2).all()
+    new = stream.finish()
+    after = stream.buffers()
+    plain2 = render_frame(scene, translated.camera, 1, plan, spp=2, **kw)
+    plain5 = render_frame(scene, translated.camera, 1, plan, spp=5, **kw)
+    for name in plain2.buffers:
+        assert np.array_equal(during[name], plain2.buffers[name]), name
+        assert np.array_equal(after[name], plain5.buffers[name]), name
+    for name in plain5.samples:
+        assert np.array_equal(new[name], plain5.samples[name][2:]), name  # the round's samples: 3..5
+    with pytest.raises(RuntimeError):
+        stream.finish()

@@ -339,6 +339,8 @@ class FrameStream:
         mi = load_mitsuba()
 
         self.scene, self.width, self.height = scene, int(width), int(height)
+        if self.width < 1 or self.height < 1:
+            raise ValueError(f"image size must be positive (got {width}x{height})")
         setup = camera_setup(camera, frame, plan, width, height)
         features = () if reference else tuple(f for f in FEATURES if f in plan.features)
         want_motion = "motion" in features and setup.has_previous
@@ -384,23 +386,44 @@ class FrameStream:
         self._chunk = max(1, max_paths_per_pass // (rows * width))  # samples per pixel per pass
         self._groups = [_lane_groups(band, width, target_lanes) for _, band in self._bands]
         self._state: list = [None] * len(self._bands)
-        self.counts = np.zeros((height, width), np.int64)
+        self._counts = np.zeros((height, width), np.int64)
+        self._round = None  # the launched round's (add, samples, pending, last), until finish()
         self._packed = np.zeros((height, width, self._layout["stride"]), np.float32)
+
+    @property
+    def counts(self) -> np.ndarray:
+        """H×W int32: samples per pixel so far (those of finished rounds: what :meth:`buffers` reads)."""
+        return self._counts.astype(np.int32)
 
     def advance(self, counts) -> dict[str, np.ndarray] | None:
         """Trace ``counts`` (H×W ints >= 0, or one int for every pixel) more samples per pixel.
 
         Returns this round's per-sample data when kept (name → N×H×W×C float32, N the largest count
         of the round; row ``j`` of pixel ``p`` is its ``j``-th new sample, zeros where ``j >=
-        counts[p]``), else ``None``.
+        counts[p]``), else ``None``. The same as :meth:`launch` then :meth:`finish`.
+        """
+        self.launch(counts)
+        return self.finish()
+
+    def launch(self, counts) -> None:
+        """Queue the passes of a round of ``counts`` more samples per pixel (:meth:`advance`); :meth:`finish` ends it.
+
+        Dr.Jit runs the queued kernels while Python goes on, so the host can assemble the previous
+        round's buffers (:meth:`buffers` reads finished rounds only) while this one traces: that is
+        how :func:`render_ladder` hides a rung's host work behind the next rung's samples. One round
+        at a time. Without per-sample data nothing waits for the kernels here; with it, a pass's
+        samples are copied out once the next pass is queued (so at most two passes' samples are on
+        the device).
         """
         mi = load_mitsuba()
 
+        if self._round is not None:
+            raise RuntimeError("finish() the launched round before launching another")
         add = np.broadcast_to(np.asarray(counts), (self.height, self.width))
         if not np.issubdtype(add.dtype, np.integer) or (add < 0).any():
             raise ValueError("per-pixel sample counts must be integers >= 0")
         add = add.astype(np.int64)
-        if int((self.counts + add).max(initial=0)) >= 1 << 31:
+        if int((self._counts + add).max(initial=0)) >= 1 << 31:
             raise ValueError("at most 2^31 - 1 samples per pixel")
         rows_most = int(add.max(initial=0))
         samples = None
@@ -409,10 +432,11 @@ class FrameStream:
                 k: np.zeros((rows_most, self.height, self.width, c), np.float32)
                 for k, c in self.sample_channels.items()
             }
-        layout = self._layout
+        pending = []  # (rows, offset, count, targets): per-sample data still on the device
+        last = {}  # band index → (rows, band, packed) of the band's last pass: all samples of the round
         for index, ((row0, band), groups) in enumerate(zip(self._bands, self._groups)):
             rows = slice(row0, row0 + band)
-            before = self.counts[rows]
+            before = self._counts[rows]
             extra = add[rows]
             most = int(extra.max(initial=0))
             for offset in range(0, most, self._chunk):
@@ -439,52 +463,80 @@ class FrameStream:
                     uniform,
                     self._state[index] is None,
                 )
-                state = self._state[index]
                 state, packed, targets = _compiled_pass(self.scene, config)(
                     self.scene,
                     params,
                     ranges,
-                    state,
+                    self._state[index],
                     self._values,
                     config,
                 )
                 self._state[index] = state
-                self._packed[rows] = np.asarray(packed, dtype=np.float32).reshape(band, self.width, layout["stride"])
-                if samples is not None:
-                    for name, chans in self.sample_channels.items():
-                        values = np.asarray(targets[name]).reshape(count, band, self.width, chans)
-                        samples[name][offset : offset + count, rows] = values
-                del packed, targets
-        self.counts = self.counts + add
+                last[index] = (rows, band, packed)
+                if targets is not None:
+                    if pending:
+                        self._copy_samples(samples, *pending.pop())
+                    pending.append((rows, offset, count, targets))
+        self._round = (add, samples, pending, last)
+
+    def finish(self) -> dict[str, np.ndarray] | None:
+        """Wait for the launched round, copy its per-pixel moments to the host; return its per-sample data.
+
+        What :meth:`advance` returns; afterwards :attr:`counts` and :meth:`buffers` include the round.
+        """
+        if self._round is None:
+            raise RuntimeError("no launched round to finish")
+        add, samples, pending, last = self._round
+        self._round = None
+        stride = self._layout["stride"]
+        for rows, band, packed in last.values():
+            self._packed[rows] = np.asarray(packed, dtype=np.float32).reshape(band, self.width, stride)
+        for entry in pending:
+            self._copy_samples(samples, *entry)
+        self._counts = self._counts + add
         return samples
 
+    def _copy_samples(self, samples: dict, rows: slice, offset: int, count: int, targets: dict) -> None:
+        """One pass's per-sample data (``targets``, on the device) into the round's host arrays."""
+        band = rows.stop - rows.start
+        for name, chans in self.sample_channels.items():
+            values = np.asarray(targets[name]).reshape(count, band, self.width, chans)
+            samples[name][offset : offset + count, rows] = values
+
     def buffers(self) -> dict[str, np.ndarray]:
-        """Means and variances of the mean of every sample so far (module docstring's conventions).
+        """Means and variances of the mean of every sample of the finished rounds (module docstring's conventions).
 
         A pixel without samples has mean 0 and variance ``inf``; one with a single sample has
         variance 0 (unknown, but finite, as in a 1-spp render).
+
+        Notes:
+            Each buffer is written once, contiguous, straight from the packed moments (a strided
+            read): means copied, variances as ``max(M2, 0) * scale`` in place, with ``scale = 1 /
+            ((n - 1) n)`` one float32 per pixel (one for the frame when counts are uniform).
         """
-        counts = self.counts
-        channels = list(self.stat_channels.items())
+        counts = self._counts
         half = self._layout["stride"] // 2  # means, then M2s (moment_layout)
-        means = self._packed[..., :half]
-        m2 = np.maximum(self._packed[..., half:], np.float32(0.0))
-        # var = M2 / ((n - 1) n): one float32 scale per pixel (one for the frame when counts are uniform).
         low, high = int(counts.min()), int(counts.max())
         if low == high:
-            var = m2 * np.float32(1.0 / ((low - 1) * low) if low > 1 else 0.0)
-            if low == 0:
-                var[...] = np.inf
+            scale = np.float32(1.0 / ((low - 1) * low) if low > 1 else 0.0)
+            empty = np.s_[...] if low == 0 else None
         else:
             n = counts.astype(np.float64)
             with np.errstate(divide="ignore"):
-                scale = np.where(counts > 1, 1.0 / ((n - 1) * n), 0.0).astype(np.float32)
-            var = m2 * scale[..., None]
-            var[counts == 0] = np.inf
+                scale = np.where(counts > 1, 1.0 / ((n - 1) * n), 0.0).astype(np.float32)[..., None]
+            empty = counts == 0
         out, at = {}, 0
-        for name, c in channels:
-            out[name] = np.ascontiguousarray(means[..., at : at + c])
-            out[f"{name}_var"] = np.ascontiguousarray(var[..., at : at + c])
+        for name, c in self.stat_channels.items():
+            shape = (self.height, self.width, c)
+            mean = np.empty(shape, np.float32)
+            np.copyto(mean, self._packed[..., at : at + c])
+            out[name] = mean
+            var = np.empty(shape, np.float32)
+            np.maximum(self._packed[..., half + at : half + at + c], np.float32(0.0), out=var)
+            var *= scale
+            if empty is not None:
+                var[empty] = np.inf
+            out[f"{name}_var"] = var
             at += c
         if self.zero_motion:
             out["motion"] = np.zeros((self.height, self.width, 2), np.float32)
@@ -563,8 +615,10 @@ def render_ladder(
 
     Notes:
         The passes are split at rung boundaries (each rung is a snapshot of the carried moments),
-        so a ladder ``1, 2, 4, ..., 64`` traces what a plain 64-spp render traces plus one launch,
-        one host copy and one variance per rung (bench/ladder_cost.py measures the difference).
+        so a ladder ``1, 2, 4, ..., 64`` traces what a plain 64-spp render traces plus one launch
+        and one host copy per rung. A rung's buffers (copies and variances) are assembled on the
+        host while the next rung's passes trace (:meth:`FrameStream.launch`). bench/ladder_cost.py
+        measures the difference against the top rung alone.
     """
     started = clock()
     rungs = sorted({int(k) for k in rungs})
@@ -587,8 +641,11 @@ def render_ladder(
     if stream.keep_samples:
         top = {k: np.zeros((rungs[-1], height, width, c), np.float32) for k, c in stream.sample_channels.items()}
     out, done = [], 0
-    for spp in rungs:
-        new = stream.advance(spp - done)
+    stream.launch(rungs[0])
+    for index, spp in enumerate(rungs):
+        new = stream.finish()
+        if index + 1 < len(rungs):
+            stream.launch(rungs[index + 1] - spp)  # traces while the host assembles this rung
         if top is not None:
             for name, values in new.items():
                 top[name][done:spp] = values

@@ -1,8 +1,8 @@
 """Per-pixel sample counts: render a frame in rounds, each pixel continuing its own sample stream.
 
-This is the handle adaptive samplers (:mod:`denoisebench.sampling`, DESIGN.md "Sampler protocol")
-render through. :class:`ProgressiveFrame` wraps the feature renderer's
-:class:`~denoisebench.generator.render.frame.FrameStream`: every call of
+This is the handle adaptive samplers (:mod:`denoisebench.sampling`, docs/architecture.md, "Sampler protocol")
+render through. :class:`ProgressiveFrame` is the feature renderer's
+:class:`~denoisebench.generator.render.frame.FrameStream` with the samplers' entry point: every call of
 :meth:`ProgressiveFrame.render_round` traces the *additional* samples a count map asks for and
 returns the accumulated per-pixel buffers of all samples so far (:class:`RoundBuffers`).
 
@@ -43,8 +43,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from denoisebench.generator.contract.camera_track import CameraTrack
-from denoisebench.generator.contract.render_plan import RenderPlan
 from denoisebench.generator.render.frame import FrameStream
 
 
@@ -91,46 +89,16 @@ class RoundBuffers:
     samples: dict[str, np.ndarray] | None = None
 
 
-class ProgressiveFrame:
+class ProgressiveFrame(FrameStream):
     """One frame rendered in rounds of per-pixel sample counts (module docstring).
 
-    ``scene`` is a loaded Mitsuba scene, ``camera``/``frame``/``plan`` as for
-    :func:`~denoisebench.generator.render.frame.render_frame`; ``seed`` is the render seed (a
-    sampler judged against a dataset should use one disjoint from the dataset's own).
+    Built like its :class:`~denoisebench.generator.render.frame.FrameStream`: ``scene`` is a loaded
+    Mitsuba scene, ``camera``/``frame``/``plan`` as for
+    :func:`~denoisebench.generator.render.frame.render_frame`, ``width``/``height``/``seed`` by
+    keyword (a sampler judged against a dataset should use a seed disjoint from the dataset's own),
+    ``reference`` for the reference stream and ``keep_samples`` for per-sample data (default: the
+    plan's ``per_sample``). Samplers call :meth:`render_round`; :attr:`counts` is what they got.
     """
-
-    def __init__(
-        self,
-        scene,
-        camera: CameraTrack,
-        frame: int,
-        plan: RenderPlan,
-        *,
-        width: int,
-        height: int,
-        seed: int,
-        reference: bool = False,
-        keep_samples: bool = False,
-    ):
-        self.width, self.height = int(width), int(height)
-        if self.width < 1 or self.height < 1:
-            raise ValueError(f"image size must be positive (got {width}x{height})")
-        self._stream = FrameStream(
-            scene,
-            camera,
-            frame,
-            plan,
-            width=self.width,
-            height=self.height,
-            seed=seed,
-            reference=reference,
-            keep_samples=keep_samples,
-        )
-
-    @property
-    def counts(self) -> np.ndarray:
-        """H×W int32: samples per pixel so far."""
-        return self._stream.counts.astype(np.int32)
 
     def render_round(self, counts: np.ndarray) -> RoundBuffers:
         """Trace ``counts`` (H×W ints >= 0) *additional* samples per pixel; return the accumulated buffers.
@@ -146,6 +114,6 @@ class ProgressiveFrame:
             raise ValueError("counts must be >= 0")
         clock = RenderClock()
         started = clock()
-        samples = self._stream.advance(counts)
-        buffers = self._stream.buffers()
+        samples = self.advance(counts)
+        buffers = self.buffers()
         return RoundBuffers(buffers=buffers, counts=self.counts, seconds=clock() - started, samples=samples)
