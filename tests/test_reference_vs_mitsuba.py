@@ -12,7 +12,11 @@ A second test proves that pruning leaves the expectation unchanged: the pruned p
 time samples, no lobe split without glossy/specular effects) and the unpruned one (thin lens of zero
 aperture, a time sample per ray, lobe-split evaluation) agree within noise.
 
-Images are 24 px and a few hundred samples; most of the time is kernel compilation.
+Object motion blur, which Mitsuba cannot render: a cluttered stage with depth of field and movers,
+taken through ``generate-dataset``, must store a blurred reference that agrees with the average of
+static sub-frame renders by ``path``, while the frame with its objects frozen is rejected.
+
+Images are 24 px (the blurred check: 32 px) and a few hundred samples; most of the time is kernel compilation.
 """
 
 from __future__ import annotations
@@ -171,8 +175,13 @@ def test_cluttered_blurred_dataset_reference_matches_a_sub_frame_average_and_a_f
     (seed 152 as authored: frozen frame worst block z 3.1, like the blurred one). So the stage is seed
     152 (six movers, depth of field) with its movers' travel and turn scaled ×6 about frame 1: measured
     at 32 px, 256 spp, 32×16 sub-frame spp, blurred worst block z 3.1, mean z² 0.93; frozen worst block
-    z 9.8, mean z² 4.0, 8 % of blocks beyond 4. Frame 1 is the last of two, so USD holds the poses
-    after it: half the shutter moves, the sub-frames see the same clamp."""
+    z 9.8, mean z² 4.0, 8 % of blocks beyond 4; over four more noise draws (sub-frame times and seeds,
+    our seeds) blurred mean z² 0.75-1.20, frozen 3.35-4.33, while the frozen frame's worst block (7.4-11.9)
+    and share beyond 4 (4-7 %) straddle :func:`assert_agree`'s limits: the blocks' mean z² is the
+    criterion with power, and the control must fail it. Frame 1 is the last of two, so USD holds the
+    poses after it: half the shutter moves, the sub-frames see the same clamp. Cost (2 cores): 20 s with
+    Dr.Jit's kernel cache warm, 49 s cold on a loaded machine, mostly kernel compilation
+    (generate-dataset's noisy and reference kernels, the frozen scene's, ``path``'s)."""
     from motion_helpers import paired_strata_variance, sub_frame_renders
 
     from denoisebench.cli import main
@@ -211,17 +220,13 @@ def test_cluttered_blurred_dataset_reference_matches_a_sub_frame_average_and_a_f
         seed=12,
         reference=True,
     ).buffers
-    z_frozen_image, z_frozen = z_scores(
-        frozen["color"].astype(np.float64), frozen["color_var"].astype(np.float64), mean_b, var_b
-    )
+    z_frozen = z_scores(frozen["color"].astype(np.float64), frozen["color_var"].astype(np.float64), mean_b, var_b)[1]
     print(
         "blurred", np.abs(z_blocks).max(), np.mean(z_blocks**2), "frozen", np.abs(z_frozen).max(), np.mean(z_frozen**2)
     )
     assert_agree(z_image, z_blocks)
-    assert np.mean(z_blocks**2) < 1.8, np.mean(z_blocks**2)
-    # The control: the frozen objects fail the same criterion, and clearly.
-    with pytest.raises(AssertionError):
-        assert_agree(z_frozen_image, z_frozen)
+    assert np.mean(z_blocks**2) < 1.8, np.mean(z_blocks**2)  # the blocks' chi², the powerful part here
+    # The control fails the same criterion, by the chi² clause (measured 3.4-4.3 over five noise draws).
     assert np.mean(z_frozen**2) > 2.5, np.mean(z_frozen**2)
 
 
