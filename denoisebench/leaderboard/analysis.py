@@ -101,6 +101,23 @@ class SummaryRow:
     errors: list[str] = field(default_factory=list)
 
 
+class _DictView:
+    """A list attribute's rows as plain dicts (:meth:`.records.ByKey.as_dict`), made once, when first read."""
+
+    def __init__(self, rows: str):
+        self.rows = rows
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.name = name
+
+    def __get__(self, obj, owner=None):
+        if obj is None:
+            return self
+        value = [row.as_dict() for row in getattr(obj, self.rows)]
+        obj.__dict__[self.name] = value  # a plain attribute from now on
+        return value
+
+
 class RunData(RunIndex):
     """One run's rows from the store, indexed once for the analyses (:class:`.run_index.RunIndex`).
 
@@ -120,21 +137,10 @@ class RunData(RunIndex):
     def run(self) -> dict:
         return self.run_row.as_dict()
 
-    @cached_property
-    def denoisers(self) -> list[dict]:
-        return [d.as_dict() for d in self.entries]
-
-    @cached_property
-    def units(self) -> list[dict]:
-        return [u.as_dict() for u in self.unit_rows]
-
-    @cached_property
-    def frames(self) -> list[dict]:
-        return [f.as_dict() for f in self.frame_rows]
-
-    @cached_property
-    def sequences(self) -> list[dict]:
-        return [s.as_dict() for s in self.sequence_rows]
+    denoisers = _DictView("entries")
+    units = _DictView("unit_rows")
+    frames = _DictView("frame_rows")
+    sequences = _DictView("sequence_rows")
 
     def scene_mean(self, label: str, spp: int, scene: str, metric: str) -> float | None:
         """:meth:`.run_index.RunIndex.scene_value` (the name older callers use)."""

@@ -624,7 +624,7 @@ class ResultsStore:
         return int(row[0]), decode_image(row[3], row[1], row[2])
 
     def strip(self, run_id: str, denoiser: str, scene: str, spp: int) -> StripRow | None:
-        """The unit's strip: {first_frame, top, left, side, crops F×side×side×3}, or None (none, or a v1 database)."""
+        """The unit's strip (first frame, window, crops F×side×side×3), or None (none, or a v1 database)."""
         if self.version < 2:
             return None
         row = self.conn.execute(
