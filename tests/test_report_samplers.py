@@ -143,3 +143,33 @@ def test_cvvdp_viewing_conditions_are_stated(run):
     for text in (md, page):
         assert "cvvdp viewing conditions" in text and "75.4 pixels per degree" in text
         assert f"{SIZE / 75.4:.2f}°×{SIZE / 75.4:.2f}°" in text
+
+
+def test_sampler_frames_round_trip_through_the_store_and_an_old_store_reads_as_none(tmp_path):
+    import sqlite3
+
+    from denoisebench.leaderboard import sampler_maps
+    from denoisebench.leaderboard.records import FrameRecord, UnitRecord
+    from denoisebench.leaderboard.store import ResultsStore
+
+    rng = np.random.default_rng(3)
+    maps = [(t, rng.integers(0, 5, size=(6, 7)).astype(np.int32)) for t in range(3)]
+    frames = sampler_maps.frame_records(maps)
+    assert [f.spp is None for f in frames] == [True, True, False]  # only the image frame keeps its map
+    assert [f.pixels_without_samples for f in frames] == [int((m < 1).sum()) for _, m in maps]
+    unit = UnitRecord("s", "scene", 4, "ok", None, [FrameRecord(t, "ok", None, 1.0, 0.0, 1.0) for t in range(3)])
+    unit.sampler_frames = frames
+    with ResultsStore(tmp_path / "r.sqlite") as store:
+        store.ensure_run("run", "hash", "/data", {"denoisers": []}, {})
+        assert store.write_unit("run", unit)
+        rows = sampler_maps.read(store, "run")
+    assert [r["frame"] for r in rows] == [0, 1, 2] and [r["samples"] for r in rows] == [int(m.sum()) for _, m in maps]
+    np.testing.assert_array_equal(rows[2]["spp_map"], maps[2][1])
+    assert rows[0]["spp_map"] is None and rows[2]["max_spp"] == int(maps[2][1].max())
+    # a database written before the table existed, opened read-only, has no sampler frames
+    conn = sqlite3.connect(tmp_path / "r.sqlite")
+    conn.execute(f"DROP TABLE {sampler_maps.TABLE}")
+    conn.commit()
+    conn.close()
+    with ResultsStore(tmp_path / "r.sqlite", readonly=True) as store:
+        assert sampler_maps.read(store, "run") == []
