@@ -185,13 +185,12 @@ def test_the_leaderboard_ranks_one_sampler_or_the_stored_inputs_and_groups_by_sa
         _, _, _, every = table.leaderboard(store, "relmse", 4)
         _, _, _, uniform = table.leaderboard(store, "relmse", 4, sampler="uniform")
         _, _, _, stored = table.leaderboard(store, "relmse", 4, sampler="")
-        _, _, _, none = table.leaderboard(store, "relmse", 4, sampler="hachisuka2008")
     assert [e.denoiser for e in every] == ["uniform+box", "box", "uniform", NOISY]  # planted: 0.1 < 0.2 < 0.6 < 0.8
     assert [(e.denoiser, e.sampler, e.denoiser_label) for e in uniform] == [
         ("uniform+box", "uniform", "box"),
         ("uniform", "uniform", None),
     ]
-    assert [e.denoiser for e in stored] == ["box", NOISY] and none == []
+    assert [e.denoiser for e in stored] == ["box", NOISY]
     groups = table.by_sampler(every)
     assert {k: [e.denoiser for e in v] for k, v in groups.items()} == {
         "uniform": ["uniform+box", "uniform"],
@@ -240,3 +239,17 @@ def test_the_summary_table_and_the_leaderboard_read_the_same_per_scene_values(me
     assert data.scene_value("identity", 1, scene, "tpsnr") == sequence.value
     frames = [f.metrics["ssim"] for f in store.frames(run_id) if (f.denoiser, f.spp, f.scene) == ("identity", 1, scene)]
     assert len(frames) == 3 and data.scene_value("identity", 1, scene, "ssim") == pytest.approx(math.fsum(frames) / 3)
+
+
+def test_the_leaderboard_command_takes_a_sampler_and_refuses_one_never_measured(tmp_path, capsys):
+    from denoisebench.cli import main
+
+    _sampler_store(tmp_path / "r.sqlite").close()
+    args = ["leaderboard", "--db", str(tmp_path / "r.sqlite"), "--metric", "relmse", "--spp", "4"]
+    assert main([*args, "--sampler", "uniform"]) == 0
+    assert [line.split()[1] for line in capsys.readouterr().out.strip().splitlines()[3:]] == ["uniform+box", "uniform"]
+    assert main([*args, "--sampler", "none"]) == 0
+    assert [line.split()[1] for line in capsys.readouterr().out.strip().splitlines()[3:]] == ["box", NOISY]
+    assert main([*args, "--sampler", "hachisuka2008"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "sampler 'hachisuka2008'" in err[0] and "samplers measured: uniform" in err[0]

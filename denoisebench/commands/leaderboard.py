@@ -13,6 +13,7 @@ EPILOG = """examples:
   denoisebench leaderboard --db benchmark.sqlite
   denoisebench leaderboard --db benchmark.sqlite --metric flip --spp 4
   denoisebench leaderboard --metric flicker --dataset 3fa9c1    # temporal_relmse (scale-free)
+  denoisebench leaderboard --sampler ci_stop                     # only ci_stop's live pairs
 """
 
 
@@ -28,9 +29,16 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--dataset", default=None, help="dataset hash prefix or folder (default the dataset of the newest run)"
     )
+    parser.add_argument(
+        "--sampler",
+        default=None,
+        help="rank only the entries whose input this live sampler made ('none': only the dataset's stored inputs; "
+        "default every entry)",
+    )
 
 
 def run(args) -> int:
     with ResultsStore(args.db, readonly=True) as store:
-        print(format_leaderboard(*leaderboard(store, args.metric, args.spp, args.dataset)))
+        sampler = "" if args.sampler == "none" else args.sampler
+        print(format_leaderboard(*leaderboard(store, args.metric, args.spp, args.dataset, sampler)))
     return 0

@@ -91,6 +91,13 @@ def leaderboard(
         spp = available[0]
     elif spp not in available:
         raise UserInputError(f"no results at {spp} spp; measured: {', '.join(map(str, available))}")
+    if sampler:
+        known = sorted({d.sampler for r in runs for d in store.denoisers(r.run_id) if d.sampler})
+        if sampler not in known:
+            raise UserInputError(
+                f"no results of sampler {sampler!r} on dataset {data_hash[:12]}; samplers measured: "
+                + (", ".join(known) or "none")
+            )
     entries: dict[str, Entry] = {}
     unmeasured: dict[str, Entry] = {}
     for run in runs:
