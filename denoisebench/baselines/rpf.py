@@ -51,8 +51,8 @@ Deviations (each with its reason; tests/test_baselines_classic.py shows what the
       describe a neighbourhood of σ_p = b/4 pixels, which a grid of about σ_p resolves; clustering,
       which keeps edges, is still done for every pixel in the filter. Measured: no worse than
       statistics at every pixel (slightly better: fewer, less noisy estimates), at 1/stride² of
-      their cost. (``min_stat_stride=3``, the ``fast`` preset's, was tried as the default and not kept:
-      rpf_card.md gives the figures.) A 3-px grid in a 3-px box is too coarse (a bounce-driven feature moved a pixel by 1% in
+      their cost. (The ``fast`` preset's ``min_stat_stride=3`` is 10% faster at 128 px but weakens the
+      lens response slightly: rpf_card.md gives the figures.) A 3-px grid in a 3-px box is too coarse (a bounce-driven feature moved a pixel by 1% in
       tests/test_baselines_rpf.py), hence the half-box cap on the floor.
       **Straddling pixels are refined** (``refine_passes``, ``refine_samples``): a pixel whose own
       samples straddle surfaces (3σ of its own clustering features above the tolerance 0.1 in some
