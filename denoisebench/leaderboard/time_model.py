@@ -54,6 +54,7 @@ import numpy as np
 
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard.names import NOISY
+from denoisebench.leaderboard.run_index import RunIndex
 
 #: The resolution a report's time axis is for unless ``--time-at`` says otherwise.
 DEFAULT_TIME_AT = (1920, 1080)
@@ -491,7 +492,7 @@ def measure_run_timings(
     scene, spp = plan.scenes[0], min(plan.spp)
     info = dataset.scene(scene)
     pixels0 = int(info.record["width"]) * int(info.record["height"])
-    frames = store.frames(plan.run_id)
+    frames = RunIndex(store.units(plan.run_id), store.frames(plan.run_id), [])
     todo = [label for label in instances if f"denoiser:{label}" not in done]
     wants_probe = render_probe and "render_probe" not in done
     bar = tqdm(
@@ -502,9 +503,7 @@ def measure_run_timings(
         small = dataset.frame(scene, spp, 0, samples=needs_samples)
     for label in todo:
         measured = [
-            f["denoise_seconds"]
-            for f in frames
-            if f["denoiser"] == label and f["spp"] == spp and f["denoise_seconds"] is not None
+            f.denoise_seconds for f in frames.frames_of(label) if f.spp == spp and f.denoise_seconds is not None
         ]
         record = {"spp": spp, "scene": scene}
         chosen = timing_size(float(np.mean(measured)), pixels0, size, budget) if measured else None
