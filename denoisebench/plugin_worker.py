@@ -160,8 +160,10 @@ def exit_reason(code: int | None, sandboxed: bool = False, noun: str = "plugin")
 class WorkerProcess:
     """``python -m module FD *args`` with the socket pair's other end as ``conn`` (module docstring).
 
-    ``noun`` names the plugin in reasons (``denoiser disabled``); ``spec`` and ``options`` (already
-    through :func:`confined_spec`) decide what a sandboxed worker may read; ``fds`` are passed on.
+    ``noun`` names the plugin in reasons (``denoiser disabled``); ``spec`` and ``options`` decide what
+    a sandboxed worker may read, and are kept as the worker must be told them (:meth:`load_message`:
+    paths absolute under the sandbox, with the :func:`rlimits` of ``processes``, ``open_files``,
+    ``scratch_mb`` and ``memory_limit_mb``); ``fds`` are passed on.
     """
 
     def __init__(
@@ -176,10 +178,16 @@ class WorkerProcess:
         fds: tuple[int, ...] = (),
         scratch_mb: int = DEFAULT_SCRATCH_MB,
         processes: int = DEFAULT_PROCESS_LIMIT,
+        open_files: int = DEFAULT_OPEN_FILES,
+        memory_limit_mb: int,
     ):
         from multiprocessing import Pipe
 
         self.noun, self.sandboxed, self.processes = noun, bool(sandboxed), int(processes)
+        self.spec, self.options, self.rlimits = spec, dict(options or {}), None
+        if self.sandboxed:
+            self.spec, self.options = confined_spec(spec, self.options)
+            self.rlimits = rlimits(self.processes, int(open_files), int(scratch_mb), int(memory_limit_mb))
         self.breach: str | None = None  # why the task watcher killed the sandbox
         self._worker_pid: int | None = None
         ours, theirs = Pipe(duplex=True)
@@ -188,7 +196,7 @@ class WorkerProcess:
         wrapped = None
         if self.sandboxed:
             wrapped = sandbox.command(
-                command, readable=sandbox.readable_paths(spec, options or {}), scratch_bytes=int(scratch_mb) << 20
+                command, readable=sandbox.readable_paths(self.spec, self.options), scratch_bytes=int(scratch_mb) << 20
             )
             command, fds = wrapped.argv, (*fds, wrapped.args_fd)
         try:
@@ -207,6 +215,10 @@ class WorkerProcess:
         _LIVE.add(self)
         if self.sandboxed:  # counted between waits too: a plugin's background forks do not wait for a call
             threading.Thread(target=self._watch_tasks, args=(self.proc,), daemon=True).start()
+
+    def load_message(self) -> tuple:
+        """``("load", spec, options, sys_path, rlimits)``: what both workers are first told."""
+        return ("load", self.spec, self.options, list(sys.path), self.rlimits)
 
     @property
     def running(self) -> bool:

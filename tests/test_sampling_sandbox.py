@@ -18,6 +18,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from hostile_parts import SOURCE
 
 from denoisebench import sandbox
 from denoisebench.cli import main
@@ -48,20 +49,7 @@ def _first_round(rounds):
     rounds.render(np.ones((rounds.height, rounds.width), dtype=int))
 
 
-def _folders():
-    """Where a plain worker finds the dataset: its path, the parent's argv (--data), cwd, the environment."""
-    found = [DATASET]
-    try:
-        argv = open(f"/proc/{{os.getppid()}}/cmdline", "rb").read().split(b"\\0")
-        found += [a.decode() for prev, a in zip(argv, argv[1:]) if prev == b"--data"]
-    except OSError:
-        pass
-    try:
-        found.append(os.readlink(f"/proc/{{os.getppid()}}/cwd"))
-    except OSError:
-        pass
-    return found + [v for k, v in os.environ.items() if k == "HOSTILE_DATA"]
-
+{parts}
 
 class Snoop:
     """Opens every reference EXR it can find, and the one whose path it was told."""
@@ -70,17 +58,7 @@ class Snoop:
 
     def sample(self, budget, rounds):
         _first_round(rounds)
-        tried = 0
-        for folder in _folders():
-            for path in glob.glob(os.path.join(folder, "*", "reference", "*.exr")) + [REFERENCE]:
-                tried += 1
-                try:
-                    with open(path, "rb") as handle:
-                        handle.read(16)
-                except OSError:
-                    continue
-                raise RuntimeError(f"LEAK: read {{path}}")
-        raise RuntimeError(f"contained: no reference in reach ({{tried}} tries)")
+        _snoop()
 
 
 class Vandal:
@@ -90,20 +68,12 @@ class Vandal:
 
     def sample(self, budget, rounds):
         _first_round(rounds)
-        done, refused = [], []
-        attempts = [
-            ("reference", lambda: open(REFERENCE, "r+b").write(b"garbage")),
-            ("new file", lambda: open(os.path.join(DATASET, "planted.txt"), "w").write("x")),
-        ]
-        for what, attempt in attempts:
-            try:
-                attempt()
-                done.append(what)
-            except OSError as error:
-                refused.append(f"{{what}}: {{error.strerror}}")
-        if done:
-            raise RuntimeError(f"VANDALISED: {{done}}")
-        raise RuntimeError(f"contained: {{'; '.join(refused)}}")
+        _vandalise(
+            [
+                ("reference", lambda: open(REFERENCE, "r+b").write(b"garbage")),
+                ("new file", lambda: open(os.path.join(DATASET, "planted.txt"), "w").write("x")),
+            ]
+        )
 
 
 class Honest:
@@ -129,7 +99,9 @@ def setting(tmp_path_factory):
         main(["generate", "--out", str(dataset), *args, "--spp", "4", "--ref-spp", "16", "--seed", "3", "--quiet"]) == 0
     )
     (reference,) = sorted(dataset.glob("*/reference/frame_0000.exr"))
-    (root / "hostile.py").write_text(textwrap.dedent(HOSTILE.format(reference=str(reference), dataset=str(dataset))))
+    (root / "hostile.py").write_text(
+        textwrap.dedent(HOSTILE.format(reference=str(reference), dataset=str(dataset), parts=SOURCE))
+    )
     return {"root": root, "dataset": dataset, "reference": str(reference), "plugin": str(root / "hostile.py")}
 
 

@@ -22,6 +22,7 @@ import uuid
 from pathlib import Path
 
 import pytest
+from hostile_parts import SOURCE
 
 from denoisebench import cli, sandbox
 from denoisebench.dataset import open_dataset
@@ -58,21 +59,7 @@ class _Base:
         pass
 
 
-def _routes():
-    """Folders where a plain worker finds the dataset: its parent's argv, cwd, the environment."""
-    found = [DATASET]
-    try:
-        argv = open(f"/proc/{{os.getppid()}}/cmdline", "rb").read().split(b"\\0")
-        found += [a.decode() for prev, a in zip(argv, argv[1:]) if prev == b"--data"]
-    except OSError:
-        pass
-    try:
-        found.append(os.readlink(f"/proc/{{os.getppid()}}/cwd"))
-    except OSError:
-        pass
-    found += [v for k, v in os.environ.items() if k == "HOSTILE_DATA"]
-    return found
-
+{parts}
 
 class Snoop(_Base):
     """Reads a reference EXR found through /proc/<ppid>/cmdline, /proc/<ppid>/cwd or $HOSTILE_DATA."""
@@ -80,16 +67,7 @@ class Snoop(_Base):
     name = "snoop"
 
     def denoise(self, frame):
-        tried = []
-        for folder in _routes():
-            for path in glob.glob(os.path.join(folder, "*", "reference", "*.exr")) + [REFERENCE]:
-                try:
-                    with open(path, "rb") as handle:
-                        handle.read(16)
-                    raise RuntimeError(f"LEAK: read {{path}}")
-                except OSError as error:
-                    tried.append(type(error).__name__)
-        raise RuntimeError(f"contained: no reference in reach ({{len(tried)}} tries)")
+        _snoop()
 
 
 class Vandal(_Base):
@@ -101,21 +79,13 @@ class Vandal(_Base):
     name = "vandal"
 
     def denoise(self, frame):
-        done, refused = [], []
-        attempts = [
-            ("reference", lambda: open(REFERENCE, "r+b").write(b"garbage")),
-            ("new file", lambda: open(os.path.join(DATASET, "planted.txt"), "w").write("x")),
-            ("store", lambda: open(DB, "r+b").write(b"garbage")),
-        ]
-        for what, attempt in attempts:
-            try:
-                attempt()
-                done.append(what)
-            except OSError as error:
-                refused.append(f"{{what}}: {{error.strerror}}")
-        if done:
-            raise RuntimeError(f"VANDALISED: {{done}}")
-        raise RuntimeError(f"contained: {{'; '.join(refused)}}")
+        _vandalise(
+            [
+                ("reference", lambda: open(REFERENCE, "r+b").write(b"garbage")),
+                ("new file", lambda: open(os.path.join(DATASET, "planted.txt"), "w").write("x")),
+                ("store", lambda: open(DB, "r+b").write(b"garbage")),
+            ]
+        )
 
 
 class Caller(_Base):
@@ -226,7 +196,9 @@ def setting(tmp_path_factory):
     assert Path(paths["reference"]).is_file()
     plugins = root / "plugins"
     plugins.mkdir()
-    (plugins / "hostile.py").write_text(HOSTILE.format(port=listener.getsockname()[1], token=token, **paths))
+    (plugins / "hostile.py").write_text(
+        HOSTILE.format(port=listener.getsockname()[1], token=token, parts=SOURCE, **paths)
+    )
     yield {**paths, "root": root, "dataset": dataset, "plugins": plugins, "accepted": accepted, "token": token}
     listener.close()
 

@@ -31,9 +31,9 @@ What isolation gives
 * **Sandbox** (policies ``plugins`` and ``all``; :mod:`denoisebench.sandbox`): the worker runs
   under bubblewrap, without the host's files (but the Python environment, ``sys.path``, the plugin
   and its option files, read-only), network or a way to outlive its worker, under resource limits
-  (:meth:`Limits.rlimits`, set by the worker on itself) and a task count that a thread of the
-  parent checks every :data:`~denoisebench.plugin_worker.TASK_POLL_SECONDS`, during calls and
-  between them. Where no sandbox starts, the proxy is refused
+  (:func:`~denoisebench.plugin_worker.rlimits`, set by the worker on itself) and a task count that
+  a thread of the parent checks every :data:`~denoisebench.plugin_worker.TASK_POLL_SECONDS`, during
+  calls and between them. Where no sandbox starts, the proxy is refused
   (:class:`~denoisebench.plugin_worker.SandboxUnavailableError`); ``process`` is a plain worker.
   The worker process itself (start, limits, end) is :class:`~denoisebench.plugin_worker.WorkerProcess`,
   shared with the samplers' isolation.
@@ -59,7 +59,6 @@ Pitfalls
 
 from __future__ import annotations
 
-import sys
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -103,12 +102,6 @@ class Limits:
     processes: int = DEFAULT_PROCESS_LIMIT
     open_files: int = DEFAULT_OPEN_FILES
     scratch_mb: int = DEFAULT_SCRATCH_MB
-
-    def rlimits(self) -> dict[str, int]:
-        """What a sandboxed worker sets on itself before it imports the plugin.
-
-        See :func:`~denoisebench.plugin_worker.rlimits`."""
-        return plugin_worker.rlimits(self.processes, self.open_files, self.scratch_mb, self.memory_limit_mb)
 
     def __post_init__(self) -> None:
         if not self.time_limit > 0:
@@ -156,23 +149,22 @@ class IsolatedDenoiser:
 
     def _start(self) -> dict:
         args, fds = ((str(self._channel.fd),), (self._channel.fd,)) if self._channel is not None else ((), ())
-        spec, options, rlimits = self.spec, self.options, None
-        if self.sandboxed:
-            spec, options = plugin_worker.confined_spec(spec, options)
-            rlimits = self.limits.rlimits()
+        limits = self.limits
         self._worker = plugin_worker.WorkerProcess(
             "denoisebench.denoisers.isolation_worker",
             noun="denoiser",
             sandboxed=self.sandboxed,
-            spec=spec,
-            options=options,
+            spec=self.spec,
+            options=self.options,
             args=args,
             fds=fds,
-            scratch_mb=self.limits.scratch_mb,
-            processes=self.limits.processes,
+            scratch_mb=limits.scratch_mb,
+            processes=limits.processes,
+            open_files=limits.open_files,
+            memory_limit_mb=limits.memory_limit_mb,
         )
         try:
-            header, _ = self._request(("load", spec, options, list(sys.path), rlimits), "load")
+            header, _ = self._request(self._worker.load_message(), "load")
         except WorkerFailure as failure:
             from denoisebench.denoisers.registry import DenoiserLoadError
 

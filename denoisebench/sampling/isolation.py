@@ -44,8 +44,6 @@ Notes
 
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 
 from denoisebench import plugin_worker
@@ -91,24 +89,16 @@ class IsolatedSampler:
     def _start(self) -> str:
         from denoisebench.sampling.registry import SamplerLoadError, UnknownSamplerError
 
-        spec, options, rlimits = self.spec, self.options, None
-        if self.sandboxed:
-            spec, options = plugin_worker.confined_spec(spec, options)
-            rlimits = plugin_worker.rlimits(
-                plugin_worker.DEFAULT_PROCESS_LIMIT,
-                plugin_worker.DEFAULT_OPEN_FILES,
-                plugin_worker.DEFAULT_SCRATCH_MB,
-                self.memory_limit_mb,
-            )
         self._worker = plugin_worker.WorkerProcess(
             "denoisebench.sampling.isolation_worker",
             noun="sampler",
             sandboxed=self.sandboxed,
-            spec=spec,
-            options=options,
+            spec=self.spec,
+            options=self.options,
+            memory_limit_mb=self.memory_limit_mb,
         )
         try:
-            self._send(("load", spec, options, list(sys.path), rlimits))
+            self._send(self._worker.load_message())
             header, _ = self._receive("load", 0)
         except SamplerWorkerError as failure:
             raise SamplerLoadError(f"cannot load sampler {self.spec!r} in its worker: {failure}") from None
