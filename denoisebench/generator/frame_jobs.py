@@ -129,15 +129,36 @@ class _LoadedScene:
         )
         self.scene = loaded if loaded is not None else build_mitsuba_scene(self.translated)
         self._frame_scene: tuple = (0, self.scene)
+        self.per_frame = loaded is None and scene_varies_by_frame(self.translated)
 
     def scene_at(self, frame: int):
-        """The Mitsuba scene of ``frame``: the one scene, or for moving objects that frame's (the last kept)."""
-        if not self.translated.moving:
+        """The Mitsuba scene of ``frame``: the one scene, or where the scene varies by frame that frame's (the last kept)."""
+        if not self.per_frame:
             return self.scene
 
         if self._frame_scene[0] != frame:
             self._frame_scene = (frame, build_mitsuba_scene(self.translated, frame=frame))
         return self._frame_scene[1]
+
+
+def scene_varies_by_frame(translated) -> bool:
+    """Whether ``build_mitsuba_scene(translated, frame=i)`` differs between frames ``i``.
+
+    Notes
+    -----
+    Only meshes that move between frames and stay in the main scene take per-frame vertices (and their
+    previous frame's, for motion vectors); static meshes carry their own positions as the previous
+    ones at every frame. With object motion blur (``shutter_moving``) every shape that moves within the
+    shutter lives apart in its object space, posed at each ray's time from keys covering all frames,
+    so unless some other shape moves between frames only (an emitter, which never moves within the
+    shutter), one scene serves every frame: the same bytes as a scene built per frame, without
+    rebuilding it, and the passes recorded with ``dr.freeze`` for it (:mod:`~denoisebench.generator.render.frame`)
+    replay for later frames instead of being recorded and compiled anew."""
+    if not translated.moving:
+        return False
+    if not translated.shutter_moving:
+        return True
+    return any("frame_positions" in s and "shutter_motion" not in s for s in translated.scene_dict["shapes"])
 
 
 # One scene per process: jobs arrive grouped by scene, and a Mitsuba scene can be large.
