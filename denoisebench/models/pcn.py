@@ -38,7 +38,9 @@ Notes
 
 from __future__ import annotations
 
+import inspect
 import math
+from collections.abc import Callable
 
 import torch
 from torch import nn
@@ -218,7 +220,9 @@ class PCN(nn.Module):
         self.log_depth_var = bool(log_depth_var)
         #: DPCN: each lobe's log output is capped by the largest noisy value of that lobe within the
         #: kernel_size window (what KPCN's convex combination obeys by construction); False in old checkpoints
-        self.bound_output = bool(bound_output)
+        #: (KPCN: accepted for the shared configurations and off: a kernel's output is already a convex
+        #: combination of the noisy window)
+        self.bound_output = bool(bound_output) and mode == "direct"
         if mode not in ("direct", "kernel"):
             raise ValueError(f"mode must be 'direct' or 'kernel', not {mode!r}")
         if kernel_size % 2 != 1:
@@ -289,32 +293,29 @@ class PCN(nn.Module):
         return out
 
 
-def make_dpcn(
-    layers: int,
-    channels: int,
-    kernel: int,
-    kernel_size: int = 21,
-    head_kernel: int | None = None,
-    init: str = "default",
-    log_depth_var: bool = False,
-    bound_output: bool = False,
-    log_offset: float = 0.0,
-) -> PCN:
-    return PCN(
-        "direct", layers, channels, kernel, kernel_size, head_kernel, init, log_depth_var, bound_output, log_offset
-    )
+def _builder(mode: str, without: tuple[str, ...] = ()) -> Callable[..., PCN]:
+    """A builder of ``PCN(mode, ...)`` that takes PCN's own parameters less ``mode`` and ``without``.
+
+    Notes
+    -----
+    ``training.apply_overrides`` reads a builder's signature to know which ``--set`` keys a model
+    takes, so the builder carries PCN's signature (one parameter list to keep, not three) and refuses
+    a parameter it leaves out with the TypeError a plain function would raise.
+    """
+    signature = inspect.signature(PCN)
+    parameters = [p for name, p in signature.parameters.items() if name != "mode" and name not in without]
+    signature = signature.replace(parameters=parameters, return_annotation="PCN")
+
+    def build(*args, **kwargs) -> PCN:
+        signature.bind(*args, **kwargs)
+        return PCN(mode, *args, **kwargs)
+
+    build.__signature__ = signature
+    build.__name__ = build.__qualname__ = f"make_{'dpcn' if mode == 'direct' else 'kpcn'}"
+    return build
 
 
-def make_kpcn(
-    layers: int,
-    channels: int,
-    kernel: int,
-    kernel_size: int = 21,
-    head_kernel: int | None = None,
-    init: str = "default",
-    log_depth_var: bool = False,
-    bound_output: bool = False,
-) -> PCN:
-    # bound_output is accepted for the shared configurations and has no effect: a kernel's output is
-    # already a convex combination of the noisy window
-    return PCN("kernel", layers, channels, kernel, kernel_size, head_kernel, init, log_depth_var)
+#: DPCN from PCN's parameters.
+make_dpcn = _builder("direct")
+#: KPCN from PCN's parameters less ``log_offset`` (DPCN's log domain; a kernel's output has none).
+make_kpcn = _builder("kernel", without=("log_offset",))
