@@ -31,26 +31,20 @@ class ModelSpec:
     recipes: dict[str, dict] = field(default_factory=dict)
 
 
+def _pcn_spec(name: str, build: Callable[..., nn.Module], configs: dict[str, dict]) -> ModelSpec:
+    """DPCN's or KPCN's spec: the same targets, buffers and recipe, another builder and configurations.
+
+    Notes
+    -----
+    The paper's recipe: each branch trained on its own lobe with L1, no combined-colour loss.
+    """
+    targets = ("color", "diffuse", "specular")
+    return ModelSpec(name, build, configs, False, targets, OPTIONAL_BUFFERS, recipes={"paper": {"loss": "lobes"}})
+
+
 MODELS: dict[str, ModelSpec] = {
-    # The paper's recipe: each branch trained on its own lobe with L1, no combined-colour loss.
-    "dpcn": ModelSpec(
-        "dpcn",
-        pcn.make_dpcn,
-        pcn.DPCN_CONFIGS,
-        False,
-        ("color", "diffuse", "specular"),
-        OPTIONAL_BUFFERS,
-        recipes={"paper": {"loss": "lobes"}},
-    ),
-    "kpcn": ModelSpec(
-        "kpcn",
-        pcn.make_kpcn,
-        pcn.KPCN_CONFIGS,
-        False,
-        ("color", "diffuse", "specular"),
-        OPTIONAL_BUFFERS,
-        recipes={"paper": {"loss": "lobes"}},
-    ),
+    "dpcn": _pcn_spec("dpcn", pcn.make_dpcn, pcn.DPCN_CONFIGS),
+    "kpcn": _pcn_spec("kpcn", pcn.make_kpcn, pcn.KPCN_CONFIGS),
     # The paper's recipe: 128 px crops (where the scenes are that large), windows played both ways
     # (the small configuration plays both ways too).
     "rae": ModelSpec(
