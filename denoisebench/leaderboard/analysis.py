@@ -142,10 +142,6 @@ class RunData(RunIndex):
     frames = _DictView("frame_rows")
     sequences = _DictView("sequence_rows")
 
-    def scene_mean(self, label: str, spp: int, scene: str, metric: str) -> float | None:
-        """:meth:`.run_index.RunIndex.scene_value` (the name older callers use)."""
-        return self.scene_value(label, spp, scene, metric)
-
 
 def summary_table(data: RunData, exclude=()) -> list[SummaryRow]:
     """Per (spp, denoiser): every metric aggregated over its ok scenes, except ``exclude`` (the scenes

@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from denoisebench.errors import UserInputError
+from denoisebench.leaderboard.finite import is_finite
 from denoisebench.leaderboard.names import NOISY
 from denoisebench.leaderboard.run_index import RunIndex
 
@@ -141,7 +142,7 @@ def line_through(points) -> tuple[float, float] | None:
     A negative offset (noise on a time that is all per-unit) refits through the origin; a negative
     slope (noise on a time that is all offset) gives slope 0 and the mean as offset. One distinct x:
     through the origin. None without a point."""
-    pairs = [(float(x), float(y)) for x, y in points if y is not None and math.isfinite(y) and x > 0]
+    pairs = [(float(x), float(y)) for x, y in points if is_finite(y) and x > 0]
     if not pairs:
         return None
     x = np.array([p[0] for p in pairs])
