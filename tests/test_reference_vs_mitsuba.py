@@ -129,7 +129,11 @@ def _compare(mi, translated, frame, plan):
 
 @pytest.mark.parametrize("family", [f.name for f in list_families()])
 def test_every_family_reference_matches_mitsuba_path(mi, tmp_path, family):
-    translated = translate_usd(get_family(family).author(tmp_path, seed=0, frames=2, width=SIZE, height=SIZE))
+    # Cluttered: the blurred check's seed (depth of field, movers), here at its frame's pose: the static frame.
+    seed = BLUR_SEED if family == "cluttered" else 0
+    translated = translate_usd(get_family(family).author(tmp_path, seed=seed, frames=2, width=SIZE, height=SIZE))
+    if family == "cluttered":
+        assert {"depth_of_field", "motion_blur"} <= set(translated.effects) and translated.shutter_moving
     plan = make_render_plan(translated.effects, stage_max_depth=translated.max_depth)
     assert plan.max_depth == -1 and plan.max_depth_source == "default"  # families render full transport
     if plan.time_sampling:
