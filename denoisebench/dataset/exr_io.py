@@ -185,42 +185,43 @@ def _to_bytes(exr_file) -> bytes:
     return stream.getvalue()
 
 
-def encode_exr(buffers: Mapping[str, np.ndarray], header_extra: dict | None = None) -> bytes:
-    """The bytes of one single-part multi-layer EXR holding ``buffers`` (H×W×C each)."""
+def _alike_arrays(buffers: Mapping[str, np.ndarray], ndim: int, what: str, label: str = ""):
+    """Yield ``(layer, float32 array)`` in name order, each checked as it comes: a good name, ``ndim``
+    dimensions of finite numbers, and the same non-empty leading ``ndim - 1`` dimensions as the first.
+
+    Notes
+    -----
+    A generator, so that what the caller does with one layer (its channel names) is checked before
+    the next layer is: the first fault in name order is the one reported. ``what`` names a buffer in
+    the errors and ``label`` the leading dimensions (``"S×H×W = "``).
+    """
     if not buffers:
-        raise ValueError("no buffers to write")
-    channels: dict[str, np.ndarray] = {}
-    size = None
+        raise ValueError(f"no {what}s to write")
+    lead = None
     for layer in sorted(buffers):
         _check_name(layer)
-        array = _as_float32(layer, buffers[layer], 3, "buffer")
-        if size is None:
-            size = array.shape[:2]
-            if min(size) < 1:
-                raise ValueError(f"buffer {layer!r} is empty ({array.shape})")
-        elif array.shape[:2] != size:
-            raise ValueError(f"buffer {layer!r} is {array.shape[:2]}, others are {size}")
+        array = _as_float32(layer, buffers[layer], ndim, what)
+        if lead is None:
+            lead = array.shape[: ndim - 1]
+            if min(lead) < 1:
+                raise ValueError(f"{what} {layer!r} is empty ({array.shape})")
+        elif array.shape[: ndim - 1] != lead:
+            raise ValueError(f"{what} {layer!r} is {label}{array.shape[: ndim - 1]}, others are {lead}")
+        yield layer, array
+
+
+def encode_exr(buffers: Mapping[str, np.ndarray], header_extra: dict | None = None) -> bytes:
+    """The bytes of one single-part multi-layer EXR holding ``buffers`` (H×W×C each)."""
+    channels: dict[str, np.ndarray] = {}
+    for layer, array in _alike_arrays(buffers, 3, "buffer"):
         channels.update(_channels(layer, array))
     return _to_bytes(OpenEXR.File(_header(header_extra), channels))
 
 
 def encode_samples_exr(samples: Mapping[str, np.ndarray], header_extra: dict | None = None) -> bytes:
     """The bytes of a multi-part EXR: part ``i`` holds sample ``i`` of every S×H×W×C array."""
-    if not samples:
-        raise ValueError("no per-sample buffers to write")
-    arrays: dict[str, np.ndarray] = {}
-    shape = None
-    for layer in sorted(samples):
-        _check_name(layer)
-        array = _as_float32(layer, samples[layer], 4, "per-sample buffer")
-        if shape is None:
-            shape = array.shape[:3]
-            if min(shape) < 1:
-                raise ValueError(f"per-sample buffer {layer!r} is empty ({array.shape})")
-        elif array.shape[:3] != shape:
-            raise ValueError(f"per-sample buffer {layer!r} is S×H×W = {array.shape[:3]}, others are {shape}")
-        arrays[layer] = array
-    count = shape[0]
+    arrays = dict(_alike_arrays(samples, 4, "per-sample buffer", "S×H×W = "))
+    count = next(iter(arrays.values())).shape[0]
     # One storage type per layer for all parts, decided over all samples (parts stay alike).
     dtypes = {layer: np.float16 if storage_type(layer, a) == "half" else np.float32 for layer, a in arrays.items()}
     parts = []
