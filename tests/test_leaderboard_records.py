@@ -135,6 +135,11 @@ def test_the_store_returns_typed_rows_that_read_by_key_as_the_dicts_did(tmp_path
     # results.json's "denoisers" keep their keys; the sampler dimension is an attribute
     assert list(entries[0].as_dict()) == ["label", "spec", "kind", "needs", "temporal", "load_error", "trained_on"]
     assert {d.label: (d.sampler, d.denoiser_label) for d in entries} == DIMENSION
+    with ResultsStore(tmp_path / "r.sqlite", readonly=True) as store:
+        data = analysis.RunData(store, "run1")
+    assert {label: (data.entry(label).sampler, data.entry(label).denoiser_label) for label in data.labels} == DIMENSION
+    assert data.entry("nope") is None and data.denoisers == [d.as_dict() for d in entries]
+    assert data.frames == [f.as_dict() for f in frames] and data.run == run.as_dict()
 
 
 # ----------------------------------------------------------------------------------------------- samplers

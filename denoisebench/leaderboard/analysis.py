@@ -132,6 +132,12 @@ class RunData(RunIndex):
         self.entries = store.denoisers(run_id)
         super().__init__(store.units(run_id), store.frames(run_id), store.sequence_metrics(run_id))
         self.labels = [d.label for d in self.entries if not d.load_error]
+        self._entry = {d.label: d for d in self.entries}
+
+    def entry(self, label: str):
+        """The :class:`~.records.EntryRow` of ``label`` (its sampler and denoiser: the run's sampler
+        dimension), or None for a label the run does not have."""
+        return self._entry.get(label)
 
     @cached_property
     def run(self) -> dict:
