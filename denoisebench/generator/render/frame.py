@@ -190,6 +190,33 @@ def _render_pass(scene, params, ranges: tuple, state, camera_values: dict, confi
     return state, packed, targets
 
 
+@dataclass(frozen=True)
+class _MergeConfig:
+    """What shapes a :func:`_merge_pass` (hashable)."""
+
+    stat_channels: tuple
+    band: int
+    width: int
+    groups: int
+
+
+def _merge_pass(scene, params, state, config: _MergeConfig):
+    """The per-pixel moments of ``state`` (a band's lanes) counted as ``params[0]`` samples per pixel, packed.
+
+    Right where every lane holds at most one sample (a fresh stream of at most ``groups`` samples):
+    lane ``g`` then holds sample ``g`` and the merge weighs lanes ``g >= params[0]`` by 0, so the
+    result is the bits a stream of ``params[0]`` samples packs (:meth:`FrameStream.prefix_buffers`).
+    ``scene`` is unused (the compiled-pass cache is per scene).
+    """
+    mi = load_mitsuba()
+    import drjit as dr
+
+    total = dr.gather(mi.UInt32, params, 0)
+    packed, _ = pixel_moments(mi, state, dict(config.stat_channels), config.groups, total)
+    dr.eval(packed)
+    return packed
+
+
 #: Record passes with ``dr.freeze`` and replay them (False: trace every pass afresh; same bits).
 FREEZE_PASSES = True
 #: Passes compiled with ``dr.freeze`` for the most recent scene, one per :class:`_PassConfig`, oldest first.
@@ -199,8 +226,9 @@ _COMPILED_SCENE: list = [None]  # the scene they were recorded with (a strong re
 MAX_COMPILED_PASSES = 8
 
 
-def _compiled_pass(scene, config: _PassConfig):
-    """The frozen (``dr.freeze``) :func:`_render_pass` for ``scene`` and ``config``.
+def _compiled_pass(scene, config, function=_render_pass):
+    """The frozen (``dr.freeze``) ``function`` (:func:`_render_pass`, or :func:`_merge_pass` for a
+    :class:`_MergeConfig`) for ``scene`` and ``config``.
 
     Notes:
         Tracing the Python integrator costs ~10-20 ms per pass and assembling its ~6000-op
@@ -221,17 +249,17 @@ def _compiled_pass(scene, config: _PassConfig):
     import drjit as dr
 
     if not FREEZE_PASSES:
-        return _render_pass
+        return function
     if _COMPILED_SCENE[0] is not scene:
         _COMPILED.clear()
         _COMPILED_SCENE[0] = scene
-    function = _COMPILED.pop(config, None)
-    if function is None:
-        function = _FreezeOrTrace(dr.freeze(_render_pass, warn_after=2))
+    compiled = _COMPILED.pop(config, None)
+    if compiled is None:
+        compiled = _FreezeOrTrace(dr.freeze(function, warn_after=2), function)
         while len(_COMPILED) >= MAX_COMPILED_PASSES:
             _COMPILED.pop(next(iter(_COMPILED)))
-    _COMPILED[config] = function  # most recently used last
-    return function
+    _COMPILED[config] = compiled  # most recently used last
+    return compiled
 
 
 class _FreezeOrTrace:
@@ -244,8 +272,8 @@ class _FreezeOrTrace:
         pass is traced normally instead (same kernels, same bits), for good for this configuration.
     """
 
-    def __init__(self, frozen):
-        self.frozen = frozen
+    def __init__(self, frozen, function=_render_pass):
+        self.frozen, self.function = frozen, function
 
     def __call__(self, *args):
         if self.frozen is not None:
@@ -255,7 +283,7 @@ class _FreezeOrTrace:
                 if "frozen function" not in str(error):
                     raise
                 self.frozen = None
-        return _render_pass(*args)
+        return self.function(*args)
 
 
 @dataclass
@@ -514,7 +542,41 @@ class FrameStream:
             read): means copied, variances as ``max(M2, 0) * scale`` in place, with ``scale = 1 /
             ((n - 1) n)`` one float32 per pixel (one for the frame when counts are uniform).
         """
-        counts = self._counts
+        return self._assemble(self._packed, self._counts)
+
+    @property
+    def lanes_per_pixel(self) -> int:
+        """Lanes every pixel has at least (``groups``): a fresh stream of up to this many samples holds one per lane."""
+        return min(self._groups)
+
+    def prefix_buffers(self, total: int) -> dict[str, np.ndarray]:
+        """The buffers of every pixel's first ``total`` samples, while each lane holds at most one sample.
+
+        That is, after one finished round of ``n <= lanes_per_pixel`` samples for every pixel from a
+        fresh stream, and ``1 <= total <= n``: the bytes :meth:`buffers` gives after a round of
+        ``total`` (:func:`_merge_pass`), from the lanes already traced. :func:`render_ladder` takes
+        its rungs below ``lanes_per_pixel`` this way: on small images a pixel's few samples occupy
+        a few of its lanes while the others idle in the same SIMD vectors, so one pass of ``n``
+        costs about what a pass of 1 costs. Raises ``ValueError`` otherwise.
+        """
+        mi = load_mitsuba()
+
+        n = int(self._counts.flat[0])
+        if self._round is not None or (self._counts != n).any() or not 1 <= total <= n <= self.lanes_per_pixel:
+            raise ValueError(
+                f"prefix_buffers({total}) needs a finished uniform round of {total}..{self.lanes_per_pixel}"
+            )
+        params = _device_copy(mi, mi.UInt32, np.asarray([total], np.uint32))
+        packed_host = np.empty_like(self._packed)
+        stride = self._layout["stride"]
+        for index, ((row0, band), groups) in enumerate(zip(self._bands, self._groups)):
+            config = _MergeConfig(tuple(self.stat_channels.items()), band, self.width, groups)
+            packed = _compiled_pass(self.scene, config, _merge_pass)(self.scene, params, self._state[index], config)
+            packed_host[row0 : row0 + band] = np.asarray(packed, dtype=np.float32).reshape(band, self.width, stride)
+        return self._assemble(packed_host, np.full_like(self._counts, total))
+
+    def _assemble(self, packed: np.ndarray, counts: np.ndarray) -> dict[str, np.ndarray]:
+        """The buffers of packed per-pixel moments (H×W×stride) of ``counts`` samples (:meth:`buffers`' Notes)."""
         half = self._layout["stride"] // 2  # means, then M2s (moment_layout)
         low, high = int(counts.min()), int(counts.max())
         if low == high:
@@ -529,10 +591,10 @@ class FrameStream:
         for name, c in self.stat_channels.items():
             shape = (self.height, self.width, c)
             mean = np.empty(shape, np.float32)
-            np.copyto(mean, self._packed[..., at : at + c])
+            np.copyto(mean, packed[..., at : at + c])
             out[name] = mean
             var = np.empty(shape, np.float32)
-            np.maximum(self._packed[..., half + at : half + at + c], np.float32(0.0), out=var)
+            np.maximum(packed[..., half + at : half + at + c], np.float32(0.0), out=var)
             var *= scale
             if empty is not None:
                 var[empty] = np.inf
@@ -640,16 +702,28 @@ def render_ladder(
     top = None
     if stream.keep_samples:
         top = {k: np.zeros((rungs[-1], height, width, c), np.float32) for k, c in stream.sample_channels.items()}
+    # Rungs below the lanes per pixel come from one round of `first` samples (FrameStream.prefix_buffers).
+    first = min(stream.lanes_per_pixel, rungs[-1])
+    head = [k for k in rungs if k < first]
+    rounds = sorted({first, *rungs} - set(head))
     out, done = [], 0
-    stream.launch(rungs[0])
-    for index, spp in enumerate(rungs):
+
+    def emit(spp, buffers):
+        samples = None if top is None else {name: values[:spp] for name, values in top.items()}
+        out.append(RenderedFrame(buffers=buffers, samples=samples, seconds=clock() - started, spp=spp))
+
+    stream.launch(rounds[0])
+    for index, spp in enumerate(rounds):
         new = stream.finish()
-        if index + 1 < len(rungs):
-            stream.launch(rungs[index + 1] - spp)  # traces while the host assembles this rung
         if top is not None:
             for name, values in new.items():
                 top[name][done:spp] = values
         done = spp
-        samples = None if top is None else {name: values[:spp] for name, values in top.items()}
-        out.append(RenderedFrame(buffers=stream.buffers(), samples=samples, seconds=clock() - started, spp=spp))
+        if index == 0:
+            for k in head:
+                emit(k, stream.prefix_buffers(k))
+        if index + 1 < len(rounds):
+            stream.launch(rounds[index + 1] - spp)  # traces while the host assembles this rung
+        if spp in rungs:
+            emit(spp, stream.buffers())
     return out
