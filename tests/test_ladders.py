@@ -187,7 +187,8 @@ def test_frozen_ladder_passes_replay_what_a_fresh_trace_computes(monkeypatch, fa
 
 
 def test_buffers_read_finished_rounds_while_a_launched_round_traces(family_scene):
-    """launch() queues a round; until finish(), buffers() and counts are those of the rounds before (bytes of plain renders)."""
+    """launch() queues a round; until finish(), buffers() and counts are those of the rounds before; prefix_buffers(k)
+    while lanes hold one sample each. All against plain renders, bit for bit."""
     from denoisebench.generator.render.frame import FrameStream
 
     translated, scene = family_scene("cornell")
@@ -195,6 +196,11 @@ def test_buffers_read_finished_rounds_while_a_launched_round_traces(family_scene
     kw = dict(width=SIZE, height=SIZE, seed=6)
     stream = FrameStream(scene, translated.camera, 1, plan, **kw)
     stream.advance(2)
+    # Lanes hold one sample each (64 lanes per pixel at 16 px): the first sample's buffers without tracing anew.
+    assert stream.lanes_per_pixel > 5
+    first = stream.prefix_buffers(1)
+    with pytest.raises(ValueError):
+        stream.prefix_buffers(3)  # more than the stream has
     stream.launch(3)
     with pytest.raises(RuntimeError):
         stream.launch(1)  # one round in flight at a time
@@ -204,7 +210,9 @@ def test_buffers_read_finished_rounds_while_a_launched_round_traces(family_scene
     after = stream.buffers()
     plain2 = render_frame(scene, translated.camera, 1, plan, spp=2, **kw)
     plain5 = render_frame(scene, translated.camera, 1, plan, spp=5, **kw)
+    plain1 = render_frame(scene, translated.camera, 1, plan, spp=1, **kw)
     for name in plain2.buffers:
+        assert np.array_equal(first[name], plain1.buffers[name]), name
         assert np.array_equal(during[name], plain2.buffers[name]), name
         assert np.array_equal(after[name], plain5.buffers[name]), name
     for name in plain5.samples:
