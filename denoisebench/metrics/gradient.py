@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from denoisebench.metrics.spatial import mean_of_map
 from denoisebench.metrics.validation import Checked, check_pair
 
 # Lazy imports: scipy (0.3 s) is imported inside the functions that filter.
@@ -63,10 +64,7 @@ def _grad_l1_map(c: Checked) -> np.ndarray:
 
 def grad_l1(pred, ref) -> float:
     """Mean L1 norm of the forward-difference gradient error, linear HDR. Lower is better."""
-    c = check_pair(pred, ref)
-    if c.nonfinite_count:
-        return WORST["grad_l1"]
-    return float(np.mean(_grad_l1_map(c)))
+    return mean_of_map(pred, ref, _grad_l1_map, WORST["grad_l1"])
 
 
 def grad_l1_map(pred, ref) -> np.ndarray:

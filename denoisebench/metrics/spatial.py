@@ -137,6 +137,21 @@ def _abs(p, r):
     return np.abs(p - r)
 
 
+def mean_of_map(pred, ref, map_of, worst: float) -> float:
+    """A frame's score as the mean of its per-pixel map ``map_of(check_pair(pred, ref))``; ``worst``
+    when the prediction has a non-finite value.
+
+    Notes
+    -----
+    Validation's policy: a NaN or Inf in the prediction gives the worst score, never a mean over the
+    finite pixels (a broken denoiser cannot average its failures away).
+    """
+    c = check_pair(pred, ref)
+    if c.nonfinite_count:
+        return worst
+    return float(np.mean(map_of(c)))
+
+
 def _scalar(c: Checked, per_value, name: str) -> float:
     if c.nonfinite_count:
         return WORST[name]
@@ -353,10 +368,7 @@ def _deltae_map(c: Checked) -> np.ndarray:
 
 def deltae2000(pred, ref) -> float:
     """Mean CIEDE2000 after the Reinhard stage of the tone map (see Notes). Lower is better."""
-    c = check_pair(pred, ref)
-    if c.nonfinite_count:
-        return WORST["deltae2000"]
-    return float(np.mean(_deltae_map(c)))
+    return mean_of_map(pred, ref, _deltae_map, WORST["deltae2000"])
 
 
 def deltae2000_map(pred, ref) -> np.ndarray:
