@@ -286,16 +286,8 @@ class DatasetWriter:
         timing = _timing(seconds, spp)  # checked before anything is written
         _check_extra(extra)
         relative = layout.noisy_path(scene, spp, frame)
-        header = {"scene": scene, "frame": int(frame), "spp": spp, "kind": "noisy"}
-        written = write_exr(self.path(relative), buffers, samples, header)
-        entry = {
-            "file": relative,
-            "sha256": written.main.sha256,
-            "spp": spp,
-            **timing,
-            "rel_se": relative_standard_error(buffers["color"], buffers.get("color_var")),
-            "samples": None,
-        }
+        written, entry = self._write_file(relative, "noisy", scene, frame, spp, timing, buffers, samples)
+        entry["samples"] = None
         if written.samples is not None:
             count = int(np.shape(next(iter(samples.values())))[0])
             entry["samples"] = {
@@ -326,19 +318,34 @@ class DatasetWriter:
         timing = _timing(seconds, spp)  # checked before anything is written
         _check_extra(extra)
         layers = {"color": color, "color_var": color_var, **dict(buffers or {})}
-        relative = layout.reference_path(scene, frame)
-        header = {"scene": scene, "frame": int(frame), "spp": spp, "kind": "reference"}
-        written = write_exr(self.path(relative), layers, None, header)
+        _, entry = self._write_file(layout.reference_path(scene, frame), "reference", scene, frame, spp, timing, layers)
+        entry.update(noisy_rel_se_max=None, reference_too_noisy=False)
+        return self._put(scene, layout.REFERENCE, frame, entry, extra)
+
+    def _write_file(
+        self,
+        relative: str,
+        kind: str,
+        scene: str,
+        frame: int,
+        spp: int,
+        timing: dict,
+        layers: Mapping[str, np.ndarray],
+        samples: Mapping[str, np.ndarray] | None = None,
+    ) -> tuple:
+        """Write one frame's EXR (``kind`` ``noisy`` or ``reference`` in its header) at ``relative``;
+        return what ``write_exr`` wrote and the record's common fields (file, hash, spp, timing and the
+        relative standard error of ``layers``' color)."""
+        header = {"scene": scene, "frame": int(frame), "spp": spp, "kind": kind}
+        written = write_exr(self.path(relative), layers, samples, header)
         entry = {
             "file": relative,
             "sha256": written.main.sha256,
             "spp": spp,
             **timing,
-            "rel_se": relative_standard_error(color, color_var),
-            "noisy_rel_se_max": None,
-            "reference_too_noisy": False,
+            "rel_se": relative_standard_error(layers["color"], layers.get("color_var")),
         }
-        return self._put(scene, layout.REFERENCE, frame, entry, extra)
+        return written, entry
 
     def _put(self, scene: str, key: str, frame: int, entry: dict, extra: Mapping | None) -> dict:
         _check_extra(extra)
