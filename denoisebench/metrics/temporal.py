@@ -248,6 +248,16 @@ def warped_valid_masks(motion, depth=None, masks=None, depth_tolerance: float = 
 # --------------------------------------------------------------------------- metrics
 
 
+def _masked_pair_maps(c: Checked, mask, mot, dep, depth_tolerance: float, worst: float) -> np.ndarray:
+    """(T−1)×H×W per-pair |Δp − Δr| maps (:func:`_pair_maps`) with 0 where a pixel is not measured;
+    ``worst`` everywhere when the prediction has a non-finite value (validation's policy)."""
+    n, h, w = c.pred.shape[:3]
+    if c.nonfinite_count:
+        return np.full((n - 1, h, w), worst)
+    maps, valid = _pair_maps(c, mask, mot, dep, depth_tolerance)
+    return np.where(valid, maps, 0.0)
+
+
 def temporal_l1(pred_seq, ref_seq, *, masks=None) -> float:
     """Mean |(p_t − p_{t−1}) − (r_t − r_{t−1})| over pairs, pixels, channels (linear). Lower is better."""
     c = check_sequences(pred_seq, ref_seq, min_frames=2)
@@ -261,11 +271,7 @@ def temporal_l1_map(pred_seq, ref_seq, *, masks=None) -> np.ndarray:
     """(T−1)×H×W maps of |Δp − Δr| (channel mean); 0 where ``masks`` excludes a pixel."""
     c = check_sequences(pred_seq, ref_seq, min_frames=2)
     mask, _, _ = _context(c, None, None, masks, DEPTH_TOLERANCE)
-    n, h, w = c.pred.shape[:3]
-    if c.nonfinite_count:
-        return np.full((n - 1, h, w), WORST["temporal_l1"])
-    maps, valid = _pair_maps(c, mask, None, None, DEPTH_TOLERANCE)
-    return np.where(valid, maps, 0.0)
+    return _masked_pair_maps(c, mask, None, None, DEPTH_TOLERANCE, WORST["temporal_l1"])
 
 
 def temporal_l1_warped(
@@ -289,11 +295,7 @@ def temporal_l1_warped_map(
     if motion is None:
         raise ValueError("temporal_l1_warped needs the motion buffers (one H×W×2 per frame)")
     mask, mot, dep = _context(c, motion, depth, masks, depth_tolerance)
-    n, h, w = c.pred.shape[:3]
-    if c.nonfinite_count:
-        return np.full((n - 1, h, w), WORST["temporal_l1_warped"])
-    maps, valid = _pair_maps(c, mask, mot, dep, depth_tolerance)
-    return np.where(valid, maps, 0.0)
+    return _masked_pair_maps(c, mask, mot, dep, depth_tolerance, WORST["temporal_l1_warped"])
 
 
 def _bilinear_squared(img: np.ndarray, taps) -> np.ndarray:
