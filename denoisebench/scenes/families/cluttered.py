@@ -15,7 +15,8 @@ Following Gharbi et al. 2019 (SBMC's scene generator), with a richer shape libra
   vertical at random, with a ``DistantLight`` sun for the sunny kinds;
 * camera: random field of view (focal length 20-60 mm), a partial orbit over the sequence; depth of
   field with probability 0.5, focused on one of the objects; object motion blur with probability
-  0.5: then up to :data:`MAX_MOVING` objects translate and turn, and the shutter is open half a frame.
+  0.5: then up to :data:`MAX_MOVING` objects translate (0.08-0.25 units per frame) and turn (up to
+  :data:`SPIN` degrees per frame), and the shutter is open half a frame.
 
 Effects therefore vary by seed: the stage's metadata declares its own (``depth_of_field`` and
 ``motion_blur`` when drawn), and the family's effects are their union.
@@ -53,6 +54,11 @@ ALWAYS = ("glossy", "specular", "transmission", "textures", "environment")
 EFFECTS = validate_effects(ALWAYS + ("depth_of_field", "motion_blur"))
 #: Most objects that move within the shutter (the cost of object motion blur grows with them).
 MAX_MOVING = 6
+#: Largest turn of a moving object about the vertical, degrees per frame. Turning costs no room on the
+#: ground (travel inflates an object's footprint for the whole sequence and so the stage, which the camera
+#: then frames from further away), so it carries most of the blur: at 150 degrees per frame a 0.5-unit
+#: object's rim sweeps up to 0.65 units in the half-frame shutter, about 4 px of a 64 px frame.
+SPIN = 150.0
 #: Objects per stage.
 OBJECTS = (10, 50)
 #: Share of seeds in the held-out pool.
@@ -183,7 +189,7 @@ def build(b: SceneBuilder, rng: np.random.Generator) -> None:
     for i in sorted(movers):
         angle = rng.uniform(0.0, 2.0 * np.pi)
         velocity[i] = rng.uniform(0.08, 0.25) * np.array([np.cos(angle), np.sin(angle)])
-        spin[i] = rng.uniform(-40.0, 40.0)
+        spin[i] = rng.uniform(-SPIN, SPIN)
     half_travel = np.linalg.norm(velocity, axis=1) * (0.5 * max(b.frames - 1, 0) + 0.5)  # sequence and shutter
     radii = np.array([m.extra["radius"] for m in meshes]) + half_travel
     area = float(np.sqrt(np.sum(np.square(radii)) * 2.5))
