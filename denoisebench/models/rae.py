@@ -190,12 +190,6 @@ class RecurrentAutoencoder(nn.Module):
         return {"color": from_log(log_color) * factor * scale, "log_color": log_color}
 
 
-def make_rae(
-    levels: list[int],
-    bottleneck: int,
-    demodulate: bool = False,
-    residual: bool = False,
-    view_normals: bool = False,
-    sequence_exposure: bool = False,
-) -> RecurrentAutoencoder:
-    return RecurrentAutoencoder(levels, bottleneck, demodulate, residual, view_normals, sequence_exposure)
+#: The catalog's builder: the class itself, so that its signature (what ``train --set`` accepts) is
+#: the constructor's one parameter list.
+make_rae = RecurrentAutoencoder
