@@ -226,7 +226,7 @@ def test_generate_out_under_a_file_is_exit_2(tmp_path, capsys):
 def test_memory_estimate_grows_with_per_sample_data():
     plain = bounds.frame_memory_bytes(128, 128, [4], 256, samples=False)
     with_samples = bounds.frame_memory_bytes(128, 128, [4], 256, samples=True)
-    assert with_samples - plain == 128 * 128 * 4 * bounds.SAMPLE_BYTES_PER_SAMPLE
+    assert with_samples - plain >= 128 * 128 * 4 * bounds.SAMPLE_BYTES_PER_SAMPLE  # the top rung's samples, at least
     assert bounds.available_memory() is None or bounds.available_memory() > 0
 
 

@@ -18,13 +18,27 @@ bound                    value                 applies to
 :data:`MAX_SCENES`       10 000                scenes per family (and scenes in a manifest)
 =======================  ====================  ===========================================
 
-The memory estimate (:func:`frame_memory_bytes`) is the peak of one frame in flight: float64
-mean and M2 accumulators for every buffer channel (:data:`ACCUMULATOR_BYTES_PER_PIXEL`), the
-render pass's path state (at most ``MAX_PATHS_PER_PASS`` paths of :data:`PATH_BYTES`) and, with
-per-sample data, S×H×W float32 values of every per-sample channel
-(:data:`SAMPLE_BYTES_PER_SAMPLE`). It is a lower bound of what rendering needs, so a refusal is
-certain to be right; it is compared with ``MemAvailable`` (``/proc/meminfo``; physical memory
-where that cannot be read) times the number of frames rendered at once.
+The memory estimate (:func:`frame_memory_bytes`) is the peak of one frame in flight, counted from
+what the renderer allocates (render/frame.py ``FrameStream`` and ``render_ladder``, then the
+reference while the noisy rungs wait to be written):
+
+* held until the frame is written: every rung's buffers (H×W float32 means and variances of
+  :data:`NOISY_CHANNELS`) and, with per-sample data, the top rung's S×H×W samples
+  (:data:`SAMPLE_BYTES_PER_SAMPLE` per sample and pixel; the rungs' samples are views of it);
+* the noisy stream while it renders: the lanes' float32 mean and M2 of every channel (one lane
+  per pixel, more on small images: ``TARGET_LANES``), in and out of a pass; the packed per-pixel
+  moments of the finished rung and of the running one (the next rung traces while the host
+  assembles a rung), and their host copy; with per-sample data the largest round's host arrays
+  and two passes' device arrays;
+* then the reference stream (:data:`REFERENCE_CHANNELS`) and its buffers, in place of the noisy one.
+
+Dr.Jit rounds every allocation up to a power of two, and each channel of the lanes' moments is
+its own array, so device arrays are counted that way. Left out: the scene, the interpreter and
+libraries, kernels' registers, an adaptive reference's extra rounds and the EXR writer's
+buffers; tests/test_memory_estimate.py measures a small frame's peaks (``tracemalloc`` and Dr.Jit's
+allocation watermark) at 1-2x the estimate. It is compared with ``MemAvailable``
+(``/proc/meminfo``; physical memory where that cannot be read) times the number of frames
+rendered at once.
 """
 
 from __future__ import annotations
@@ -41,15 +55,47 @@ MAX_SPP_COUNTS = 32
 MAX_FRAMES = 10_000
 MAX_SCENES = 10_000
 
-#: float64 mean + M2 of ~26 buffer channels (color, diffuse, specular, albedo, normal, depth,
-#: position, roughness, motion) and a few counters.
-ACCUMULATOR_BYTES_PER_PIXEL = 26 * 2 * 8 + 16
-#: float32 per-sample channels (buffers + random parameters + second-hit features), per sample.
-SAMPLE_BYTES_PER_SAMPLE = 40 * 4
-#: Dr.Jit state of one path in a render pass (rays, throughput, moments), a conservative figure.
-PATH_BYTES = 64
-#: Paths per render pass (the feature renderer's MAX_PATHS_PER_PASS).
+#: Channels of the noisy stream's moments and buffers: color, diffuse, specular (3 each) and every
+#: feature (albedo 3, normal 3, depth 1, position 3, roughness 1, motion 2), as render/frame.py renders them.
+NOISY_CHANNELS = 22
+#: Channels of the reference stream: color, diffuse, specular.
+REFERENCE_CHANNELS = 9
+#: float32 per-sample channels every per-sample plan holds: the 8 buffers (20 channels) and the
+#: pixel offset (2); bounces, thin lens and motion blur add up to 13 more.
+SAMPLE_CHANNELS = 22
+SAMPLE_BYTES_PER_SAMPLE = SAMPLE_CHANNELS * 4
+#: Paths per render pass and lanes per pass aimed at (the feature renderer's MAX_PATHS_PER_PASS and
+#: TARGET_LANES; tests/test_memory_estimate.py checks they agree).
 MAX_PATHS_PER_PASS = 1 << 22
+TARGET_LANES = 1 << 14
+
+
+def _device(nbytes: int) -> int:
+    """Bytes Dr.Jit allocates for an array of ``nbytes``: the next power of two."""
+    return 1 << max(0, int(nbytes) - 1).bit_length() if nbytes > 0 else 0
+
+
+def _bands(width: int, height: int) -> tuple[list[tuple[int, int]], int]:
+    """``([(pixels, lanes per pixel) per band of rows], samples per pixel per pass)`` as the renderer splits a frame."""
+    rows = max(1, min(height, MAX_PATHS_PER_PASS // width))
+    bands = [min(rows, height - row0) * width for row0 in range(0, height, rows)]
+    return [(b, max(1, -(-TARGET_LANES // b))) for b in bands], max(1, MAX_PATHS_PER_PASS // (rows * width))
+
+
+def _stream_bytes(width: int, height: int, channels: int) -> int:
+    """A stream's moments while it renders (module docstring): device lanes' and packed moments, host packed copy."""
+    bands, _ = _bands(width, height)
+    lanes = sum(_device(pixels * groups * 4) * 2 * channels for pixels, groups in bands)  # every band's lanes
+    largest = max(_device(pixels * groups * 4) * 2 * channels for pixels, groups in bands)  # a pass's new ones
+    packed = sum(_device(pixels * 2 * channels * 4) for pixels, _ in bands)
+    return lanes + largest + 2 * packed + width * height * 2 * channels * 4
+
+
+def _rounds(width: int, height: int, rungs: list[int]) -> list[int]:
+    """Sample counts after each round of ``render_ladder``: rungs below the lanes per pixel share the first."""
+    bands, _ = _bands(width, height)
+    first = min(min(groups for _, groups in bands), rungs[-1])
+    return sorted({first, *rungs} - {k for k in rungs if k < first})
 
 
 def _gib(n: float) -> str:
@@ -79,13 +125,22 @@ def check_counts(*, scenes: int, frames: int, spp, ref_spp: int, option_prefix: 
 
 
 def frame_memory_bytes(width: int, height: int, spp, ref_spp: int, samples: bool) -> int:
-    """Lower bound of the peak memory of rendering one frame (module docstring)."""
+    """Peak memory of rendering one frame, as the renderer allocates it (module docstring)."""
     pixels = width * height
-    paths = min(pixels * max(max(spp), ref_spp), MAX_PATHS_PER_PASS)
-    total = pixels * ACCUMULATOR_BYTES_PER_PIXEL + paths * PATH_BYTES
-    if samples:
-        total += pixels * max(spp) * SAMPLE_BYTES_PER_SAMPLE
-    return total
+    rungs = sorted({int(k) for k in spp})
+    held = len(rungs) * pixels * 2 * NOISY_CHANNELS * 4
+    noisy = _stream_bytes(width, height, NOISY_CHANNELS) if rungs else 0
+    if samples and rungs:
+        held += pixels * rungs[-1] * SAMPLE_BYTES_PER_SAMPLE
+        rounds = _rounds(width, height, rungs)
+        largest = max(b - a for a, b in zip([0, *rounds], rounds))
+        bands, chunk = _bands(width, height)
+        per_pass = _device(min(largest, chunk) * max(p for p, _ in bands) * SAMPLE_BYTES_PER_SAMPLE)
+        noisy += pixels * largest * SAMPLE_BYTES_PER_SAMPLE + 2 * per_pass
+    reference = 0
+    if ref_spp:
+        reference = _stream_bytes(width, height, REFERENCE_CHANNELS) + pixels * 2 * REFERENCE_CHANNELS * 4
+    return held + max(noisy, reference)
 
 
 def available_memory() -> int | None:
