@@ -11,7 +11,7 @@ import pytest
 
 from denoisebench.leaderboard import equal_tables as et
 from denoisebench.leaderboard.analysis import Cell, SummaryRow
-from denoisebench.leaderboard.runner import NOISY
+from denoisebench.leaderboard.names import NOISY
 
 RUNGS = [1, 2, 4, 8, 16]
 

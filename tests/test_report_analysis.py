@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from denoisebench.leaderboard import analysis, images
-from denoisebench.leaderboard.runner import NOISY
+from denoisebench.leaderboard.names import NOISY
 
 
 def _curve(seconds_per_spp=0.01, spps=(1, 4, 16), c=0.5):

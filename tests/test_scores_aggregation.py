@@ -16,7 +16,8 @@ import pytest
 from denoisebench.dataset.frame import Frame, Sequence
 from denoisebench.leaderboard import aggregate as agg
 from denoisebench.leaderboard import analysis, strips
-from denoisebench.leaderboard.runner import NOISY, measure_unit
+from denoisebench.leaderboard.names import NOISY
+from denoisebench.leaderboard.runner import measure_unit
 from denoisebench.leaderboard.store import SCHEMA_VERSION, FrameRecord, ResultsStore, UnitRecord
 
 SCENES = {"dark": 0.05, "plain": 1.0, "glossy_fireflies": 300.0}  # very different brightness
@@ -93,7 +94,7 @@ def test_every_lead_temporal_and_gradient_score_ranks_the_smooth_prediction_abov
         rows = {r.denoiser: r for r in summary if r.spp == spp}
         for metric in LEAD:
             m = get_metric(metric)
-            blur, noisy = rows["blur"].metrics[metric].mean, rows[NOISY].metrics[metric].mean
+            blur, noisy = rows["blur"].metrics[metric].value, rows[NOISY].metrics[metric].value
             assert m.better(blur, noisy), (spp, metric, blur, noisy)
             if m.aggregate == "relative_to_input":
                 assert noisy == pytest.approx(1.0)
@@ -106,9 +107,9 @@ def test_floors_and_corrected_values_travel_through_the_store(measured):
         cell = row.metrics[metric]
         assert cell.floor is not None and cell.floor > 0, metric
         assert (
-            cell.corrected == pytest.approx(cell.mean - cell.floor, rel=1e-9)
+            cell.corrected == pytest.approx(cell.value - cell.floor, rel=1e-9)
             if cell.rule == "mean"
-            else cell.corrected < cell.mean
+            else cell.corrected < cell.value
         )
     assert row.metrics["hfen"].floor is None  # not an MSE-family score
     frames = store.frames("run1")

@@ -11,7 +11,7 @@ import pytest
 from denoisebench.dataset.frame import Frame
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard import time_model as tm
-from denoisebench.leaderboard.runner import NOISY
+from denoisebench.leaderboard.names import NOISY
 
 FIXED, PER_PIXEL = 0.05, 2e-7  # a denoiser: 50 ms per call + 0.2 s per megapixel
 P0, P1, HD = 80 * 80, 1024 * 1024, 1920 * 1080

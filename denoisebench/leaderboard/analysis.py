@@ -82,11 +82,6 @@ class Cell:
     floor: float | None = None
     corrected: float | None = None
 
-    @property
-    def mean(self) -> float | None:
-        """``value``, under the name results.json (``"mean"``) and older readers use."""
-        return self.value
-
 
 @dataclass
 class SummaryRow:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import io
 
 from denoisebench.leaderboard.analysis import AccuracyTime
-from denoisebench.leaderboard.runner import NOISY
+from denoisebench.leaderboard.names import NOISY
 
 NOISY_COLOR = "#444444"
 

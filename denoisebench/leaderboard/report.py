@@ -37,8 +37,8 @@ from denoisebench.dataset import Dataset
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.leaderboard import aggregate as agg
 from denoisebench.leaderboard import analysis, figures, images, report_samplers, strips
+from denoisebench.leaderboard.names import NOISY
 from denoisebench.leaderboard.report_model import ReportModel
-from denoisebench.leaderboard.runner import NOISY
 from denoisebench.leaderboard.store import ResultsStore
 
 
@@ -410,7 +410,7 @@ def results_json(report: ReportModel) -> dict:
                     "render_seconds_per_frame": r.render_seconds,
                     "metrics": {
                         m: {
-                            "mean": c.mean,
+                            "mean": c.value,
                             "ci95": [c.low, c.high],
                             "scenes": c.scenes,
                             "aggregate": c.rule,

@@ -44,7 +44,7 @@ import numpy as np
 from denoisebench.dataset import Dataset, DatasetError, layout
 from denoisebench.dataset.exr_io import canonical_json
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard.names import (  # noqa: F401 (NOISY, REQUIRED_METRICS: re-exported for older importers)
+from denoisebench.leaderboard.names import (
     FLICKER_METRICS,
     FLICKER_PREFIX,
     NOISY,
