@@ -219,3 +219,21 @@ def test_buffers_read_finished_rounds_while_a_launched_round_traces(family_scene
         assert np.array_equal(new[name], plain5.samples[name][2:]), name  # the round's samples: 3..5
     with pytest.raises(RuntimeError):
         stream.finish()
+
+
+def test_rounds_a_ladder_traces(monkeypatch, family_scene):
+    """A plain render is one round; rungs below the lanes per pixel share the first round; the others get one each."""
+    from denoisebench.generator.render.frame import FrameStream
+
+    translated, scene = family_scene("cornell")
+    plan = make_render_plan(translated.effects)
+    launched = []
+    launch = FrameStream.launch
+    monkeypatch.setattr(FrameStream, "launch", lambda self, counts: launched.append(counts) or launch(self, counts))
+    kw = dict(width=SIZE, height=SIZE, seed=2)
+    lanes = FrameStream(scene, translated.camera, 1, plan, **kw).lanes_per_pixel  # 64 at 16x16
+    render_frame(scene, translated.camera, 1, plan, spp=3, **kw)
+    assert launched == [3]
+    launched.clear()
+    render_ladder(scene, translated.camera, 1, plan, rungs=(1, 2, 4, lanes + 6, lanes + 8), **kw)
+    assert launched == [lanes, 6, 2]

@@ -95,7 +95,8 @@ def _rounds(width: int, height: int, rungs: list[int]) -> list[int]:
     """Sample counts after each round of ``render_ladder``: rungs below the lanes per pixel share the first."""
     bands, _ = _bands(width, height)
     first = min(min(groups for _, groups in bands), rungs[-1])
-    return sorted({first, *rungs} - {k for k in rungs if k < first})
+    head = {k for k in rungs if k < first}
+    return sorted({first, *rungs} - head) if head else rungs
 
 
 def _gib(n: float) -> str:

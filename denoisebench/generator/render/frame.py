@@ -705,7 +705,7 @@ def render_ladder(
     # Rungs below the lanes per pixel come from one round of `first` samples (FrameStream.prefix_buffers).
     first = min(stream.lanes_per_pixel, rungs[-1])
     head = [k for k in rungs if k < first]
-    rounds = sorted({first, *rungs} - set(head))
+    rounds = sorted({first, *rungs} - set(head)) if head else rungs
     out, done = [], 0
 
     def emit(spp, buffers):
