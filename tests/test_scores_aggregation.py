@@ -17,8 +17,9 @@ from denoisebench.dataset.frame import Frame, Sequence
 from denoisebench.leaderboard import aggregate as agg
 from denoisebench.leaderboard import analysis, strips
 from denoisebench.leaderboard.names import NOISY
+from denoisebench.leaderboard.records import FrameRecord, UnitRecord
 from denoisebench.leaderboard.runner import measure_unit
-from denoisebench.leaderboard.store import SCHEMA_VERSION, FrameRecord, ResultsStore, UnitRecord
+from denoisebench.leaderboard.store import SCHEMA_VERSION, ResultsStore
 
 SCENES = {"dark": 0.05, "plain": 1.0, "glossy_fireflies": 300.0}  # very different brightness
 

@@ -62,9 +62,8 @@ from denoisebench.errors import UserInputError
 from denoisebench.leaderboard import sampler_maps
 from denoisebench.leaderboard.finite import finite_or_none
 from denoisebench.leaderboard.names import PAIR_LABEL_SEPARATOR, PAIR_SPEC_SEPARATOR, SAMPLER_SPEC_PREFIX
-from denoisebench.leaderboard.records import (  # noqa: F401 (FrameRecord, UnitRecord: re-exported from records)
+from denoisebench.leaderboard.records import (
     EntryRow,
-    FrameRecord,
     FrameRow,
     NotApplicableRow,
     RunRow,
