@@ -679,8 +679,11 @@ def render_ladder(
         The passes are split at rung boundaries (each rung is a snapshot of the carried moments),
         so a ladder ``1, 2, 4, ..., 64`` traces what a plain 64-spp render traces plus one launch
         and one host copy per rung. A rung's buffers (copies and variances) are assembled on the
-        host while the next rung's passes trace (:meth:`FrameStream.launch`). bench/ladder_cost.py
-        measures the difference against the top rung alone.
+        host while the next rung's passes trace (:meth:`FrameStream.launch`). On small images,
+        whose pixels have several lanes, the rungs below the lanes per pixel all come from the
+        first round (:meth:`FrameStream.prefix_buffers`): traced one by one, each would cost a
+        pass of mostly idle lanes. bench/ladder_cost.py measures the difference against the top
+        rung alone; a rung's ``seconds`` then is the time the shared round and its own merge took.
     """
     started = clock()
     rungs = sorted({int(k) for k in rungs})
