@@ -106,7 +106,8 @@ def _encode(counts: np.ndarray) -> bytes:
     return zlib.compress(np.ascontiguousarray(counts, dtype="<i4").tobytes(), 6)
 
 
-def _has_table(conn) -> bool:
+def has_table(conn) -> bool:
+    """Whether the database holds the table (stores written before it existed do not)."""
     return (
         conn.execute("SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (TABLE,)).fetchone() is not None
     )
@@ -115,7 +116,7 @@ def _has_table(conn) -> bool:
 def read(store, run_id: str) -> list[dict]:
     """Every sampler frame of ``run_id``: denoiser (the pair's label), scene, spp, frame, counts and ``spp``
     (H×W int32 or None), ordered by label, scene, spp, frame; [] when the store has no such table."""
-    if not _has_table(store.conn):
+    if not has_table(store.conn):
         return []
     rows = store.conn.execute(
         f"SELECT denoiser, scene, spp, frame, samples, mean_spp, max_spp, pixels_without_samples, height, width, data "

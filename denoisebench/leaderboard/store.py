@@ -646,6 +646,13 @@ class ResultsStore:
             ).fetchone()[0]
             if orphans:
                 problems.append(f"{orphans} row(s) of {table} without a unit")
+        if sampler_maps.has_table(self.conn):  # spp maps of live sampler units, when the database has them
+            orphans = self.conn.execute(
+                f"SELECT COUNT(*) FROM {sampler_maps.TABLE} t WHERE NOT EXISTS (SELECT 1 FROM units u "
+                "WHERE u.run_id = t.run_id AND u.denoiser = t.denoiser AND u.scene = t.scene AND u.spp = t.spp)"
+            ).fetchone()[0]
+            if orphans:
+                problems.append(f"{orphans} row(s) of {sampler_maps.TABLE} without a unit")
         short = self.conn.execute(
             "SELECT COUNT(*) FROM units u WHERE u.frames != (SELECT COUNT(*) FROM frames f WHERE f.run_id = u.run_id "
             "AND f.denoiser = u.denoiser AND f.scene = u.scene AND f.spp = u.spp)"
