@@ -4,7 +4,7 @@ Every place the leaderboard combines scenes (the summary table, ``denoisebench l
 flicker table) goes through :func:`aggregate`, so a plugin metric that states its rule
 (:attr:`denoisebench.metrics.Metric.aggregate`) is combined correctly too.
 
-Rules (DESIGN.md "Metrics"; the registry's docstring says why):
+Rules (docs/architecture.md, "Metrics"; the registry's docstring says why):
 
 * ``mean``: arithmetic mean of the per-scene values (scale-free scores).
 * ``geomean``: exp(mean(log value)). A brightness factor of one scene multiplies every denoiser's

@@ -6,8 +6,8 @@ Spatial and gradient metrics take ``(pred, ref)`` H×W×3; temporal ones take
 ``depth``, ``masks``), of which ``requires`` must be given. A metric of any kind whose ``accepts``
 lists ``trim`` (the robust scores, :mod:`.robust`) receives the run's trim fraction when one is set.
 
-Aggregation over scenes (``Metric.aggregate``; DESIGN.md "Metrics")
---------------------------------------------------------------------
+Aggregation over scenes (``Metric.aggregate``; docs/architecture.md, "Metrics")
+-------------------------------------------------------------------------------
 Scores of linear radiance grow with a scene's brightness: an arithmetic mean over scenes is then
 decided by the brightest scene (measured: ``temporal_l1`` ranked the noisy input above OIDN because
 glossy_fireflies scored 1.07–1.44 and every other scene 0.01–0.18). So every metric states how the

@@ -18,7 +18,7 @@ Notes
 * A step whose loss or gradient is not finite is skipped (counted in ``meta["skipped_steps"]``)
   rather than allowed to poison the weights; gradients are clipped to norm 1.
 * Validation relMSE is computed here with torch (:func:`~denoisebench.models.losses.relmse`)
-  because ``models`` may not import ``metrics`` (DESIGN.md's import direction); it follows the
+  because ``models`` may not import ``metrics`` (docs/architecture.md's import table); it follows the
   metric's definition exactly.
 * The checkpoint written during training carries the optimiser state (for ``--resume``);
   :func:`strip_for_shipping` drops it.
