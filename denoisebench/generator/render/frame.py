@@ -416,6 +416,7 @@ class FrameStream:
         self._state: list = [None] * len(self._bands)
         self._counts = np.zeros((height, width), np.int64)
         self._round = None  # the launched round's (add, samples, pending, last), until finish()
+        self._prefixes: dict = {}  # total → merged device moments queued with the first round (queue_prefixes)
         self._packed = np.zeros((height, width, self._layout["stride"]), np.float32)
 
     @property
@@ -447,6 +448,7 @@ class FrameStream:
 
         if self._round is not None:
             raise RuntimeError("finish() the launched round before launching another")
+        self._prefixes = {}
         add = np.broadcast_to(np.asarray(counts), (self.height, self.width))
         if not np.issubdtype(add.dtype, np.integer) or (add < 0).any():
             raise ValueError("per-pixel sample counts must be integers >= 0")
@@ -549,6 +551,16 @@ class FrameStream:
         """Lanes every pixel has at least (``groups``): a fresh stream of up to this many samples holds one per lane."""
         return min(self._groups)
 
+    def queue_prefixes(self, totals) -> None:
+        """Queue :meth:`prefix_buffers`' merges for ``totals`` on the launched round, so that its finish waits for them too.
+
+        Only for a fresh stream's first round (launched, not finished) of ``n <= lanes_per_pixel``
+        samples for every pixel, and totals ``1..n``; raises ``ValueError`` otherwise.
+        """
+        if self._round is None or self._counts.any():
+            raise ValueError("queue_prefixes() needs the launched first round of a fresh stream")
+        self._prefixes = {int(k): self._merge(int(k), self._round[0]) for k in totals}
+
     def prefix_buffers(self, total: int) -> dict[str, np.ndarray]:
         """The buffers of every pixel's first ``total`` samples, while each lane holds at most one sample.
 
@@ -557,23 +569,35 @@ class FrameStream:
         ``total`` (:func:`_merge_pass`), from the lanes already traced. :func:`render_ladder` takes
         its rungs below ``lanes_per_pixel`` this way: on small images a pixel's few samples occupy
         a few of its lanes while the others idle in the same SIMD vectors, so one pass of ``n``
-        costs about what a pass of 1 costs. Raises ``ValueError`` otherwise.
+        costs about what a pass of 1 costs. Merges queued with the round (:meth:`queue_prefixes`)
+        are only copied; others run now. Raises ``ValueError`` otherwise.
         """
-        mi = load_mitsuba()
-
-        n = int(self._counts.flat[0])
-        if self._round is not None or (self._counts != n).any() or not 1 <= total <= n <= self.lanes_per_pixel:
-            raise ValueError(
-                f"prefix_buffers({total}) needs a finished uniform round of {total}..{self.lanes_per_pixel}"
-            )
-        params = _device_copy(mi, mi.UInt32, np.asarray([total], np.uint32))
+        if self._round is not None:
+            raise ValueError("prefix_buffers() reads a finished round: finish() first")
+        merged = self._prefixes.get(int(total)) or self._merge(int(total), self._counts)
         packed_host = np.empty_like(self._packed)
         stride = self._layout["stride"]
-        for index, ((row0, band), groups) in enumerate(zip(self._bands, self._groups)):
-            config = _MergeConfig(tuple(self.stat_channels.items()), band, self.width, groups)
-            packed = _compiled_pass(self.scene, config, _merge_pass)(self.scene, params, self._state[index], config)
+        for (row0, band), packed in zip(self._bands, merged):
             packed_host[row0 : row0 + band] = np.asarray(packed, dtype=np.float32).reshape(band, self.width, stride)
         return self._assemble(packed_host, np.full_like(self._counts, total))
+
+    def _merge(self, total: int, counts: np.ndarray) -> list:
+        """Queue the merges of every band's lanes as ``total`` samples (:func:`_merge_pass`): device arrays."""
+        mi = load_mitsuba()
+
+        n = int(counts.flat[0])
+        if (counts != n).any() or not 1 <= total <= n <= self.lanes_per_pixel:
+            raise ValueError(
+                f"prefix_buffers({total}) needs a uniform round of {total}..{self.lanes_per_pixel} samples"
+            )
+        params = _device_copy(mi, mi.UInt32, np.asarray([total], np.uint32))
+        merged = []
+        for index, ((_, band), groups) in enumerate(zip(self._bands, self._groups)):
+            config = _MergeConfig(tuple(self.stat_channels.items()), band, self.width, groups)
+            merged.append(
+                _compiled_pass(self.scene, config, _merge_pass)(self.scene, params, self._state[index], config)
+            )
+        return merged
 
     def _assemble(self, packed: np.ndarray, counts: np.ndarray) -> dict[str, np.ndarray]:
         """The buffers of packed per-pixel moments (H×W×stride) of ``counts`` samples (:meth:`buffers`' Notes)."""
@@ -716,6 +740,8 @@ def render_ladder(
         out.append(RenderedFrame(buffers=buffers, samples=samples, seconds=clock() - started, spp=spp))
 
     stream.launch(rounds[0])
+    if head:
+        stream.queue_prefixes(head)
     for index, spp in enumerate(rounds):
         new = stream.finish()
         if top is not None:
