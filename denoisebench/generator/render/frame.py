@@ -323,11 +323,16 @@ def _device_copy(mi, kind, values: np.ndarray):
         replays record anew, at random (NumPy's alignment varies). Adding an opaque zero runs a
         kernel that writes a fresh Dr.Jit array (fast for large arrays, unlike going through a
         list); a gather by ``arange`` did not do it (Dr.Jit returned the mapped array itself).
+        A few values (a pass's scalars) go through a list: a copy without a kernel launch, which
+        in a ladder's pipelined rounds also queued behind the running pass.
     """
     import drjit as dr
 
-    mapped = kind(values)
-    copy = mapped + dr.opaque(kind, 0)  # a kernel writes a fresh array (an opaque 0 is not folded away)
+    if 1 < values.size <= 16:  # a pass's few scalars: copied from a list, without a kernel (one element: a literal)
+        copy = kind(values.tolist())
+    else:
+        mapped = kind(values)
+        copy = mapped + dr.opaque(kind, 0)  # a kernel writes a fresh array (an opaque 0 is not folded away)
     dr.eval(copy)
     return copy
 
@@ -590,7 +595,7 @@ class FrameStream:
             raise ValueError(
                 f"prefix_buffers({total}) needs a uniform round of {total}..{self.lanes_per_pixel} samples"
             )
-        params = _device_copy(mi, mi.UInt32, np.asarray([total], np.uint32))
+        params = _device_copy(mi, mi.UInt32, np.asarray([total, 0], np.uint32))  # two: one element is a literal
         merged = []
         for index, ((_, band), groups) in enumerate(zip(self._bands, self._groups)):
             config = _MergeConfig(tuple(self.stat_channels.items()), band, self.width, groups)
