@@ -27,11 +27,13 @@ import atexit
 import glob
 import json
 import os
+import resource
 import signal
 import subprocess
 import sys
 import threading
 import time
+from multiprocessing import Pipe
 
 from denoisebench import sandbox
 from denoisebench.errors import UserInputError
@@ -97,8 +99,6 @@ def rlimits(processes: int, open_files: int, scratch_mb: int, memory_limit_mb: i
 
 def set_rlimits(limits: dict[str, int] | None) -> None:
     """In the worker: set each ``RLIMIT_<name>`` of ``limits``, soft and hard (never above the hard limit)."""
-    import resource
-
     for name, value in (limits or {}).items():
         kind = getattr(resource, f"RLIMIT_{name}")
         _, hard = resource.getrlimit(kind)
@@ -181,7 +181,6 @@ class WorkerProcess:
         open_files: int = DEFAULT_OPEN_FILES,
         memory_limit_mb: int,
     ):
-        from multiprocessing import Pipe
 
         self.noun, self.sandboxed, self.processes = noun, bool(sandboxed), int(processes)
         self.spec, self.options, self.rlimits = spec, dict(options or {}), None

@@ -64,7 +64,10 @@ import os
 import shutil
 import subprocess
 import sys
+import tempfile
 from collections.abc import Iterable
+
+import denoisebench
 
 #: The worker's private writable folder (a tmpfs) inside the sandbox.
 SCRATCH = "/tmp"
@@ -151,8 +154,6 @@ def unavailable_reason() -> str | None:
 
 def readable_paths(spec: str, options: dict) -> list[str]:
     """What the worker may read besides the system: Python, ``sys.path``, the plugin, option files."""
-    import denoisebench
-
     paths = [sys.prefix, sys.base_prefix, sys.exec_prefix, os.path.dirname(os.path.realpath(sys.executable))]
     paths.append(os.path.dirname(os.path.abspath(denoisebench.__file__)))
     paths += [entry for entry in sys.path if entry and os.path.isabs(entry)]
@@ -272,7 +273,6 @@ def command(worker_argv: list[str], *, readable: Iterable[str], scratch_bytes: i
 
 
 def _tempfile_fd() -> int:
-    import tempfile
 
     handle, name = tempfile.mkstemp(prefix="denoisebench-bwrap-")
     os.unlink(name)

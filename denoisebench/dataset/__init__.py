@@ -12,6 +12,8 @@ from denoisebench.dataset.manifest import assign_splits, config_hash, manifest_w
 from denoisebench.dataset.reader import Dataset, SceneInfo, open_dataset
 from denoisebench.dataset.writer import DatasetWriter
 
+# Lazy imports: the torch datasets (torch: 1 s) only when CropDataset or SequenceCropDataset is asked for.
+
 __all__ = [
     "CropDataset",
     "Dataset",

@@ -66,7 +66,8 @@ from typing import Any
 import numpy as np
 
 from denoisebench import plugin_worker
-from denoisebench.denoisers import shared_frames
+from denoisebench.denoisers import registry, shared_frames
+from denoisebench.denoisers.registry import BUILTINS, DenoiserLoadError, load_denoiser
 from denoisebench.errors import UserInputError
 from denoisebench.plugin_worker import (
     DEFAULT_OPEN_FILES,
@@ -166,8 +167,6 @@ class IsolatedDenoiser:
         try:
             header, _ = self._request(self._worker.load_message(), "load")
         except WorkerFailure as failure:
-            from denoisebench.denoisers.registry import DenoiserLoadError
-
             raise DenoiserLoadError(f"cannot load {self.spec!r} in its worker: {failure}") from None
         if not header.get("ok"):
             self.close()
@@ -290,8 +289,6 @@ def _rebuild(header: dict, payload: bytes | None, channel=None, descriptor=None)
 
 def _load_error(type_name: str, message: str, spec: str) -> Exception:
     """The parent-side exception for a load failure reported by a worker."""
-    from denoisebench.denoisers import registry
-
     kinds = {
         "UnknownDenoiserError": registry.UnknownDenoiserError,
         "UnknownOptionError": registry.UnknownOptionError,
@@ -328,8 +325,6 @@ def isolation_text(config: dict, versions: dict) -> str:
 
 def isolated(spec: str, policy: str = DEFAULT_POLICY) -> bool:
     """Whether ``spec`` runs in a worker under ``policy``."""
-    from denoisebench.denoisers.registry import BUILTINS
-
     if policy not in POLICIES:
         raise UserInputError(f"--isolation must be one of {', '.join(POLICIES)} (got {policy!r})")
     if policy == "none":
@@ -343,8 +338,6 @@ def load(spec: str, options: dict | None = None, *, policy: str = DEFAULT_POLICY
     Raises what :func:`~.registry.load_denoiser` raises (UnknownDenoiserError, UnknownOptionError,
     DenoiserLoadError), also when the failure happened in a worker.
     """
-    from denoisebench.denoisers.registry import load_denoiser
-
     if isolated(spec, policy):
         return IsolatedDenoiser(spec.strip(), options, limits, sandboxed=sandboxed(policy))
     return load_denoiser(spec, **(options or {}))

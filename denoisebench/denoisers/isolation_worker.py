@@ -23,7 +23,13 @@ from __future__ import annotations
 import json
 import sys
 import time
+from multiprocessing.connection import Connection
 
+import numpy as np
+
+from denoisebench.denoisers.protocol import describe
+from denoisebench.denoisers.registry import load_denoiser
+from denoisebench.denoisers.shared_frames import WorkerView
 from denoisebench.errors import one_line
 from denoisebench.plugin_worker import set_rlimits
 
@@ -36,8 +42,6 @@ def _reply(conn, header: dict, payload: bytes | memoryview | None = None) -> Non
 
 
 def _load(conn, spec: str, options: dict, sys_path: list[str], rlimits: dict[str, int] | None = None):
-    from denoisebench.denoisers.protocol import describe
-    from denoisebench.denoisers.registry import load_denoiser
 
     set_rlimits(rlimits)
     sys.path[:] = list(sys_path)
@@ -68,7 +72,6 @@ def _load(conn, spec: str, options: dict, sys_path: list[str], rlimits: dict[str
 
 
 def _denoise(conn, denoiser, frame, view=None, descriptor=None) -> None:
-    import numpy as np
 
     for array in list(frame.buffers.values()) + list((frame.samples or {}).values()):
         array.flags.writeable = False  # the same contract as in-process; these are this process's copies
@@ -94,13 +97,10 @@ def _denoise(conn, denoiser, frame, view=None, descriptor=None) -> None:
 
 
 def main(fd: int, memfd: int | None = None) -> None:
-    from multiprocessing.connection import Connection
 
     conn = Connection(fd)
     view = None
     if memfd is not None:
-        from denoisebench.denoisers.shared_frames import WorkerView
-
         view = WorkerView(memfd)
     denoiser = None
     while True:

@@ -34,15 +34,20 @@ from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 
-from denoisebench.dataset import layout
+from tqdm import tqdm
+
+from denoisebench.dataset import bounds, layout
 from denoisebench.dataset.errors import DatasetError
 from denoisebench.dataset.manifest import assign_splits, config_hash, load_header, pin_held_out
 from denoisebench.dataset.writer import DatasetWriter
 from denoisebench.errors import UserInputError
 from denoisebench.generator import dataset_scenes as scenes_mod
+from denoisebench.generator.contract.render_plan import RenderOptions, check_max_depth, make_render_plan
 from denoisebench.generator.dataset_scenes import SceneSpec
 from denoisebench.generator.frame_jobs import missing_jobs, write_rendered
 from denoisebench.generator.render.reference import GROWTH_WARNING
+from denoisebench.mitsuba_runtime import load_mitsuba
+from denoisebench.scenes import get_family
 
 CONFIG_KIND = "denoisebench.generate"
 #: The reference should have this many times the noisy inputs' largest spp (rel_se falls as 1/sqrt(spp),
@@ -119,7 +124,6 @@ def check_request(request: GenerateRequest) -> None:
         raise UserInputError(f"--spp needs positive sample counts (got {list(request.spp)})")
     if not request.families and not request.usd and not request.xml:
         raise UserInputError("nothing to generate: give --families, --usd and/or --mitsuba")
-    from denoisebench.dataset import bounds  # documented upper bounds and a memory estimate, before any allocation
 
     bounds.check_generate(
         width=request.width,
@@ -133,8 +137,6 @@ def check_request(request: GenerateRequest) -> None:
     if request.ref_error is not None and not (0 < request.ref_error < float("inf")):
         raise UserInputError(f"--ref-error must be a positive number (got {request.ref_error})")
     if request.max_depth is not None:
-        from denoisebench.generator.contract.render_plan import check_max_depth
-
         try:
             check_max_depth(request.max_depth, "--max-depth")
         except ValueError as error:
@@ -145,8 +147,6 @@ def validate_request(request: GenerateRequest) -> None:
     """Every check that needs no output folder: values, family names, the user's stages."""
     check_request(request)
     if request.families:
-        from denoisebench.scenes import get_family
-
         for family in request.families:
             get_family(family)  # UnknownFamilyError is a UserInputError
     for path in request.usd:
@@ -221,8 +221,6 @@ def resumable_config(out: str | Path, config: dict) -> dict:
 
 def render_versions() -> dict[str, str]:
     """Versions that decide the renders: Mitsuba (and its variant), Dr.Jit, USD."""
-    from denoisebench.mitsuba_runtime import load_mitsuba
-
     versions = {"mitsuba_variant": load_mitsuba().variant()}
     for package in ("mitsuba", "drjit", "usd-core"):
         try:
@@ -269,9 +267,6 @@ def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -
 
 def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names: list[str]) -> list[SceneSpec]:
     """Author / copy every scene into OUT and record it with the writer."""
-    from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
-    from denoisebench.scenes import get_family
-
     entries = []
     for family, seed, name in scenes_mod.family_scene_names(list(request.families), request.scenes, request.seed):
         folder = writer.scene_dir(name)
@@ -317,8 +312,6 @@ def render_options(request: GenerateRequest) -> dict:
 
 def generate_dataset(request: GenerateRequest, executor, progress: bool = True, log=None) -> GenerateSummary:
     """Generate or resume the dataset ``request`` asks for with ``executor``; return a summary."""
-    from tqdm import tqdm
-
     log = log or (lambda line: print(line, file=sys.stderr))
     started = time.perf_counter()
     validate_request(request)

@@ -51,6 +51,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from denoisebench.leaderboard.finite import is_finite
+from denoisebench.metrics import get_metric
+
+# Lazy imports: scipy (0.3 s) only where a bootstrap interval is drawn.
 
 #: Bootstrap resamples and seed (fixed: the same run gives the same report).
 BOOTSTRAP_RESAMPLES = 2000
@@ -82,8 +85,6 @@ __all__ = [
 
 def rule_of(metric_name: str) -> str:
     """The aggregation rule of a registered metric; ``mean`` for names the registry does not know."""
-    from denoisebench.metrics import get_metric
-
     try:
         return get_metric(metric_name).aggregate
     except ValueError:
@@ -307,7 +308,6 @@ def excluded_scenes(unresolved: list[Unresolved]) -> list[str]:
 
 
 def _higher_is_better(metric: str) -> bool:
-    from denoisebench.metrics import get_metric
 
     try:
         return get_metric(metric).higher_is_better

@@ -48,6 +48,7 @@ import numpy as np
 
 from denoisebench.leaderboard import aggregate as agg
 from denoisebench.leaderboard.aggregate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401 (re-exported)
+from denoisebench.leaderboard.equal_tables import spp_for
 from denoisebench.leaderboard.finite import finite_mean, is_finite
 from denoisebench.leaderboard.names import (  # noqa: F401 (ERROR_METRICS: re-exported for the report)
     ERROR_METRICS,
@@ -383,8 +384,6 @@ def readings(at: AccuracyTime) -> list[str]:
     a denoiser's error is read off the straight log-log segment between the two rungs around it
     (:func:`.equal_tables.spp_for`). An error below the top rung's (or any error when one rung was
     measured) would need an extrapolation: the sentence then says so and gives no verdict."""
-    from denoisebench.leaderboard.equal_tables import spp_for
-
     if at.fit is None:
         return [f"No noisy-input curve for {at.metric}: the inputs' error does not fall with spp (or no render times)."]
     fit = at.fit

@@ -10,8 +10,11 @@ from __future__ import annotations
 
 import sys
 
+from tqdm import tqdm
+
 from denoisebench.dataset import Dataset
 from denoisebench.errors import UserInputError
+from denoisebench.leaderboard.ray_executor import run_ray
 from denoisebench.leaderboard.records import UnitRecord
 from denoisebench.leaderboard.runner import BenchmarkConfig, RunPlan, prepare_run, run_local
 from denoisebench.leaderboard.store import ResultsStore
@@ -29,8 +32,6 @@ def run_benchmark(
     progress: bool = True,
 ) -> RunPlan:
     """Measure every missing unit of the run ``config`` describes; return its plan (with run_id)."""
-    from tqdm import tqdm
-
     plan = prepare_run(dataset, config, store, progress=progress)
     for label, scenes in plan.trained_on().items():
         shown = ", ".join(scenes[:6]) + (f" and {len(scenes) - 6} more" if len(scenes) > 6 else "")
@@ -60,8 +61,6 @@ def run_benchmark(
         if executor == "local":
             run_local(dataset, plan, store, on_unit)
         elif executor == "ray":
-            from denoisebench.leaderboard.ray_executor import run_ray  # imports Ray itself only when called
-
             run_ray(dataset, plan, store, config, on_unit)
         else:
             raise UserInputError(f"unknown executor {executor!r}; use one of {', '.join(EXECUTORS)}")

@@ -29,7 +29,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from denoisebench.leaderboard.formatting import num
 from denoisebench.leaderboard.names import NOISY
+from denoisebench.metrics.registry import metric_names
 
 #: Multiples of the top rung the equal-quality table adds as (extrapolated) targets.
 EXTRA_TARGETS = (4, 16)
@@ -40,8 +42,6 @@ EXTRAPOLATION_LIMIT = 64
 
 def lead_metrics(measured: list[str]) -> list[str]:
     """The tables' metrics: robust relMSE (else relMSE), then FLIP, among those the run measured."""
-    from denoisebench.metrics.registry import metric_names
-
     registered = set(metric_names())
     first = "relmse_robust" if "relmse_robust" in registered and "relmse_robust" in measured else "relmse"
     return [m for m in (first, "flip") if m in measured]
@@ -258,7 +258,6 @@ def _res(tables: Tables) -> str:
 def verdicts(tables: Tables) -> list[str]:
     """Sentences from rows whose every figure lies within the measured rungs (none from an extrapolation)."""
     out = []
-    from denoisebench.leaderboard.formatting import num
 
     wins = [r for r in tables.equal_time if r.best is not None and r.best_error.verdict_ok]
     if wins:

@@ -16,8 +16,12 @@ from __future__ import annotations
 
 import io
 
+import numpy as np
+
 from denoisebench.leaderboard.analysis import AccuracyTime
 from denoisebench.leaderboard.names import NOISY
+
+# Lazy imports: matplotlib only where a figure is drawn, so that a run without a report never loads it.
 
 NOISY_COLOR = "#444444"
 
@@ -51,7 +55,6 @@ def _save(fig) -> tuple[bytes, str]:
 
 
 def _accuracy_axis(ax, at: AccuracyTime, palette: dict[str, str]) -> None:
-    import numpy as np
 
     noisy = sorted((p for p in at.points if p.denoiser == NOISY), key=lambda p: p.spp)
     if noisy:

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import math
 
+from denoisebench.leaderboard.aggregate import rule_of
 from denoisebench.leaderboard.names import NOISY
+from denoisebench.metrics import get_metric
 
 #: Metrics shown in the summary tables, in this order.
 LEAD_METRICS = (
@@ -49,8 +51,6 @@ def cell_text(cell) -> str:
 
 def metric_heading(name: str) -> str:
     """``name ↓`` (or ↑), with the aggregation rule when it is not the mean: ``hfen ↓ (× input)``."""
-    from denoisebench.metrics import get_metric
-
     try:
         metric = get_metric(name)
     except ValueError:
@@ -131,8 +131,6 @@ def not_held_out_lines(report: dict) -> list[str]:
 
 def indistinguishable_lines(report: dict) -> list[str]:
     """One sentence per pair of denoisers the reference cannot tell apart (analysis.indistinguishable_pairs)."""
-    from denoisebench.leaderboard.aggregate import rule_of
-
     lines = []
     for p in report.get("indistinguishable", []):
         scale = "" if rule_of(p.metric) == "mean" else " in log ratio"

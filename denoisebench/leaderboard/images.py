@@ -18,12 +18,15 @@ import io
 
 import numpy as np
 
+from denoisebench.metrics.tonemap import tonemap
+
+# Lazy imports: PIL, matplotlib's colour maps and scipy only where an image is encoded, coloured or
+# filtered, so that a run without a report never loads them.
+
 
 def to_png(image: np.ndarray, scale: int = 1) -> bytes:
     """PNG bytes of the tone-mapped H×W×3 linear image, upscaled ``scale``× by pixel repetition."""
     from PIL import Image
-
-    from denoisebench.metrics.tonemap import tonemap
 
     display = np.clip(np.nan_to_num(tonemap(image), nan=0.0), 0.0, 1.0)
     pixels = np.round(display * 255.0).astype(np.uint8)

@@ -21,11 +21,14 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import replace
 
-from denoisebench.dataset import Dataset
+from denoisebench.dataset import Dataset, open_dataset
+from denoisebench.denoisers import isolation as isolation_mod
 from denoisebench.leaderboard.names import NOISY
 from denoisebench.leaderboard.records import UnitRecord
 from denoisebench.leaderboard.runner import BenchmarkConfig, RunPlan, measure_group, pending_groups
 from denoisebench.leaderboard.store import ResultsStore
+
+# Lazy imports: Ray (optional, 0.4 s) only when a run uses the Ray executor.
 
 
 def light_plan(plan: RunPlan) -> RunPlan:
@@ -50,8 +53,6 @@ def _measure_remote(
     isolation: str = "plugins",
     limits=None,
 ) -> list[UnitRecord]:
-    from denoisebench.dataset import open_dataset
-    from denoisebench.denoisers import isolation as isolation_mod
 
     instances: dict[str, object] = {}
     errors: dict[str, str] = {}

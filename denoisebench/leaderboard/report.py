@@ -36,10 +36,16 @@ import numpy as np
 from denoisebench.dataset import Dataset
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.leaderboard import aggregate as agg
-from denoisebench.leaderboard import analysis, figures, images, report_samplers, strips
+from denoisebench.leaderboard import analysis, equal_tables, figures, images, report_samplers, strips, time_model
+from denoisebench.leaderboard.aggregate import rule_of
 from denoisebench.leaderboard.names import NOISY
+from denoisebench.leaderboard.report_html import render_html
+from denoisebench.leaderboard.report_markdown import render_markdown
 from denoisebench.leaderboard.report_model import ReportModel
+from denoisebench.leaderboard.stability import stability_table
 from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.metrics import relmse_map
+from denoisebench.metrics.colorvideovdp import viewing_conditions
 
 
 def _clean(value):
@@ -126,8 +132,6 @@ def _comparisons(
 ) -> list[dict]:
     """Per scene: the noisy input, each denoiser and the reference at one frame, with worst-region crops;
     a live sampler's entry has its ``spp_map`` of that frame (:mod:`.report_samplers`)."""
-    from denoisebench.metrics import relmse_map
-
     out = []
     for scene in data.scenes:
         shown: list[tuple[str, np.ndarray]] = []
@@ -188,8 +192,6 @@ FLICKER_LEAD = ("temporal_relmse_robust", "temporal_relmse", "cvvdp", "tpsnr")
 def temporal_metric_order(names: list[str]) -> list[str]:
     """The flicker table's columns: FLICKER_LEAD, then other mean-aggregated (scale-free) metrics,
     then the rest (linear diagnostics such as temporal_l1), each group in name order."""
-    from denoisebench.leaderboard.aggregate import rule_of
-
     lead = [m for m in FLICKER_LEAD if m in names]
     rest = sorted(m for m in names if m not in lead)
     return lead + [m for m in rest if rule_of(m) == "mean"] + [m for m in rest if rule_of(m) != "mean"]
@@ -258,8 +260,6 @@ def _cvvdp_viewing(dataset: Dataset, data: analysis.RunData) -> dict:
     """cvvdp's viewing conditions (:func:`denoisebench.metrics.colorvideovdp.viewing_conditions`): the
     display once, and per scene the frame's visual angle and the exposure from its reference sequence
     (the one cvvdp set for every denoiser of that scene)."""
-    from denoisebench.metrics.colorvideovdp import viewing_conditions
-
     display = viewing_conditions()
     scenes = {}
     spp = data.spp[0] if data.spp else None
@@ -312,9 +312,6 @@ def build_report(
 
     ``time_at``: the resolution of the report's time axis (default
     :data:`.time_model.DEFAULT_TIME_AT`), projected from the run's timings (:mod:`.time_model`)."""
-    from denoisebench.leaderboard import equal_tables, time_model
-    from denoisebench.leaderboard.stability import stability_table
-
     data = analysis.RunData(store, run_id)
     # scenes whose reference cannot resolve the headline scores: listed apart, out of the aggregates
     states = agg.reference_states({s: dataset.scene(s).record for s in data.scenes})
@@ -388,8 +385,6 @@ def build_report(
 
 def results_json(report: ReportModel) -> dict:
     """The machine-readable part of the report (no images)."""
-    from denoisebench.leaderboard import equal_tables
-
     return _clean(
         {
             "run": report.run,
@@ -540,9 +535,6 @@ def write_report(
     include_unresolved: bool = False,
 ) -> Path:
     """Write the report folder; return the path of index.html (``time_at``: see :func:`build_report`)."""
-    from denoisebench.leaderboard.report_html import render_html
-    from denoisebench.leaderboard.report_markdown import render_markdown
-
     out = Path(out_dir)
     report = build_report(store, run_id, dataset, denoisers, time_at, include_unresolved)
     for name, (png, svg) in report.figures.items():

@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 from denoisebench.denoisers.isolation import isolation_text
 from denoisebench.leaderboard import formatting as fmt
 from denoisebench.leaderboard import report_notes as notes
+from denoisebench.leaderboard.images import colour_bar_png, data_uri
 from denoisebench.leaderboard.report_samplers import undersampled_lines
 
 if TYPE_CHECKING:
@@ -119,7 +120,6 @@ def _table(header: list[str], rows: list[list[str]], row_classes: list[str] | No
 
 
 def _figure(report: ReportModel, name: str, alt: str) -> str:
-    from denoisebench.leaderboard.images import data_uri
 
     if name not in report.figures:
         return ""
@@ -296,8 +296,6 @@ def _tile(entry: dict, element_id: str) -> str:
 
 def _spp_tile(entry: dict) -> str:
     """The spp map of a sampler's entry, beside its image: the map, its numbers and the colour bar."""
-    from denoisebench.leaderboard.images import colour_bar_png, data_uri
-
     m = entry["spp_map"]
     return (
         f'<div class="tile sppmap"><img alt="spp map of {e(entry["label"])}" src="{m["image"]}">'

@@ -42,7 +42,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from denoisebench.dataset import Dataset, DatasetError, layout
+from denoisebench.dataset.bounds import check_scene_record
 from denoisebench.dataset.exr_io import canonical_json
+from denoisebench.dataset.verify import run_files, verify_files
+from denoisebench.denoisers import isolation as isolation_mod
+from denoisebench.denoisers.isolation import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, Limits
+from denoisebench.denoisers.protocol import describe
+from denoisebench.denoisers.registry import DenoiserLoadError, available_denoisers
+from denoisebench.denoisers.runner import run_sequence, sanitize_array
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard.names import (
     FLICKER_METRICS,
@@ -51,7 +58,14 @@ from denoisebench.leaderboard.names import (
     REQUIRED_METRICS,
 )
 from denoisebench.leaderboard.records import FrameRecord, UnitRecord
+from denoisebench.leaderboard.sampler_units import measure_pairs, plan_pairs, register_pairs
 from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.leaderboard.strips import cut
+from denoisebench.metrics import compute_metrics
+from denoisebench.metrics.cost import total_seconds
+from denoisebench.metrics.registry import default_metric_names, expand_metric_names, get_metric
+from denoisebench.metrics.validation import MetricNotApplicable
+from denoisebench.sandbox import version as sandbox_version
 
 #: A unit's key: (label, scene, spp).
 UnitKey = tuple[str, str, int]
@@ -116,7 +130,6 @@ class BenchmarkConfig:
         return data
 
     def limits(self):
-        from denoisebench.denoisers.isolation import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, Limits
 
         return Limits(
             DEFAULT_TIME_LIMIT if self.time_limit is None else float(self.time_limit),
@@ -162,7 +175,6 @@ def software_versions() -> dict[str, str]:
             versions[dist] = importlib.metadata.version(dist)
         except importlib.metadata.PackageNotFoundError:
             continue
-    from denoisebench.sandbox import version as sandbox_version
 
     if sandbox_version():  # the plugin sandbox (reports say whether the run used it)
         versions["bubblewrap"] = sandbox_version().split()[-1]
@@ -175,8 +187,6 @@ def software_versions() -> dict[str, str]:
 
 def resolve_denoiser_specs(specs: Iterable[str]) -> list[str]:
     """Expand ``all`` to every available name (built-ins, then entry points); keep order, no repeats."""
-    from denoisebench.denoisers.registry import available_denoisers
-
     out: list[str] = []
     for spec in specs:
         names = list(available_denoisers()) if spec.strip() == "all" else [spec.strip()]
@@ -191,10 +201,6 @@ def load_denoisers(
 ) -> list[LoadedDenoiser]:
     """Construct each denoiser (isolated by ``isolation``). An unknown name or option is bad input;
     a load failure is recorded, not raised."""
-    from denoisebench.denoisers import isolation as isolation_mod
-    from denoisebench.denoisers.protocol import describe
-    from denoisebench.denoisers.registry import DenoiserLoadError
-
     unknown = [spec for spec in options if spec not in specs]
     if unknown:
         raise UserInputError(
@@ -229,8 +235,6 @@ def load_denoisers(
 
 def check_dataset(dataset: Dataset, scenes: list[str], spp: list[int]) -> None:
     """Every frame the run needs has a manifest record and a file, and a reference: else one line."""
-    from denoisebench.dataset.bounds import check_scene_record
-
     for scene in scenes:
         info = dataset.scene(scene)
         check_scene_record(scene, info.record)  # a forged size or frame count is refused before any loop
@@ -269,8 +273,6 @@ def _split_results(results) -> tuple[dict[str, float], dict[str, float], dict[st
 def _applicable(compute: Callable[[list[str]], dict], names: list[str]) -> tuple[dict, dict[str, str]]:
     """``compute(names)``, and when a metric's precondition fails (MetricNotApplicable, e.g. SSIM on
     frames under 11×11 px), each metric on its own: (results of those that apply, {name: reason})."""
-    from denoisebench.metrics.validation import MetricNotApplicable
-
     try:
         return compute(names), {}
     except MetricNotApplicable:
@@ -287,14 +289,11 @@ def _applicable(compute: Callable[[list[str]], dict], names: list[str]) -> tuple
 
 def _frame_metrics(pred: np.ndarray, ref: np.ndarray, names: list[str], ref_var=None, trim=None):
     """(values, floors, ref_se, not applicable {name: reason}) of the per-frame metrics."""
-    from denoisebench.metrics import compute_metrics
-
     results, skipped = _applicable(lambda chosen: compute_metrics(pred, ref, chosen, ref_var=ref_var, trim=trim), names)
     return (*_split_results(results), skipped)
 
 
 def _sequence_metrics(outputs, refs, motion, names: list[str], ref_vars=None, trim=None):
-    from denoisebench.metrics import compute_metrics, get_metric
 
     usable = [n for n in names if "motion" not in get_metric(n).requires or motion is not None]
     if len(outputs) < 2 or not usable:
@@ -309,8 +308,6 @@ def _sequence_metrics(outputs, refs, motion, names: list[str], ref_vars=None, tr
 
 def _flicker(outputs, refs, motion=None, trim=None) -> list[dict[str, float]]:
     """FLICKER_METRICS of each consecutive pair: the flicker of frame t against frame t−1."""
-    from denoisebench.metrics import compute_metrics
-
     out = []
     for t in range(1, len(outputs)):
         pair_motion = None if motion is None else motion[t - 1 : t + 1]
@@ -339,9 +336,6 @@ def measure_unit(
     """Run one denoiser (None: the noisy input) on ``sequence`` and measure every frame.
 
     ``trim``: the robust scores' dropped fraction (None: their default, :mod:`denoisebench.metrics.robust`)."""
-    from denoisebench.denoisers.runner import run_sequence, sanitize_array
-    from denoisebench.metrics.cost import total_seconds
-
     frames = list(sequence)
     if denoiser is None:
         results = [(True, None, 0.0, sanitize_array(f.color)[0].astype(np.float32), 0) for f in frames]
@@ -384,7 +378,6 @@ def measure_unit(
     if len(outputs) > 1:
         for record, values in zip(records[1:], _flicker(outputs, refs, motion, trim)):
             record.metrics.update(values)
-        from denoisebench.leaderboard.strips import cut
 
         first, unit.strip_window, unit.strip = cut(outputs, [f.color for f in frames], refs, motion)
         unit.strip_first = frames[first].index
@@ -398,8 +391,6 @@ def measure_unit(
 def split_metrics(names: list[str]) -> tuple[list[str], list[str]]:
     """(per-frame metric names, temporal metric names) of a metrics option: metric or set names
     (``noisebase``); [] = every registered metric outside the opt-in sets."""
-    from denoisebench.metrics.registry import default_metric_names, expand_metric_names, get_metric
-
     try:
         chosen = expand_metric_names(names) if names else default_metric_names()
     except ValueError as exc:
@@ -469,14 +460,10 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     denoisers = load_denoisers(specs, config.options, isolation=config.isolation, limits=config.limits())
     pairs = []
     if config.samplers:
-        from denoisebench.leaderboard.sampler_units import plan_pairs
-
         taken = {d.label for d in denoisers} | {NOISY}
         pairs = plan_pairs(config.samplers, denoisers, taken, isolation=config.isolation, limits=config.limits())
     check_dataset(dataset, scenes, spp)
     if config.verify:
-        from denoisebench.dataset.verify import run_files, verify_files
-
         # samples files included (cheap): a samples file that is listed must be genuine too
         verify_files(dataset, run_files(dataset, scenes, spp, samples=True), progress=progress)
     data_hash = dataset_hash(dataset)
@@ -497,8 +484,6 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
             seen.get(d.label, []) if d.trained_scenes else None,
         )
     if pairs:
-        from denoisebench.leaderboard.sampler_units import register_pairs
-
         plan.samplers = pairs
         register_pairs(store, run_id, pairs, denoisers)
     return plan
@@ -521,8 +506,6 @@ def measure_group(
     stored = [label for label in labels if label not in pairs]
     sequence = dataset.sequence(scene, spp, samples=wants_samples) if stored else None
     if len(stored) < len(labels):
-        from denoisebench.leaderboard.sampler_units import measure_pairs
-
         live = [pairs[label] for label in labels if label in pairs]
         yield from measure_pairs(dataset, plan, scene, spp, live, instances)
     for label in stored:

@@ -32,9 +32,14 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from denoisebench.dataset.frame import Frame
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard.names import PAIR_LABEL_SEPARATOR, PAIR_SPEC_SEPARATOR, SAMPLER_SPEC_PREFIX
 from denoisebench.leaderboard.records import UnitRecord
+from denoisebench.leaderboard.sampler_maps import frame_records
+from denoisebench.sampling.isolation import IsolatedSampler, load, sampler_policy
+from denoisebench.sampling.live import LiveScene, run_live
+from denoisebench.sampling.protocol import Budget
 
 SEPARATOR = PAIR_LABEL_SEPARATOR  # between a pair's sampler and denoiser labels
 
@@ -51,7 +56,6 @@ class SamplerPair:
     memory_limit_mb: int | None = None
 
     def load(self):
-        from denoisebench.sampling.isolation import load
 
         return load(
             self.sampler, policy=self.isolation, time_limit=self.time_limit, memory_limit_mb=self.memory_limit_mb
@@ -66,8 +70,6 @@ def plan_pairs(
     ``isolation`` is the run's (denoisers') policy, mapped by :func:`~denoisebench.sampling.isolation.sampler_policy`;
     ``limits`` its :class:`~denoisebench.denoisers.isolation.Limits` (time and memory of a plugin sampler's worker).
     """
-    from denoisebench.sampling.isolation import sampler_policy
-
     policy = sampler_policy(isolation)
     time_limit = getattr(limits, "time_limit", None)
     memory = getattr(limits, "memory_limit_mb", None)
@@ -87,7 +89,6 @@ def plan_pairs(
 
 
 def _close(sampler) -> None:
-    from denoisebench.sampling.isolation import IsolatedSampler
 
     if isinstance(sampler, IsolatedSampler):
         sampler.close()
@@ -116,10 +117,6 @@ def live_sequence(dataset, scene: str, spp: int, pair: SamplerPair, live=None, m
     """(the scene's sequence at ``spp`` with every frame rendered live by the sampler, None) or (None, reason).
 
     ``maps``: a list to append (frame index, H×W spp map) of every frame to (the report shows them)."""
-    from denoisebench.dataset.frame import Frame
-    from denoisebench.sampling.live import LiveScene, run_live
-    from denoisebench.sampling.protocol import Budget
-
     sampler_spec = pair.sampler
     stored = dataset.sequence(scene, spp, samples=False)
     live = live or LiveScene.from_dataset(dataset, scene)
@@ -150,8 +147,7 @@ def live_sequence(dataset, scene: str, spp: int, pair: SamplerPair, live=None, m
 
 def measure_pairs(dataset, plan, scene: str, spp: int, pairs: list[SamplerPair], instances: dict):
     """Yield the UnitRecord of every pair on ``scene`` at ``spp`` (one live render per sampler)."""
-    from denoisebench.leaderboard.runner import measure_unit
-    from denoisebench.leaderboard.sampler_maps import frame_records
+    from denoisebench.leaderboard.runner import measure_unit  # runner imports this module: look it up late
 
     by_sampler: dict[str, list[SamplerPair]] = {}
     for pair in pairs:

@@ -24,6 +24,12 @@ import io
 
 import numpy as np
 
+from denoisebench.leaderboard.images import worst_windows
+from denoisebench.metrics import temporal_relmse_map
+from denoisebench.metrics.tonemap import tonemap
+
+# Lazy imports: PIL only where a strip is encoded.
+
 #: Frames in a strip (the first ones of the sequence).
 STRIP_FRAMES = 8
 
@@ -36,9 +42,6 @@ def strip_side(height: int, width: int) -> int:
 
 def choose_window(noisy: np.ndarray, refs: np.ndarray, motion: np.ndarray | None = None) -> tuple[int, int, int]:
     """(top, left, side) of the square where the noisy input's frame-to-frame error is largest."""
-    from denoisebench.leaderboard.images import worst_windows
-    from denoisebench.metrics import temporal_relmse_map
-
     height, width = refs.shape[1:3]
     side = strip_side(height, width)
     if len(refs) < 2:
@@ -61,7 +64,6 @@ def cut(outputs, noisy, refs, motion=None) -> tuple[int, tuple[int, int, int], n
 
 
 def _pixels(crops: np.ndarray, scale: int) -> list[np.ndarray]:
-    from denoisebench.metrics.tonemap import tonemap
 
     frames = []
     for crop in crops:

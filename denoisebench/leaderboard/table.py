@@ -31,6 +31,7 @@ from denoisebench.leaderboard.finite import finite_mean
 from denoisebench.leaderboard.names import NOISY
 from denoisebench.leaderboard.run_index import RunIndex
 from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.metrics import get_metric
 
 
 @dataclass
@@ -76,8 +77,6 @@ def leaderboard(
 
     ``sampler``: rank only the entries whose input that live sampler made (``""``: only those on the
     dataset's stored inputs, the noisy input among them); None: every entry."""
-    from denoisebench.metrics import get_metric
-
     try:
         m = get_metric(metric)
     except ValueError as exc:

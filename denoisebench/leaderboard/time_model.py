@@ -51,11 +51,17 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from tqdm import tqdm
 
+from denoisebench.dataset.frame import Frame
+from denoisebench.denoisers.runner import run_frame
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard.finite import is_finite
 from denoisebench.leaderboard.names import NOISY
 from denoisebench.leaderboard.run_index import RunIndex
+
+# Lazy imports: torch (1 s) only where the machine's GPU is looked up, and frame_jobs' render_job
+# looked up when a render is timed (tests replace it on its module).
 
 #: The resolution a report's time axis is for unless ``--time-at`` says otherwise.
 DEFAULT_TIME_AT = (1920, 1080)
@@ -386,7 +392,6 @@ def upscaled_frame(frame, width: int, height: int):
 
     Only for timing: the content repeats, which no denoiser's cost depends on in a way that matters
     here (the cost of a call grows with pixels and samples, not with what they show)."""
-    from denoisebench.dataset.frame import Frame
 
     def tile(array: np.ndarray, axes: tuple[int, int]) -> np.ndarray:
         reps = [1] * array.ndim
@@ -417,8 +422,6 @@ def timing_size(small_seconds: float, pixels0: int, requested: tuple[int, int], 
 
 def time_call(denoiser, frame, label: str, repeats: int = 2) -> tuple[float | None, str]:
     """Least seconds of up to ``repeats`` calls on ``frame`` (one when a call takes over 2 s), or (None, why)."""
-    from denoisebench.denoisers.runner import run_frame
-
     best = None
     for _ in range(repeats):
         reset = getattr(denoiser, "reset", None)
@@ -483,8 +486,6 @@ def measure_run_timings(
     """Time every loaded denoiser (and one render) at ``size`` once per run; return the run's timings.
 
     ``size`` None: nothing is timed (the report's times stay at the dataset's resolution)."""
-    from tqdm import tqdm
-
     done = read_timings(store, plan.run_id)
     if "machine" not in done:
         write_timing(store, plan.run_id, "machine", machine())

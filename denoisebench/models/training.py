@@ -42,17 +42,21 @@ Notes
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 import os
+import shlex
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from denoisebench.dataset.reader import Dataset, open_dataset
+from denoisebench.dataset.torch_dataset import CropDataset, SequenceCropDataset
 from denoisebench.errors import UserInputError
 from denoisebench.models.catalog import build_model, get_spec, model_config
 from denoisebench.models.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
@@ -275,7 +279,6 @@ def apply_overrides(spec, config: dict, overrides: dict) -> dict:
     constructor does not take, or a value of another type than the configuration's, is a UserInputError."""
     if not overrides:
         return config
-    import inspect
 
     accepted = set(config) | {name for name in inspect.signature(spec.build).parameters if name != "self"}
     out = dict(config)
@@ -299,8 +302,6 @@ def recipe_value(spec, config, key: str, given, default):
 
 
 def _make_dataset(spec, ds, scenes, spp, options, buffers, targets):
-    from denoisebench.dataset.torch_dataset import CropDataset, SequenceCropDataset
-
     smallest = min(min(ds.scene(s).height, ds.scene(s).width) for s in scenes)
     # "where the data allows": a recipe's 128 px crop shrinks to the smallest train scene
     crop = min(int(recipe_value(spec, options.config, "crop", options.crop, 32)), smallest)
@@ -561,8 +562,6 @@ def _optimise(start: _Start, spec, options, dataset, device, loss_kind, checkpoi
 
     ``validation()`` scores the val split (for ``--val-every``); ``checkpoint(step)`` writes.
     """
-    from tqdm import tqdm
-
     model, optimizer, meta = start.model, start.optimizer, start.meta
     start_step = int(meta["steps"])
     total = start_step + int(options.steps)
@@ -691,8 +690,6 @@ def strip_for_shipping(src: str | Path, dst: str | Path) -> Path:
 
 def command_line(options: TrainOptions, out: str) -> str:
     """The ``denoisebench train`` command that runs ``options`` (recorded in the checkpoint for model cards)."""
-    import shlex
-
     parts = [
         "denoisebench",
         "train",

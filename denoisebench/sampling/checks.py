@@ -25,13 +25,17 @@ Notes
 
 from __future__ import annotations
 
+import json
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
+from tqdm import tqdm
 
 from denoisebench.errors import one_line
 from denoisebench.sampling.harness import run_sampler
-from denoisebench.sampling.protocol import Budget
+from denoisebench.sampling.isolation import IsolatedSampler, load, sampler_policy
+from denoisebench.sampling.protocol import Budget, sampler_name
 from denoisebench.sampling.synthetic import check_frame
 
 BUDGETS = (4, 16, 64)
@@ -110,8 +114,6 @@ def _one_budget(make_sampler, spp: float, seeds, size: int) -> BudgetOutcome:
 
 def _close(sampler) -> None:
     """Stop an isolated sampler's worker (in-process samplers are left alone)."""
-    from denoisebench.sampling.isolation import IsolatedSampler
-
     if isinstance(sampler, IsolatedSampler):
         sampler.close()
 
@@ -172,14 +174,6 @@ def check_sampler(
 
     A plugin runs in a worker (:mod:`.isolation`) unless ``isolation`` is ``"none"`` (``"all"``: built-ins too).
     """
-    import json
-    import sys
-
-    from tqdm import tqdm
-
-    from denoisebench.sampling.isolation import load, sampler_policy
-    from denoisebench.sampling.protocol import sampler_name
-
     policy = sampler_policy(isolation)
 
     def make_sampler():

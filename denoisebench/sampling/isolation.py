@@ -50,6 +50,7 @@ from denoisebench import plugin_worker
 from denoisebench.errors import UserInputError
 from denoisebench.plugin_worker import WorkerGone
 from denoisebench.sampling.protocol import BudgetExhausted, SamplerRequestError
+from denoisebench.sampling.registry import BUILTINS, SamplerLoadError, UnknownSamplerError, load_sampler
 
 DEFAULT_TIME_LIMIT = 120.0
 DEFAULT_MEMORY_LIMIT_MB = 4096
@@ -87,7 +88,6 @@ class IsolatedSampler:
         self.name = self._start()
 
     def _start(self) -> str:
-        from denoisebench.sampling.registry import SamplerLoadError, UnknownSamplerError
 
         self._worker = plugin_worker.WorkerProcess(
             "denoisebench.sampling.isolation_worker",
@@ -206,8 +206,6 @@ def sampler_policy(denoiser_policy: str) -> str:
 
 def isolated(spec: str, policy: str = "plugins") -> bool:
     """Whether ``spec`` runs in a worker under ``policy``."""
-    from denoisebench.sampling.registry import BUILTINS
-
     if policy not in POLICIES:
         raise UserInputError(f"sampler isolation must be one of {', '.join(POLICIES)} (got {policy!r})")
     return policy == "all" or (policy in ("plugins", "process") and spec.strip() not in BUILTINS)
@@ -215,8 +213,6 @@ def isolated(spec: str, policy: str = "plugins") -> bool:
 
 def load(spec: str, options: dict | None = None, *, policy: str = "plugins", time_limit=None, memory_limit_mb=None):
     """The sampler ``spec`` names: in this process, or in a worker by ``policy`` (module docstring)."""
-    from denoisebench.sampling.registry import load_sampler
-
     if isolated(spec, policy):
         return IsolatedSampler(
             spec.strip(),

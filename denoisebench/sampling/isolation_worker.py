@@ -25,12 +25,14 @@ from __future__ import annotations
 
 import json
 import sys
+from multiprocessing.connection import Connection
 
 import numpy as np
 
 from denoisebench.errors import one_line
 from denoisebench.plugin_worker import set_rlimits
 from denoisebench.sampling.protocol import Budget, BudgetExhausted, SamplerRequestError
+from denoisebench.sampling.registry import load_sampler
 from denoisebench.sampling.synthetic import RoundBuffers
 
 
@@ -87,9 +89,6 @@ class ProxyHandle:
 
 
 def main(fd: int) -> int:
-    from multiprocessing.connection import Connection
-
-    from denoisebench.sampling.registry import load_sampler
 
     conn = Connection(fd)
     sampler = None

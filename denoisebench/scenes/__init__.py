@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from denoisebench.scenes.effects import EFFECTS, METADATA_KEY, validate_effects
 
+# Lazy imports: the family registry (it authors USD: pxr) only when a family is asked for.
+
 _REGISTRY_NAMES = ("FAMILIES", "list_families", "get_family", "SceneFamily", "UnknownFamilyError")
 
 __all__ = ["EFFECTS", "METADATA_KEY", "validate_effects", *_REGISTRY_NAMES]
