@@ -28,6 +28,9 @@ from denoisebench.errors import UserInputError
 from denoisebench.sampling.checks import check_sampler
 from denoisebench.sampling.registry import available_samplers
 
+# Lazy imports: the hard cases (scipy, 0.3 s) only when a denoiser is checked, so that --help and
+# --sampler stay quick.
+
 EPILOG = """examples:
   denoisebench check-plugin cross_bilateral
   denoisebench check-plugin rpf --case fireflies --case tiny

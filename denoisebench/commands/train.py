@@ -37,6 +37,9 @@ from denoisebench.errors import UserInputError
 from denoisebench.metrics.spatial import relmse
 from denoisebench.models.card import render_card
 
+# Lazy imports: the models and the trainer (torch: 1 s) only when a model is trained or shipped, so
+# that --help stays quick.
+
 EPILOG = """examples:
   denoisebench train --model kpcn --data data/small --config small --steps 2000 --out kpcn.pt
   denoisebench train --model lbf --data data/small --steps 600 --lr-schedule cosine --val-every 200 --out lbf.pt

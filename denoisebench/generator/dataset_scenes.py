@@ -289,8 +289,6 @@ def load_scene_file(path: str | Path):
     USD (None: ``build_mitsuba_scene`` makes the Mitsuba scene), ``scene.xml`` loaded by Mitsuba."""
     path = Path(path)
     if path.suffix.lower() == ".xml":
-        from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
-
         return load_mitsuba_xml(path, **xml_camera(path))
 
     return translate_usd(path), None
