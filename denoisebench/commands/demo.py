@@ -29,14 +29,18 @@ Notes
   frame (227 s of references, measured with seed 900), which takes the demo past 10 minutes.
 * **Seed.** DEMO_DATASET_SEED = 915 draws a cluttered stage with depth of field and object motion
   blur under an overcast sky (14 objects): its reference reaches the floor target at 1280 spp
-  (floor growth 1.01). Seed 900's sunlit cluttered stage (29 objects, glass under a sun) still had
-  a growing floor at the 20480 cap (growth 2.11: caustics not yet resolved) and was left apart.
+  (floor growth 1.01; floor / best score 0.09 for temporal_relmse_robust at 16 spp). Seed 900's
+  sunlit cluttered stage (29 objects, glass under a sun) still had a growing floor at the 20480 cap
+  (growth 2.11: caustics not yet resolved) and was left apart.
 * **Sizes.** Five rungs instead of two give the benchmark 2.5 times the units; 64x64 instead of the
   former 80x80 (0.64 of the pixels, for the references too). The rungs are nested (rung k is the
   first k samples of one progressive render), so the ladder costs what its 16-spp rung costs.
-  Measured (``/usr/bin/time denoisebench demo --out /tmp/d``, 2 cores shared with other jobs): seven
-  scenes (these five, cornell and dim_room) took 22 min 53 s at load 1.5-8 (dataset 515 s, of which
-  dim_room's references 227 s; benchmark of 525 sequences 699 s), hence five.
+  Measured (``/usr/bin/time denoisebench demo --out /tmp/d``) on 2 cores shared with other jobs, so
+  wall times are upper bounds: these five scenes took 36 min 31 s at load average 6-12 (previews 91 s,
+  dataset 545 s, benchmark of 400 sequences 1474 s, timing and report 82 s; 1312 CPU seconds), and
+  seven scenes (with cornell and dim_room) 22 min 53 s at load 1.5-8 (1628 CPU seconds). Scaled from
+  the idle 4-scene demo (7 min 13 s: benchmark 70 s per scene) and each stage's figures at the lowest
+  load, an idle run of these five takes about 10 minutes (benchmark 350 s, dataset 170 s).
 * **Timing at a second size.** DEMO_TIME_SIZE = 512x512 (0.26 MP, 64 times the frame) with a
   DEMO_TIME_BUDGET of 10 s per denoiser (RPF is timed smaller, at the largest size that fits): the
   1 MP default would add about 2 minutes on 2 cores (kpcn alone takes 38 s at 1 MP there).
@@ -67,7 +71,9 @@ DEMO_TIME_BUDGET = 10.0
 #: (relmse_robust and temporal_relmse_robust, denoisebench.leaderboard.aggregate.unresolved_references). Measured
 #: at 1.5e-4 (64 px, 8 frames, seed 900), worst floor / best score: glass_env 0.083, motion_blur 0.066, cornell
 #: 0.055, depth_of_field 0.052, glossy_fireflies 0.031 (its references now stop at 3200-5760 spp); the former
-#: 3.5e-4, set for a top rung of 4, gives floors 2.3 times higher: cornell and depth_of_field over 1/10.
+#: 3.5e-4, set for a top rung of 4, gives floors 2.3 times higher: cornell and depth_of_field over 1/10. With
+#: seed 915 every demo scene is resolved: cluttered 0.09, glass_env 0.058, motion_blur 0.056, depth_of_field
+#: 0.051, glossy_fireflies < 0.02 (references 1280-12800 spp, none at the cap).
 #: The cap stops a reference whose floor keeps growing (fireflies not yet found often enough).
 DEMO_REF_ERROR = 1.5e-4
 DEMO_REF_SPP = 20480
