@@ -10,7 +10,9 @@ buffer and variance, returned as host arrays). Start-up is subtracted: each is w
 (the order reversed every other repeat). The ratio is the median over repeats of each repeat's
 ladder / top rung: the two run back to back, so a shared machine's load, which changes over
 seconds, weighs on both alike. The ratio of the medians and of the minima are printed beside it
-(other processes only ever add time).
+(other processes only ever add time), and the ratio of the process's CPU seconds (all threads;
+what the work costs when other processes hold the cores, counting Dr.Jit's workers' spinning
+between kernels against the ladder).
 
     .venv/bin/python bench/ladder_cost.py [--family cornell] [--size 160] [--rungs 1,2,4,8,16,32,64]
         [--repeats 9]
@@ -69,12 +71,14 @@ def main(argv=None) -> int:
     for run in runs.values():  # warm-up: compilation and freeze recordings
         run()
     times = {name: [] for name in runs}
+    cpu = {name: [] for name in runs}
     for repeat in range(args.repeats):
         order = list(runs) if repeat % 2 == 0 else list(reversed(runs))  # drift in load hits both sides alike
         for name in order:
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), time.process_time()
             runs[name]()
             times[name].append(time.perf_counter() - start)
+            cpu[name].append(time.process_time() - start_cpu)
     print(
         f"{args.family} {args.size}x{args.size}, rungs {','.join(map(str, rungs))}, "
         f"{args.repeats} repeats ({mi.variant()}; medians, minima in brackets)"
@@ -86,9 +90,10 @@ def main(argv=None) -> int:
     for name in ("ladder", "independent"):
         paired = statistics.median(a / b for a, b in zip(times[name], times["top rung"]))
         ratio = statistics.median(times[name]) / base
+        cpu_ratio = statistics.median(a / b for a, b in zip(cpu[name], cpu["top rung"]))
         print(
             f"  {name} / top rung: {paired:.3f}  [median of medians {ratio:.3f}, "
-            f"minima {min(times[name]) / base_min:.3f}]"
+            f"minima {min(times[name]) / base_min:.3f}; CPU seconds {cpu_ratio:.3f}]"
         )
     return 0
 
