@@ -55,6 +55,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from denoisebench.dataset.frame import BUFFER_CHANNELS
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.contract.render_plan import RenderPlan
 from denoisebench.generator.render.camera import CameraSwitches, DrCamera, camera_setup, camera_switches, camera_values
@@ -82,23 +83,14 @@ MAX_PATHS_PER_PASS = 1 << 22
 #: be the same bytes on every machine.
 TARGET_LANES = 1 << 14
 
-#: Channels of each per-sample buffer, in output order.
-SAMPLE_BUFFERS = {
-    "color": 3,
-    "diffuse": 3,
-    "specular": 3,
-    "albedo": 3,
-    "normal": 3,
-    "depth": 1,
-    "position": 3,
-    "roughness": 1,
-}
+#: Channels of each per-sample buffer, in output order: the dataset's buffers but motion (per pixel, not sampled).
+SAMPLE_BUFFERS = {name: count for name, count in BUFFER_CHANNELS.items() if name != "motion"}
 RANDOM_PARAMETER_CHANNELS = {"pixel": 2, "lens": 2, "time": 1}
 #: Per-sample channels of paths that bounce (render_integrator's ``second_hit``): the first vertex's
 #: light-sample and bounce-direction random numbers, and the bounce ray's hit point and normal.
 SECOND_HIT_CHANNELS = {"light": 2, "bounce": 2, "position2": 3, "normal2": 3}
 FEATURES = ("albedo", "normal", "depth", "position", "roughness", "motion")
-FEATURE_CHANNELS = {"albedo": 3, "normal": 3, "depth": 1, "position": 3, "roughness": 1, "motion": 2}
+FEATURE_CHANNELS = {name: BUFFER_CHANNELS[name] for name in FEATURES}
 
 NOISY_STREAM = 0
 REFERENCE_STREAM = 1
