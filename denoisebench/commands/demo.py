@@ -36,11 +36,11 @@ Notes
   former 80x80 (0.64 of the pixels, for the references too). The rungs are nested (rung k is the
   first k samples of one progressive render), so the ladder costs what its 16-spp rung costs.
   Measured (``/usr/bin/time denoisebench demo --out /tmp/d``) on 2 cores shared with other jobs, so
-  wall times are upper bounds: these five scenes took 36 min 31 s at load average 6-12 (previews 91 s,
-  dataset 545 s, benchmark of 400 sequences 1474 s, timing and report 82 s; 1312 CPU seconds), and
-  seven scenes (with cornell and dim_room) 22 min 53 s at load 1.5-8 (1628 CPU seconds). Scaled from
-  the idle 4-scene demo (7 min 13 s: benchmark 70 s per scene) and each stage's figures at the lowest
-  load, an idle run of these five takes about 10 minutes (benchmark 350 s, dataset 170 s).
+  wall times are upper bounds: 12 min 56 s at load average 1.6-5.3 (previews 16 s, dataset 246 s,
+  benchmark of 400 sequences 466 s, timing and report 48 s; 784 CPU seconds); 36 min 31 s at load
+  6-12. Seven scenes (with cornell and dim_room) took 22 min 53 s at load 1.5-8 (1628 CPU seconds).
+  Within 10 minutes on idle cores is an estimate (the idle 4-scene demo: 7 min 13 s, 70 s of
+  benchmark per scene), not a measurement.
 * **Timing at a second size.** DEMO_TIME_SIZE = 512x512 (0.26 MP, 64 times the frame) with a
   DEMO_TIME_BUDGET of 10 s per denoiser (RPF is timed smaller, at the largest size that fits): the
   1 MP default would add about 2 minutes on 2 cores (kpcn alone takes 38 s at 1 MP there).
