@@ -399,6 +399,15 @@ def test_the_report_leaves_unresolved_scenes_out_of_the_summary_unless_asked(tmp
     for row in kept["summary"]:
         assert row.metrics["relmse_robust"].scenes == len(scenes)
     assert json.dumps(results_json(report)["unresolved_references"], allow_nan=False)
+    # shown apart in report.md and index.html, with the reason and the spp it would need
+    from denoisebench.leaderboard.report_html import e, render_html
+    from denoisebench.leaderboard.report_markdown import md, render_markdown
+
+    text = f"{scenes[0]}: its 64-spp reference's noise floor estimate was still growing"
+    for page, escape in ((render_markdown(report), md), (render_html(report), e)):
+        assert "References that cannot resolve a score" in page and escape(text) in page
+        assert "it would need at least 128 spp" in page and "left out of the aggregates above" in page
+    assert "They are included in the aggregates above" in render_markdown(kept)
 
 
 def test_the_runner_passes_the_trim_to_the_robust_scores():

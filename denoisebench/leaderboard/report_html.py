@@ -201,6 +201,13 @@ def _results(report: ReportModel) -> str:
             + "".join(f"<li>{e(line)}</li>" for line in lines)
             + "</ul>"
         )
+    unresolved = notes.unresolved_text(report)
+    if unresolved:
+        parts.append(
+            f'<h3>References that cannot resolve a score</h3><p class="note">{e(unresolved)}</p><ul class="readings">'
+            + "".join(f"<li>{e(line)}</li>" for line in notes.unresolved_lines(report))
+            + "</ul>"
+        )
     missing = notes.not_applicable_lines(report)
     if missing:
         parts.append(

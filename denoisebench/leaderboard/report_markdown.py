@@ -78,6 +78,10 @@ def render_markdown(report: ReportModel) -> str:
     pairs = fmt.indistinguishable_lines(report)
     if pairs:
         lines += ["### Not distinguishable at this reference quality", ""] + [f"- {md(p)}" for p in pairs] + [""]
+    unresolved = notes.unresolved_text(report)
+    if unresolved:
+        lines += ["### References that cannot resolve a score", "", md(unresolved), ""]
+        lines += [f"- {md(line)}" for line in notes.unresolved_lines(report)] + [""]
     missing = notes.not_applicable_lines(report)
     if missing:
         lines += ["### Metrics that did not apply", ""]

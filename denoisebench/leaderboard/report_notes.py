@@ -62,6 +62,28 @@ def not_applicable_lines(report: ReportModel) -> list[str]:
     return lines
 
 
+def unresolved_text(report: ReportModel) -> str | None:
+    """The heading sentence of the scenes whose reference cannot resolve a score (None: there are none)."""
+    unresolved = report.unresolved_references or {}
+    if not unresolved.get("scenes"):
+        return None
+    where = (
+        "They are included in the aggregates above (--include-unresolved)."
+        if unresolved.get("included")
+        else "They are left out of the aggregates above and of the verdicts (run-benchmark --include-unresolved "
+        "puts them back); their rows stay in results.json and results.csv."
+    )
+    return (
+        "The references of these scenes cannot resolve the headline scores: a score closer to the reference's "
+        f"noise floor than that measures the reference, not the denoiser. {where}"
+    )
+
+
+def unresolved_lines(report: ReportModel) -> list[str]:
+    """One sentence per unresolved scene and reason, with the reference spp it would need."""
+    return [item["sentence"] for item in (report.unresolved_references or {}).get("scenes", [])]
+
+
 def sampler_scale_text() -> str:
     """How to read the spp maps."""
     return (
