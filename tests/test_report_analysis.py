@@ -121,3 +121,36 @@ def test_render_time_line_keeps_the_fixed_cost_out_of_the_per_sample_cost():
     fit = analysis.fit_noisy(points, [(1, 0.92), (4, 0.98), (256, 6.02)], "relmse")
     assert fit.seconds_at(100) == pytest.approx(2.9)  # not 100 × 0.92
     assert analysis.fit_render_time([(4, 0.4)]) == (0.0, pytest.approx(0.1))
+
+
+class _EffectRun:
+    """What effect_breakdown reads of a run: labels, scenes, spp, per-scene values, unit status."""
+
+    def __init__(self, values):
+        self.values = values  # {(label, scene): value} at 4 spp
+        self.labels = sorted({label for label, _ in values})
+        self.scenes = sorted({scene for _, scene in values})
+        self.spp = [4]
+
+    def scene_value(self, label, spp, scene, metric):
+        return self.values.get((label, scene))
+
+    def unit_ok(self, label, spp, scene):
+        return True
+
+
+def test_effects_exercised_by_the_same_scenes_are_one_column_and_the_others_stay_apart():
+    values = {(NOISY, s): 1.0 for s in "abc"} | {("d", "a"): 0.5, ("d", "b"): 0.2, ("d", "c"): 0.1}
+    scene_effects = {
+        "a": ["glossy", "specular", "transmission"],
+        "b": ["environment", "specular", "transmission"],
+        "c": ["glossy", "environment"],
+    }
+    out = analysis.effect_breakdown(_EffectRun(values), scene_effects)
+    assert out["effects"] == ["environment", "glossy", "specular + transmission"]
+    row = out["table"]["d"]
+    assert row["specular + transmission"] == pytest.approx(math.sqrt(0.5 * 0.2))
+    assert row["glossy"] == pytest.approx(math.sqrt(0.5 * 0.1)) and row["environment"] == pytest.approx(
+        math.sqrt(0.2 * 0.1)
+    )
+    assert len({row[e] for e in out["effects"]}) == len(out["effects"])  # no two columns alike

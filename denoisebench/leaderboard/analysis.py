@@ -445,7 +445,15 @@ def effect_breakdown(data: RunData, scene_effects: dict[str, list[str]], metric:
 
     The share is denoiser error / noisy-input error per scene and spp (so scene difficulty cancels),
     averaged geometrically over the scenes that exercise the effect.
+
+    Notes
+    -----
+    Effects that the run's scenes always exercise together (every scene with ``specular`` also has
+    ``transmission`` and the other way round) would be columns of the same numbers, computed over the
+    same scenes: they are one column, named by their effects joined with ``" + "``
+    (``"specular + transmission"``). The run cannot tell such effects apart; more scenes can.
     """
+    scene_effects = _merge_inseparable(scene_effects, data.scenes)
     effects = sorted({e for es in scene_effects.values() for e in es})
     table: dict[str, dict[str, float | None]] = {}
     for label in data.labels:
@@ -464,6 +472,19 @@ def effect_breakdown(data: RunData, scene_effects: dict[str, list[str]], metric:
             for key in ["overall", *effects]
         }
     return {"metric": metric, "effects": effects, "table": table}
+
+
+def _merge_inseparable(scene_effects: dict[str, list[str]], scenes) -> dict[str, list[str]]:
+    """``scene_effects`` with effects exercised by exactly the same of ``scenes`` merged into one name."""
+    present = [s for s in scenes if s in scene_effects]
+    holders: dict[str, frozenset] = {}
+    for effect in sorted({e for s in present for e in scene_effects[s]}):
+        holders[effect] = frozenset(s for s in present if effect in scene_effects[s])
+    groups: dict[frozenset, list[str]] = {}
+    for effect, where in holders.items():
+        groups.setdefault(where, []).append(effect)
+    name_of = {effect: " + ".join(group) for group in groups.values() for effect in group}
+    return {scene: list(dict.fromkeys(name_of.get(e, e) for e in effects)) for scene, effects in scene_effects.items()}
 
 
 def flicker_metrics(data: RunData) -> list[str]:
