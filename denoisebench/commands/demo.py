@@ -56,6 +56,15 @@ import sys
 import time
 from pathlib import Path
 
+from tqdm import tqdm
+
+from denoisebench.generator.executors import LocalExecutor
+from denoisebench.generator.preview import render_preview, tone_map_preview, write_png
+from denoisebench.scenes import list_families
+
+# Lazy imports: the dataset run and generate's summary (they load USD) only when the dataset stage
+# runs, and the CLI's main (it imports this module) only when the benchmark stage runs.
+
 #: The demo dataset: several families, a few frames each; references adaptive (DEMO_REF_ERROR, DEMO_REF_SPP).
 DEMO_DATASET_FAMILIES = ("glossy_fireflies", "depth_of_field", "motion_blur", "glass_env", "cluttered")
 #: Frames per demo sequence (≥ 8, so that flicker can be seen) and their width and height.
@@ -104,10 +113,6 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    from tqdm import tqdm
-
-    from denoisebench.generator.preview import render_preview, tone_map_preview, write_png
-    from denoisebench.scenes import list_families
 
     out = Path(args.out)
     families = list_families()
@@ -132,7 +137,6 @@ def _dataset_stage(out: Path, args) -> None:
     """Generate a small dataset with the local executor (resumes when run again), print where it is."""
     from denoisebench.commands.generate import print_summary
     from denoisebench.generator.dataset_run import GenerateRequest, generate_dataset
-    from denoisebench.generator.executors import LocalExecutor
 
     families = DEMO_DATASET_FAMILIES[:2] if args.quick else DEMO_DATASET_FAMILIES
     size, frames = (48, 4) if args.quick else (DEMO_SIZE, DEMO_FRAMES)

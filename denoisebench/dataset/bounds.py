@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import os
 
+from denoisebench.dataset.errors import DatasetError
 from denoisebench.errors import UserInputError
 
 MAX_SIDE = 16384
@@ -182,8 +183,6 @@ def check_generate(*, width: int, height: int, scenes: int, frames: int, spp, re
 
 def check_scene_record(scene: str, record: dict) -> None:
     """A manifest's scene record within the bounds (a forged one is refused before it is read)."""
-    from denoisebench.dataset.errors import DatasetError
-
     try:
         width, height, frames = int(record["width"]), int(record["height"]), int(record["frames"])
         spp = [int(s) for s in record["spp"]]
