@@ -639,20 +639,16 @@ class ResultsStore:
     def integrity_problems(self) -> list[str]:
         """SQLite's integrity check plus ours: every frame row belongs to a unit row and vice versa."""
         problems = [r[0] for r in self.conn.execute("PRAGMA integrity_check") if r[0] != "ok"]
-        for table in _UNIT_TABLES_OF[self.version]:
+        tables = list(_UNIT_TABLES_OF[self.version])
+        if sampler_maps.has_table(self.conn):  # spp maps of live sampler units, when the database has them
+            tables.append(sampler_maps.TABLE)
+        for table in tables:
             orphans = self.conn.execute(
                 f"SELECT COUNT(*) FROM {table} t WHERE NOT EXISTS (SELECT 1 FROM units u WHERE u.run_id = t.run_id "
                 "AND u.denoiser = t.denoiser AND u.scene = t.scene AND u.spp = t.spp)"
             ).fetchone()[0]
             if orphans:
                 problems.append(f"{orphans} row(s) of {table} without a unit")
-        if sampler_maps.has_table(self.conn):  # spp maps of live sampler units, when the database has them
-            orphans = self.conn.execute(
-                f"SELECT COUNT(*) FROM {sampler_maps.TABLE} t WHERE NOT EXISTS (SELECT 1 FROM units u "
-                "WHERE u.run_id = t.run_id AND u.denoiser = t.denoiser AND u.scene = t.scene AND u.spp = t.spp)"
-            ).fetchone()[0]
-            if orphans:
-                problems.append(f"{orphans} row(s) of {sampler_maps.TABLE} without a unit")
         short = self.conn.execute(
             "SELECT COUNT(*) FROM units u WHERE u.frames != (SELECT COUNT(*) FROM frames f WHERE f.run_id = u.run_id "
             "AND f.denoiser = u.denoiser AND f.scene = u.scene AND f.spp = u.spp)"
