@@ -112,34 +112,32 @@ def write_frames(folder: Path, frames: dict) -> None:
         _write_exr(folder / f"ref_{name}.hdr.exr", ref)
 
 
-def their_evaluation(training: Path, folder: Path, names) -> dict[str, dict[str, float]]:
-    """OIDN's loader + transfer + ``compare_images`` (path 1 of the module docstring), full precision."""
+def _run_oidn(training: Path, args: list[str], cwd: Path, what: str) -> str:
+    """stdout of ``python ARGS`` run in ``cwd`` with OIDN's ``training/`` importable; a failure raises with its stderr."""
     proc = subprocess.run(
-        [sys.executable, "-c", _THEIR_EVALUATION, str(folder), *names],
-        cwd=training,
+        [sys.executable, *args],
+        cwd=cwd,
         env={**os.environ, "PYTHONPATH": str(training)},
         capture_output=True,
         text=True,
         timeout=600,
     )
     if proc.returncode:
-        raise RuntimeError(f"OIDN evaluation failed:\n{proc.stderr[-2000:]}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+        raise RuntimeError(f"{what} failed:\n{proc.stderr[-2000:]}")
+    return proc.stdout
+
+
+def their_evaluation(training: Path, folder: Path, names) -> dict[str, dict[str, float]]:
+    """OIDN's loader + transfer + ``compare_images`` (path 1 of the module docstring), full precision."""
+    out = _run_oidn(training, ["-c", _THEIR_EVALUATION, str(folder), *names], training, "OIDN evaluation")
+    return json.loads(out.strip().splitlines()[-1])
 
 
 def their_compare_image(training: Path, folder: Path, name: str) -> dict[str, float]:
     """``compare_image.py pred ref`` (path 2): the values of the line it prints (4 decimals)."""
-    proc = subprocess.run(
-        [sys.executable, str(training / "compare_image.py"), f"pred_{name}.hdr.exr", f"ref_{name}.hdr.exr"],
-        cwd=folder,
-        env={**os.environ, "PYTHONPATH": str(training)},
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    if proc.returncode:
-        raise RuntimeError(f"compare_image.py failed on {name}:\n{proc.stderr[-2000:]}")
-    return {k: float(v) for k, v in re.findall(r"(\w+) = ([-+0-9.eEnaif]+)", proc.stdout)}
+    args = [str(training / "compare_image.py"), f"pred_{name}.hdr.exr", f"ref_{name}.hdr.exr"]
+    out = _run_oidn(training, args, folder, f"compare_image.py on {name}")
+    return {k: float(v) for k, v in re.findall(r"(\w+) = ([-+0-9.eEnaif]+)", out)}
 
 
 def oidn_commit(training: Path) -> str:
