@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from denoisebench.generator.usd import materialx
 from denoisebench.generator.usd.stage import check_finite
 from denoisebench.generator.usd.textures import connected_shader as _connected_shader
 from denoisebench.generator.usd.textures import read_texture
@@ -55,6 +56,7 @@ class MaterialInfo:
     texture_files: list[str] = field(default_factory=list)
     uv_primvar: str | None = None  # the primvar the textures read (``varname``); None: st, else uv
     cutout: bool = False  # an alpha mask (opacityThreshold)
+    report: dict = field(default_factory=dict)  # how it was translated (the manifest's ``materials``)
 
 
 def default_material(display_color=None) -> MaterialInfo:
@@ -72,6 +74,11 @@ def _rgb(values) -> dict:
 def translate_material(material, warnings: list[str]) -> MaterialInfo:
     """UsdShade.Material → MaterialInfo (default grey diffuse, with a warning, when unsupported)."""
     path = str(material.GetPath())
+    mtlx_shader = material.ComputeSurfaceSource(["mtlx"])[0] if material else None
+    if mtlx_shader and _shader_id(mtlx_shader).startswith("ND_"):
+        translated = materialx.translate_usd_network(mtlx_shader, warnings)
+        if translated is not None:
+            return _from_materialx(translated, path, "MaterialX network in USD", _shader_id(mtlx_shader), "")
     shader = material.ComputeSurfaceSource()[0] if material else None
     if not shader or _shader_id(shader) != "UsdPreviewSurface":
         kind = _shader_id(shader) or "no surface shader"
@@ -105,7 +112,7 @@ def translate_material(material, warnings: list[str]) -> MaterialInfo:
     if use_specular and use_specular.Get():
         warnings.append(f"{path}: specular workflow is not supported; metallic workflow used")
 
-    info = MaterialInfo(bsdf={}, source=path)
+    info = MaterialInfo(bsdf={}, source=path, report={"material": path, "kind": "UsdPreviewSurface"})
     principled: dict = {"type": "principled"}
 
     diffuse, diffuse_texture = value("diffuseColor", DEFAULT_GREY)
@@ -172,6 +179,26 @@ def translate_material(material, warnings: list[str]) -> MaterialInfo:
     return info
 
 
+def _from_materialx(translated, path: str, kind: str, surface: str, document: str) -> MaterialInfo:
+    """A :class:`materialx.Translation` → MaterialInfo, with its manifest report."""
+    report = {"material": path, "kind": kind, "surface": surface, "fallbacks": list(translated.fallbacks)}
+    if document:
+        report["document"] = document
+    return MaterialInfo(
+        bsdf=translated.bsdf,
+        emission=translated.emission,
+        roughness=translated.roughness,
+        metallic=translated.metallic,
+        opacity=translated.opacity,
+        textured=bool(translated.texture_files),
+        source=path,
+        texture_files=list(translated.texture_files),
+        uv_primvar=translated.uv_primvar,
+        cutout=translated.cutout,
+        report=report,
+    )
+
+
 def _use_texture(info: MaterialInfo, connection, want_color: bool, warnings: list[str], owner: str) -> dict | None:
     """Decode the texture of a ``(shader, output)`` connection; record it on ``info``. None: fallback."""
     shader, output = connection
@@ -195,6 +222,19 @@ def bound_material(prim, cache: dict, warnings: list[str]) -> MaterialInfo:
     from pxr import UsdGeom, UsdShade
 
     material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()[0]
+    if not material:
+        target = materialx.unresolved_binding(prim)
+        found = materialx.mtlx_reference(prim.GetStage(), target) if target is not None else None
+        if found is not None:
+            key = f"{found[0]}:{found[1]}"
+            if key not in cache:
+                translated, category = materialx.translate_document_material(found[0], found[1], warnings)
+                cache[key] = (
+                    _from_materialx(translated, str(target), "MaterialX document", category, found[0])
+                    if translated is not None
+                    else default_material()
+                )
+            return cache[key]
     if material:
         key = str(material.GetPath())
         if key not in cache:

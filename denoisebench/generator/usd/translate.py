@@ -100,6 +100,9 @@ def summarise_diagnostics(diagnostics) -> list[str]:
     for coalesced in diagnostics:
         for item in coalesced.unsharedItems:
             text = " ".join(str(item.commentary).split())
+            mtlx = re.search(r"Could not open asset @([^@]+\.mtlx)@", text)
+            if mtlx and Path(mtlx.group(1)).is_file():
+                continue  # usd-core has no .mtlx format: materialx.py reads the document itself
             match = re.match(r"In <(/[^>]*)>: (.*)", text)
             prim, message = (match.group(1), match.group(2)) if match else ("stage", text)
             message = re.sub(r" \((?:instantiating|composing) stage on stage .*\)$", "", message)
