@@ -71,6 +71,7 @@ from denoisebench.generator.render.integrator import (
     scene_has_null_bsdf,
     scene_has_object_motion,
 )
+from denoisebench.generator.render.media import scene_has_media
 from denoisebench.mitsuba_runtime import load_mitsuba
 
 #: Most paths traced by one kernel launch (bounds per-sample memory and the length of one launch).
@@ -377,6 +378,7 @@ class FrameStream:
             motion=want_motion,
             object_motion=want_motion and scene_has_object_motion(scene),
             null_skips=NULL_SKIPS if scene_has_null_bsdf(mi, scene) else 0,
+            media=scene_has_media(scene),
             follow_delta_albedo="albedo" in features and scene_has_delta_only_bsdf(mi, scene),
             jitter=_jitter,
         )

@@ -94,6 +94,7 @@ class KernelOptions:
     null_skips: int = (
         0  # cut-outs (mask BSDFs): fully transparent surfaces the camera ray passes before its first vertex
     )
+    media: bool = False  # the scene has participating media: trace with render/volpath.py (else never entered)
 
     @property
     def bounded(self) -> bool:
@@ -663,8 +664,12 @@ def render_moments(
     def cond(s, mean, m2):
         return s < end
 
+    tracer = trace
+    if opts.media:  # participating media: the volumetric tracer (a scene without media never imports it)
+        from denoisebench.generator.render.volpath import trace as tracer
+
     def body(s, mean, m2):
-        out = trace(mi, scene, streams(s), camera, opts, pixel_x, pixel_y)
+        out = tracer(mi, scene, streams(s), camera, opts, pixel_x, pixel_y)
         inv_n = dr.rcp(mi.Float(s // step + 1))
         new_mean, new_m2 = {}, {}
         for k, c in names.items():

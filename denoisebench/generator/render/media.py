@@ -1,0 +1,39 @@
+"""Which participating media a Mitsuba scene binds: what decides whether the volumetric tracer runs.
+
+A scene has media when a shape is bound to one (``interior``/``exterior``) or the camera sits in one
+(the sensor's ``medium``). :func:`scene_has_media` sets ``KernelOptions.media`` (render/frame.py):
+only then does :mod:`~denoisebench.generator.render.volpath` trace the frame; every other scene runs
+the surface tracer unchanged (same kernels, same bytes). Media unbound to anything are not rendered
+by Mitsuba either and do not count.
+"""
+
+from __future__ import annotations
+
+from denoisebench.generator.render.motion import ShutterMotionScene
+
+
+def scene_media(scene) -> list:
+    """Every medium the scene binds: shapes' interiors and exteriors and the sensors' media (no duplicates)."""
+    found = []
+    for shape in scene.shapes():
+        for medium in (shape.interior_medium(), shape.exterior_medium()):
+            if medium is not None and all(medium is not m for m in found):
+                found.append(medium)
+    for sensor in scene.sensors():
+        medium = sensor.get_medium()
+        if medium is not None and all(medium is not m for m in found):
+            found.append(medium)
+    return found
+
+
+def scene_has_media(scene) -> bool:
+    """True when some shape or sensor of ``scene`` (a ``mi.Scene``) is bound to a participating medium."""
+    if isinstance(scene, ShutterMotionScene):
+        scene = scene.base
+    return bool(scene_media(scene))
+
+
+def camera_medium(scene):
+    """The medium the camera sits in: the first sensor's (None without sensors or medium)."""
+    sensors = scene.sensors()
+    return sensors[0].get_medium() if sensors else None
