@@ -19,7 +19,7 @@ avoids. Denoise time is the runner's (inside ``denoise()``), the minimum over ``
 sequences after a warm-up. The worker's start-up (interpreter, imports, construction) is paid once
 per denoiser per run and reported apart.
 
-The same denoiser then runs in a sandboxed worker (:mod:`denoisebench.sandbox`, the
+The same denoiser then runs in a sandboxed worker (:mod:`denoisebench.plugins.sandbox`, the
 default for plugins), beside the plain worker process (``--isolation process``), in the same run:
 
     start-up ratio  = sandboxed start-up / plain worker start-up   (and the difference in seconds)
@@ -40,11 +40,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from denoisebench import sandbox  # noqa: E402
 from denoisebench.denoisers.isolation import IsolatedDenoiser  # noqa: E402
 from denoisebench.denoisers.registry import BUILTINS, load_denoiser  # noqa: E402
 from denoisebench.denoisers.runner import run_sequence  # noqa: E402
 from denoisebench.denoisers.synthetic import synthetic_sequence  # noqa: E402
+from denoisebench.plugins import sandbox  # noqa: E402
 
 
 def _measure(denoiser, sequence, repeats: int, per_call: list | None = None) -> tuple[float, float]:

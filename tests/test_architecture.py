@@ -15,18 +15,29 @@ PACKAGE = Path(__file__).resolve().parents[1] / "denoisebench"
 
 #: Each stage and the stages it may import (besides itself and the package's top-level helpers).
 ALLOWED = {
+    "plugins": set(),  # the shell for untrusted code: knows no protocol (a worker's side is named to it at run time)
     "scenes": set(),
     "generator": {"scenes", "dataset"},
-    "sampling": {"generator", "dataset", "scenes"},
+    "sampling": {"generator", "dataset", "scenes", "plugins"},
     "dataset": set(),
-    "denoisers": {"dataset"},
+    "denoisers": {"dataset", "plugins"},
     "baselines": {"dataset", "denoisers", "metrics"},
     "models": {"dataset", "denoisers", "metrics", "baselines"},
     "metrics": set(),
-    "leaderboard": {"dataset", "denoisers", "baselines", "models", "metrics", "sampling", "generator", "scenes"},
+    "leaderboard": {
+        "dataset",
+        "denoisers",
+        "baselines",
+        "models",
+        "metrics",
+        "sampling",
+        "generator",
+        "scenes",
+        "plugins",
+    },
 }
 #: Top-level helper modules every stage may use (no stage of their own).
-HELPERS = {"errors", "mitsuba_runtime", "outputs", "plugin_loading", "plugin_worker", "progress", "sandbox"}
+HELPERS = {"errors", "mitsuba_runtime", "outputs", "progress"}
 
 
 def _module_name(path: Path) -> str:

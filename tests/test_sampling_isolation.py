@@ -7,6 +7,7 @@ import textwrap
 import numpy as np
 import pytest
 
+from denoisebench.plugins import Limits
 from denoisebench.sampling import synthetic
 from denoisebench.sampling.harness import run_sampler
 from denoisebench.sampling.isolation import IsolatedSampler, isolated, load
@@ -84,7 +85,8 @@ def test_an_exit_fails_the_run_with_its_status_and_the_next_run_gets_a_fresh_wor
 
 
 def test_a_hang_is_killed_at_the_time_limit_and_the_sampler_disabled(plugins):
-    sampler = IsolatedSampler(plugins("Hangs"), time_limit=3)  # the sandbox and numpy load well within it
+    # the sandbox and numpy load well within the limit
+    sampler = IsolatedSampler(plugins("Hangs"), limits=Limits(time_limit=3))
     first = run_sampler(sampler, synthetic.constant(8, 8), Budget(spp=4))
     assert first.stopped == "error" and "time limit" in first.error and first.samples == 64
     second = run_sampler(sampler, synthetic.constant(8, 8), Budget(spp=4))

@@ -24,16 +24,17 @@ from pathlib import Path
 import pytest
 from hostile_parts import SOURCE
 
-from denoisebench import cli, sandbox
+from denoisebench import cli
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.synthetic import make_synthetic_dataset
 from denoisebench.dataset.verify import run_files, verify_files
 from denoisebench.denoisers import isolation
-from denoisebench.denoisers.isolation import IsolatedDenoiser, Limits
+from denoisebench.denoisers.isolation import IsolatedDenoiser
 from denoisebench.denoisers.runner import run_sequence
 from denoisebench.denoisers.synthetic import synthetic_sequence
 from denoisebench.leaderboard.report import write_report
 from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.plugins import Limits, proxy, sandbox
 
 pytestmark = pytest.mark.skipif(
     sandbox.unavailable_reason() is not None, reason=f"no sandbox here: {sandbox.unavailable_reason()}"
@@ -443,6 +444,6 @@ def _frames_or_none(db: Path):
 
 
 def test_policies():
-    assert isolation.sandboxed("plugins") and isolation.sandboxed("all")
-    assert not isolation.sandboxed("process") and not isolation.sandboxed("none")
+    assert proxy.sandboxed("plugins") and proxy.sandboxed("all")
+    assert not proxy.sandboxed("process") and not proxy.sandboxed("none")
     assert isolation.isolated("x.py:A", "process") and not isolation.isolated("identity", "process")

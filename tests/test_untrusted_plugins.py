@@ -22,11 +22,12 @@ import pytest
 from denoisebench import cli
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.synthetic import make_synthetic_dataset
-from denoisebench.denoisers.isolation import IsolatedDenoiser, Limits, isolated
+from denoisebench.denoisers.isolation import IsolatedDenoiser, isolated
 from denoisebench.denoisers.registry import UnknownOptionError
 from denoisebench.denoisers.runner import PUBLIC_META, run_denoisers, run_sequence, sanitize_frame
 from denoisebench.denoisers.synthetic import synthetic_sequence
 from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.plugins import Limits
 
 PLUGINS = textwrap.dedent(
     '''

@@ -23,8 +23,6 @@ import time
 from pathlib import Path
 
 from denoisebench.dataset import disk_space, open_dataset
-from denoisebench.denoisers.isolation import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, limits_from_args
-from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard.benchmark_run import run_benchmark
 from denoisebench.leaderboard.report import write_report
@@ -33,7 +31,10 @@ from denoisebench.leaderboard.store import ResultsStore, utc_now
 from denoisebench.leaderboard.time_model import DEFAULT_TIME_BUDGET, measure_run_timings, parse_size
 from denoisebench.metrics.robust import check_trim
 from denoisebench.outputs import check_writable_dir, check_writable_file
-from denoisebench.sandbox import protect
+from denoisebench.plugins import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT
+from denoisebench.plugins.proxy import add_arguments as add_isolation_arguments
+from denoisebench.plugins.proxy import limits_from_args
+from denoisebench.plugins.sandbox import protect
 
 EPILOG = """examples:
   run-benchmark --data out/dataset --out report/

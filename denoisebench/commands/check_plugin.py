@@ -22,9 +22,10 @@ import sys
 
 from tqdm import tqdm
 
-from denoisebench.denoisers.isolation import add_arguments as add_isolation_arguments
 from denoisebench.denoisers.registry import available_denoisers
 from denoisebench.errors import UserInputError
+from denoisebench.plugins.proxy import add_arguments as add_isolation_arguments
+from denoisebench.plugins.proxy import limits_from_args
 from denoisebench.sampling.checks import check_sampler
 from denoisebench.sampling.registry import available_samplers
 
@@ -122,13 +123,13 @@ def run(args) -> int:
     if not args.spec:
         raise UserInputError("give a denoiser SPEC (or --list)")
     if args.sampler:
-        limits = {"time_limit": args.time_limit, "memory_limit_mb": args.memory_limit}
+        limits = limits_from_args(args)
         options = parse_options(args.option)
-        return check_sampler(args.spec, options, as_json=args.json, isolation=args.isolation, **limits)
+        return check_sampler(args.spec, options, as_json=args.json, isolation=args.isolation, limits=limits)
 
     from denoisebench.denoisers import hard_cases, isolation
 
-    limits = isolation.limits_from_args(args)
+    limits = limits_from_args(args)
     options = parse_options(args.option)
     try:
         cases = hard_cases.hard_cases(args.case)

@@ -23,7 +23,7 @@ or :class:`DenoiserLoadError` (found but it failed to import or construct, e.g. 
 
 Notes
 -----
-The resolution itself is :mod:`denoisebench.plugin_loading`'s, shared with the samplers' registry;
+The resolution itself is :mod:`denoisebench.plugins.loading`'s, shared with the samplers' registry;
 this module holds what is the denoisers' own: the group, the built-ins, the error classes.
 """
 
@@ -32,9 +32,9 @@ from __future__ import annotations
 import importlib.metadata
 from typing import Any
 
-from denoisebench import plugin_loading
 from denoisebench.denoisers.protocol import describe
 from denoisebench.errors import UserInputError
+from denoisebench.plugins import loading
 
 ENTRY_POINT_GROUP = "denoisebench.denoisers"
 
@@ -74,10 +74,10 @@ class DenoiserUnavailableError(RuntimeError):
 
 
 def _entry_points() -> dict[str, importlib.metadata.EntryPoint]:
-    return plugin_loading.entry_points(ENTRY_POINT_GROUP)
+    return loading.entry_points(ENTRY_POINT_GROUP)
 
 
-KIND = plugin_loading.PluginKind(
+KIND = loading.PluginKind(
     noun="denoiser",
     group=ENTRY_POINT_GROUP,
     builtins=BUILTINS,
@@ -93,9 +93,9 @@ KIND = plugin_loading.PluginKind(
 
 def available_denoisers() -> dict[str, str]:
     """Every name a spec may use, mapped to where it comes from (nothing is imported)."""
-    return plugin_loading.available(KIND, _entry_points())
+    return loading.available(KIND, _entry_points())
 
 
 def load_denoiser(spec: str, **options: Any):
     """The denoiser ``spec`` names, constructed with ``options``. See the module docstring."""
-    return plugin_loading.load(KIND, spec, options, _entry_points)
+    return loading.load(KIND, spec, options, _entry_points)

@@ -38,9 +38,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from denoisebench.dataset.frame import Frame, Sequence
-from denoisebench.denoisers.isolation import IsolatedDenoiser, WorkerFailure
+from denoisebench.denoisers.isolation import IsolatedDenoiser
 from denoisebench.denoisers.protocol import describe
 from denoisebench.errors import one_line
+from denoisebench.plugins import PluginFailure
 
 STATUS_OK = "ok"
 STATUS_FAILED = "failed"
@@ -202,7 +203,7 @@ def run_frame(denoiser: object, frame: Frame, *, name: str | None = None, keep_o
     started = time.perf_counter()
     try:
         output = denoiser.denoise(safe)
-    except WorkerFailure as error:  # an isolated call: the reason is already one line
+    except PluginFailure as error:  # an isolated call: the reason is already one line
         result.seconds = denoiser.last_seconds if isolated else time.perf_counter() - started
         result.error = str(error)
         return result
@@ -231,7 +232,7 @@ def run_sequence(
         try:
             reset()
         except Exception as error:  # noqa: BLE001
-            reason = str(error) if isinstance(error, WorkerFailure) else f"reset() raised {one_line(error)}"
+            reason = str(error) if isinstance(error, PluginFailure) else f"reset() raised {one_line(error)}"
             return [DenoiseResult(label, f.scene, f.index, STATUS_FAILED, reason) for f in frames]
     return [run_frame(denoiser, frame, name=label, keep_output=keep_output) for frame in frames]
 

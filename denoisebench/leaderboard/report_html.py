@@ -17,11 +17,11 @@ from __future__ import annotations
 from html import escape
 from typing import TYPE_CHECKING
 
-from denoisebench.denoisers.isolation import isolation_text
 from denoisebench.leaderboard import formatting as fmt
 from denoisebench.leaderboard import report_notes as notes
 from denoisebench.leaderboard.images import colour_bar_png, data_uri
 from denoisebench.leaderboard.report_samplers import undersampled_lines
+from denoisebench.plugins.proxy import isolation_text
 
 if TYPE_CHECKING:
     from denoisebench.leaderboard.report_model import ReportModel

@@ -46,7 +46,6 @@ from denoisebench.dataset.bounds import check_scene_record
 from denoisebench.dataset.exr_io import canonical_json
 from denoisebench.dataset.verify import run_files, verify_files
 from denoisebench.denoisers import isolation as isolation_mod
-from denoisebench.denoisers.isolation import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, Limits
 from denoisebench.denoisers.protocol import describe
 from denoisebench.denoisers.registry import DenoiserLoadError, available_denoisers
 from denoisebench.denoisers.runner import run_sequence, sanitize_array
@@ -65,7 +64,8 @@ from denoisebench.metrics import compute_metrics
 from denoisebench.metrics.cost import total_seconds
 from denoisebench.metrics.registry import default_metric_names, expand_metric_names, get_metric
 from denoisebench.metrics.validation import MetricNotApplicable
-from denoisebench.sandbox import version as sandbox_version
+from denoisebench.plugins import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, Limits
+from denoisebench.plugins.sandbox import version as sandbox_version
 
 #: A unit's key: (label, scene, spp).
 UnitKey = tuple[str, str, int]

@@ -33,6 +33,7 @@ import numpy as np
 from tqdm import tqdm
 
 from denoisebench.errors import one_line
+from denoisebench.plugins import Limits
 from denoisebench.sampling.harness import run_sampler
 from denoisebench.sampling.isolation import IsolatedSampler, load, sampler_policy
 from denoisebench.sampling.protocol import Budget, sampler_name
@@ -167,17 +168,17 @@ def check_sampler(
     *,
     as_json: bool = False,
     isolation: str = "plugins",
-    time_limit=None,
-    memory_limit_mb=None,
+    limits: Limits | None = None,
 ) -> int:
     """``check-plugin --sampler SPEC``: load (a one-line error, exit 2, when it cannot), check, print; 0 pass, 1 fail.
 
-    A plugin runs in a worker (:mod:`.isolation`) unless ``isolation`` is ``"none"`` (``"all"``: built-ins too).
+    A plugin runs in a worker (:mod:`.isolation`, under ``limits``) unless ``isolation`` is ``"none"``
+    (``"all"``: built-ins too).
     """
     policy = sampler_policy(isolation)
 
     def make_sampler():
-        return load(spec, options, policy=policy, time_limit=time_limit, memory_limit_mb=memory_limit_mb)
+        return load(spec, options, policy=policy, limits=limits)
 
     first = make_sampler()
     name = sampler_name(first, spec)

@@ -1,7 +1,7 @@
 """Find a sampler by spec: a built-in name, an entry point, or ``module:attr`` / ``file.py:attr``.
 
 The same grammar as the denoisers' registry (``denoisebench/denoisers/registry.py``): ``NAME`` is a
-built-in (:data:`BUILTINS`: ``uniform``, ``ci_stop``, ``dual_buffer``, ``hachisuka2008``), else an
+built-in (:data:`BUILTINS`: ``uniform``, ``ci_stop``, ``dual_buffer``, ``hachisuka2008``, ``mdas``), else an
 entry point of the group ``denoisebench.samplers`` (a plugin package declares
 ``[project.entry-points."denoisebench.samplers"] my_sampler = "my_pkg:MySampler"``); built-ins win
 over an entry point of the same name. ``MODULE:ATTR`` and ``path/to/file.py:ATTR`` name anything
@@ -9,7 +9,7 @@ importable. The object may be a class or a factory (called with the options) or 
 
 Notes
 -----
-* The resolution itself is :mod:`denoisebench.plugin_loading`'s, shared with the denoisers' registry
+* The resolution itself is :mod:`denoisebench.plugins.loading`'s, shared with the denoisers' registry
   (the layering keeps ``sampling`` from importing ``denoisers``); this module holds the group, the
   built-ins and the error classes.
 * Failures are :class:`UnknownSamplerError` and :class:`SamplerLoadError`, one-line
@@ -21,8 +21,8 @@ from __future__ import annotations
 import importlib.metadata
 from typing import Any
 
-from denoisebench import plugin_loading
 from denoisebench.errors import UserInputError
+from denoisebench.plugins import loading
 from denoisebench.sampling.protocol import sampler_name
 
 ENTRY_POINT_GROUP = "denoisebench.samplers"
@@ -33,6 +33,7 @@ BUILTINS: dict[str, tuple[str, dict[str, Any]]] = {
     "ci_stop": ("denoisebench.sampling.ci_stop:ConfidenceStop", {}),
     "dual_buffer": ("denoisebench.sampling.dual_buffer:DualBuffer", {}),
     "hachisuka2008": ("denoisebench.sampling.hachisuka:Hachisuka2008", {}),
+    "mdas": ("denoisebench.sampling.mdas:MDAS", {}),
 }
 
 
@@ -45,10 +46,10 @@ class SamplerLoadError(UserInputError):
 
 
 def _entry_points() -> dict[str, importlib.metadata.EntryPoint]:
-    return plugin_loading.entry_points(ENTRY_POINT_GROUP)
+    return loading.entry_points(ENTRY_POINT_GROUP)
 
 
-KIND = plugin_loading.PluginKind(
+KIND = loading.PluginKind(
     noun="sampler",
     group=ENTRY_POINT_GROUP,
     builtins=BUILTINS,
@@ -65,9 +66,9 @@ KIND = plugin_loading.PluginKind(
 
 def available_samplers() -> dict[str, str]:
     """Every name a spec may use, mapped to where it comes from (nothing is imported)."""
-    return plugin_loading.available(KIND, _entry_points())
+    return loading.available(KIND, _entry_points())
 
 
 def load_sampler(spec: str, **options: Any):
     """The sampler ``spec`` names, constructed with ``options`` (module docstring)."""
-    return plugin_loading.load(KIND, spec, options, _entry_points)
+    return loading.load(KIND, spec, options, _entry_points)

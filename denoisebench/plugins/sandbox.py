@@ -50,9 +50,9 @@ Pitfalls
 * What ``sys.path`` holds is readable: a harness started by ``python -m`` or pytest has its
   working folder there. The console scripts (``run-benchmark``) have only the environment.
 * Resource limits (address space, processes, file size, open files) are set by the worker on
-  itself before it imports the plugin (:func:`denoisebench.plugin_worker.set_rlimits`); the kernel does not enforce
+  itself before it imports the plugin (:func:`denoisebench.plugins.process.set_rlimits`); the kernel does not enforce
   ``RLIMIT_NPROC`` for a worker whose user is root outside the sandbox, so the parent also counts
-  the sandbox's tasks (:class:`denoisebench.plugin_worker.WorkerProcess`).
+  the sandbox's tasks (:class:`denoisebench.plugins.process.WorkerProcess`).
 * bwrap reports a worker killed by signal N as exit status 128 + N (:func:`exit_signal`).
 """
 

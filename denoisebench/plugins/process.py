@@ -1,14 +1,14 @@
 """A plugin's worker process: started plain or in the sandbox, watched while the harness waits, ended.
 
-The denoisers' and the samplers' isolation (``denoisers/isolation.py``, ``sampling/isolation.py``)
-each run a plugin in a worker of their own and speak their own protocol with it; what they share is
-here: :class:`WorkerProcess` starts ``python -m MODULE FD ...`` (FD one end of a socket pair), under
-bubblewrap where ``sandboxed`` (:mod:`denoisebench.sandbox`: none of the host's files but Python,
+:class:`WorkerProcess` starts ``python -m denoisebench.plugins.worker FD SERVICE ...`` (FD one end of a
+socket pair, SERVICE the protocol's worker side, :mod:`denoisebench.plugins.worker`), under bubblewrap
+where ``sandboxed`` (:mod:`denoisebench.plugins.sandbox`: none of the host's files but Python,
 ``sys.path``, the plugin and its option files, read-only; no network; a private scratch), and while
 the harness waits for a message it watches the worker's exit, its resident memory (polled every
-:data:`POLL_SECONDS`) and a time limit. A sandboxed worker's tasks are counted by a thread every
-:data:`TASK_POLL_SECONDS`, during waits and between them. Every breach ends the worker and raises
-:class:`WorkerGone` with a one-line reason.
+:data:`POLL_SECONDS`) and a time limit (:class:`Limits`). A sandboxed worker's tasks are counted by a
+thread every :data:`TASK_POLL_SECONDS`, during waits and between them. Every breach ends the worker and
+raises :class:`WorkerGone` with a one-line reason. The proxies speak to it through
+:class:`denoisebench.plugins.proxy.PluginProxy`.
 
 Notes
 -----
@@ -33,10 +33,11 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import dataclass
 from multiprocessing import Pipe
 
-from denoisebench import sandbox
 from denoisebench.errors import UserInputError
+from denoisebench.plugins import sandbox
 
 #: How often the parent looks at the worker while it waits (seconds).
 POLL_SECONDS = 0.02
@@ -50,6 +51,30 @@ DEFAULT_OPEN_FILES = 1024
 DEFAULT_SCRATCH_MB = 1024
 #: Address space (RLIMIT_AS, MiB) of a sandboxed worker: at least this, and 4x the memory limit.
 MIN_ADDRESS_SPACE_MB = 32768
+#: Seconds one wait for a plugin's worker may take (a denoiser's call, a sampler's stretch of decisions).
+DEFAULT_TIME_LIMIT = 120.0
+#: Resident memory (MiB) a plugin's worker may hold.
+DEFAULT_MEMORY_LIMIT_MB = 4096
+#: The module run as the worker process.
+WORKER_MODULE = "denoisebench.plugins.worker"
+
+
+@dataclass(frozen=True)
+class Limits:
+    """A plugin worker's limits: time of one wait (seconds), resident memory (MiB), and the sandbox's
+    task count, open files and scratch size (MiB; also the largest file). The same for every plugin kind."""
+
+    time_limit: float = DEFAULT_TIME_LIMIT
+    memory_limit_mb: int = DEFAULT_MEMORY_LIMIT_MB
+    processes: int = DEFAULT_PROCESS_LIMIT
+    open_files: int = DEFAULT_OPEN_FILES
+    scratch_mb: int = DEFAULT_SCRATCH_MB
+
+    def __post_init__(self) -> None:
+        if not self.time_limit > 0:
+            raise UserInputError(f"--time-limit must be > 0 seconds (got {self.time_limit})")
+        if not self.memory_limit_mb > 0:
+            raise UserInputError(f"--memory-limit must be > 0 MiB (got {self.memory_limit_mb})")
 
 
 class WorkerGone(Exception):
@@ -158,39 +183,38 @@ def exit_reason(code: int | None, sandboxed: bool = False, noun: str = "plugin")
 
 
 class WorkerProcess:
-    """``python -m module FD *args`` with the socket pair's other end as ``conn`` (module docstring).
+    """``python -m denoisebench.plugins.worker FD service *args``, the socket pair's other end as ``conn``.
 
+    ``service`` (``"module:Class"``) is the protocol's worker side (:mod:`denoisebench.plugins.worker`);
     ``noun`` names the plugin in reasons (``denoiser disabled``); ``spec`` and ``options`` decide what
     a sandboxed worker may read, and are kept as the worker must be told them (:meth:`load_message`:
-    paths absolute under the sandbox, with the :func:`rlimits` of ``processes``, ``open_files``,
-    ``scratch_mb`` and ``memory_limit_mb``); ``fds`` are passed on.
+    paths absolute under the sandbox, with the :func:`rlimits` of ``limits``); ``fds`` are passed on.
     """
 
     def __init__(
         self,
-        module: str,
+        service: str,
         *,
         noun: str,
         sandboxed: bool,
+        limits: Limits,
         spec: str = "",
         options: dict | None = None,
         args: tuple[str, ...] = (),
         fds: tuple[int, ...] = (),
-        scratch_mb: int = DEFAULT_SCRATCH_MB,
-        processes: int = DEFAULT_PROCESS_LIMIT,
-        open_files: int = DEFAULT_OPEN_FILES,
-        memory_limit_mb: int,
     ):
-
-        self.noun, self.sandboxed, self.processes = noun, bool(sandboxed), int(processes)
+        self.noun, self.sandboxed, self.processes = noun, bool(sandboxed), int(limits.processes)
         self.spec, self.options, self.rlimits = spec, dict(options or {}), None
         if self.sandboxed:
             self.spec, self.options = confined_spec(spec, self.options)
-            self.rlimits = rlimits(self.processes, int(open_files), int(scratch_mb), int(memory_limit_mb))
+            self.rlimits = rlimits(
+                self.processes, int(limits.open_files), int(limits.scratch_mb), int(limits.memory_limit_mb)
+            )
+        scratch_mb = int(limits.scratch_mb)
         self.breach: str | None = None  # why the task watcher killed the sandbox
         self._worker_pid: int | None = None
         ours, theirs = Pipe(duplex=True)
-        command = [sys.executable, "-m", module, str(theirs.fileno()), *args]
+        command = [sys.executable, "-m", WORKER_MODULE, str(theirs.fileno()), service, *args]
         fds = (theirs.fileno(), *fds)
         wrapped = None
         if self.sandboxed:
@@ -216,7 +240,7 @@ class WorkerProcess:
             threading.Thread(target=self._watch_tasks, args=(self.proc,), daemon=True).start()
 
     def load_message(self) -> tuple:
-        """``("load", spec, options, sys_path, rlimits)``: what both workers are first told."""
+        """``("load", spec, options, sys_path, rlimits)``: what every worker is first told."""
         return ("load", self.spec, self.options, list(sys.path), self.rlimits)
 
     @property
