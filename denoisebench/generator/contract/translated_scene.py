@@ -39,6 +39,9 @@ class TranslatedScene:
             shutter), "to_world": K×4×4 world-from-object poses at those times, "from_record": 4×4
             object-from-record matrix (the inverse of the pose the record's positions are baked at)}``;
             its ``positions`` stay the first frame's, so that renderers without motion blur still work.
+            Optional ``instance_groups`` (static PointInstancer instances, usd/instancers.py):
+            ``[{"name", "shapes": [records in prototype space], "to_world": K×4×4 world-from-prototype}]``,
+            built as one Mitsuba ``shapegroup`` and K ``instance`` objects (geometry stored once).
         camera: the camera's poses over the sequence and its lens.
         effects_declared: effects the stage's metadata declares (empty for a user's own USD).
         effects_inferred: effects read off the stage itself.

@@ -184,12 +184,41 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
                 out[key] = _build_mesh(mi, record, bsdf, emitter, frame if moving else None)
             except Exception as error:  # a prim that breaks Mitsuba is skipped with its warning
                 skipped(f"{record['name']}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
+    for index, group in enumerate(data.get("instance_groups", [])):
+        _add_instances(mi, out, index, group, bsdfs, skipped)
     for index, record in enumerate(data["emitters"]):
         try:
             out[f"emitter_{index:03d}"] = mi.load_dict(_emitter_dict(mi, record))
         except Exception as error:
             skipped(f"{record.get('prim', 'light')}: Mitsuba cannot build this light ({_short(error)}); skipped")
     return out
+
+
+def _add_instances(mi, out: dict, index: int, group: dict, bsdfs: dict, skipped) -> None:
+    """An instance group (``scene_dict["instance_groups"]``): its shapes once, as a Mitsuba
+    ``shapegroup``, and one ``instance`` per ``to_world`` matrix (static; no emitters inside)."""
+    members: dict = {"type": "shapegroup"}
+    for j, record in enumerate(group["shapes"]):
+        bsdf = bsdfs.get(record.get("bsdf")) or mi.load_dict({"type": "diffuse"})
+        try:
+            if record["kind"] == "sphere":
+                members[f"shape_{j:04d}"] = mi.load_dict(
+                    {"type": "sphere", "center": record["center"], "radius": record["radius"], "bsdf": bsdf}
+                )
+            else:
+                members[f"shape_{j:04d}"] = _build_mesh(mi, record, bsdf, None)
+        except Exception as error:
+            skipped(f"{record['name']}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
+    if len(members) == 1:
+        return
+    # Mitsuba 3.9's instance takes its shapegroup by reference to a sibling (an object fails: "Couldn't find key").
+    out[f"group_{index:03d}"] = members
+    for k, matrix in enumerate(group["to_world"]):
+        out[f"instance_{index:03d}_{k:07d}"] = {
+            "type": "instance",
+            "shapegroup": {"type": "ref", "id": f"group_{index:03d}"},
+            "to_world": _transform(mi, matrix),
+        }
 
 
 def _short(error: Exception) -> str:
@@ -243,7 +272,7 @@ def build_mitsuba_scene(
         objects["sensor"] = sensor
     if integrator is not None:
         objects["integrator"] = integrator
-    if not moving and not any(key.startswith("shape_") for key in objects):
+    if not moving and not any(key.startswith(("shape_", "instance_")) for key in objects):
         raise UserInputError(f"{translated.source or 'stage'}: nothing renderable: no shape that Mitsuba can build")
     try:
         base = mi.load_dict(objects)

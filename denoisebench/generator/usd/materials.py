@@ -74,7 +74,7 @@ def _rgb(values) -> dict:
 def translate_material(material, warnings: list[str]) -> MaterialInfo:
     """UsdShade.Material → MaterialInfo (default grey diffuse, with a warning, when unsupported)."""
     path = str(material.GetPath())
-    mtlx_shader = material.ComputeSurfaceSource(["mtlx"])[0] if material else None
+    mtlx_shader = material.ComputeSurfaceSource("mtlx")[0] if material else None
     if mtlx_shader and _shader_id(mtlx_shader).startswith("ND_"):
         translated = materialx.translate_usd_network(mtlx_shader, warnings)
         if translated is not None:

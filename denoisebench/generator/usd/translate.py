@@ -27,7 +27,7 @@ import numpy as np
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.render_plan import STAGE_MAX_DEPTH_KEY, check_max_depth
 from denoisebench.generator.contract.translated_scene import TranslatedScene, shutter_keys
-from denoisebench.generator.usd import geometry
+from denoisebench.generator.usd import geometry, instancers
 from denoisebench.generator.usd.additions import add_auto_camera, add_default_lights, stage_has_light
 from denoisebench.generator.usd.camera import find_camera, read_camera
 from denoisebench.generator.usd.effects import infer_effects
@@ -134,7 +134,9 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
     used_materials = []
     light_kinds: list[str] = []
 
-    def bind(record: dict, material) -> None:
+    instance_groups: list[dict] = []
+
+    def bind(record: dict, material, into: list | None = None) -> None:
         key = id(material)
         if key not in bsdf_ids:
             bsdf_ids[key] = f"bsdf_{len(bsdf_ids):03d}"
@@ -143,7 +145,7 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
         record["bsdf"] = bsdf_ids[key]
         if material.emission is not None:
             record["emitter"] = {"type": "area", "radiance": list(material.emission)}
-        shapes.append(record)
+        (shapes if into is None else into).append(record)
 
     iterator = iter(Usd.PrimRange(stage.GetPseudoRoot(), Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
     for prim in iterator:
@@ -168,6 +170,24 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
                 shapes.append(record)
             emitters.extend(new_emitters)
             continue
+        if prim.IsA(UsdGeom.PointInstancer):
+            iterator.PruneChildren()  # prototypes render only where the instancer puts them
+            plain, groups = instancers.read_instancer(
+                prim,
+                to_mitsuba,
+                frames,
+                camera,
+                warnings,
+                lambda p, space, t, analytic: _gprim_parts(p, space, t, warnings, materials, analytic),
+            )
+            for record, material in plain:
+                bind(record, material)
+            for group in groups:
+                records: list[dict] = []
+                for record, material in group["parts"]:
+                    bind(record, material, into=records)
+                instance_groups.append({"name": group["name"], "shapes": records, "to_world": group["to_world"]})
+            continue
         if prim.IsA(UsdGeom.Gprim):
             if not (prim.IsA(UsdGeom.Mesh) or type_name in geometry.SUPPORTED_PRIMITIVES):
                 warnings.append(f"{path}: prim type {type_name} is not supported; skipped")
@@ -191,7 +211,7 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
             warnings.append(f"{path}: prim type {type_name} is not supported; skipped")
 
     lit = any("emitter" in s for s in shapes) or bool(emitters)
-    if strict and not any(s.get("bsdf") for s in shapes):
+    if strict and not any(s.get("bsdf") for s in shapes) and not instance_groups:
         # Mitsuba cannot trace a scene without shapes (and lights alone show nothing but a sky).
         skipped = sorted({w.split(": prim type ")[1].split(" ")[0] for w in warnings if ": prim type " in w})
         detail = f" (unsupported: {', '.join(skipped)})" if skipped else ""
@@ -217,7 +237,12 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
         except ValueError as error:
             raise UserInputError(f"{source or 'stage'}: {error}") from None
     return TranslatedScene(
-        scene_dict={"bsdfs": bsdfs, "shapes": shapes, "emitters": emitters},
+        scene_dict={
+            "bsdfs": bsdfs,
+            "shapes": shapes,
+            "emitters": emitters,
+            **({"instance_groups": instance_groups} if instance_groups else {}),
+        },
         camera=camera,
         effects_declared=declared,
         effects_inferred=inferred,
@@ -317,6 +342,20 @@ def scene_bounds(translated: TranslatedScene) -> tuple[np.ndarray, np.ndarray]:
         else:
             lows.append(shape["positions"].min(0))
             highs.append(shape["positions"].max(0))
+    for group in translated.scene_dict.get("instance_groups", []):
+        for shape in group["shapes"]:
+            if shape["kind"] == "sphere":
+                corners = np.asarray(shape["center"]) + shape["radius"] * np.array(
+                    [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
+                )
+            else:
+                low, high = shape["positions"].min(0), shape["positions"].max(0)
+                corners = np.array(
+                    [[a, b, c] for a in (low[0], high[0]) for b in (low[1], high[1]) for c in (low[2], high[2])]
+                )
+            placed = np.einsum("kij,nj->kni", group["to_world"][:, :3, :3], corners) + group["to_world"][:, None, :3, 3]
+            lows.append(placed.reshape(-1, 3).min(0))
+            highs.append(placed.reshape(-1, 3).max(0))
     if not lows:
         return np.zeros(3), np.zeros(3)
     return np.min(lows, 0), np.max(highs, 0)

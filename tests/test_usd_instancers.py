@@ -1,0 +1,151 @@
+"""UsdGeom.PointInstancer → Mitsuba shapegroup + instance (issue 44): what is placed, and that an
+instanced stage renders as the same stage with its instances written out as plain prims."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("pxr")
+
+from denoisebench.generator.usd.translate import translate_usd  # noqa: E402
+
+POSITIONS = [(-0.6, 0.0, 0.0), (0.0, 0.0, 0.0), (0.6, 0.0, 0.0), (0.0, 0.5, 0.0), (-0.6, 0.5, 0.0)]
+ORIENT = [(1, 0, 0, 0), (0.9238795, 0, 0.3826834, 0), (1, 0, 0, 0), (0.7071068, 0.7071068, 0, 0), (1, 0, 0, 0)]
+SCALES = [(1, 1, 1), (0.8, 1.2, 0.8), (1, 1, 1), (1.5, 1.5, 1.5), (1, 1, 1)]
+INDICES = [0, 1, 0, 1, 0]
+INVISIBLE = [4]
+
+
+def _common(stage):
+    from pxr import Gf, Sdf, UsdGeom, UsdLux, UsdShade
+
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    camera = UsdGeom.Camera.Define(stage, "/Camera")
+    camera.CreateFocalLengthAttr(35.0)
+    camera.CreateHorizontalApertureAttr(36.0)
+    camera.CreateVerticalApertureAttr(36.0)
+    camera.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.25, 3.0))
+    dome = UsdLux.DomeLight.Define(stage, "/Dome")
+    dome.CreateIntensityAttr(1.0)
+    key = UsdLux.DistantLight.Define(stage, "/Key")
+    key.CreateIntensityAttr(2.0)
+    key.AddRotateXYZOp().Set(Gf.Vec3f(-45.0, 30.0, 0.0))
+    materials = []
+    for name, colour in (("Red", (0.8, 0.2, 0.1)), ("Blue", (0.1, 0.3, 0.8))):
+        material = UsdShade.Material.Define(stage, f"/Looks/{name}")
+        shader = UsdShade.Shader.Define(stage, f"/Looks/{name}/Surface")
+        shader.CreateIdAttr("UsdPreviewSurface")
+        shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(colour)
+        shader.CreateInput("roughness", Sdf.ValueTypeNames.Float).Set(0.6)
+        material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+        materials.append(material)
+    return materials
+
+
+def _prototype(stage, path, kind, material):
+    """Prototype 0: a cube mesh (offset inside its root), prototype 1: a sphere with its own scale."""
+    from pxr import Gf, UsdGeom, UsdShade
+
+    root = UsdGeom.Xform.Define(stage, path)
+    if kind == 0:
+        cube = UsdGeom.Cube.Define(stage, f"{path}/Box")
+        cube.CreateSizeAttr(0.3)
+        cube.AddTranslateOp().Set(Gf.Vec3d(0.0, 0.05, 0.0))
+        gprim = cube
+    else:
+        sphere = UsdGeom.Sphere.Define(stage, f"{path}/Ball")
+        sphere.CreateRadiusAttr(0.15)
+        root.AddScaleOp().Set(Gf.Vec3f(1.0, 0.7, 1.0))
+        gprim = sphere
+    UsdShade.MaterialBindingAPI.Apply(gprim.GetPrim()).Bind(material)
+    return root
+
+
+def author_instanced(path, animated=False):
+    from pxr import Gf, Usd, UsdGeom, Vt
+
+    stage = Usd.Stage.CreateNew(str(path))
+    materials = _common(stage)
+    instancer = UsdGeom.PointInstancer.Define(stage, "/World/Instancer")
+    roots = [_prototype(stage, f"/World/Instancer/Proto{k}", k, materials[k]) for k in range(2)]
+    rel = instancer.CreatePrototypesRel()
+    for root in roots:
+        rel.AddTarget(root.GetPath())
+    instancer.CreateProtoIndicesAttr(INDICES)
+    instancer.CreateOrientationsAttr(Vt.QuathArray([Gf.Quath(*q) for q in ORIENT]))
+    instancer.CreateScalesAttr([Gf.Vec3f(*s) for s in SCALES])
+    instancer.CreateInvisibleIdsAttr(Vt.Int64Array(INVISIBLE))
+    if animated:
+        stage.SetStartTimeCode(0)
+        stage.SetEndTimeCode(1)
+        attribute = instancer.CreatePositionsAttr()
+        attribute.Set([Gf.Vec3f(*p) for p in POSITIONS], 0)
+        attribute.Set([Gf.Vec3f(p[0] + 0.1, p[1], p[2]) for p in POSITIONS], 1)
+    else:
+        instancer.CreatePositionsAttr([Gf.Vec3f(*p) for p in POSITIONS])
+    stage.GetRootLayer().Save()
+    return path
+
+
+def author_flattened(path):
+    """The same instances written out: one Xform per visible instance (its T·R·S) over the prototype."""
+    from pxr import Gf, Usd, UsdGeom
+
+    stage = Usd.Stage.CreateNew(str(path))
+    materials = _common(stage)
+    for index, (position, quat, scale, proto) in enumerate(zip(POSITIONS, ORIENT, SCALES, INDICES)):
+        if index in INVISIBLE:
+            continue
+        holder = UsdGeom.Xform.Define(stage, f"/World/Instance{index}")
+        holder.AddTranslateOp().Set(Gf.Vec3d(*position))
+        holder.AddOrientOp().Set(Gf.Quatf(*quat))
+        holder.AddScaleOp().Set(Gf.Vec3f(*scale))
+        _prototype(stage, f"/World/Instance{index}/Proto", proto, materials[proto])
+    stage.GetRootLayer().Save()
+    return path
+
+
+def test_instances_are_grouped_masked_and_prototypes_not_rendered_in_place(tmp_path):
+    translated = translate_usd(author_instanced(tmp_path / "instanced.usda"))
+    groups = translated.scene_dict["instance_groups"]
+    assert [len(g["to_world"]) for g in groups] == [2, 2]  # 3 cubes minus one invisible id, 2 spheres
+    assert all(len(g["shapes"]) == 1 for g in groups)
+    assert translated.scene_dict["shapes"] == []  # prototypes only where the instancer puts them
+    assert not [w for w in translated.warnings if "PointInstancer" in w]
+    # The cube's instance 2 sits at x = 0.6 (its prototype's own 0.05 offset is inside the group's shape).
+    assert np.allclose(groups[0]["to_world"][1][:3, 3], [0.6, 0.0, 0.0], atol=1e-6)
+    assert np.allclose(groups[0]["shapes"][0]["positions"][:, 1].mean(), 0.05, atol=1e-6)
+
+
+def test_instanced_stage_renders_as_the_flattened_stage(tmp_path):
+    from denoisebench.generator.render.scene import build_mitsuba_scene, sensor_dict
+    from denoisebench.mitsuba_runtime import load_mitsuba
+
+    mi = load_mitsuba()
+    images = []
+    for author, name in ((author_instanced, "instanced.usda"), (author_flattened, "flat.usda")):
+        translated = translate_usd(author(tmp_path / name))
+        scene = build_mitsuba_scene(translated, sensor_dict(translated.camera, 0, 32, 32, 64, seed=3), {"type": "path"})
+        images.append(np.array(mi.render(scene), dtype=np.float64))
+    instanced, flat = images
+    assert instanced.mean() > 0.05
+    # Same geometry, same sampler seed: equal up to the noise of rays that land differently on edges.
+    rel = np.mean((instanced - flat) ** 2 / (flat**2 + 0.01))
+    assert rel < 2e-3, rel
+    assert abs(instanced.mean() - flat.mean()) < 0.01 * flat.mean()
+    mask = instanced.sum(-1) - 3 * 0.0
+    assert np.count_nonzero(np.abs(instanced - flat).max(-1) > 0.05) < 0.03 * mask.size
+
+
+def test_animated_instancer_is_written_out_with_per_frame_positions(tmp_path):
+    translated = translate_usd(author_instanced(tmp_path / "moving.usda", animated=True))
+    assert "instance_groups" not in translated.scene_dict
+    shapes = translated.scene_dict["shapes"]
+    assert len(shapes) == 4
+    assert translated.moving
+    for shape in shapes:
+        frames = shape["frame_positions"]
+        assert frames.shape[0] == 2
+        assert np.allclose(frames[1] - frames[0], [0.1, 0.0, 0.0], atol=1e-5)
