@@ -65,6 +65,7 @@ class TranslatedScene:
     seed: int | None = None
     max_depth: int | None = None
     variants: dict = field(default_factory=dict)
+    materials: list[dict] = field(default_factory=list)  # how each used material was translated (manifest)
 
     @property
     def moving(self) -> bool:

@@ -493,7 +493,7 @@ def _input_type(node, name: str) -> str:
 def _param(val: Val, name: str, evaluator: Evaluator, translation: Translation) -> object:
     """A Val → principled parameter: a float, an ``rgb`` dict, or a ``bitmap`` dict."""
     if not val.textured:
-        values = [float(v) for v in val.array]
+        values = [round(float(v), 6) for v in val.array]  # float32 inputs: 0.8f → 0.8
         return values[0] if len(values) == 1 else {"type": "rgb", "value": values}
     meta = val.meta or {}
     translation.texture_files.extend(f for f in meta.get("files", []) if f not in translation.texture_files)
@@ -588,7 +588,7 @@ def _principled(surface, warnings: list[str]) -> Translation:
         got = get(key, size)
         if got is not None and got.textured:
             note(f"textured {names[key]} is not supported; its mean {_mean(got, default):g} used")
-        return _mean(got, default)
+        return round(_mean(got, default), 6)
 
     principled: dict = {"type": "principled"}
     base = get("base", 1)
@@ -624,9 +624,9 @@ def _principled(surface, warnings: list[str]) -> Translation:
             principled.pop("specular")
             principled["eta"] = max(ior, 1.0 + 1e-3)
     elif abs(weight - 1.0) > 1e-6 and transmission == 0:
-        principled["specular"] = float(weight * ((ior - 1.0) / (ior + 1.0)) ** 2 / 0.08)
+        principled["specular"] = round(float(weight * ((ior - 1.0) / (ior + 1.0)) ** 2 / 0.08), 6)
     else:
-        principled["eta"] = float(ior)
+        principled["eta"] = round(float(ior), 6)
     for key in ("specular_color", "coat_color", "sheen_color"):
         got = get(key, 3)
         if got is not None and (got.textured or np.any(np.abs(got.array - 1.0) > 1e-4)):
@@ -635,7 +635,8 @@ def _principled(surface, warnings: list[str]) -> Translation:
     coat = float(np.clip(constant("coat", 1, 0.0), 0.0, 1.0))
     if coat > 0:
         principled["clearcoat"] = coat
-        principled["clearcoat_gloss"] = float(np.clip(1.0 - constant("coat_roughness", 1, 0.1), 0.0, 1.0))
+        gloss = 1.0 - constant("coat_roughness", 1, 0.1)
+        principled["clearcoat_gloss"] = round(float(np.clip(gloss, 0.0, 1.0)), 6)
     sheen = float(np.clip(constant("sheen", 1, 0.0), 0.0, 1.0))
     if sheen > 0:
         principled["sheen"] = sheen
@@ -650,10 +651,10 @@ def _principled(surface, warnings: list[str]) -> Translation:
         if max(value) > 0:
             translation.emission = value
 
-    for key, default in (("subsurface", 0.0), ("diffuse_roughness", 0.0)):
+    for key, instead in (("subsurface", "a diffuse base used"), ("diffuse_roughness", "Lambertian diffuse used")):
         got = get(key, 1)
-        if got is not None and (got.textured or float(got.array[0]) > default):
-            note(f"{names[key]} is not supported; ignored")
+        if got is not None and (got.textured or float(got.array[0]) > 0.0):
+            note(f"{names[key]} is not supported; {instead}")
     thin = get("thin_walled", 1)
     if thin is not None and float(thin.array[0]) > 0.5:
         note(f"{names['thin_walled']} is not supported; a solid surface used")

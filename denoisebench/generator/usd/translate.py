@@ -252,6 +252,7 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
         seed=int(metadata["seed"]) if "seed" in metadata else None,
         max_depth=stage_depth,
         variants=_variants(stage),
+        materials=[dict(m.report) for m in used_materials if m.report],
     )
 
 
