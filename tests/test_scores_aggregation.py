@@ -107,10 +107,12 @@ def test_floors_and_corrected_values_travel_through_the_store(measured):
     for metric in ("relmse", "mse", "temporal_relmse"):
         cell = row.metrics[metric]
         assert cell.floor is not None and cell.floor > 0, metric
+        # the corrected aggregate leads (value); the raw score stays beside it
+        assert cell.corrected == cell.value
         assert (
-            cell.corrected == pytest.approx(cell.value - cell.floor, rel=1e-9)
-            if cell.rule == "mean"
-            else cell.corrected < cell.value
+            cell.value == pytest.approx(cell.raw - cell.floor, rel=1e-9)
+            if cell.rule == "mean" and not cell.at_resolution
+            else cell.value < cell.raw
         )
     assert row.metrics["hfen"].floor is None  # not an MSE-family score
     frames = store.frames("run1")
@@ -265,7 +267,8 @@ def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
     for row in results["summary"]:
         relmse = row["metrics"]["relmse"]
         assert relmse["aggregate"] == "mean" and relmse["floor"] > 0
-        assert relmse["corrected"] == pytest.approx(relmse["mean"] - relmse["floor"])
+        assert relmse["corrected"] is True and relmse["at_resolution"] == 0
+        assert relmse["mean"] == pytest.approx(relmse["raw"] - relmse["floor"])
         assert row["metrics"]["temporal_relmse"]["floor"] > 0
         # the robust scores (always computed, they lead) carry floors too
         assert row["metrics"]["relmse_robust"]["floor"] > 0
@@ -305,10 +308,10 @@ def test_the_leaderboard_command_ranks_a_linear_flicker_score_per_scene_against_
 
 
 class _Run:
-    """A RunData stand-in: per-scene values and floors of one metric, keyed (label, spp, scene)."""
+    """A RunData stand-in: per-scene values, floors and ses of one metric, keyed (label, spp, scene)."""
 
-    def __init__(self, values, floors, metric="relmse_robust"):
-        self.values, self.floors, self.metric = values, floors, metric
+    def __init__(self, values, floors, ses=None, metric="relmse_robust"):
+        self.values, self.floors, self.ses, self.metric = values, floors, ses or {}, metric
         self.scenes = sorted({k[2] for k in values})
         self.labels = sorted({k[0] for k in values})
         self.spp = sorted({k[1] for k in values})
@@ -321,33 +324,60 @@ class _Run:
             if (label, spp, scene) in self.values:
                 out[0][scene] = self.values[label, spp, scene]
                 out[1][scene] = self.floors[label, spp, scene]
+                if (label, spp, scene) in self.ses:
+                    out[2][scene] = self.ses[label, spp, scene]
         return tuple(out)
 
 
-def test_a_reference_floor_above_a_tenth_of_the_best_score_or_still_growing_is_set_apart():
-    values, floors = {}, {}
-    for scene, best, floor in (("clean", 0.02, 0.001), ("noisy_ref", 0.02, 0.005), ("growing", 0.05, 0.001)):
+def test_a_scene_is_set_apart_only_when_its_corrected_scores_cannot_rank():
+    # issue 42: a floor above a tenth of the best score no longer sets a scene apart; a still-growing
+    # floor, a reference too noisy for the floor's expansion, or scores the reference cannot tell apart do
+    values, floors, ses = {}, {}, {}
+    scenes = (
+        ("clean", 0.02, 0.001, 1e-4),
+        ("high_floor", 0.02, 0.005, 2e-4),  # floor 1/4 of the best score: corrected, still ranks
+        ("growing", 0.05, 0.001, 1e-4),
+        ("noisy_ref", 0.02, 0.001, 1e-4),
+        ("unrankable", 0.02, 0.01, 0.5),  # se larger than every gap
+    )
+    for scene, best, floor, se in scenes:
         for label, factor in ((NOISY, 10.0), ("oidn", 1.0)):
             for spp, s in ((1, 4.0), (4, 1.0)):
                 values[label, spp, scene] = best * factor * s
                 floors[label, spp, scene] = floor
-    refs = {"clean": {"spp": 1024, "floor_growth": 1.01}, "noisy_ref": {"spp": 256, "floor_growth": 1.1}}
+                ses[label, spp, scene] = se
+    refs = {s[0]: {"spp": 256, "floor_growth": 1.05, "noisy_share": 0.001} for s in scenes}
     refs["growing"] = {"spp": 512, "floor_growth": 1.6}
-    found = agg.unresolved_references(_Run(values, floors), refs)
-    assert [(u.scene, u.reason) for u in found] == [("growing", "floor_growing"), ("noisy_ref", "floor_above_tenth")]
-    grow, above = found
-    # floor 0.005 > 0.1 × 0.02 (oidn at 4 spp): 256 · 0.005 / 0.002 = 640 spp would bring it to a tenth
-    assert (above.best, above.label, above.spp, above.floor, above.needed_spp) == (0.02, "oidn", 4, 0.005, 640)
-    assert not above.needed_is_lower_bound
-    assert "noisy_ref" in above.sentence() and "640 spp" in above.sentence() and "a tenth" in above.sentence()
-    # growing: its floor rule alone would pass (0.001 ≤ 0.005), so at least twice its spp
+    refs["noisy_ref"]["noisy_share"] = 0.2
+    found = agg.unresolved_references(_Run(values, floors, ses), refs)
+    assert [(u.scene, u.reason) for u in found] == [
+        ("growing", "floor_growing"),
+        ("noisy_ref", "reference_too_noisy"),
+        ("unrankable", "cannot_rank"),
+    ]
+    grow, noisy, unrankable = found
+    # growing: at least twice its spp (its floor alone would need less)
     assert (grow.needed_spp, grow.needed_is_lower_bound, grow.floor_growth) == (1024, True, 1.6)
     assert "at least 1024 spp" in grow.sentence() and "still growing" in grow.sentence()
-    assert agg.excluded_scenes(found) == ["growing", "noisy_ref"]
-    assert found[1].as_dict()["sentence"] == above.sentence()
-    # a looser fraction resolves the noisy reference; no reference record: only the floor rule
-    assert [u.scene for u in agg.unresolved_references(_Run(values, floors), refs, fraction=0.3)] == ["growing"]
-    assert [u.scene for u in agg.unresolved_references(_Run(values, floors), {})] == ["noisy_ref"]
+    assert "20.0 %" in noisy.sentence() and noisy.noisy_share == 0.2
+    # floor 0.01 against the best 0.02 (oidn at 4 spp): 256 · 0.01 / 0.002 = 1280 spp
+    assert (unrankable.best, unrankable.label, unrankable.spp, unrankable.needed_spp) == (0.02, "oidn", 4, 1280)
+    assert "no two entries there differ" in unrankable.sentence() and "1280 spp" in unrankable.sentence()
+    assert agg.excluded_scenes(found) == ["growing", "noisy_ref", "unrankable"]
+    assert found[2].as_dict()["sentence"] == unrankable.sentence()
+    # a looser noise limit keeps the noisy reference; without stored ses nothing is judged unrankable
+    loose = agg.unresolved_references(_Run(values, floors, ses), refs, noisy_limit=0.5)
+    assert [u.scene for u in loose] == ["growing", "unrankable"]
+    assert [u.scene for u in agg.unresolved_references(_Run(values, floors), {})] == []
+
+
+def test_corrected_values_are_unbiased_and_raised_to_the_resolution():
+    corrected, raised = agg.corrected_values(
+        {"a": 0.05, "b": 0.011, "c": 0.02}, {"a": 0.01, "b": 0.01, "c": 0.0}, {"a": 1e-3, "b": 5e-3}
+    )
+    assert corrected["a"] == pytest.approx(0.04)
+    assert corrected["b"] == pytest.approx(5e-3) and raised == ["b"]  # 0.001 < se: at the resolution
+    assert corrected["c"] == pytest.approx(0.02)  # no se stored: kept as measured
 
 
 def test_reference_states_read_the_manifest_records():

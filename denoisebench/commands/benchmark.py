@@ -169,6 +169,17 @@ def add_arguments(parser) -> None:
     add_isolation_arguments(parser)
 
 
+def few_scenes_line(split: str, scenes: int, total: int) -> str | None:
+    """One line when the split holds fewer scenes than the report's tables need (None otherwise)."""
+    if scenes >= 2:
+        return None
+    other = f"; --split all scores all {total}" if total > scenes and split != "all" else ""
+    return (
+        f"note: split {split!r} holds {scenes} of the dataset's {total} scene(s): the report has no interval over "
+        f"scenes and no per-effect column (each needs 2 scenes){other}"
+    )
+
+
 def run(args) -> int:
     need = lambda: disk_space.store_need(args.db)  # noqa: E731
     with disk_space.full_disk_is_one_line(Path(args.db).absolute().parent, "--db", "the results store", need):
@@ -232,6 +243,9 @@ def _run(args) -> int:
         for d in plan.denoisers:
             if d.load_error:
                 print(f"  {d.spec}: not run: {d.load_error}")
+        few = few_scenes_line(args.split, len(plan.scenes), len(dataset.scenes))
+        if few:
+            print(few)
 
         instances = {d.label: d.instance for d in plan.denoisers if d.instance is not None}
         measure_run_timings(

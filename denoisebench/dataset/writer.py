@@ -343,7 +343,9 @@ class DatasetWriter:
             "sha256": written.main.sha256,
             "spp": spp,
             **timing,
-            "rel_se": relative_standard_error(layers["color"], layers.get("color_var")),
+            # one sample per pixel has no variance estimate (its color_var is 0, not a measurement):
+            # unknown (None), never "less noisy" than anything
+            "rel_se": None if spp < 2 else relative_standard_error(layers["color"], layers.get("color_var")),
         }
         return written, entry
 

@@ -27,19 +27,33 @@ Notes
   errors are correlated (one reference), and only each score's own se is stored, so the se of a
   difference is bounded by the sum of the two (|ρ| ≤ 1): conservative, it never claims a
   difference the reference cannot resolve.
-* **References that cannot resolve a score** (:func:`unresolved_references`). A scene's
-  reference cannot decide a score when (a) its floor estimate was still growing when rendering
-  stopped (``floor_growth`` in the manifest above :data:`GROWTH_LIMIT`, 1.25: rare bright paths
-  were still being found, so the floor is a lower bound; generate-dataset warns about such
-  frames), or (b) its floor (the expected score of a perfect denoiser) is above a tenth
-  (:data:`RESOLVE_FRACTION`) of the best score anyone reached on that scene: then at least 10 %
-  of that score is the reference's own noise. Such a scene is listed apart with its reason and
-  the reference spp it would need (the floor falls as 1/spp once every kind of path is sampled,
-  so ``ref_spp · floor / (0.1 · best)``; for a growing floor at least twice the spp it has, a
-  lower bound), and is left out of the headline aggregates (the summary table) unless asked
-  for (``run-benchmark --include-unresolved``). The rule is judged on the headline scores that
-  have floors (the robust relMSE and the robust flicker score; their raw forms for runs
-  without them), over every label (noisy input included) and every measured spp.
+* **Corrected scores lead** (:func:`corrected_values`). Every score with a reference-noise floor
+  (the MSE family, their robust and temporal forms) is aggregated as ``score − floor`` per scene:
+  an unbiased estimate of the error against the noise-free image, whose interval carries the
+  reference's uncertainty (its se, above). A per-scene corrected value below its own se (what the
+  reference can still resolve) is raised to that se: the log-scale rules and the log axes need a
+  positive value, and a value the reference cannot tell from 0 is reported as "at most what the
+  reference resolves". The raise only ever makes a score worse, by less than one se, and the cells
+  count the scenes where it happened (``at_resolution``). Raw values stay beside the corrected ones.
+* **References whose scores cannot be used** (:func:`unresolved_references`). A scene is set apart
+  only when even its corrected numbers cannot rank, for one of three reasons, judged on the headline
+  scores that have floors (the robust relMSE and the robust flicker score; their raw forms for runs
+  without them), over every label (noisy input included) and every measured spp:
+
+  - ``floor_growing``: the floor estimate was still growing when rendering stopped (``floor_growth``
+    in the manifest above :data:`GROWTH_LIMIT`, 1.25: rare bright paths were still being found, so
+    the floor is a lower bound and the correction too small);
+  - ``reference_too_noisy``: more than :data:`NOISY_VALUES_LIMIT` of the reference's values have a
+    noise comparable to their signal (variance above ``floors.SECOND_ORDER_LIMIT · (r² + 0.01)``),
+    where the floor's expansion is outside its stated validity (:mod:`denoisebench.metrics.floors`);
+  - ``cannot_rank``: no two entries on the scene (denoisers and the noisy input, at one spp) differ
+    by more than the reference resolves (95 %, the two se added): nothing there can be ranked.
+
+  Such a scene is listed apart with its reason and the reference spp that would bring its floor to a
+  tenth of the best score (the floor falls as 1/spp once every kind of path is sampled, so
+  ``ref_spp · floor / (0.1 · best)``; for a growing floor at least twice the spp it has, a lower
+  bound), is left out of the headline aggregates unless asked for
+  (``run-benchmark --include-unresolved``), and keeps its raw and corrected rows in results.json.
 """
 
 from __future__ import annotations
@@ -61,8 +75,10 @@ BOOTSTRAP_SEED = 0
 #: Two-sided 95 % normal quantile.
 Z95 = 1.959963984540054
 
-#: A reference resolves a scene's scores when its floor is at most this fraction of the best score there.
+#: The spp a set-apart scene's reference would need is the one bringing its floor to this fraction of the best score.
 RESOLVE_FRACTION = 0.1
+#: A reference with more than this share of values whose noise is comparable to their signal has no usable floor.
+NOISY_VALUES_LIMIT = 0.05
 #: ``floor_growth`` above this: the floor estimate was still rising (generator.render.reference.GROWTH_WARNING).
 GROWTH_LIMIT = 1.25
 #: The scores the rule is judged on, each pair in order of preference (the robust form, else the raw one).
@@ -75,6 +91,8 @@ __all__ = [
     "reference_resolution",
     "rule_of",
     "RESOLVE_FRACTION",
+    "NOISY_VALUES_LIMIT",
+    "corrected_values",
     "GROWTH_LIMIT",
     "Unresolved",
     "reference_states",
@@ -159,6 +177,31 @@ def aggregate(rule: str, mine: dict, noisy: dict | None = None, ses: dict | None
     return value, (None if low is None else back(low)), (None if high is None else back(high)), len(terms)
 
 
+def corrected_values(mine: dict, floors: dict, ses: dict | None = None) -> tuple[dict, list[str]]:
+    """({scene: score − floor}, scenes raised to their se) over the scenes of ``mine`` with a floor.
+
+    A corrected value below the scene's se (the reference's standard error of that score) is raised
+    to it (module Notes); with no se (a reference without variance) a value ≤ 0 keeps its raw score.
+    """
+    ses = ses or {}
+    out, raised = {}, []
+    for scene, value in mine.items():
+        floor = floors.get(scene)
+        if not is_finite(value) or not is_finite(floor):
+            out[scene] = value
+            continue
+        corrected = value - floor
+        se = ses.get(scene)
+        if is_finite(se) and se > 0:
+            if corrected < se:
+                corrected = se
+                raised.append(scene)
+        elif corrected <= 0:
+            corrected = value
+        out[scene] = corrected
+    return out, sorted(raised)
+
+
 def reference_resolution(rule: str, mine_a: dict, ses_a: dict, mine_b: dict, ses_b: dict) -> float | None:
     """95 % half-width of the difference of two aggregates that the reference's noise allows.
 
@@ -187,10 +230,11 @@ def reference_resolution(rule: str, mine_a: dict, ses_a: dict, mine_b: dict, ses
 class Unresolved:
     """One scene whose reference cannot resolve a score (module Notes): why, and what it would need.
 
-    ``reason``: ``"floor_growing"`` or ``"floor_above_tenth"``. ``metric``/``spp``/``label``/``best``/
+    ``reason``: ``"floor_growing"``, ``"reference_too_noisy"`` or ``"cannot_rank"``. ``metric``/``spp``/``label``/``best``/
     ``floor``: the best score on the scene, where it was reached and its floor (``floor_growing``:
     those of the judged metric, possibly None). ``needed_spp``: the reference spp that would bring
     the floor to a tenth of the best score; ``needed_is_lower_bound`` when the floor is still growing.
+    ``noisy_share``: the reference's share of values beyond the floor's validity (``reference_too_noisy``).
     """
 
     scene: str
@@ -204,6 +248,7 @@ class Unresolved:
     floor: float | None
     needed_spp: int | None
     needed_is_lower_bound: bool
+    noisy_share: float | None = None
 
     def sentence(self) -> str:
         """One line for a report: the scene, the reason in words, the spp it would need."""
@@ -215,12 +260,18 @@ class Unresolved:
             growth = f"{self.floor_growth:.2f}" if self.floor_growth is not None else "?"
             why = (
                 f"its {have}'s noise floor estimate was still growing (spp × floor ×{growth} from half the "
-                "samples to all: rare bright paths not yet resolved)"
+                "samples to all: rare bright paths not yet resolved, so the floor and the correction are too low)"
+            )
+        elif self.reason == "reference_too_noisy":
+            share = f"{100 * self.noisy_share:.1f} %" if self.noisy_share is not None else "many"
+            why = (
+                f"its {have} is too noisy for a floor: {share} of its values have a noise comparable to their "
+                f"signal (over {100 * NOISY_VALUES_LIMIT:g} %), where the floor's approximation does not hold"
             )
         else:
             why = (
-                f"its {have}'s {self.metric} floor {self.floor:.3g} is above a tenth of the best score there "
-                f"({self.label} at {self.spp} spp: {self.best:.3g})"
+                f"no two entries there differ by more than its {have} resolves in {self.metric} (corrected "
+                f"scores; best {self.label} at {self.spp} spp: {self.best:.3g}, floor {self.floor:.3g})"
             )
         return f"{self.scene}: {why}{need}"
 
@@ -246,6 +297,31 @@ def reference_states(scene_records: dict[str, dict]) -> dict[str, dict]:
     return out
 
 
+def _can_rank(data, scene: str, metric: str) -> bool | None:
+    """Whether two entries on ``scene`` differ in ``metric`` by more than the reference resolves.
+
+    Corrected scores (:func:`corrected_values`) at each spp, every pair of labels; a difference is
+    resolved when it exceeds 1.96 × (se_a + se_b) (one reference: correlated, so the sum bounds the
+    se of the difference). None when no se is stored (nothing to judge with)."""
+    judged = False
+    for spp in data.spp:
+        entries = []
+        for label in data.labels:
+            values, floors, ses = data.per_scene(label, spp, metric, [scene])
+            if scene not in values or not is_finite(values[scene]):
+                continue
+            corrected, _ = corrected_values(values, floors, ses)
+            entries.append((corrected[scene], ses.get(scene)))
+        for i, (a, sa) in enumerate(entries):
+            for b, sb in entries[i + 1 :]:
+                if not (is_finite(sa) or is_finite(sb)):
+                    continue
+                judged = True
+                if abs(a - b) > Z95 * ((sa or 0.0) + (sb or 0.0)):
+                    return True
+    return False if judged else None
+
+
 def _needed(ref_spp: int | None, floor: float | None, best: float | None, fraction: float) -> int | None:
     if not ref_spp or floor is None or best is None or not (best > 0 and floor > 0):
         return None
@@ -258,13 +334,16 @@ def unresolved_references(
     *,
     fraction: float = RESOLVE_FRACTION,
     growth_limit: float = GROWTH_LIMIT,
+    noisy_limit: float = NOISY_VALUES_LIMIT,
     metrics=RESOLUTION_METRICS,
 ) -> list[Unresolved]:
-    """The scenes of a run whose reference cannot resolve its headline scores (module Notes).
+    """The scenes of a run whose corrected scores cannot rank anything (module Notes).
 
     ``data``: a :class:`denoisebench.leaderboard.analysis.RunData` (``scenes``, ``labels``, ``spp``,
-    ``per_scene(label, spp, metric)`` and the metric names); ``references``: :func:`reference_states`.
-    One entry per scene and reason, floor growth first; lower-is-better scores with floors only.
+    ``per_scene(label, spp, metric)`` and the metric names); ``references``: :func:`reference_states`,
+    optionally with ``noisy_share`` per scene (the reference's share of values beyond the floor's
+    validity). One entry per scene and reason, floor growth first; lower-is-better scores with floors.
+    ``fraction`` only sizes the advice (the spp that brings the floor to that share of the best score).
     """
     measured = set(data.frame_metric_names) | set(data.sequence_metric_names)
     judged = [next((m for m in pair if m in measured), None) for pair in metrics]
@@ -272,7 +351,7 @@ def unresolved_references(
     out: list[Unresolved] = []
     for scene in data.scenes:
         state = references.get(scene) or {}
-        ref_spp, growth = state.get("spp"), state.get("floor_growth")
+        ref_spp, growth, share = state.get("spp"), state.get("floor_growth"), state.get("noisy_share")
         bests = []
         for metric in judged:
             best = None  # (value, label, spp, floor)
@@ -284,21 +363,42 @@ def unresolved_references(
                         best = (value, label, spp, floors.get(scene))
             if best is not None:
                 bests.append((metric, *best))
+        first = bests[0] if bests else (None, None, None, None, None)
         if growth is not None and growth > growth_limit:
-            metric, value, label, spp, floor = bests[0] if bests else (None, None, None, None, None)
+            metric, value, label, spp, floor = first
             needed = _needed(ref_spp, floor, value, fraction)
             needed = max(needed or 0, 2 * ref_spp) if ref_spp else needed
             out.append(
                 Unresolved(scene, "floor_growing", metric, ref_spp, growth, value, label, spp, floor, needed, True)
             )
+            continue
+        if share is not None and share > noisy_limit:
+            metric, value, label, spp, floor = first
+            needed = _needed(ref_spp, floor, value, fraction)
+            out.append(
+                Unresolved(
+                    scene,
+                    "reference_too_noisy",
+                    metric,
+                    ref_spp,
+                    growth,
+                    value,
+                    label,
+                    spp,
+                    floor,
+                    needed,
+                    False,
+                    share,
+                )
+            )
+            continue
         for metric, value, label, spp, floor in bests:
-            if floor is not None and value is not None and floor > fraction * value:
+            if floor is not None and _can_rank(data, scene, metric) is False:
                 needed = _needed(ref_spp, floor, value, fraction)
                 out.append(
-                    Unresolved(
-                        scene, "floor_above_tenth", metric, ref_spp, growth, value, label, spp, floor, needed, False
-                    )
+                    Unresolved(scene, "cannot_rank", metric, ref_spp, growth, value, label, spp, floor, needed, False)
                 )
+                break
     return out
 
 

@@ -58,6 +58,8 @@ from denoisebench.leaderboard.names import (  # noqa: F401 (ERROR_METRICS: re-ex
 )
 from denoisebench.leaderboard.run_index import RunIndex
 
+#: Scenes a per-effect column needs (on one scene a column is that scene's score, not the effect's).
+MIN_EFFECT_SCENES = 2
 #: Assumed slope of log(error) vs log(spp) when only one input spp was measured.
 DEFAULT_SLOPE = {"relmse_robust": -1.0, "relmse": -1.0, "mse": -1.0, "flip": -0.5}
 
@@ -71,9 +73,15 @@ def bootstrap_interval(values, ses=None) -> tuple[float | None, float | None]:
 
 @dataclass
 class Cell:
-    """A metric aggregated over scenes: ``value`` is the aggregate under ``rule`` (:mod:`.aggregate`),
-    ``low``/``high`` its 95 % interval; ``floor``/``corrected``: reference-noise floor and
-    ``value − floor`` aggregated by the same rule (MSE-family metrics with a reference variance)."""
+    """A metric aggregated over scenes under its ``rule`` (:mod:`.aggregate`), with a 95 % interval.
+
+    For metrics with a reference-noise floor (the MSE family, with a reference variance) ``value``,
+    ``low`` and ``high`` are the **floor-corrected** aggregate (``score − floor`` per scene, raised to
+    the reference's se where below it: :func:`.aggregate.corrected_values`), and the interval carries
+    the reference's uncertainty; ``raw``/``raw_low``/``raw_high`` are the score as measured against
+    the reference, ``floor`` the floor aggregated by the same rule, ``at_resolution`` the scenes whose
+    corrected value was at the reference's resolution. Without a floor ``raw`` is ``value``.
+    """
 
     value: float | None
     low: float | None
@@ -81,7 +89,15 @@ class Cell:
     scenes: int
     rule: str = "mean"
     floor: float | None = None
-    corrected: float | None = None
+    raw: float | None = None
+    raw_low: float | None = None
+    raw_high: float | None = None
+    at_resolution: int = 0
+
+    @property
+    def corrected(self) -> float | None:
+        """The floor-corrected aggregate (``value``), None for a metric without a floor."""
+        return self.value if self.floor is not None else None
 
 
 @dataclass
@@ -177,19 +193,26 @@ def summary_table(data: RunData, exclude=()) -> list[SummaryRow]:
 
 
 def metric_cell(data: RunData, label: str, spp: int, metric: str, scenes: list[str]) -> Cell:
-    """One metric of one denoiser at one spp, aggregated over ``scenes`` by the metric's rule."""
+    """One metric of one denoiser at one spp, aggregated over ``scenes`` by the metric's rule.
+
+    With floors on every scene the cell leads with the corrected aggregate (:class:`Cell`); for
+    ``relative_to_input`` both the denoiser's and the input's scores are corrected before the ratio."""
     rule = agg.rule_of(metric)
     mine, floors, ses = data.per_scene(label, spp, metric, scenes)
-    noisy = data.per_scene(NOISY, spp, metric, scenes)[0] if rule == "relative_to_input" else None
+    noisy = noisy_floors = noisy_ses = None
+    if rule == "relative_to_input":
+        noisy, noisy_floors, noisy_ses = data.per_scene(NOISY, spp, metric, scenes)
     value, low, high, count = agg.aggregate(rule, mine, noisy, ses)
-    floor = corrected = None
-    if floors and len(floors) == len(mine) and value is not None:
-        # relative_to_input: the floor relative to the input's own score (noisy is None otherwise)
-        floor = agg.aggregate(rule, floors, noisy)[0]
-        corrected_values = {s: mine[s] - floors[s] for s in mine}
-        if rule == "mean" or all(v > 0 for v in corrected_values.values()):
-            corrected = agg.aggregate(rule, corrected_values, noisy)[0]
-    return Cell(value, low, high, count, rule, floor, corrected)
+    if not (floors and len(floors) == len(mine) and value is not None):
+        return Cell(value, low, high, count, rule, raw=value, raw_low=low, raw_high=high)
+    # relative_to_input: the floor relative to the input's own score (noisy is None otherwise)
+    floor = agg.aggregate(rule, floors, noisy)[0]
+    corrected, raised = agg.corrected_values(mine, floors, ses)
+    noisy_corrected = None
+    if noisy is not None:
+        noisy_corrected = agg.corrected_values(noisy, noisy_floors or {}, noisy_ses)[0]
+    c_value, c_low, c_high, c_count = agg.aggregate(rule, corrected, noisy_corrected, ses)
+    return Cell(c_value, c_low, c_high, c_count, rule, floor, value, low, high, len(raised))
 
 
 @dataclass
@@ -284,6 +307,7 @@ class AccuracyTime:
     hidden: list[str]  # points that cannot be drawn on log axes, and why
     time_label: str = "seconds per frame (render at input spp + denoise)"
     noisy_curve: dict[int, float] = field(default_factory=dict)  # measured rungs {spp: error}
+    model: object = None  # the time model the seconds come from (its spreads bound the time verdicts)
 
 
 def pareto_front(points: list[Point]) -> None:
@@ -368,7 +392,7 @@ def accuracy_time(data: RunData, summary: list[SummaryRow], metric: str, referen
             reference_seconds = model.render_seconds(reference["spp"])
         width, height = model.time_at
         label = f"seconds per frame at {width}×{height}" + (" (projected)" if model.projected else "")
-    at = AccuracyTime(metric, points, fit, reference_seconds, reference.get("spp"), hidden, label)
+    at = AccuracyTime(metric, points, fit, reference_seconds, reference.get("spp"), hidden, label, model=model)
     at.noisy_curve = {p.spp: p.error for p in points if p.denoiser == NOISY}
     return at
 
@@ -415,10 +439,18 @@ def readings(at: AccuracyTime) -> list[str]:
         if at.reference_spp and spp_eq > at.reference_spp:
             notes.append(f"beyond the {at.reference_spp}-spp reference, whose own noise then dominates the score")
         note = f" ({'; '.join(notes)})" if notes else ""
-        if ratio <= 1:
+        bounds = at.model.ratio_bounds(p.denoiser, p.spp, spp_eq) if at.model is not None else None
+        if bounds is not None and bounds[0] <= 1 <= bounds[1]:
+            text = (
+                f"{p.denoiser} at {p.spp} spp matches {spp_eq:,.0f}-spp rendering in {at.metric} in "
+                f"{p.seconds:.3g} s against {seconds_eq:.3g} s per frame: {_ratio_text(bounds[0])} to "
+                f"{_ratio_text(bounds[1])} of its time across the timings' spread, so no time verdict{note}."
+            )
+        elif ratio <= 1:
+            spread = f", {_ratio_text(bounds[0])}–{_ratio_text(bounds[1])} across the timings' spread" if bounds else ""
             text = (
                 f"{p.denoiser} at {p.spp} spp matches {spp_eq:,.0f}-spp rendering in {at.metric} "
-                f"at {_ratio_text(ratio)} of its time ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame){note}."
+                f"at {_ratio_text(ratio)} of its time ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame{spread}){note}."
             )
         else:
             text = (
@@ -448,13 +480,31 @@ def effect_breakdown(data: RunData, scene_effects: dict[str, list[str]], metric:
 
     Notes
     -----
-    Effects that the run's scenes always exercise together (every scene with ``specular`` also has
+    A column needs :data:`MIN_EFFECT_SCENES` scenes: columns with fewer are left out (``too_few``) and
+    ``notes`` says so, and which sentences the report cannot write (a "suffers most from" needs two
+    columns). Effects that the run's scenes always exercise together (every scene with ``specular`` also has
     ``transmission`` and the other way round) would be columns of the same numbers, computed over the
     same scenes: they are one column, named by their effects joined with ``" + "``
     (``"specular + transmission"``). The run cannot tell such effects apart; more scenes can.
     """
     scene_effects = _merge_inseparable(scene_effects, data.scenes)
-    effects = sorted({e for es in scene_effects.values() for e in es})
+    counts: dict[str, int] = {}
+    for scene in data.scenes:
+        for effect in scene_effects.get(scene, []):
+            counts[effect] = counts.get(effect, 0) + 1
+    effects = sorted(e for e, n in counts.items() if n >= MIN_EFFECT_SCENES)
+    too_few = {e: n for e, n in sorted(counts.items()) if n < MIN_EFFECT_SCENES}
+    notes = []
+    if too_few:
+        notes.append(
+            f"Not shown: {', '.join(f'{e} ({n} scene)' for e, n in too_few.items())}. A per-effect column needs "
+            f"{MIN_EFFECT_SCENES} scenes of its own: on one scene it is that scene's score, not the effect's."
+        )
+    if len(effects) < 2:
+        notes.append(
+            "No \"suffers most from\" sentence: that needs two columns to compare"
+            + (f" (this run has {len(effects)})." if effects else " (this run has none).")
+        )
     table: dict[str, dict[str, float | None]] = {}
     for label in data.labels:
         if label == NOISY:
@@ -471,7 +521,7 @@ def effect_breakdown(data: RunData, scene_effects: dict[str, list[str]], metric:
             key: (float(np.exp(np.mean(np.log(shares[key])))) if shares.get(key) else None)
             for key in ["overall", *effects]
         }
-    return {"metric": metric, "effects": effects, "table": table}
+    return {"metric": metric, "effects": effects, "table": table, "too_few": too_few, "notes": notes}
 
 
 def _merge_inseparable(scene_effects: dict[str, list[str]], scenes) -> dict[str, list[str]]:

@@ -19,6 +19,10 @@ Notes
 * **Where the seconds come from.** Every second is the :class:`~.time_model.TimeModel` at the
   report's resolution (``projected`` when that is not the dataset's); the tables do not mix
   resolutions.
+* **Timing spread.** A candidate fits a budget for a verdict only when its time fits at the top of
+  its spread (:meth:`.time_model.TimeModel.ratio_bounds`); a row where a better candidate fits only
+  at the bottom is ``contested`` and makes no verdict either way. An equal-quality saving or loss is
+  stated only when its ratio's bounds lie on one side of 1 (with 5 % either side called "about").
 * **Which error.** The lead metric is the robust relMSE (``relmse_robust``) when the metrics
   registry has it and the run measured it, else relMSE; FLIP beside it (:func:`lead_metrics`). Each
   is aggregated over scenes by its rule (:func:`.analysis.summary_table`).
@@ -146,6 +150,7 @@ class EqualTimeRow:
     best_seconds: float | None
     best_error: Estimate | None
     candidates: int
+    contested: bool = False  # a better candidate fits only at the bottom of the timings' spread
 
     @property
     def ratio(self) -> float | None:
@@ -162,6 +167,7 @@ class EqualQualityRow:
     render_seconds: float
     render_how: str  # measured (a rung) or extrapolated
     needs: dict[str, tuple[Estimate, Estimate] | None] = field(default_factory=dict)  # label → (spp, seconds)
+    ratio_bounds: dict[str, tuple[float, float]] = field(default_factory=dict)  # label → time ratio across spreads
 
 
 @dataclass
@@ -174,8 +180,18 @@ class Tables:
     denoisers: list[str]
 
 
+def _fits(model, label: str, spp: int, budget_spp: int, seconds: float, budget: float) -> tuple[bool, bool]:
+    """(fits at the top of the timings' spread, fits at its bottom) of ``label`` at ``spp`` within the budget."""
+    bounds = model.ratio_bounds(label, spp, budget_spp) if hasattr(model, "ratio_bounds") else None
+    if bounds is None:
+        fits = seconds <= budget * (1 + 1e-9)
+        return fits, fits
+    return bounds[1] <= 1 + 1e-9, bounds[0] <= 1 + 1e-9
+
+
 def equal_time(curves: Curves, model, rungs: list[int]) -> list[EqualTimeRow]:
-    """One row per measured rung: the best (denoiser, spp) within rendering's seconds at that rung."""
+    """One row per measured rung: the best (denoiser, spp) that fits rendering's seconds at that rung at
+    the top of its timing spread; ``contested`` when a better one fits only at the bottom of it."""
     rows = []
     noisy = curves.cells.get(NOISY, {})
     for s in rungs:
@@ -186,20 +202,28 @@ def equal_time(curves: Curves, model, rungs: list[int]) -> list[EqualTimeRow]:
         render_error = Estimate(mean, "measured", low, high)
         best = None
         count = 0
+        maybe = []
         for label, by_spp in curves.cells.items():
             if label == NOISY:
                 continue
             for spp, (e, lo, hi) in by_spp.items():
                 seconds = model.total_seconds(label, spp)
-                if seconds is None or seconds > budget * (1 + 1e-9):
+                if seconds is None:
+                    continue
+                surely, possibly = _fits(model, label, spp, s, seconds, budget)
+                if not surely:
+                    if possibly:
+                        maybe.append(e)
                     continue
                 count += 1
                 if best is None or e < best[3].value:
                     best = (label, spp, seconds, Estimate(e, "measured", lo, hi))
+        floor = best[3].value if best is not None and best[3].value < mean else mean
+        contested = any(e < floor for e in maybe)
         if best is not None and best[3].value < mean:
-            rows.append(EqualTimeRow(s, budget, render_error, *best, count))
+            rows.append(EqualTimeRow(s, budget, render_error, *best, count, contested))
         else:
-            rows.append(EqualTimeRow(s, budget, render_error, None, None, None, None, count))
+            rows.append(EqualTimeRow(s, budget, render_error, None, None, None, None, count, contested))
     return rows
 
 
@@ -229,6 +253,9 @@ def equal_quality(curves: Curves, model, rungs: list[int]) -> list[EqualQualityR
                 continue
             seconds = model.total_seconds(label, need.value)
             row.needs[label] = None if seconds is None else (need, Estimate(seconds, need.how))
+            bounds = model.ratio_bounds(label, need.value, target_spp) if hasattr(model, "ratio_bounds") else None
+            if seconds is not None and bounds is not None:
+                row.ratio_bounds[label] = bounds
         rows.append(row)
     return rows
 
@@ -259,7 +286,7 @@ def verdicts(tables: Tables) -> list[str]:
     """Sentences from rows whose every figure lies within the measured rungs (none from an extrapolation)."""
     out = []
 
-    wins = [r for r in tables.equal_time if r.best is not None and r.best_error.verdict_ok]
+    wins = [r for r in tables.equal_time if r.best is not None and r.best_error.verdict_ok and not r.contested]
     if wins:
         r = max(wins, key=lambda r: r.budget_spp)
         interval = f" [{num(r.best_error.low)}, {num(r.best_error.high)}]" if r.best_error.low is not None else ""
@@ -270,7 +297,7 @@ def verdicts(tables: Tables) -> list[str]:
             f"{_pct(r.ratio)} of its error."
         )
     losses = [r for r in tables.equal_time if r.best is None and r.candidates]
-    if losses and not wins:
+    if losses and not wins and not any(r.contested for r in tables.equal_time):
         out.append(
             f"Equal time ({tables.metric}): at every measured budget rendering alone has the lowest error "
             f"({_res(tables)})."
@@ -288,12 +315,14 @@ def verdicts(tables: Tables) -> list[str]:
             continue
         ratio, row, (spp, seconds) = best
         bound = "at most " if spp.how == "at_most" else ""
-        if 0.95 <= ratio <= 1.05:
-            tail = "about rendering's time (no saving)"
-        elif ratio < 1:
-            tail = f"{_pct(ratio)} of rendering's time"
+        low, high = row.ratio_bounds.get(label, (ratio, ratio))
+        spread = f"; {_pct(low)}–{_pct(high)} across the timings' spread" if high > low else ""
+        if high < 0.95:
+            tail = f"{_pct(ratio)} of rendering's time{spread}"
+        elif low > 1.05:
+            tail = f"{ratio:.2g}× rendering's time{spread}: rendering more samples is cheaper"
         else:
-            tail = f"{ratio:.2g}× rendering's time: rendering more samples is cheaper"
+            tail = f"about rendering's time ({_pct(low)}–{_pct(high)} across the timings' spread: no saving shown)"
         out.append(
             f"Equal quality ({tables.metric}): {label} reaches the error of {row.target_spp:g}-spp rendering "
             f"({num(row.target)}) in {bound}{num(seconds.value)} s per frame against {num(row.render_seconds)} s "
@@ -322,6 +351,7 @@ def as_dict(tables: Tables) -> dict:
                 "best_seconds": r.best_seconds,
                 "best_error": est(r.best_error),
                 "error_ratio": r.ratio,
+                "contested": r.contested,
             }
             for r in tables.equal_time
         ],
@@ -332,7 +362,13 @@ def as_dict(tables: Tables) -> dict:
                 "target_how": r.render_how,
                 "render_seconds": r.render_seconds,
                 "denoisers": {
-                    label: None if need is None else {"spp": est(need[0]), "seconds": est(need[1])}
+                    label: None
+                    if need is None
+                    else {
+                        "spp": est(need[0]),
+                        "seconds": est(need[1]),
+                        "time_ratio_bounds": list(r.ratio_bounds[label]) if label in r.ratio_bounds else None,
+                    }
                     for label, need in r.needs.items()
                 },
             }

@@ -64,15 +64,17 @@ def _has_floor(rows, metric: str) -> bool:
 
 
 def _metric_columns(rows, metrics: list[str]) -> tuple[list[str], list]:
-    """Headings and cell makers: each metric, and for those with a floor its floor and corrected value."""
+    """Headings and cell makers: each metric; one with a floor leads with its floor-corrected value
+    (heading ``… − floor``, with its interval), then the raw score and the floor beside it."""
     header, makers = [], []
     for m in metrics:
-        header.append(metric_heading(m))
+        floored = _has_floor(rows, m)
+        header.append(metric_heading(m) + (" − floor" if floored else ""))
         makers.append(lambda r, m=m: cell_text(r.metrics.get(m)))
-        if _has_floor(rows, m):
-            header += [f"{m} floor", f"{m} − floor"]
+        if floored:
+            header += [f"{m} raw", f"{m} floor"]
+            makers.append(lambda r, m=m: num(r.metrics[m].raw) if r.metrics.get(m) else "—")
             makers.append(lambda r, m=m: num(r.metrics[m].floor) if r.metrics.get(m) else "—")
-            makers.append(lambda r, m=m: num(r.metrics[m].corrected) if r.metrics.get(m) else "—")
     return header, makers
 
 
@@ -149,7 +151,7 @@ def effect_rows(report: dict) -> tuple[list[str], list[list[str]], dict[str, str
     rows, worst = [], {}
     for label, values in effects["table"].items():
         present = {e: values.get(e) for e in names if values.get(e) is not None}
-        if present:
+        if len(present) >= 2:  # "suffers most" compares columns: one column has nothing to compare
             worst[label] = max(present, key=present.get)
         rows.append(
             [label, *(("—" if values.get(k) is None else f"{100 * values[k]:.3g}%") for k in ["overall", *names])]

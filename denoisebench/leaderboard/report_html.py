@@ -143,7 +143,7 @@ def _accuracy(report: ReportModel) -> str:
     if hidden:
         parts.append("<p class=\"note\">Not drawn: " + e("; ".join(hidden)) + "</p>")
     if report.time_model is not None:
-        notes = "".join(f"<li>{e(n)}</li>" for n in report.time_model.notes)
+        notes = "".join(f"<li>{e(n)}</li>" for n in [*report.time_model.notes, report.time_model.measurement_text()])
         parts.append(
             f'<h3>Times</h3><p class="note">{e(fmt.time_axis_text(report))} {e(fmt.machine_text(report))}</p>'
             + (f'<ul class="readings">{notes}</ul>' if notes else "")
@@ -220,8 +220,10 @@ def _results(report: ReportModel) -> str:
 
 
 def _effects(report: ReportModel) -> str:
+    notes = "".join(f"<li>{e(n)}</li>" for n in report.effects.get("notes", []))
+    notes = f'<ul class="readings">{notes}</ul>' if notes else ""
     if not report.effects["effects"]:
-        return '<p class="note">The scenes declare no effects.</p>'
+        return notes or '<p class="note">The scenes declare no effects.</p>'
     header, rows, worst = fmt.effect_rows(report)
     names = ["overall", *report.effects["effects"]]
     labels = [r[0] for r in rows]
@@ -234,7 +236,7 @@ def _effects(report: ReportModel) -> str:
         "over the scenes that exercise each effect and over spp (lower is better). Highlighted: the effect that costs "
         "each denoiser most.</p>"
     )
-    return note + _table(header, rows, cell_classes=worst_cell)
+    return note + _table(header, rows, cell_classes=worst_cell) + notes
 
 
 def _strip_section(report: ReportModel) -> str:

@@ -98,8 +98,9 @@ def render_markdown(report: ReportModel) -> str:
     if report.effects["effects"]:
         lines += _table(header, rows)
         lines += [f"- {md(label)} suffers most from **{md(effect)}**" for label, effect in worst.items()] + [""]
-    else:
+    elif not report.effects.get("too_few"):
         lines += ["The scenes declare no effects.", ""]
+    lines += [f"- {md(note)}" for note in report.effects.get("notes", [])] + [""]
     lines += ["## Temporal flicker", ""]
     if report.flicker["series"]:
         lines += [
@@ -146,7 +147,7 @@ def render_markdown(report: ReportModel) -> str:
 def _times(report: ReportModel) -> list[str]:
     """The time axis' resolution and machine, the fixed and per-pixel costs, and the two tables."""
     lines = ["### Times", "", md(fmt.time_axis_text(report)) + " " + md(fmt.machine_text(report)), ""]
-    lines += [f"- {md(note)}" for note in report.time_model.notes]
+    lines += [f"- {md(note)}" for note in [*report.time_model.notes, report.time_model.measurement_text()]]
     lines += _table(*fmt.time_model_rows(report))
     lines += [
         "## Equal time and equal quality",

@@ -74,8 +74,8 @@ def unresolved_text(report: ReportModel) -> str | None:
         "puts them back); their rows stay in results.json and results.csv."
     )
     return (
-        "The references of these scenes cannot resolve the headline scores: a score closer to the reference's "
-        f"noise floor than that measures the reference, not the denoiser. {where}"
+        "These scenes' scores cannot be used even floor-corrected: their reference's floor is not known well "
+        f"enough, or no two entries there differ by more than the reference resolves. {where}"
     )
 
 

@@ -34,6 +34,18 @@ Notes
   the record says which size was used. The timing call is made after ``reset()`` and followed by
   one, so that a temporal denoiser neither sees a frame of another size as its history nor keeps
   it.
+* **Times on a busy machine.** Other processes only ever add time, so every cost is the
+  **minimum** of repeated measurements: the render probe renders the stage at the dataset's size
+  and at ``--time-size`` in turn (:data:`PROBE_REPEATS` rounds, interleaved, so that both sizes see
+  the same load and the fixed/per-pixel split does not mix an idle size with a loaded one); each
+  denoiser's timing call is repeated (:data:`TIMING_REPEATS`); the run's own per-frame seconds are
+  taken by their median. The **spread** of each cost is its median over its minimum (at least
+  :data:`MIN_SPREAD`): the time could plausibly be that much larger. Every ratio of a denoiser's
+  time to rendering's carries it (:meth:`TimeModel.ratio_bounds`: the render and the denoise parts
+  each between their minimum and minimum × spread, the render part of both sides moving together)
+  and a time verdict is written only when it holds at both ends (``leaderboard.equal_tables``,
+  ``leaderboard.analysis.readings``). Measured on the README tour's dataset: the probe's fixed
+  1080p cost was 2.4 s idle and 11 s beside other jobs with one render per point; see the README.
 * **Where it is kept.** Measurements go to the run's store in a table of this module
   (``run_timings``: run id, key, JSON value), written once per run and reused when the run resumes
   or its report is rebuilt.
@@ -71,8 +83,13 @@ DEFAULT_TIME_SIZE = (1024, 1024)
 DEFAULT_TIME_BUDGET = 60.0
 #: Spp of the render probe (two, so that its offset and per-sample cost separate).
 PROBE_SPP = (1, 4)
-#: Timed renders per probe point after the warm-up (the minimum is kept).
-PROBE_REPEATS = 2
+#: Timed renders per probe point after the warm-up, interleaved over the two sizes (the minimum is kept).
+PROBE_REPEATS = 3
+#: Timed calls per denoiser at the second size (the minimum is kept; one when a call takes over 2 s).
+TIMING_REPEATS = 3
+#: The least spread (largest / least plausible time) every measured cost carries: repeats on a shared
+#: machine never see all of its load, so no time is taken as known to better than this.
+MIN_SPREAD = 1.1
 #: The smallest timing size, as a multiple of the dataset's pixels, that still separates the costs.
 MIN_SIZE_FACTOR = 4
 
@@ -177,6 +194,7 @@ class DenoiserCost:
     large_pixels: int | None = None
     large_seconds: float | None = None
     note: str = ""
+    spread: float = MIN_SPREAD  # median / minimum of its timing calls (≥ MIN_SPREAD)
 
     @property
     def per_megapixel(self) -> float | None:
@@ -215,6 +233,7 @@ class RenderCost:
     measured_spp: list[int]
     probe: dict | None = None  # {"pixels", "offset", "per_spp", "scene"}: the timed larger render
     note: str = ""
+    spread: float = MIN_SPREAD  # median / minimum of the probe's renders (≥ MIN_SPREAD)
 
     def _linear(self, pixels: int, at0: float, at1: float | None) -> float:
         """A cost measured at pixels0 (``at0``) and at the probe's size (``at1``), as fixed + per-pixel."""
@@ -273,6 +292,46 @@ class TimeModel:
         render, denoise = self.render_seconds(spp), self.denoise_seconds(label, spp)
         return None if render is None or denoise is None else render + denoise
 
+    def ratio_bounds(self, label: str, spp: float, render_spp: float) -> tuple[float, float] | None:
+        """(least, largest) plausible ratio of ``label``'s time at ``spp`` (render + denoise) to rendering
+        ``render_spp`` alone, across the measured spreads (module Notes).
+
+        The render part of both sides moves together (one renderer, one machine): the least ratio has
+        rendering at its slowest and the denoiser at its fastest, the largest the other way round."""
+        denoise = self.denoise_seconds(label, spp)
+        mine, alone = self.render_seconds(spp), self.render_seconds(render_spp)
+        if denoise is None or mine is None or not alone:
+            return None
+        render_spread = self.render.spread if self.render is not None else MIN_SPREAD
+        cost = self.denoisers.get(label)
+        denoise_spread = cost.spread if cost is not None else 1.0
+        low = (render_spread * mine + denoise) / (render_spread * alone)
+        high = (mine + denoise_spread * denoise) / alone
+        return min(low, high), max(low, high)
+
+    def measurement_text(self) -> str:
+        """How the times were measured and how noisy they were, in one sentence for a report."""
+        parts = []
+        if self.render is not None:
+            how = (
+                f"rendering: least of {self.render.probe.get('repeats', PROBE_REPEATS)} interleaved renders per point"
+                if self.render.probe
+                else "rendering: the dataset's own render seconds"
+            )
+            parts.append(f"{how}, spread ×{self.render.spread:.2f}")
+        if self.denoisers:
+            spreads = [c.spread for c in self.denoisers.values()]
+            parts.append(
+                f"denoisers: median of the run's calls and least of {TIMING_REPEATS} timing calls at the second size, "
+                f"spread ×{min(spreads):.2f}–×{max(spreads):.2f}"
+            )
+        return (
+            "Times were measured as "
+            + "; ".join(parts)
+            + " (spread: median over least of the repeats, at least "
+            + f"×{MIN_SPREAD:g}). A time verdict is given only where it holds across these spreads."
+        )
+
     def extrapolated_pixels(self) -> bool:
         """True when the time axis lies beyond the largest size anything was timed at."""
         sizes = [c.large_pixels for c in self.denoisers.values() if c.large_pixels]
@@ -288,6 +347,7 @@ class TimeModel:
             "beyond_timed_sizes": self.extrapolated_pixels(),
             "machine": self.machine,
             "notes": self.notes,
+            "measurement": self.measurement_text(),
             "render": None
             if self.render is None
             else {
@@ -299,6 +359,7 @@ class TimeModel:
                 "measured_spp": self.render.measured_spp,
                 "probe": self.render.probe,
                 "note": self.render.note,
+                "spread": self.render.spread,
             },
             "denoisers": {
                 label: {
@@ -309,6 +370,7 @@ class TimeModel:
                     "timed_seconds": c.large_seconds,
                     "seconds_at_time_at": {str(s): c.seconds(self.pixels, s) for s in sorted(c.small)},
                     "note": c.note,
+                    "spread": c.spread,
                 }
                 for label, c in self.denoisers.items()
             },
@@ -331,6 +393,11 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
         probe = timings.get("render_probe")
         if probe and probe.get("points"):
             line = line_through(probe["points"])
+            small_line = line_through(probe.get("small_points") or [])
+            if small_line is not None and int(probe.get("small_pixels", 0)) == pixels0:
+                # the same probe timed the dataset's size: both sizes under the same load (module Notes)
+                render.offset0, render.per_spp0 = small_line
+            render.spread = max(float(probe.get("spread", MIN_SPREAD)), MIN_SPREAD)
             if line is not None:
                 render.probe = {
                     "pixels": int(probe["width"]) * int(probe["height"]),
@@ -339,6 +406,7 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
                     "scene": probe.get("scene"),
                     "offset": line[0],
                     "per_spp": line[1],
+                    "repeats": int(probe.get("repeats", 1)),
                 }
                 render.note = (
                     f"offset split into fixed and per-pixel parts by one render of {probe.get('scene')} at "
@@ -357,7 +425,7 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
         for spp in data.spp:
             values = [f["denoise_seconds"] for f in data.ok_frames(label, spp) if f["denoise_seconds"] is not None]
             if values:
-                small[int(spp)] = float(np.mean(values))
+                small[int(spp)] = float(np.median(values))  # a loaded moment adds to a few calls, not to all
         if not small:
             continue
         cost = DenoiserCost(label, pixels0, small)
@@ -369,6 +437,7 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
                 cost.fixed = min(line[0], small[min(small)])
                 cost.large_pixels, cost.large_seconds = pixels, float(record["seconds"])
         cost.note = record.get("note", "")
+        cost.spread = max(float(record.get("spread") or MIN_SPREAD), MIN_SPREAD)
         costs[label] = cost
     timed = [c for c in costs.values() if c.fixed is not None]
     model = TimeModel(requested, pixels0, (width0, height0), render, costs, timings.get("machine") or machine())
@@ -422,9 +491,12 @@ def timing_size(small_seconds: float, pixels0: int, requested: tuple[int, int], 
     return width, height, f"timed at {width}×{height}, not {requested[0]}×{requested[1]}, to stay within {budget:g} s"
 
 
-def time_call(denoiser, frame, label: str, repeats: int = 2) -> tuple[float | None, str]:
-    """Least seconds of up to ``repeats`` calls on ``frame`` (one when a call takes over 2 s), or (None, why)."""
-    best = None
+def time_call(denoiser, frame, label: str, repeats: int = TIMING_REPEATS) -> tuple[float | None, str, float]:
+    """(least seconds of up to ``repeats`` calls on ``frame``, why not, spread = median / least).
+
+    One call only when it takes over 2 s (the spread is then :data:`MIN_SPREAD`); (None, why, nan) when
+    a call fails."""
+    times = []
     for _ in range(repeats):
         reset = getattr(denoiser, "reset", None)
         if callable(reset):
@@ -433,22 +505,26 @@ def time_call(denoiser, frame, label: str, repeats: int = 2) -> tuple[float | No
         if callable(reset):
             reset()
         if result.status != "ok":
-            return None, f"timing call failed: {result.error}"
-        best = result.seconds if best is None else min(best, result.seconds)
+            return None, f"timing call failed: {result.error}", math.nan
+        times.append(result.seconds)
         if result.seconds > 2.0:
             break
-    return best, ""
+    best = min(times)
+    spread = float(np.median(times) / best) if best > 0 and len(times) > 1 else MIN_SPREAD
+    return best, "", max(spread, MIN_SPREAD)
 
 
-def probe_render(dataset, scene: str, size: tuple[int, int], spp=PROBE_SPP) -> dict:
-    """Renders of ``scene``'s frame 0 at ``size`` up to each of ``spp``: {"points": [[spp, seconds]]}.
+def probe_render(dataset, scene: str, size: tuple[int, int], spp=PROBE_SPP, repeats: int = PROBE_REPEATS) -> dict:
+    """Renders of ``scene``'s frame 0 at the dataset's size and at ``size``, up to each of ``spp``.
 
-    Seconds exclude kernel compilation, like the dataset's own (the generator's timer). The first
-    render is a warm-up and is not timed: at a size no dataset frame had, it traces and records the
-    frozen passes (measured on the demo's cluttered_915 at 512×512: 1.30 s to reach 1 spp against
-    0.43-0.44 s warm), which the dataset's own frames pay once per sequence, not per frame; charging it to the
-    probe put it into every projected frame's fixed cost. Each point is then the smaller of
-    :data:`PROBE_REPEATS` timed renders (other processes on a shared machine only ever add time)."""
+    Returns {"points": [[spp, seconds]] at ``size``, "small_points": the same at the dataset's size,
+    "spread": median / least over every point, "repeats"}. Seconds exclude kernel compilation, like
+    the dataset's own (the generator's timer). The first render at each size is a warm-up and is not
+    timed: at a size no dataset frame had, it traces and records the frozen passes (measured on the
+    demo's cluttered_915 at 512×512: 1.30 s to reach 1 spp against 0.43-0.44 s warm), which the
+    dataset's own frames pay once per sequence, not per frame. Then ``repeats`` rounds, each one render
+    at each size in turn (interleaved: both sizes see the same load), and each point keeps the least
+    of its renders (other processes on a shared machine only ever add time; module Notes)."""
     from denoisebench.generator.frame_jobs import FrameJob, render_job
 
     info = dataset.scene(scene)
@@ -458,22 +534,52 @@ def probe_render(dataset, scene: str, size: tuple[int, int], spp=PROBE_SPP) -> d
     if plan.get("max_depth_source") == "user":
         options["max_depth"] = int(plan.get("max_depth", -1))
     usd = dataset.path(record["usd"], "stage file")
-    job = FrameJob(
-        scene,
-        0,
-        str(record.get("stage_sha256", scene)),
-        str(usd),
-        tuple(int(s) for s in spp),
-        None,
-        int(size[0]),
-        int(size[1]),
-        int(record.get("render_seed", 0)),
-        options,
-    )
-    render_job(job)  # warm-up: trace and record the passes at this size
-    timed = [render_job(job).noisy for _ in range(PROBE_REPEATS)]
-    points = [[rungs[0].spp, min(r.seconds for r in rungs)] for rungs in zip(*timed)]
-    return {"scene": scene, "width": int(size[0]), "height": int(size[1]), "points": points}
+    small = (int(record["width"]), int(record["height"]))
+
+    def job(width: int, height: int):
+        return FrameJob(
+            scene,
+            0,
+            str(record.get("stage_sha256", scene)),
+            str(usd),
+            tuple(int(s) for s in spp),
+            None,
+            width,
+            height,
+            int(record.get("render_seed", 0)),
+            options,
+        )
+
+    jobs = {"small": job(*small), "large": job(int(size[0]), int(size[1]))}
+    for j in jobs.values():
+        render_job(j)  # warm-up: trace and record the passes at this size
+    timed: dict[str, list] = {"small": [], "large": []}
+    for _ in range(max(int(repeats), 1)):
+        for key, j in jobs.items():
+            timed[key].append([rung.seconds for rung in render_job(j).noisy])
+    spreads = []
+
+    def points(key: str) -> list[list[float]]:
+        out = []
+        for k, s in enumerate(spp):
+            seconds = [run[k] for run in timed[key]]
+            least = min(seconds)
+            if least > 0:
+                spreads.append(float(np.median(seconds)) / least)
+            out.append([int(s), least])
+        return out
+
+    return {
+        "scene": scene,
+        "width": int(size[0]),
+        "height": int(size[1]),
+        "points": points("large"),
+        "small_points": points("small"),
+        "small_pixels": small[0] * small[1],
+        "repeats": max(int(repeats), 1),
+        "spread": max(max(spreads, default=MIN_SPREAD), MIN_SPREAD),
+        "seconds": timed,
+    }
 
 
 def measure_run_timings(
@@ -520,8 +626,10 @@ def measure_run_timings(
         else:
             width, height, note = chosen
             started = time.perf_counter()
-            seconds, error = time_call(instances[label], upscaled_frame(small, width, height), label)
+            seconds, error, spread = time_call(instances[label], upscaled_frame(small, width, height), label)
             record.update(width=width, height=height, seconds=seconds, note=error or note)
+            if math.isfinite(spread):
+                record["spread"] = spread
             record["wall_seconds"] = time.perf_counter() - started
         write_timing(store, plan.run_id, f"denoiser:{label}", record)
         bar.update(1)

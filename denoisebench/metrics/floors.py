@@ -66,7 +66,15 @@ from denoisebench.metrics.validation import check_pair
 #: relmse_floor adds its second-order terms only where v ≤ this × (r² + 0.01) (relative noise ≲ 30 %).
 SECOND_ORDER_LIMIT = 0.1
 
-__all__ = ["SECOND_ORDER_LIMIT", "Floor", "as_variance", "squared_error_floor", "mse_floor", "relmse_floor"]
+__all__ = [
+    "SECOND_ORDER_LIMIT",
+    "Floor",
+    "as_variance",
+    "squared_error_floor",
+    "mse_floor",
+    "relmse_floor",
+    "noisy_value_share",
+]
 
 
 class Floor(NamedTuple):
@@ -156,3 +164,18 @@ def relmse_floor(pred, ref, ref_var, *, valid=None) -> Floor:
     # the expansion holds only where the reference's noise is small against its value (module Notes)
     second = np.where(v <= SECOND_ORDER_LIMIT * denom, second, 0.0)
     return Floor(first.floor + float(np.mean(second if keep is None else second[keep])), first.se)
+
+
+def noisy_value_share(ref, ref_var) -> float:
+    """Share of a reference's values whose noise is comparable to their signal (0 … 1).
+
+    The values with ``v > SECOND_ORDER_LIMIT · (r² + 0.01)`` (relative noise above ~30 %): there the
+    relMSE floor's expansion does not hold (module Notes) and only its first-order term is used, which
+    underestimates the noise's share. A reference where many values are so has no usable floor: the
+    leaderboard sets its scene apart above 5 % (``leaderboard.aggregate.NOISY_VALUES_LIMIT``).
+    """
+    r = np.asarray(ref, dtype=np.float64)
+    v = as_variance(ref_var, r.shape)
+    if r.size == 0:
+        return 0.0
+    return float(np.mean(v > SECOND_ORDER_LIMIT * (np.square(r) + EPS_RELMSE)))
