@@ -182,7 +182,7 @@ def test_synthetic_frame_is_unbiased_deterministic_and_its_variance_is_right():
 
 
 def test_registry_finds_builtins_entry_points_module_attr_and_files(tmp_path, monkeypatch):
-    assert set(registry.BUILTINS) == {"uniform", "ci_stop", "dual_buffer", "hachisuka2008"}
+    assert set(registry.BUILTINS) == {"uniform", "ci_stop", "dual_buffer", "hachisuka2008", "mdas"}
     for name in registry.BUILTINS:
         assert registry.load_sampler(name).name == name
     assert registry.load_sampler("ci_stop", max_error=0.1).max_error == 0.1

@@ -28,6 +28,20 @@ Notes
   here either way. A sampler that raises (or whose worker exits, crashes or runs over its limits)
   is recorded (``error``), with what it had rendered.
 * A sampler that renders nothing leaves zero buffers and every pixel without a sample.
+* **Placed rounds** (issue 41). Where the frame can place samples (the renderer's
+  ``ProgressiveFrame.render_placed``), :attr:`RoundHandle.dimensions` names what a sample position
+  has beyond the film ``x, y`` (``"lens"``, ``"time"``; ``()`` for a pinhole without motion blur)
+  and :meth:`RoundHandle.render_placed` renders one sample at each given position, returning the
+  samples' values in request order (``RoundBuffers.placed``) with the pooled pixel buffers. Each
+  position is one sample of its pixel's budget; a request over what is left keeps its first rows
+  (a sampler lists its positions most wanted first) and sets :attr:`RoundHandle.cut`. Frames that
+  cannot place (synthetic frames, a plugin's worker) have ``dimensions`` None; count rounds are
+  unchanged for every sampler.
+* **Reconstruction.** A sampler with a ``reconstruct(rounds)`` method (a built-in: a plugin's proxy
+  forwards none) may replace the scored ``color``, ``diffuse`` and ``specular`` with its own image
+  of the samples it placed (``mdas`` integrates its k-d tree); ``run_sampler`` calls it once after
+  ``sample``, counts its time as decision seconds, checks shapes and finiteness (a failure is the
+  sampler's error), and keeps the renderer's pixel means in :attr:`SamplerResult.pixel_means`.
 """
 
 from __future__ import annotations
@@ -38,6 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from denoisebench.errors import one_line
+from denoisebench.generator.render.placed import check_positions
 from denoisebench.sampling.allocation import allocate
 from denoisebench.sampling.protocol import Budget, BudgetExhausted, SamplerRequestError, sampler_name
 
@@ -85,6 +100,7 @@ class SamplerResult:
     error: str | None
     final_decision_seconds: float
     budget_samples: int | None
+    pixel_means: dict[str, np.ndarray] | None = None  # the renderer's buffers where a reconstruction replaced them
 
     @property
     def samples(self) -> int:
@@ -145,12 +161,16 @@ def _read_only(round_buffers):
         return out
 
     samples = getattr(round_buffers, "samples", None)
-    return type(round_buffers)(
+    out = type(round_buffers)(
         buffers={name: view(array) for name, array in round_buffers.buffers.items()},
         counts=view(round_buffers.counts),
         seconds=float(round_buffers.seconds),
         samples=None if samples is None else {name: view(array) for name, array in samples.items()},
     )
+    placed = getattr(round_buffers, "placed", None)
+    if placed is not None:
+        out.placed = {name: view(array) for name, array in placed.items()}
+    return out
 
 
 class RoundHandle:
@@ -259,6 +279,65 @@ class RoundHandle:
         self.latest = _read_only(round_buffers)
         return self.latest
 
+    @property
+    def dimensions(self) -> tuple[str, ...] | None:
+        """Placement dimensions beyond film x, y (``"lens"``, ``"time"``), or None where the frame cannot place."""
+        if not callable(getattr(self._frame, "render_placed", None)):
+            return None
+        return tuple(getattr(self._frame, "placement_dimensions", ()))
+
+    def render_placed(self, film, lens=None, time=None):
+        """Render one sample at each position (module Notes, "Placed rounds"); the accumulated RoundBuffers.
+
+        ``film`` N×2 film positions in pixels (``x`` in [0, W), ``y`` in [0, H)), ``lens`` N×2 and
+        ``time`` N in [0, 1), each given exactly when it is one of :attr:`dimensions`. Cut to the
+        budget by keeping the first rows.
+        """
+        if self.dimensions is None:
+            raise SamplerRequestError("this frame cannot place samples (RoundHandle.dimensions is None)")
+        if self.exhausted:
+            raise BudgetExhausted(f"the budget of {self.budget.label()} is spent ({self.spent} samples rendered)")
+        if len(self.records) >= self.max_rounds:
+            self.stop_reason = "round_limit"
+            raise BudgetExhausted(f"the round limit ({self.max_rounds}) is reached")
+        try:
+            film, lens, time = check_positions(
+                film, lens, time, width=self.width, height=self.height, dimensions=self.dimensions
+            )
+        except ValueError as error:
+            raise SamplerRequestError(str(error)) from None
+        requested = film.shape[0]
+        left = self.remaining_samples()
+        if left <= 0:
+            self.exhausted = True
+            raise BudgetExhausted(f"the budget of {self.budget.label()} is spent ({self.spent} samples rendered)")
+        cut = requested > left
+        if cut:
+            film = film[:left]
+            lens = None if lens is None else lens[:left]
+            time = None if time is None else time[:left]
+        pixel = np.floor(film[:, 1]).astype(np.int64) * self.width + np.floor(film[:, 0]).astype(np.int64)
+        granted32 = np.bincount(pixel, minlength=self.pixels).reshape(self.height, self.width).astype(np.int32)
+        before_render = self._clock()
+        decision = before_render - self._mark
+        round_buffers = self._frame.render_placed(film, lens, time)
+        self._mark = self._clock()
+        seconds = float(round_buffers.seconds)
+        self._render_seconds += seconds
+        self._decision_seconds += decision
+        self.counts = self.counts + granted32
+        self.records.append(
+            RoundRecord(len(self.records), requested, int(film.shape[0]), cut, seconds, decision, granted32)
+        )
+        self.final = round_buffers
+        self.cut = cut
+        if self._total is not None:
+            self.exhausted = self.spent >= self._total
+        elif cut and len(self.records) > 1:
+            self.exhausted = True
+        self.latest = _read_only(round_buffers)
+        return self.latest
+
     def finish(self) -> float:
         """Stop the clock: the decision seconds since the last round."""
         return self._clock() - self._mark
@@ -282,7 +361,6 @@ def run_sampler(
     except Exception as failure:  # noqa: BLE001 - a failing sampler is recorded, its rounds kept
         error = one_line(failure)
         stopped = "error"
-    final_decision = handle.finish()
     if stopped == "sampler" and handle.exhausted:
         stopped = "budget"
     if handle.final is not None:
@@ -290,6 +368,17 @@ def run_sampler(
     else:
         zeros = np.zeros((handle.height, handle.width, 3), dtype=np.float32)
         buffers = {"color": zeros, "color_var": zeros.copy()}
+    pixel_means = None
+    reconstruct = getattr(sampler, "reconstruct", None)
+    if error is None and handle.final is not None and callable(reconstruct):
+        try:
+            image = _checked_reconstruction(reconstruct(handle), buffers)
+        except Exception as failure:  # noqa: BLE001 - a failing reconstruction is the sampler's error
+            error, stopped = one_line(failure), "error"
+        else:
+            if image:
+                pixel_means, buffers = buffers, {**buffers, **image}
+    final_decision = handle.finish()
     return SamplerResult(
         sampler=name,
         budget=budget,
@@ -300,4 +389,24 @@ def run_sampler(
         error=error,
         final_decision_seconds=final_decision,
         budget_samples=handle._total,
+        pixel_means=pixel_means,
     )
+
+
+#: Buffers a sampler's reconstruction may replace.
+RECONSTRUCTED = ("color", "diffuse", "specular")
+
+
+def _checked_reconstruction(image, buffers: dict) -> dict:
+    """``reconstruct``'s result (None, or name → H×W×3 for :data:`RECONSTRUCTED`) as float32; ValueError if malformed."""
+    if image is None:
+        return {}
+    if not isinstance(image, dict) or not image or not set(image) <= set(RECONSTRUCTED):
+        raise ValueError(f"a reconstruction is a dict of some of {', '.join(RECONSTRUCTED)}")
+    out = {}
+    for name, array in image.items():
+        array = np.asarray(array, dtype=np.float32)
+        if array.shape != buffers["color"].shape or not np.isfinite(array).all():
+            raise ValueError(f"reconstructed {name} must be finite and shaped {buffers['color'].shape}")
+        out[name] = array
+    return out

@@ -25,6 +25,14 @@ Conventions:
   new sample and rows past its count are zero.
 * ``reference=True`` renders the reference stream (color, diffuse, specular only), never the noisy
   inputs' random numbers.
+* **Placed rounds** (issue 41; for multidimensional samplers such as ``mdas``): besides count rounds,
+  :meth:`ProgressiveFrame.render_placed` traces one sample at each position the caller gives, film
+  ``x, y`` plus lens ``u, v`` and shutter ``t`` where the plan has them
+  (:attr:`ProgressiveFrame.placement_dimensions`); :mod:`~denoisebench.generator.render.placed`
+  has the conventions. The round's samples come back in request order in ``RoundBuffers.placed``
+  (name → N×C: color, diffuse, specular, the features, ``pixel``/``lens``/``time``), and they are
+  pooled into the pixels' buffers and counts. Without placed rounds nothing changes: count rounds
+  give the same bytes as before.
 
 Notes:
     No Python loop runs over pixels: a round is one kernel launch per band of rows (more only past
@@ -43,7 +51,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from denoisebench.generator.render.frame import FrameStream
+from denoisebench.generator.render.frame import FrameStream, stream_key
+from denoisebench.generator.render.placed import PLACED_STREAM, PlacedMoments, check_positions, trace_placed
 
 
 class RenderClock:
@@ -80,13 +89,15 @@ class RoundBuffers:
     ``buffers``: accumulated per-pixel means, ``"color"``, ``"diffuse"``, ``"specular"`` and the
     plan's features (H×W×C float32), plus ``"<name>_var"`` (variance of the mean; inf where a pixel
     has no sample). ``counts``: H×W int32 samples per pixel so far. ``seconds``: render seconds of
-    the last round. ``samples``: per-sample data of the last round when asked.
+    the last round. ``samples``: per-sample data of the last round when asked. ``placed``: a placed
+    round's samples in request order (name → N×C), None after a count round.
     """
 
     buffers: dict[str, np.ndarray]
     counts: np.ndarray
     seconds: float
     samples: dict[str, np.ndarray] | None = None
+    placed: dict[str, np.ndarray] | None = None
 
 
 class ProgressiveFrame(FrameStream):
@@ -99,6 +110,11 @@ class ProgressiveFrame(FrameStream):
     ``reference`` for the reference stream and ``keep_samples`` for per-sample data (default: the
     plan's ``per_sample``). Samplers call :meth:`render_round`; :attr:`counts` is what they got.
     """
+
+    def __init__(self, scene, camera, frame: int, plan, *, seed: int, reference: bool = False, **options):
+        super().__init__(scene, camera, frame, plan, seed=seed, reference=reference, **options)
+        self._placed = None  # PlacedMoments once a placed round ran
+        self._placed_key = stream_key(seed, frame, PLACED_STREAM + (1 if reference else 0))
 
     def render_round(self, counts: np.ndarray) -> RoundBuffers:
         """Trace ``counts`` (H×W ints >= 0) *additional* samples per pixel; return the accumulated buffers.
@@ -117,3 +133,54 @@ class ProgressiveFrame(FrameStream):
         samples = self.advance(counts)
         buffers = self.buffers()
         return RoundBuffers(buffers=buffers, counts=self.counts, seconds=clock() - started, samples=samples)
+
+    @property
+    def placement_dimensions(self) -> tuple[str, ...]:
+        """What a placed round takes beyond the film position: ``"lens"`` (thin lens), ``"time"`` (time sampling)."""
+        return tuple(
+            name for name, on in (("lens", self._switches.thin_lens), ("time", self._switches.time_sampling)) if on
+        )
+
+    @property
+    def counts(self) -> np.ndarray:
+        """H×W int32: samples per pixel so far, count and placed rounds together."""
+        placed = self._placed
+        return self._counts.astype(np.int32) if placed is None else (self._counts + placed.counts()).astype(np.int32)
+
+    def buffers(self) -> dict[str, np.ndarray]:
+        """The count rounds' buffers with the placed samples pooled in (the same bytes when there are none)."""
+        out = super().buffers()
+        placed = self._placed
+        return out if placed is None or not placed.total else placed.merge(out, self._counts)
+
+    def render_placed(self, film, lens=None, time=None) -> RoundBuffers:
+        """Trace one sample at each position (module docstring, "Placed rounds"); the accumulated buffers.
+
+        ``film`` N×2 (pixels), ``lens`` N×2 and ``time`` N (unit interval), each given exactly when it
+        is one of :attr:`placement_dimensions`. Raises ``ValueError`` (one line) for anything else.
+        """
+        film, lens, time = check_positions(
+            film, lens, time, width=self.width, height=self.height, dimensions=self.placement_dimensions
+        )
+        if self._placed is None:
+            self._placed = PlacedMoments(self.width, self.height, self.stat_channels)
+        names = dict(self.stat_channels)
+        names["pixel"] = 2
+        names.update({name: 2 if name == "lens" else 1 for name in self.placement_dimensions})
+        clock = RenderClock()
+        started = clock()
+        values = trace_placed(
+            self.scene,
+            self._opts,
+            self._switches,
+            self._values,
+            self._placed_key,
+            film,
+            lens,
+            time,
+            self._placed.total,
+            names,
+        )
+        self._placed.add(film, values)
+        buffers = self.buffers()
+        return RoundBuffers(buffers=buffers, counts=self.counts, seconds=clock() - started, placed=values)
