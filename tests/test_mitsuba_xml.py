@@ -155,15 +155,18 @@ def test_camera_and_effects_come_from_the_plugins(tmp_path, mi):
         ("<scene version='3.0.0'><medium type='homogeneous' id='m'/></scene>", "participating media"),
         (
             "<scene version='3.0.0'><shape type='ply'><string name='filename' value='../x.ply'/></shape></scene>",
-            "outside",
+            "names '../x.ply', which does not exist",
         ),
+        ("<scene version='3.0.0'><integer name='a' value='$n'/></scene>", r"undefined parameter \$n .*--define n="),
+        ("<scene version='3.0.0'><path value='nowhere'/></scene>", "Mitsuba cannot parse"),
         ("<scene version='3.0.0'><shape type='warp_drive'/></scene>", "Mitsuba cannot load"),
         (
             f"<scene version='3.0.0'><sensor type='perspective'>{FILM}</sensor><shape type='sphere'/></scene>",
             "no emitter",
         ),
         (
-            f"<scene version='3.0.0'><sensor type='orthographic'>{FILM}</sensor><shape type='sphere'/>"
+            "<scene version='3.0.0'><sensor type='radiancemeter'><film type='hdrfilm'><integer name='width' "
+            "value='1'/><integer name='height' value='1'/></film></sensor><shape type='sphere'/>"
             "<emitter type='constant'/></scene>",
             "not supported",
         ),

@@ -38,6 +38,13 @@ the file, which must lie in its folder), copies it with those files into OUT/xml
 renders it from its first sensor (perspective or thinlens) held still over --frames frames, with effects
 inferred from its plugins. Media and other sensors are refused (exit 2); another integrator gets a warning.
 --auto-camera gives it the orbit --usd stages get (around its bounding box, +Y up) instead of its sensor.
+Its files are found as Mitsuba finds them (<path> directives included; they may lie anywhere) and copied
+with it; the copy (<path>s removed, names that leave its folder moved under files/, parameters written in
+as <default>s) loads on another machine. --define NAME=VALUE (repeatable, Mitsuba's -D) sets its
+$parameters; $spp and the film size ($res, $resx, $resy) need none: denoisebench sets its own. Its
+integrator's restriction is honoured and recorded: path/volpath max_depth, and `direct` (read through
+wrappers such as moment and aov) as direct illumination only (max_depth 2); --max-depth wins. Sensors:
+perspective, thinlens, orthographic.
 
 Exit codes: 0 done, 2 bad input (one line, nothing written), 1 some frames failed to render
 (reported; the dataset is left resumable and marked incomplete).
@@ -59,6 +66,7 @@ from denoisebench.generator.dataset_run import (
     validate_request,
 )
 from denoisebench.generator.executors import make_executor
+from denoisebench.generator.mitsuba_xml import parse_defines
 from denoisebench.outputs import check_writable_dir
 from denoisebench.scenes import list_families
 
@@ -73,6 +81,9 @@ EPILOG = """examples:
   generate-dataset --out data/big --scenes 20 --executor ray --ray-address auto
   generate-dataset --out data/asset --usd asset.usdz --auto-camera --default-light --frames 8 --spp 4
   generate-dataset --out data/bitterli --mitsuba staircase/scene_v3.xml --frames 4 --spp 1,4 --ref-spp 1024
+  generate-dataset --out data/docs --mitsuba mitsuba-data/docs/scenes/sensor_thinlens.xml --frames 1
+  generate-dataset --out data/mts --mitsuba mitsuba-data/tests/scenes/floating_sphere/test_directional_direct.xml \
+      --define integrator=path --frames 1   # the scene's $integrator: path instead of its default, direct
 """
 
 
@@ -160,6 +171,15 @@ def add_arguments(parser) -> None:
         help="render a Mitsuba 3 XML scene too, from its sensor held still over --frames (repeatable)",
     )
     parser.add_argument(
+        "--define",
+        "-D",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="set a $NAME parameter of the --mitsuba scenes (repeatable; Mitsuba's -D); $spp and the film "
+        "size ($res, $resx, $resy) need none: denoisebench sets its own",
+    )
+    parser.add_argument(
         "--camera", default=None, metavar="PATH", help="camera prim of the --usd stages (default: the first)"
     )
     parser.add_argument(
@@ -215,6 +235,7 @@ def request_from_args(args):
         auto_camera=args.auto_camera,
         default_light=args.default_light,
         independent_rungs=args.independent_rungs,
+        defines=tuple(parse_defines(args.define).items()),
         force=args.force,
     )
 

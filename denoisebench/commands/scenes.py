@@ -20,7 +20,7 @@ import sys
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.render_plan import make_render_plan
 from denoisebench.generator.dataset_scenes import stage_options
-from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
+from denoisebench.generator.mitsuba_xml import load_mitsuba_xml, parse_defines
 from denoisebench.generator.preview import render_preview, tone_map_preview, write_png
 from denoisebench.generator.usd.translate import translate_usd
 from denoisebench.scenes import get_family, list_families
@@ -35,6 +35,7 @@ EPILOG = """examples:
   denoisebench scenes check shot.usda --camera /World/Cameras/Close
   denoisebench scenes check mitsuba-data/scenes/cbox/cbox.xml
   denoisebench scenes preview cbox.xml --auto-camera --out cbox_orbit.png --frame 4
+  denoisebench scenes check mitsuba-data/tests/scenes/floating_sphere/test_directional_direct.xml -D integrator=path
 """
 
 
@@ -53,6 +54,15 @@ def _add_stage_options(parser) -> None:
         action="store_true",
         help="light a stage that has no light: a uniform dome plus a key distant light",
     )
+    parser.add_argument(
+        "--define",
+        "-D",
+        action="append",
+        default=[],
+        metavar="NAME=VALUE",
+        help="set a $NAME parameter of a Mitsuba XML scene (repeatable; Mitsuba's -D); $spp and the film "
+        "size ($res, $resx, $resy) need none: denoisebench sets its own",
+    )
 
 
 def is_xml(path) -> bool:
@@ -62,7 +72,7 @@ def is_xml(path) -> bool:
 
 def translate_options(args, frames: int = 8) -> dict:
     """Keywords of ``translate_usd`` from --camera/--auto-camera/--default-light (strict: refuse black stages);
-    for a Mitsuba ``.xml`` file, those of ``load_mitsuba_xml`` (frames, --auto-camera)."""
+    for a Mitsuba ``.xml`` file, those of ``load_mitsuba_xml`` (frames, --auto-camera, --define)."""
     if args.camera and args.auto_camera:
         raise UserInputError("give --camera or --auto-camera, not both")
     if is_xml(args.usd):
@@ -72,7 +82,9 @@ def translate_options(args, frames: int = 8) -> dict:
                     f"{flag} applies to USD stages; a Mitsuba XML scene uses its first sensor "
                     "or --auto-camera, and its own emitters"
                 )
-        return {"frames": frames, "auto_camera": bool(args.auto_camera)}
+        return {"frames": frames, "auto_camera": bool(args.auto_camera), "defines": parse_defines(args.define)}
+    if getattr(args, "define", None):
+        raise UserInputError("--define applies to Mitsuba XML scenes ($parameters), not to USD stages")
 
     return {**stage_options(args.camera, args.auto_camera, args.default_light, frames), "strict": True}
 

@@ -86,6 +86,11 @@ class GenerateRequest:
     auto_camera: bool = False  # --auto-camera: frame --usd stages with an orbiting camera (usd/additions.py)
     default_light: bool = False  # --default-light: light --usd stages that have no light
     independent_rungs: bool = False  # --independent-rungs: every spp its own render (default: nested rungs)
+    defines: tuple[tuple[str, str], ...] = ()  # --define NAME=VALUE: parameters of the --mitsuba scenes
+
+    def define_dict(self) -> dict[str, str]:
+        """The --define parameters as a dict (later ones win, as on Mitsuba's command line)."""
+        return dict(self.defines)
 
     def stage_options(self) -> dict:
         """What is written into every copied --usd stage (dataset_scenes.stage_options)."""
@@ -152,15 +157,26 @@ def validate_request(request: GenerateRequest) -> None:
     for path in request.usd:
         scenes_mod.check_user_stage(path, request.stage_options())
     for path in request.xml:
-        scenes_mod.check_xml_scene(path, request.frames, auto_camera=request.auto_camera)
+        scenes_mod.check_xml_scene(path, request.frames, auto_camera=request.auto_camera, defines=request.define_dict())
 
 
 def _file_sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
+def xml_scene_names(request: GenerateRequest) -> list[str]:
+    """The dataset names of the --mitsuba scenes (``xml_<stem>``), as :func:`_prepare_scenes` gives them."""
+    taken = {name for _, _, name in scenes_mod.family_scene_names(list(request.families), request.scenes, request.seed)}
+    taken |= set(scenes_mod.user_scene_names(list(request.usd), taken))
+    return scenes_mod.user_scene_names(list(request.xml), taken, prefix="xml_")
+
+
 def dataset_config(request: GenerateRequest) -> dict:
-    """The config whose hash identifies the dataset (see the module docstring)."""
+    """The config whose hash identifies the dataset (see the module docstring).
+
+    A --mitsuba scene is recorded by where it is copied (``xml_<stem>/scene.xml``) and the sha256 of
+    the user's file, never by its path on this machine: the same files give the same hash anywhere.
+    """
     return {
         "generator": CONFIG_KIND,
         "families": list(request.families),
@@ -177,10 +193,16 @@ def dataset_config(request: GenerateRequest) -> dict:
         "rungs": "independent" if request.independent_rungs else "nested",
         "usd": [{"path": str(Path(p).resolve()), "sha256": _file_sha256(Path(p))} for p in request.usd],
         **(
-            {"xml": [{"path": str(Path(p).resolve()), "sha256": _file_sha256(Path(p))} for p in request.xml]}
+            {
+                "xml": [
+                    {"path": f"{name}/{scenes_mod.XML_NAME}", "sha256": _file_sha256(Path(p))}
+                    for p, name in zip(request.xml, xml_scene_names(request))
+                ]
+            }
             if request.xml
             else {}
         ),
+        **({"defines": dict(sorted(request.define_dict().items()))} if request.defines else {}),
         **(
             {
                 STAGE_OPTIONS_KEY: {
@@ -202,21 +224,31 @@ def legacy_config(config: dict) -> dict | None:
     return {(LEGACY_STAGE_OPTIONS_KEY if k == STAGE_OPTIONS_KEY else k): v for k, v in config.items()}
 
 
-def resumable_config(out: str | Path, config: dict) -> dict:
-    """The config to open ``out`` with: ``config``, or its legacy spelling when ``out`` was written with it.
+def absolute_xml_config(request: GenerateRequest, config: dict) -> dict | None:
+    """``config`` as datasets before issue 39 spelled their --mitsuba files (the absolute path on the
+    machine that made them), or None without --mitsuba files or with --define (which did not exist)."""
+    if not request.xml or request.defines:
+        return None
+    xml = [{"path": str(Path(p).resolve()), "sha256": _file_sha256(Path(p))} for p in request.xml]
+    return {**config, "xml": xml}
+
+
+def resumable_config(out: str | Path, config: dict, *older: dict | None) -> dict:
+    """The config to open ``out`` with: ``config``, or an older spelling when ``out`` was written with it.
 
     Only an existing manifest whose hash is that of :func:`legacy_config` (the same options, the old
-    key) gets the legacy spelling; anything else (no dataset, an unreadable manifest, another config)
-    gets ``config`` and the writer's usual rules (resume, refuse, or ``--force``).
+    key) or of one of ``older`` (e.g. :func:`absolute_xml_config`) gets that spelling; anything else
+    (no dataset, an unreadable manifest, another config) gets ``config`` and the writer's usual rules
+    (resume, refuse, or ``--force``).
     """
-    legacy = legacy_config(config)
-    if legacy is None:
+    candidates = [c for c in (legacy_config(config), *older) if c is not None and c != config]
+    if not candidates:
         return config
     try:
         header = load_header(Path(out) / layout.MANIFEST_NAME)
     except DatasetError:
         return config
-    return legacy if header.get("config_hash") == config_hash(legacy) else config
+    return next((c for c in candidates if header.get("config_hash") == config_hash(c)), config)
 
 
 def render_versions() -> dict[str, str]:
@@ -228,6 +260,12 @@ def render_versions() -> dict[str, str]:
         except metadata.PackageNotFoundError:
             versions[package] = "missing"
     return versions
+
+
+def _transport_origin(translated, plan) -> str:
+    """`` (<which integrator>)`` when a Mitsuba XML scene's own integrator restricts transport, else ""."""
+    origin = translated.scene_dict.get("transport_origin", "") if isinstance(translated.scene_dict, dict) else ""
+    return f" ({origin})" if origin and plan.max_depth_source == "stage" else ""
 
 
 def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -> dict:
@@ -243,7 +281,7 @@ def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -
         "spp": sorted(set(int(s) for s in request.spp)),
         "ref_spp": request.ref_spp,
         "ref_error": request.ref_error,
-        "transport": plan.transport_line(),
+        "transport": plan.transport_line() + _transport_origin(translated, plan),
         "usd": f"{spec.name}/{spec.stage_files[0]}",  # scene.usda, or scene.xml for --xml
         "stage_files": list(spec.stage_files),
         "stage_sha256": scenes_mod.stage_digest(spec.stage_dir, spec.stage_files),
@@ -259,6 +297,7 @@ def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -
             "shutter_open": float(camera.shutter_open),
             "shutter_close": float(camera.shutter_close),
             "animated": bool(camera.is_animated),
+            **({"projection": camera.projection} if camera.projection != "perspective" else {}),
         },
         # Paths inside OUT are made relative so that the manifest does not depend on where OUT is.
         "warnings": [w.replace(prefix, f"{spec.name}/") for w in translated.warnings],
@@ -289,7 +328,9 @@ def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names:
     taken = {spec.name for spec in entries}
     for path, name in zip(request.xml, scenes_mod.user_scene_names(list(request.xml), taken, prefix="xml_")):
         folder = writer.scene_dir(name)
-        files = scenes_mod.copy_xml_scene(path, folder, request.frames, auto_camera=request.auto_camera)
+        files = scenes_mod.copy_xml_scene(
+            path, folder, request.frames, auto_camera=request.auto_camera, defines=request.define_dict()
+        )
         entries.append(
             SceneSpec(
                 name, "xml", 0, str(path), str(folder.resolve()), files, scenes_mod.render_seed(request.seed, name)
@@ -320,7 +361,8 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
     }
     user_names = scenes_mod.user_scene_names(list(request.usd), family_names)
 
-    config = resumable_config(request.out, dataset_config(request))
+    config = dataset_config(request)
+    config = resumable_config(request.out, config, absolute_xml_config(request, config))
     writer = DatasetWriter(request.out, config, render_versions(), force=request.force)
     specs = _prepare_scenes(request, writer, user_names)
     by_name = {spec.name: spec for spec in specs}

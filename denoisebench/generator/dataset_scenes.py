@@ -10,9 +10,11 @@ Names and seeds are deterministic:
 * family scenes are ``<family>_<scene seed:03d>``, with scene seeds ``seed, seed+1, ...`` (the
   same stage ``denoisebench scenes make FAMILY --seed S`` writes);
 * a user's stage is ``usd_<file stem>`` (other characters become ``_``; a second file with the
-  same stem gets ``_2``, in argument order), a Mitsuba XML scene ``xml_<file stem>``: copied
-  verbatim as ``scene.xml`` with the files it names, plus ``camera.json`` (its camera's frame
-  count, and ``"auto_camera": true`` for the ``--auto-camera`` orbit), :func:`copy_xml_scene`;
+  same stem gets ``_2``, in argument order), a Mitsuba XML scene ``xml_<file stem>``: copied as
+  ``scene.xml`` with every file it names, wherever Mitsuba finds them (rewritten only where the copy
+  must be: generator/mitsuba_xml.py ``portable_files``; byte for byte otherwise), plus
+  ``camera.json`` (its camera's frame count, and ``"auto_camera": true`` for the ``--auto-camera``
+  orbit), :func:`copy_xml_scene`;
 * every scene renders with its own ``render_seed``, a hash of the dataset seed and the scene name,
   so no two scenes share random numbers and a scene's pixels do not depend on which others exist.
 
@@ -43,7 +45,7 @@ from pathlib import Path
 from denoisebench.dataset import layout
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.errors import UserInputError
-from denoisebench.generator.mitsuba_xml import XML_NAME, dependencies, load_mitsuba_xml
+from denoisebench.generator.mitsuba_xml import XML_NAME, load_mitsuba_xml, portable_files
 from denoisebench.generator.usd.translate import apply_additions, translate_usd
 from denoisebench.scenes.effects import METADATA_KEY
 
@@ -307,29 +309,33 @@ def xml_camera(path: Path) -> dict:
     return {"frames": int(record["frames"]), "auto_camera": bool(record.get("auto_camera", False))}
 
 
-def check_xml_scene(path: str | Path, frames: int, auto_camera: bool = False):
-    """Load and check a Mitsuba XML scene before anything is written (UserInputError, one line)."""
+def check_xml_scene(path: str | Path, frames: int, auto_camera: bool = False, defines: dict | None = None):
+    """Load and check a Mitsuba XML scene before anything is written (UserInputError, one line);
+    ``defines``: its parameters (``--define``)."""
     path = Path(path)
     if path.suffix.lower() != ".xml":
         raise UserInputError(f"{path}: expected a Mitsuba .xml scene file")
-    translated, _ = load_mitsuba_xml(path, frames=frames, auto_camera=auto_camera)
-    if any(relative == XML_CAMERA for _, relative in dependencies(path)):
-        raise UserInputError(f"{path}: a file it names is called {XML_CAMERA}, which the dataset reserves")
+    translated, _ = load_mitsuba_xml(path, frames=frames, auto_camera=auto_camera, defines=defines)
     return translated
 
 
-def copy_xml_scene(path: str | Path, scene_dir: Path, frames: int, auto_camera: bool = False) -> tuple[str, ...]:
-    """Copy a Mitsuba XML scene to ``scene_dir/scene.xml`` (verbatim) with the files it names, and
-    ``camera.json`` (its camera: frame count, auto camera or not); return the stage files, ``scene.xml`` first.
+def copy_xml_scene(
+    path: str | Path, scene_dir: Path, frames: int, auto_camera: bool = False, defines: dict | None = None
+) -> tuple[str, ...]:
+    """Copy a Mitsuba XML scene to ``scene_dir/scene.xml`` with every file it names (``portable_files``:
+    loadable on another machine with no options, ``defines`` written into it), and ``camera.json``
+    (its camera: frame count, auto camera or not); return the stage files, ``scene.xml`` first.
 
     Without ``auto_camera`` the sidecar holds what it held before the option existed (same bytes, so
     datasets made then keep their stage digests)."""
     path = Path(path)
     scene_dir.mkdir(parents=True, exist_ok=True)
+    copy = portable_files(path, defines)
     files = []
-    for absolute, relative in dependencies(path):
-        atomic_write_bytes(scene_dir / relative, absolute.read_bytes())
-        files.append(relative)
+    for relative, data in sorted(copy.items()):
+        if relative != XML_NAME:
+            atomic_write_bytes(scene_dir / relative, data)
+            files.append(relative)
     camera = {"frames": int(frames), "camera": "the first sensor of scene.xml, static"}
     if auto_camera:
         camera = {
@@ -338,5 +344,5 @@ def copy_xml_scene(path: str | Path, scene_dir: Path, frames: int, auto_camera: 
             "auto_camera": True,
         }
     atomic_write_bytes(scene_dir / XML_CAMERA, (json.dumps(camera, sort_keys=True) + "\n").encode())
-    atomic_write_bytes(scene_dir / XML_NAME, path.read_bytes())
+    atomic_write_bytes(scene_dir / XML_NAME, copy[XML_NAME])
     return (XML_NAME, XML_CAMERA, *files)

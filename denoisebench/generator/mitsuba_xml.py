@@ -1,20 +1,46 @@
 """Mitsuba 3 XML scene files as a scene source: ``generate-dataset --mitsuba scene.xml`` (alias ``--xml``).
 
-The file is loaded by Mitsuba itself (``mi.load_file``: its meshes, textures and ``<default>``
-parameters resolve relative to the file), and rendered by the same feature renderer as a
-translated USD stage (:func:`~denoisebench.generator.render.frame.render_frame`), which takes a
-``mi.Scene``, a :class:`CameraTrack` and a :class:`RenderPlan`. What this module adds is the
-camera track and the effects, read off the loaded scene, plus the checks a scene file must pass.
+The file is loaded by Mitsuba itself (``mi.load_file`` with the scene's parameters), and rendered by
+the same feature renderer as a translated USD stage
+(:func:`~denoisebench.generator.render.frame.render_frame`), which takes a ``mi.Scene``, a
+:class:`CameraTrack` and a :class:`RenderPlan`. What this module adds is the camera track, the
+effects and the transport restriction, read off the loaded scene, the files the scene names (as
+Mitsuba resolves them), a portable copy of the scene for the dataset, and the checks a scene file
+must pass.
 
 Notes
 -----
-* Camera: the scene's first sensor (``perspective`` or ``thinlens``; others are refused), held still
-  over ``frames`` frames (a static camera track: zero camera motion). Its ``to_world`` (Mitsuba's
-  convention, looking down +Z) becomes the track's USD-convention pose by the same 180° turn about
-  Y that :meth:`CameraTrack.mitsuba_to_world` undoes; its horizontal field of view (``x_fov``),
-  near/far clip, and for ``thinlens`` the aperture radius and focus distance are kept. The image
-  size is the dataset's ``--width``/``--height``, not the file's film: with another aspect ratio
-  the vertical framing differs from the file's own render (the horizontal field of view is kept).
+* Parsing: Mitsuba's own parser (``mi.parser.parse_file``) reads the file, its ``<include>``\\ s,
+  ``<default>`` parameters and ``<path>`` directives; ``defines`` (``--define NAME=VALUE``, Mitsuba's
+  ``-D``) set parameters and win over ``<default>``. An undefined parameter is a one-line error that
+  names it and the flag, except those in :data:`AUTO_PARAMETERS` (``$spp`` and the film size
+  ``$res``/``$resx``/``$resy``): denoisebench sets its own sample counts and image size, so an
+  undefined one gets a placeholder value. A ``--define`` the scene never uses is refused (as
+  Mitsuba's ``-D`` is).
+* Files: every ``filename`` the scene names (an element ``<string name="filename" ...>`` or a
+  ``filename`` attribute: includes, spectra) is found as Mitsuba finds it: its file resolver searches
+  the ``<path>`` folders (relative to the scene file, the last one first), then the scene file's
+  folder, then Mitsuba's defaults (the working directory, Mitsuba's own data). The user's scene may
+  name files anywhere; a name that resolves to no file is a one-line error. Pitfall: an included
+  file's names resolve like the main file's (relative to the main file's folder, not the include's),
+  as Mitsuba does.
+* The dataset copy (:func:`portable_files`): ``scene.xml`` plus every file, each at its name as
+  written when that name is relative and stays inside the folder (so the copy resolves it from its
+  own folder), else at ``files/<basename>`` (numbered on a clash). The copy differs from the user's
+  file only where it must: ``<path>`` directives removed, moved names rewritten, and the parameters
+  that were defined (``--define`` and the placeholders) written as ``<default>``\\ s, so the copy
+  loads on another machine with no options and renders the same scene. A file that needs none of
+  that is copied byte for byte. The user's own file is never changed.
+* Camera: the scene's first sensor (``perspective``, ``thinlens`` or ``orthographic``; others are
+  refused), held still over ``frames`` frames (a static camera track: zero camera motion). Its
+  ``to_world`` (Mitsuba's convention, looking down +Z) becomes the track's USD-convention pose by the
+  same 180° turn about Y that :meth:`CameraTrack.mitsuba_to_world` undoes; its horizontal field of
+  view (``x_fov``), near/far clip, and for ``thinlens`` the aperture radius and focus distance are
+  kept. An ``orthographic`` sensor keeps its ``to_world`` scale, which sets the width of the view
+  (2 units before scaling, Mitsuba's convention); the track's ``projection`` says so and its
+  ``fov_x_deg`` is 0. The image size is the dataset's ``--width``/``--height``, not the file's film:
+  with another aspect ratio the vertical framing differs from the file's own render (the horizontal
+  field of view, or width, is kept).
 * ``auto_camera`` (``--auto-camera``) replaces the sensor, or stands in for a missing one, by the
   orbit USD stages get (:mod:`~denoisebench.generator.contract.orbit`: same lens, distance,
   elevation, start azimuth and 2° per frame) around Mitsuba's bounding box of the loaded scene
@@ -27,15 +53,19 @@ Notes
   ``glossy``, delta → ``specular``, any transmission → ``transmission``; a bitmap texture in a
   BSDF → ``textures``. Effects decide the render plan exactly as for USD stages.
 * Transport: the file's integrator is replaced by denoisebench's path tracer (Mitsuba's ``path``
-  estimator with features). A ``path`` (or ``volpath``) integrator's ``max_depth`` other than −1 is
-  the scene's own depth restriction (recorded like a stage's ``maxDepth``); any other integrator
-  type gets one warning. Participating media (``<medium>``) cannot be rendered: refused.
-* Files: every ``filename`` the scene names, and every file it ``<include>``s (read too, for their
-  own files, integrator and media), must lie inside the XML file's folder (they are copied into
-  the dataset at the same relative paths, as for USD); anything else is refused, one line.
+  estimator with features), but its restriction is honoured. Wrappers that hold one integrator
+  (``moment``, ``aov``, ...) are read through. A path-space integrator of :data:`PATH_INTEGRATORS`
+  with a ``max_depth`` other than −1 restricts the depth; ``direct`` (:data:`DIRECT_INTEGRATORS`)
+  is direct illumination only: emission plus one bounce of light, the expectation of ``path`` at
+  ``max_depth`` 2, which is what is rendered. Either is recorded like a stage's ``maxDepth`` (plan
+  source ``"stage"``, with :attr:`XmlStructure.transport_origin` saying which integrator asked);
+  ``--max-depth`` still wins. Any other integrator type gets one warning: full transport is
+  rendered. Pitfall: ``direct``'s ``hide_emitters`` and sample counts are not honoured (the counts
+  change noise, not the expectation). Participating media (``<medium>``) cannot be rendered:
+  refused.
 * Refusals are one-line :class:`~denoisebench.errors.UserInputError` (exit 2): a missing file,
-  malformed XML, a root other than ``<scene>``, a scene Mitsuba will not load, no or an unsupported
-  sensor, no emitter, media.
+  malformed XML, a root other than ``<scene>``, an undefined parameter, an unused ``--define``, a
+  scene Mitsuba will not load, no or an unsupported sensor, no emitter, media.
 """
 
 from __future__ import annotations
@@ -43,7 +73,7 @@ from __future__ import annotations
 import re
 import xml.etree.ElementTree as ElementTree
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
@@ -54,20 +84,52 @@ from denoisebench.generator.contract.translated_scene import TranslatedScene
 from denoisebench.mitsuba_runtime import load_mitsuba
 
 XML_NAME = "scene.xml"
-SENSORS = {"PerspectiveCamera": "perspective", "ThinLensCamera": "thinlens"}
-PATH_INTEGRATORS = ("path", "volpath")
+#: Names of the dataset's scene folder that a copied file may not take.
+RESERVED_NAMES = (XML_NAME, "camera.json")
+#: Folder of the copy for files whose names leave the scene's folder (``../x.ply``, absolute names).
+MOVED_FOLDER = "files"
+SENSORS = {"PerspectiveCamera": "perspective", "ThinLensCamera": "thinlens", "OrthographicCamera": "orthographic"}
+#: Integrators that estimate the full path-space image (up to their ``max_depth``), as ``path`` does.
+PATH_INTEGRATORS = ("path", "volpath", "volpathmis", "prb", "prb_basic", "prbvolpath", "ptracer")
+#: Integrators of direct illumination only: rendered as ``path`` at ``max_depth`` 2.
+DIRECT_INTEGRATORS = ("direct", "direct_projective")
+DIRECT_MAX_DEPTH = 2
+#: Parameters denoisebench sets itself (sample count, film size): undefined ones get these placeholders.
+AUTO_PARAMETERS = {"spp": "16", "res": "128", "resx": "128", "resy": "128"}
 # Mitsuba to_world (looks down +Z, +X left) <-> USD camera pose (looks down -Z): a 180° turn about Y.
 _MITSUBA_TO_USD_CAMERA = np.diag([-1.0, 1.0, -1.0, 1.0])
 _VARIABLE = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
+_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+_UNDEFINED = re.compile(r"undefined parameter:? *\$([A-Za-z_][A-Za-z0-9_]*)")
+_UNUSED = re.compile(r"unused parameters?:?\s*-?\s*\$([A-Za-z_][A-Za-z0-9_]*)", re.IGNORECASE)
+
+
+def parse_defines(items) -> dict[str, str]:
+    """``--define NAME=VALUE`` items (repeatable) as a dict; UserInputError (one line) on a malformed one."""
+    out: dict[str, str] = {}
+    for item in items or ():
+        name, equals, value = str(item).partition("=")
+        name = name.strip()
+        if not equals or not _NAME.match(name):
+            raise UserInputError(f"--define expects NAME=VALUE, like --define spp=16 (got {item!r})")
+        out[name] = value
+    return out
 
 
 @dataclass
 class XmlStructure:
-    """What the file says before Mitsuba loads it (parsed with ElementTree)."""
+    """What Mitsuba's parser makes of the file (with its includes, parameters and ``<path>``\\ s)."""
 
-    integrator: str | None = None
-    max_depth: int | None = None  # None: unbounded (-1) or not given
-    files: list[str] = field(default_factory=list)  # every "filename" value, as written
+    integrator: str | None = None  # the innermost integrator's type (through wrappers)
+    wrappers: tuple[str, ...] = ()  # wrapper integrators read through, outermost first
+    max_depth: int | None = None  # the scene's own restriction (None: unbounded / full transport)
+    transport_origin: str = ""  # which integrator asked for max_depth, e.g. "integrator 'direct' in 'moment'"
+    files: list[str] = field(default_factory=list)  # every file name as written (parameters substituted)
+    resolved: dict[str, Path] = field(default_factory=dict)  # name as written -> the file Mitsuba loads
+    documents: list[Path] = field(default_factory=list)  # the XML files read: the scene first, then includes
+    search_paths: list[Path] = field(default_factory=list)  # resolver folders, searched in this order
+    parameters: dict[str, str] = field(default_factory=dict)  # passed to Mitsuba: defines + placeholders
+    placeholders: tuple[str, ...] = ()  # names in parameters that are AUTO_PARAMETERS placeholders
     has_media: bool = False
 
 
@@ -77,7 +139,8 @@ def _short(error: BaseException) -> str:
 
 def _parse(path: Path, shown: Path) -> ElementTree.Element:
     try:
-        root = ElementTree.parse(path).getroot()
+        parser = ElementTree.XMLParser(target=ElementTree.TreeBuilder(insert_comments=True))
+        root = ElementTree.parse(path, parser=parser).getroot()
     except ElementTree.ParseError as error:
         raise UserInputError(f"{shown}: not well-formed XML ({_short(error)})") from None
     except OSError as error:
@@ -87,72 +150,245 @@ def _parse(path: Path, shown: Path) -> ElementTree.Element:
     return root
 
 
-def read_structure(path: Path) -> XmlStructure:
-    """Parse ``path`` and the files it ``<include>``s (UserInputError when one is not a Mitsuba
-    ``<scene>`` document). Included files' paths, like every ``filename``, are relative to ``path``'s
-    folder, as Mitsuba resolves them."""
-    roots, queue, seen = [], [path], set()
-    while queue:
-        current = queue.pop(0)
-        key = current.resolve()
-        if key in seen:
-            continue
-        seen.add(key)
-        root = _parse(current, path if current == path else current)
-        roots.append(root)
-        queue.extend(path.parent / i.get("filename") for i in root.iter("include") if i.get("filename"))
-    defaults = {d.get("name"): d.get("value", "") for root in roots for d in root.iter("default")}
+def _mitsuba_parse(mi, path: Path, defines: dict[str, str]):
+    """``(ParserState, parameters, placeholders, <path> folders)`` from Mitsuba's own parser.
 
-    def resolve(text: str | None) -> str:
-        return _VARIABLE.sub(lambda m: defaults.get(m.group(1), m.group(0)), text or "")
+    Mitsuba's ``parse_file`` prepends the ``<path>`` folders to the thread's file resolver and leaves
+    them there; they are read off and the resolver is restored."""
+    resolver = mi.file_resolver()
+    parameters = dict(defines)
+    placeholders: list[str] = []
+    while True:
+        saved = [str(p) for p in resolver]
+        try:
+            state = mi.parser.parse_file(mi.parser.ParserConfig(mi.variant()), str(path), **parameters)
+            now = [str(p) for p in resolver]
+        except Exception as error:  # noqa: BLE001 - Mitsuba raises RuntimeError with its parser's message
+            text = " ".join(str(error).split())
+            undefined = _UNDEFINED.search(text)
+            if undefined and undefined.group(1) in AUTO_PARAMETERS and undefined.group(1) not in parameters:
+                parameters[undefined.group(1)] = AUTO_PARAMETERS[undefined.group(1)]
+                placeholders.append(undefined.group(1))
+                continue
+            if undefined:
+                name = undefined.group(1)
+                raise UserInputError(
+                    f"{path}: undefined parameter ${name} (no <default>); give --define {name}=VALUE"
+                ) from None
+            unused = _UNUSED.search(text)
+            if unused:
+                raise UserInputError(
+                    f"{path}: --define {unused.group(1)}=...: the scene has no parameter ${unused.group(1)}"
+                ) from None
+            raise UserInputError(f"{path}: Mitsuba cannot parse the scene ({_short(error)})") from None
+        finally:
+            resolver.clear()
+            for folder in saved:
+                resolver.append(folder)
+        added = now[: max(0, len(now) - len(saved))]
+        return state, parameters, tuple(placeholders), [Path(p) for p in added]
 
-    out = XmlStructure()
-    out.has_media = any(True for root in roots for _ in root.iter("medium"))
+
+def _integrator_chain(mi, state) -> list:
+    """The scene's integrator nodes, outermost first, read through wrappers that hold integrators."""
+    nodes = state.nodes
+    root = nodes[0].props
+
+    def children(props):
+        out = []
+        for key in props.keys():
+            if props.type(key) == props.Type.ResolvedReference:
+                node = nodes[props[key].index()]
+                if node.type == mi.ObjectType.Integrator:
+                    out.append(node)
+        return out
+
+    chain = []
+    found = children(root)
+    while found:
+        chain.append(found[0])
+        found = children(found[0].props)
+    return chain
+
+
+def _transport(structure: XmlStructure, chain, path: Path) -> None:
+    if not chain:
+        return
+    names = [node.props.plugin_name() for node in chain]
+    structure.integrator, structure.wrappers = names[-1], tuple(names[:-1])
+    inner = chain[-1].props
+    where = f"integrator {names[-1]!r}" + "".join(f" in {w!r}" for w in reversed(names[:-1]))
+    if names[-1] in DIRECT_INTEGRATORS:
+        structure.max_depth, structure.transport_origin = DIRECT_MAX_DEPTH, f"{where}: direct illumination only"
+    elif names[-1] in PATH_INTEGRATORS and "max_depth" in inner.keys():
+        try:
+            depth = int(inner["max_depth"])
+        except (TypeError, ValueError):
+            raise UserInputError(f"{path}: integrator max_depth {inner['max_depth']!r} is not an integer") from None
+        if depth == 0:
+            raise UserInputError(f"{path}: integrator max_depth 0 renders nothing (give >= 1, or -1 for unbounded)")
+        if depth > 0:
+            structure.max_depth, structure.transport_origin = depth, f"{where}: max_depth {depth}"
+
+
+def _substitute(text: str | None, parameters: dict[str, str]) -> str:
+    return _VARIABLE.sub(lambda m: parameters.get(m.group(1), m.group(0)), text or "")
+
+
+def _defaults(roots) -> dict[str, str]:
+    out: dict[str, str] = {}
     for root in roots:
-        for element in root.iter():
-            if element.tag == "include" and element.get("filename"):
-                out.files.append(resolve(element.get("filename")))
-            elif element.get("name") == "filename" and element.get("value"):
-                out.files.append(resolve(element.get("value")))
-    integrator = next((root.find("integrator") for root in roots if root.find("integrator") is not None), None)
-    while integrator is not None and integrator.find("integrator") is not None:  # e.g. aov/moment wrappers
-        integrator = integrator.find("integrator")
-    if integrator is not None:
-        out.integrator = resolve(integrator.get("type"))
-        for item in integrator.findall("integer"):
-            if item.get("name") == "max_depth":
-                try:
-                    depth = int(resolve(item.get("value")))
-                except ValueError:
-                    raise UserInputError(
-                        f"{path}: integrator max_depth {item.get('value')!r} is not an integer"
-                    ) from None
-                out.max_depth = None if depth < 0 else depth
+        for item in root.iter("default"):
+            out.setdefault(item.get("name"), item.get("value", ""))
     return out
 
 
-def dependencies(path: Path, structure: XmlStructure | None = None) -> list[tuple[Path, str]]:
-    """``(absolute file, path relative to the XML's folder)`` of every file the scene names.
+def _file_elements(root):
+    """``(element, attribute)`` of every file name in one document: ``<include filename>``, a
+    ``filename`` attribute (spectra), ``<... name="filename" value>``."""
+    for element in root.iter():
+        if not isinstance(element.tag, str):
+            continue  # comments
+        if element.get("filename") is not None:
+            yield element, "filename"
+        elif element.get("name") == "filename" and element.get("value") is not None:
+            yield element, "value"
 
-    UserInputError for a file outside the folder, a missing one, or one named like the scene file.
-    """
-    structure = structure or read_structure(path)
-    root = path.resolve().parent
-    out = []
+
+def _resolve(mi, name: str, search_paths: list[Path]) -> Path | None:
+    resolver = mi.FileResolver()
+    resolver.clear()
+    for folder in search_paths:
+        resolver.append(str(folder))
+    found = Path(str(resolver.resolve(name)))
+    return found.resolve() if found.is_file() else None
+
+
+def read_structure(path: Path, defines: dict[str, str] | None = None) -> XmlStructure:
+    """Parse ``path`` with Mitsuba's parser (``defines``: ``--define`` parameters) and find every file
+    it names as Mitsuba's file resolver does (module Notes); UserInputError (one line) on bad input."""
+    path = Path(path)
+    _parse(path, path)  # well-formed, a <scene>: the clear messages first
+    mi = load_mitsuba()
+    state, parameters, placeholders, added = _mitsuba_parse(mi, path.resolve(), dict(defines or {}))
+    folder = path.resolve().parent
+    defaults = [Path(str(p)) for p in mi.file_resolver()]
+    out = XmlStructure(parameters=parameters, placeholders=placeholders)
+    out.search_paths = [*added, folder, *defaults]
+    out.documents = [Path(str(f)).resolve() for f in state.files] or [path.resolve()]
+    out.has_media = any(node.type == mi.ObjectType.Medium for node in state.nodes)
+    _transport(out, _integrator_chain(mi, state), path)
+    roots = [_parse(document, document) for document in out.documents]
+    values = {**_defaults(roots), **parameters}
+    for root in roots:
+        for element, attribute in _file_elements(root):
+            name = _substitute(element.get(attribute), values)
+            if name in out.resolved:
+                continue
+            found = _resolve(mi, name, out.search_paths)
+            if found is None:
+                searched = ", ".join(str(p) for p in out.search_paths[: len(added) + 1])
+                raise UserInputError(f"{path}: names {name!r}, which does not exist (searched {searched})")
+            out.files.append(name)
+            out.resolved[name] = found
+    return out
+
+
+def _kept_name(name: str) -> str | None:
+    """``name`` as a path inside the copy's folder when it can stay as written, else None."""
+    if not name or "\\" in name or name.startswith("/"):
+        return None
+    parts = PurePosixPath(name).parts
+    if any(part in ("..", "") for part in parts) or ":" in parts[0]:
+        return None
+    kept = PurePosixPath(*[p for p in parts if p != "."]).as_posix()
+    return None if kept in RESERVED_NAMES or kept == "." else kept
+
+
+def copy_names(structure: XmlStructure) -> dict[Path, str]:
+    """Where each file goes in the copy: absolute file -> path relative to the copy's folder."""
+    out: dict[Path, str] = {structure.documents[0]: XML_NAME}
+    taken = {XML_NAME, *RESERVED_NAMES}
+    moved = []
     for name in structure.files:
-        absolute = (root / name).resolve()
-        try:
-            relative = absolute.relative_to(root).as_posix()
-        except ValueError:
-            raise UserInputError(
-                f"{path}: names {name!r}, outside the scene's folder; move it under {root} to generate from it"
-            ) from None
-        if not absolute.is_file():
-            raise UserInputError(f"{path}: names {name!r}, which does not exist ({absolute})")
-        if relative == XML_NAME:
-            raise UserInputError(f"{path}: a file it names is called {XML_NAME}, which the dataset reserves")
-        out.append((absolute, relative))
-    return sorted(set(out), key=lambda item: item[1])
+        absolute = structure.resolved[name]
+        if absolute in out:
+            continue
+        kept = _kept_name(name)
+        if kept is None or kept in taken:
+            moved.append(absolute)
+            continue
+        out[absolute] = kept
+        taken.add(kept)
+    for absolute in moved:
+        if absolute in out:
+            continue
+        stem, suffix, k = Path(absolute.name).stem, Path(absolute.name).suffix, 1
+        relative = f"{MOVED_FOLDER}/{absolute.name}"
+        while relative in taken:
+            k += 1
+            relative = f"{MOVED_FOLDER}/{stem}_{k}{suffix}"
+        out[absolute] = relative
+        taken.add(relative)
+    return out
+
+
+def dependencies(path: Path, structure: XmlStructure | None = None, defines=None) -> list[tuple[Path, str]]:
+    """``(absolute file, path relative to the copy's folder)`` of every file the scene names (the
+    scene file itself excluded), sorted by the relative path (:func:`copy_names`)."""
+    structure = structure or read_structure(path, defines)
+    names = copy_names(structure)
+    return sorted(((a, r) for a, r in names.items() if r != XML_NAME), key=lambda item: item[1])
+
+
+def _rewritten(root, structure: XmlStructure, names: dict[Path, str], values: dict[str, str], top: bool) -> bool:
+    """Rewrite one document of the copy in place; True when anything changed."""
+    changed = False
+    for parent in list(root.iter()):
+        for child in list(parent):
+            if child.tag == "path":
+                parent.remove(child)
+                changed = True
+    for element, attribute in _file_elements(root):
+        name = _substitute(element.get(attribute), values)
+        target = names[structure.resolved[name]]
+        if target != name:
+            element.set(attribute, target)
+            changed = True
+    if top and structure.parameters:
+        existing = {item.get("name"): item for item in root.findall("default")}
+        for k, (name, value) in enumerate(sorted(structure.parameters.items())):
+            if name in existing:
+                if existing[name].get("value") != value:
+                    existing[name].set("value", value)
+                    changed = True
+            else:
+                item = ElementTree.Element("default", {"name": name, "value": value})
+                item.tail = "\n    "
+                root.insert(k, item)
+                changed = True
+    return changed
+
+
+def portable_files(path: Path, defines: dict[str, str] | None = None) -> dict[str, bytes]:
+    """The dataset copy of a scene: ``{path relative to the copy's folder: bytes}``, ``scene.xml``
+    first (module Notes). XML documents are rewritten only where they must be; every other file is
+    copied byte for byte."""
+    path = Path(path)
+    structure = read_structure(path, defines)
+    names = copy_names(structure)
+    documents = set(structure.documents)
+    roots = {document: _parse(document, document) for document in structure.documents}
+    values = {**_defaults(list(roots.values())), **structure.parameters}
+    out: dict[str, bytes] = {}
+    for absolute, relative in sorted(names.items(), key=lambda item: item[1] != XML_NAME):
+        data = absolute.read_bytes()
+        if absolute in documents:
+            root = roots[absolute]
+            if _rewritten(root, structure, names, values, top=relative == XML_NAME):
+                data = ElementTree.tostring(root, encoding="unicode").encode("utf-8") + b"\n"
+        out[relative] = data
+    return out
 
 
 def _param(params, key: str, default: float | None = None) -> float | None:
@@ -169,14 +405,16 @@ def camera_track(mi, sensor, frames: int, path: Path) -> CameraTrack:
     """The static :class:`CameraTrack` of Mitsuba ``sensor`` over ``frames`` frames."""
     kind = sensor.class_name()
     if kind not in SENSORS:
-        raise UserInputError(f"{path}: sensor {kind} is not supported (use perspective or thinlens)")
+        raise UserInputError(f"{path}: sensor {kind} is not supported (use perspective, thinlens or orthographic)")
     params = mi.traverse(sensor)
     to_world = np.array(sensor.world_transform().matrix, dtype=np.float64).reshape(4, 4)
     pose = to_world @ _MITSUBA_TO_USD_CAMERA
     aperture = _param(params, "aperture_radius", 0.0) if kind == "ThinLensCamera" else 0.0
+    orthographic = kind == "OrthographicCamera"
     return CameraTrack(
         poses=np.repeat(pose[None], max(1, int(frames)), axis=0),
-        fov_x_deg=_param(params, "x_fov"),
+        fov_x_deg=0.0 if orthographic else _param(params, "x_fov"),
+        projection="orthographic" if orthographic else "perspective",
         aperture_radius=aperture,
         focus_distance=_param(params, "focus_distance", 1.0),
         near_clip=_param(params, "near_clip", 0.01),
@@ -232,25 +470,29 @@ def infer_effects(mi, scene, camera: CameraTrack) -> tuple[str, ...]:
     return tuple(sorted(found))
 
 
-def load_mitsuba_xml(path: str | Path, frames: int = 8, auto_camera: bool = False) -> tuple[TranslatedScene, object]:
+def load_mitsuba_xml(
+    path: str | Path, frames: int = 8, auto_camera: bool = False, defines: dict[str, str] | None = None
+) -> tuple[TranslatedScene, object]:
     """``(TranslatedScene, mi.Scene)`` of a Mitsuba XML file; UserInputError (one line) on bad input.
 
-    ``frames``: the camera track's length; ``auto_camera``: the orbit instead of the file's sensor.
+    ``frames``: the camera track's length; ``auto_camera``: the orbit instead of the file's sensor;
+    ``defines``: the scene's parameters (``--define NAME=VALUE``; :func:`parse_defines`).
 
     The TranslatedScene has no shapes of its own (``scene_dict["mitsuba_xml"]`` names the file):
-    render the returned ``mi.Scene`` with its ``camera``.
+    render the returned ``mi.Scene`` with its ``camera``. Its ``max_depth`` is the scene's own
+    transport restriction (module Notes), and ``scene_dict["transport_origin"]`` says which
+    integrator asked for it ("" when none did).
     """
 
     path = Path(path)
     if not path.is_file():
         raise UserInputError(f"{path}: no such Mitsuba XML file")
-    structure = read_structure(path)
+    structure = read_structure(path, defines)
     if structure.has_media:
         raise UserInputError(f"{path}: participating media (<medium>) are not supported by denoisebench's renderer")
-    dependencies(path, structure)
     mi = load_mitsuba()
     try:
-        scene = mi.load_file(str(path.resolve()))
+        scene = mi.load_file(str(path.resolve()), **structure.parameters)
     except Exception as error:
         raise UserInputError(f"{path}: Mitsuba cannot load the scene ({_short(error)})") from None
     if not scene.sensors() and not auto_camera:
@@ -262,7 +504,7 @@ def load_mitsuba_xml(path: str | Path, frames: int = 8, auto_camera: bool = Fals
     warnings = []
     if len(scene.sensors()) > 1 and not auto_camera:
         warnings.append(f"{path.name}: {len(scene.sensors())} sensors; the first is the camera")
-    if structure.integrator not in (None, *PATH_INTEGRATORS):
+    if structure.integrator not in (None, *PATH_INTEGRATORS, *DIRECT_INTEGRATORS):
         warnings.append(
             f"{path.name}: integrator {structure.integrator!r} is replaced by denoisebench's path tracer "
             "(complete transport)"
@@ -272,12 +514,18 @@ def load_mitsuba_xml(path: str | Path, frames: int = 8, auto_camera: bool = Fals
     else:
         camera = camera_track(mi, scene.sensors()[0], frames, path)
     translated = TranslatedScene(
-        scene_dict={"bsdfs": {}, "shapes": [], "emitters": [], "mitsuba_xml": str(path)},
+        scene_dict={
+            "bsdfs": {},
+            "shapes": [],
+            "emitters": [],
+            "mitsuba_xml": str(path),
+            "transport_origin": structure.transport_origin,
+        },
         camera=camera,
         effects_inferred=infer_effects(mi, scene, camera),
         warnings=warnings,
         source=str(path),
         family="mitsuba_xml",
-        max_depth=structure.max_depth if structure.integrator in PATH_INTEGRATORS else None,
+        max_depth=structure.max_depth,
     )
     return translated, scene

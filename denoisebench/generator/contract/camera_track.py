@@ -34,6 +34,9 @@ class CameraTrack:
             (USD's ``shutter:open``/``shutter:close``); equal values mean no motion blur.
         near_clip, far_clip: clipping range in meters.
         prim_path: the camera prim this came from.
+        projection: ``"perspective"`` (pinhole or thin lens, the default) or ``"orthographic"``
+            (Mitsuba's ``orthographic`` sensor: parallel rays along the camera's forward axis; the
+            pose's scale sets the view's extent, 2 units wide before scaling; ``fov_x_deg`` unused).
     """
 
     poses: np.ndarray
@@ -46,6 +49,7 @@ class CameraTrack:
     far_clip: float = 1.0e4
     prim_path: str = ""
     extra: dict = field(default_factory=dict)
+    projection: str = "perspective"
 
     @property
     def frames(self) -> int:

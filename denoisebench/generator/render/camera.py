@@ -13,6 +13,12 @@ and ``thinlens`` sensors so that both render the same image:
   ``camera.focus_distance``, lens point ``square_to_uniform_disk_concentric(lens_uv)``; rays aim at
   the point of the focal plane that the pinhole ray through the film position would hit.
 * Rays start on the near clipping plane and end on the far one, like Mitsuba's sensors.
+* Orthographic (``camera.projection == "orthographic"``, Mitsuba's ``orthographic`` sensor): every
+  ray runs along the camera's forward axis from the point ``(-ndc_x, -ndc_y * height / width,
+  near)`` of the camera frame (``ndc`` in [-1, 1]), scaled and placed by the pose, so the view is 2
+  units wide before the pose's scale; it ends ``far - near`` further on. Depth is the distance from
+  the camera plane; motion vectors project points by dropping the depth. Pitfall: a miss (a
+  direction, not a point) has no film position under this projection, so its motion is zero.
 * Time (motion blur only): a ray's time is ``frame + m + (s - 1/2) * (close - open) * shutter_scale``
   with ``s`` uniform in [0, 1) and ``m = (open + close) / 2``: the shutter interval scaled about its
   midpoint. The camera pose at that time interpolates the two bracketing frame poses exactly as
@@ -66,6 +72,7 @@ class CameraSetup:
     trans: np.ndarray | None = None
     scale: np.ndarray | None = None
     frames: int = 1
+    orthographic: bool = False  # tan_half_x/y are then the half extents of the view (1, height/width)
 
 
 def camera_setup(camera: CameraTrack, frame: int, plan: RenderPlan, width: int, height: int) -> CameraSetup:
@@ -74,7 +81,10 @@ def camera_setup(camera: CameraTrack, frame: int, plan: RenderPlan, width: int, 
         raise ValueError(f"image size must be positive (got {width}×{height})")
     if not 0 <= frame < camera.frames:
         raise ValueError(f"frame {frame} outside the camera track (0..{camera.frames - 1})")
-    tan_half_x = math.tan(math.radians(camera.fov_x_deg) / 2.0)
+    orthographic = camera.projection == "orthographic"
+    if camera.projection not in ("perspective", "orthographic"):
+        raise ValueError(f"unknown camera projection {camera.projection!r}")
+    tan_half_x = 1.0 if orthographic else math.tan(math.radians(camera.fov_x_deg) / 2.0)
     thin_lens = plan.camera_model == "thin_lens"
     if plan.camera_model not in ("pinhole", "thin_lens"):
         raise ValueError(f"unknown camera model {plan.camera_model!r}")
@@ -97,6 +107,7 @@ def camera_setup(camera: CameraTrack, frame: int, plan: RenderPlan, width: int, 
         time_span=float(span),
         has_previous=frame > 0,
         frames=camera.frames,
+        orthographic=orthographic,
     )
     if not per_ray:
         # One pose for every ray: the pose at the (center) time; the previous frame's one second earlier.
@@ -157,6 +168,7 @@ class CameraSwitches:
     time_sampling: bool
     has_previous: bool  # frame > 0: motion vectors are computed
     per_ray_pose: bool  # animated camera under time sampling: poses slerped per ray from tables
+    orthographic: bool = False  # parallel rays (CameraTrack.projection "orthographic")
 
 
 def camera_switches(setup: CameraSetup) -> CameraSwitches:
@@ -165,6 +177,7 @@ def camera_switches(setup: CameraSetup) -> CameraSwitches:
         time_sampling=setup.time_sampling,
         has_previous=setup.has_previous,
         per_ray_pose=setup.static_pose is None,
+        orthographic=setup.orthographic,
     )
 
 
@@ -323,6 +336,11 @@ class DrCamera:
         near_p = mi.Vector3f(-ndc_x * self.tan_x, -ndc_y * self.tan_y, 1.0)  # +X left, +Y up in camera space
         pose = self.current_pose(time)
         c0, c1, c2, origin = pose
+        if self.switches.orthographic:
+            o = origin + c0 * near_p.x + c1 * near_p.y + c2 * self.near
+            d = dr.normalize(c2)
+            ray = mi.Ray3f(o, d, self.far - self.near, time, mi.Color0f())
+            return ray, pose
         if self.switches.thin_lens:
             lens = mi.warp.square_to_uniform_disk_concentric(lens_uv) * self.aperture
             d_local = dr.normalize(near_p * self.focus - mi.Vector3f(lens.x, lens.y, 0.0))
@@ -355,6 +373,12 @@ class DrCamera:
         """Film position (pixels, x right, y down) of a point/direction, and whether it is in front."""
         dr, mi = self.dr, self.mi
         x, y, z = self.to_local(pose, p, w)
+        if self.switches.orthographic:  # a point's film position drops its depth; a direction has none
+            front = z > 1e-6
+            front = front if isinstance(w, (int, float)) and w > 0.5 else front & (w > 0.5)
+            px = (1.0 - x / self.tan_x) * 0.5 * self.width
+            py = (1.0 - y / self.tan_y) * 0.5 * self.height
+            return mi.Point2f(px, py), front
         front = z > 1e-6
         inv_z = dr.rcp(dr.select(front, z, 1.0))
         px = (1.0 - x * inv_z / self.tan_x) * 0.5 * self.width
