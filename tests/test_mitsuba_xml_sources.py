@@ -414,3 +414,40 @@ def test_documentation_scenes_load_as_shipped(mi, name, depth):
     # <path value="../../common"/>, includes from include/, $spp without a <default> (sensor_thinlens)
     translated, scene = load_mitsuba_xml(Path(MITSUBA_DATA) / "docs" / "scenes" / name, frames=1)
     assert scene.shapes() and translated.camera.frames == 1 and translated.max_depth == depth
+
+
+@pytest.mark.parametrize("legacy_key", [False, True])
+def test_a_dataset_that_recorded_absolute_paths_resumes_without_rendering(tmp_path, mi, capsys, legacy_key):
+    import hashlib
+
+    from denoisebench.dataset.manifest import config_hash
+    from denoisebench.generator.dataset_run import legacy_config
+
+    # a scene of the kind datasets held before issue 39: no <path>, no parameters, files in its folder
+    source = tmp_path / "src" / "plain.xml"
+    (source.parent / "meshes").mkdir(parents=True)
+    (source.parent / "meshes" / "t.obj").write_text(TRIANGLE)
+    source.write_text(
+        f"""<scene version="3.0.0"><sensor type="perspective">{FILM}</sensor><emitter type="constant"/>
+  <shape type="obj"><string name="filename" value="meshes/t.obj"/></shape><shape type="sphere"/></scene>
+"""
+    )
+    out = tmp_path / "ds"
+    args = ["generate", "--out", str(out), "--mitsuba", str(source), "--frames", "1", "--width", "8", "--height", "8"]
+    args += ["--spp", "1", "--ref-spp", "4", "--ref-error", "0", "--quiet"] + (["--auto-camera"] if legacy_key else [])
+    assert main(args) == 0
+    # rewrite the manifest as the code before issue 39 wrote it: the file's absolute path (and, before
+    # the stage_options rename, usd_options), hashed over that
+    path = out / "dataset.json"
+    manifest = json.loads(path.read_text())
+    config = dict(manifest["config"])
+    config["xml"] = [{"path": str(source.resolve()), "sha256": hashlib.sha256(source.read_bytes()).hexdigest()}]
+    config = legacy_config(config) if legacy_key else config
+    manifest["config"], manifest["config_hash"] = config, config_hash(config)
+    path.write_text(json.dumps(manifest, indent=1))
+    stamps = {p: p.stat().st_mtime_ns for p in sorted(out.rglob("*.exr"))}
+    capsys.readouterr()
+    assert main(args) == 0  # resumed, not refused as another config
+    assert "0 frame(s) rendered" in capsys.readouterr().out
+    assert json.loads(path.read_text())["config_hash"] == config_hash(config)  # its own hash, kept
+    assert {p: p.stat().st_mtime_ns for p in sorted(out.rglob("*.exr"))} == stamps

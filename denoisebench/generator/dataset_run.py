@@ -241,7 +241,9 @@ def resumable_config(out: str | Path, config: dict, *older: dict | None) -> dict
     (no dataset, an unreadable manifest, another config) gets ``config`` and the writer's usual rules
     (resume, refuse, or ``--force``).
     """
-    candidates = [c for c in (legacy_config(config), *older) if c is not None and c != config]
+    older = tuple(c for c in older if c is not None)
+    spellings = (legacy_config(config), *older, *(legacy_config(c) for c in older))
+    candidates = [c for c in spellings if c is not None and c != config]
     if not candidates:
         return config
     try:
