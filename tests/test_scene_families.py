@@ -13,6 +13,7 @@ from pxr import Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
 from denoisebench.scenes import EFFECTS, METADATA_KEY, camera_paths, get_family, list_families
 from denoisebench.scenes.authoring import STAGE_FILENAME
+from denoisebench.scenes.media import has_medium
 
 FRAMES = 4
 SEED = 5
@@ -95,6 +96,8 @@ def _infer_effects(stage: Usd.Stage, frames: int) -> set[str]:
             found.add("area_lights")
         if prim.IsA(UsdLux.DomeLight):
             found.add("environment")
+        if has_medium(prim):
+            found.add("media")
     return found
 
 

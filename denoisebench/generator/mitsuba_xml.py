@@ -61,11 +61,12 @@ Notes
   source ``"stage"``, with :attr:`XmlStructure.transport_origin` saying which integrator asked);
   ``--max-depth`` still wins. Any other integrator type gets one warning: full transport is
   rendered. Pitfall: ``direct``'s ``hide_emitters`` and sample counts are not honoured (the counts
-  change noise, not the expectation). Participating media (``<medium>``) cannot be rendered:
-  refused.
+  change noise, not the expectation). Participating media (``<medium>``
+  bound to shapes or the sensor) are rendered by the volumetric tracer (render/volpath.py) and
+  add the ``media`` effect.
 * Refusals are one-line :class:`~denoisebench.errors.UserInputError` (exit 2): a missing file,
   malformed XML, a root other than ``<scene>``, an undefined parameter, an unused ``--define``, a
-  scene Mitsuba will not load, no or an unsupported sensor, no emitter, media.
+  scene Mitsuba will not load, no or an unsupported sensor, no emitter.
 """
 
 from __future__ import annotations
@@ -467,6 +468,10 @@ def infer_effects(mi, scene, camera: CameraTrack) -> tuple[str, ...]:
             found.add("transmission")
         if any(key.endswith(".data") for key in mi.traverse(bsdf).keys()):
             found.add("textures")
+    bound = [m for shape in scene.shapes() for m in (shape.interior_medium(), shape.exterior_medium())]
+    bound += [sensor.get_medium() for sensor in scene.sensors()]
+    if any(medium is not None for medium in bound):
+        found.add("media")  # participating media: the volumetric tracer renders the scene
     return tuple(sorted(found))
 
 
@@ -488,8 +493,6 @@ def load_mitsuba_xml(
     if not path.is_file():
         raise UserInputError(f"{path}: no such Mitsuba XML file")
     structure = read_structure(path, defines)
-    if structure.has_media:
-        raise UserInputError(f"{path}: participating media (<medium>) are not supported by denoisebench's renderer")
     mi = load_mitsuba()
     try:
         scene = mi.load_file(str(path.resolve()), **structure.parameters)

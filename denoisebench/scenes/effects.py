@@ -18,6 +18,7 @@ EFFECTS: tuple[str, ...] = (
     "area_lights",  # Rect / Sphere / Disk lights, emissive geometry
     "environment",  # Dome light
     "indirect",  # multi-bounce light transport matters
+    "media",  # participating media (fog, smoke, subsurface): the volumetric tracer (render/volpath.py)
 )
 
 #: Effects no stage can show by itself (multi-bounce transport matters): only ever declared.

@@ -9,6 +9,8 @@ by Mitsuba either and do not count.
 
 from __future__ import annotations
 
+import numpy as np
+
 from denoisebench.generator.render.motion import ShutterMotionScene
 
 
@@ -37,3 +39,35 @@ def camera_medium(scene):
     """The medium the camera sits in: the first sensor's (None without sensors or medium)."""
     sensors = scene.sensors()
     return sensors[0].get_medium() if sensors else None
+
+
+def medium_dict(mi, medium: dict) -> dict:
+    """The ``mi.load_dict`` dictionary of a translated medium record (generator/usd/media.py documents it)."""
+    phase = {"type": "hg", "g": medium["g"]} if medium["g"] != 0.0 else {"type": "isotropic"}
+    sigma = np.asarray(medium["sigma_t"], dtype=np.float64)
+    if medium["type"] == "homogeneous":
+        peak = float(sigma.max())
+        unit = (sigma / peak).tolist() if peak > 0 else [0.0, 0.0, 0.0]
+        return {
+            "type": "homogeneous",
+            "sigma_t": {"type": "rgb", "value": unit},
+            "scale": peak,
+            "albedo": {"type": "rgb", "value": list(medium["albedo"])},
+            "phase": phase,
+        }
+    density = np.asarray(medium["density"], dtype=np.float32)
+    if np.allclose(sigma, sigma[0]):
+        data = density[..., None] * np.float32(sigma[0])
+    else:
+        data = density[..., None] * sigma.astype(np.float32)
+    return {
+        "type": "heterogeneous",
+        "sigma_t": {
+            "type": "gridvolume",
+            "data": mi.TensorXf(np.ascontiguousarray(data, dtype=np.float32)),
+            "to_world": mi.ScalarTransform4f(np.asarray(medium["grid_to_world"], dtype=np.float64).tolist()),
+        },
+        "albedo": {"type": "rgb", "value": list(medium["albedo"])},
+        "scale": 1.0,
+        "phase": phase,
+    }

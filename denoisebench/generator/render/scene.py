@@ -10,6 +10,9 @@ ones for static meshes and at frame 0). The feature integrator interpolates it a
 to reproject the point the surface occupied in the previous frame (object motion vectors).
 Analytic spheres never move (moving spheres are tessellated), so they need no attribute.
 
+Media: a shape record with ``medium`` (generator/usd/media.py) gets that medium as its interior, and a
+``null`` BSDF when no material is bound to it (an invisible boundary: fog, smoke).
+
 Motion within the shutter: shapes whose records hold ``shutter_motion`` (rigid shapes of a stage with
 an open shutter) are, when :func:`build_mitsuba_scene` is asked for the feature renderer (no sensor,
 no integrator), left out of the main scene and built in their object space (in layout scenes: each
@@ -32,6 +35,7 @@ import numpy as np
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.contract.translated_scene import TranslatedScene
+from denoisebench.generator.render.media import medium_dict
 from denoisebench.generator.render.motion import MovingShapes, ShutterMotionScene, object_space, plan_layout
 from denoisebench.mitsuba_runtime import load_mitsuba
 
@@ -65,10 +69,12 @@ def _emitter_object(mi, record: dict):
 PREVIOUS_POSITION = "vertex_prev_position"
 
 
-def _build_mesh(mi, record: dict, bsdf, emitter, frame: int | None = None):
+def _build_mesh(mi, record: dict, bsdf, emitter, frame: int | None = None, medium=None):
     props = mi.Properties()
     if bsdf is not None:
         props["bsdf"] = bsdf
+    if medium is not None:
+        props["interior"] = medium
     if emitter is not None:
         props["emitter"] = emitter
     positions, faces = record["positions"], record["faces"]
@@ -168,6 +174,11 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
             black = black or mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}})
             bsdf = black
         key = f"shape_{index:04d}"
+        medium = None
+        if "medium" in record:  # a medium boundary (generator/usd/media.py): its interior, null unless a material
+            medium = mi.load_dict(medium_dict(mi, record["medium"]))
+            if record["medium"]["null_boundary"]:
+                bsdf = mi.load_dict({"type": "null"})
         if shutter_motion and "shutter_motion" in record:
             local = object_space(record)
             points = local["positions"].astype(np.float64)
@@ -178,10 +189,12 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
             shape = {"type": "sphere", "center": record["center"], "radius": record["radius"], "bsdf": bsdf}
             if emitter is not None:
                 shape["emitter"] = emitter
+            if medium is not None:
+                shape["interior"] = medium
             out[key] = shape
         else:
             try:
-                out[key] = _build_mesh(mi, record, bsdf, emitter, frame if moving else None)
+                out[key] = _build_mesh(mi, record, bsdf, emitter, frame if moving else None, medium)
             except Exception as error:  # a prim that breaks Mitsuba is skipped with its warning
                 skipped(f"{record['name']}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
     for index, group in enumerate(data.get("instance_groups", [])):

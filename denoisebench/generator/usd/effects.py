@@ -5,7 +5,8 @@ Thresholds: ``specular`` for metals or dielectrics with roughness < 0.05 (a near
 opacity < 1; ``textures`` for any bitmap in use; ``area_lights`` for Rect/Disk/Sphere lights and
 emissive geometry; ``environment`` for a Dome light; ``depth_of_field`` for a lens aperture;
 ``motion_blur`` for an open shutter on an animated camera or with a shape that moves within it
-(a record with ``shutter_motion``: object motion blur). ``indirect`` (multi-bounce transport
+(a record with ``shutter_motion``: object motion blur); ``media`` for a gprim that bounds a
+participating medium (generator/usd/media.py). ``indirect`` (multi-bounce transport
 matters) cannot be read off a stage reliably; it is only ever declared.
 """
 
@@ -40,4 +41,6 @@ def infer_effects(camera, materials, light_kinds, shapes, emitters) -> tuple[str
         found.add("area_lights")
     if any(emitter["type"] in ("envmap", "constant") for emitter in emitters) or "DomeLight" in light_kinds:
         found.add("environment")
+    if any("medium" in shape for shape in shapes):
+        found.add("media")
     return validate_effects(found)

@@ -33,6 +33,7 @@ from denoisebench.generator.usd.camera import find_camera, read_camera
 from denoisebench.generator.usd.effects import infer_effects
 from denoisebench.generator.usd.lights import read_light
 from denoisebench.generator.usd.materials import bound_material
+from denoisebench.generator.usd.media import attach_media
 from denoisebench.generator.usd.stage import frame_range, open_stage, stage_to_mitsuba_matrix
 from denoisebench.scenes.effects import METADATA_KEY, validate_effects
 
@@ -204,6 +205,7 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
                 )
                 if camera.has_open_shutter and not geometry.are_points_animated(prim):
                     _attach_shutter_motion(prim, parts, to_mitsuba, frames, camera, warnings)
+            attach_media(prim, parts, to_mitsuba, to_mitsuba @ geometry.local_to_world(prim, frames[0]))
             for record, material in parts:
                 bind(record, material)
             continue

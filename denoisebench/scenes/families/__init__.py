@@ -12,6 +12,7 @@ from denoisebench.scenes.families import (
     cornell,
     depth_of_field,
     dim_room,
+    fog_smoke,
     glass_env,
     glossy_fireflies,
     motion_blur,
@@ -122,5 +123,15 @@ ALL: tuple[SceneFamily, ...] = (
         1.0,
         "partial orbit",
         cluttered.build,
+    ),
+    SceneFamily(
+        "fog_smoke",
+        ("specular", "transmission", "environment", "media"),
+        "Participating media: a fog bank lit through a skylight, a smoke plume on a seeded density grid, "
+        "a subsurface glass sphere.",
+        "Y",
+        1.0,
+        "partial orbit",
+        fog_smoke.build,
     ),
 )

@@ -1,0 +1,126 @@
+"""Participating media on USD gprims: denoisebench's documented encoding (USD has no standard for one).
+
+A gprim (Mesh, Sphere, Cube, ...) carrying ``denoisebench:medium:type`` is a **medium boundary**: its
+interior holds a participating medium, rendered by the volumetric tracer (render/volpath.py; the
+``media`` effect). Attributes (custom, on the gprim):
+
+=====================================  ===========  =====================================================
+attribute                              type         meaning
+=====================================  ===========  =====================================================
+``denoisebench:medium:type``           token        ``homogeneous`` or ``heterogeneous``
+``denoisebench:medium:sigmaT``         color3f      extinction per stage unit (default 1, 1, 1)
+``denoisebench:medium:albedo``         color3f      single-scattering albedo (default 0.8, 0.8, 0.8)
+``denoisebench:medium:g``              float        Henyey-Greenstein anisotropy in (-1, 1); 0: isotropic
+``denoisebench:medium:density``        float[]      heterogeneous: density grid, x fastest, then y, then z;
+                                                    it multiplies ``sigmaT``
+``denoisebench:medium:densityDims``    int3         heterogeneous: the grid's (x, y, z) sample counts
+``denoisebench:medium:boundary``       token        ``null`` (default): an invisible boundary, the bound
+                                                    material is not rendered (fog, smoke); ``surface``:
+                                                    the bound material is the boundary's surface (a glass
+                                                    material: subsurface scattering)
+=====================================  ===========  =====================================================
+
+The density grid spans the gprim's local extent (its bounding box in its own space), so it moves and
+scales with the gprim. Media do not nest: a ray leaving a medium boundary is in no medium (Mitsuba's
+convention without an ``exterior``), so boundaries should not overlap. ``denoisebench.scenes.media``
+authors these attributes. Bad values (a negative extinction, an albedo outside [0, 1], a
+grid whose size does not match its dims) are one-line errors, never a crash.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from denoisebench.errors import UserInputError
+
+PREFIX = "denoisebench:medium:"
+TYPES = ("homogeneous", "heterogeneous")
+BOUNDARIES = ("null", "surface")
+
+
+def _get(prim, name: str, default=None):
+    attr = prim.GetAttribute(PREFIX + name)
+    if not attr or not attr.HasAuthoredValue():
+        return default
+    return attr.Get()
+
+
+def _triple(value, what: str, path: str) -> list[float]:
+    out = [float(v) for v in value]
+    if len(out) != 3 or not all(np.isfinite(out)):
+        raise UserInputError(f"{path}: {PREFIX}{what} must be three finite numbers")
+    return out
+
+
+def read_medium(prim, to_mitsuba: np.ndarray, local_to_world: np.ndarray) -> dict | None:
+    """The medium record of ``prim`` (None without ``denoisebench:medium:type``); module docstring.
+
+    ``to_mitsuba``: stage → Mitsuba world (its scale converts the extinction per stage unit to per
+    meter); ``local_to_world``: the gprim's local → Mitsuba world matrix (the grid's placement).
+    """
+    kind = _get(prim, "type")
+    if kind is None:
+        return None
+    path = str(prim.GetPath())
+    kind = str(kind)
+    if kind not in TYPES:
+        raise UserInputError(f"{path}: {PREFIX}type {kind!r} is not one of {', '.join(TYPES)}")
+    meters = abs(float(np.linalg.det(np.asarray(to_mitsuba, dtype=np.float64)[:3, :3]))) ** (1.0 / 3.0)
+    sigma_t = _triple(_get(prim, "sigmaT", (1.0, 1.0, 1.0)), "sigmaT", path)
+    albedo = _triple(_get(prim, "albedo", (0.8, 0.8, 0.8)), "albedo", path)
+    if min(sigma_t) < 0:
+        raise UserInputError(f"{path}: {PREFIX}sigmaT must be >= 0")
+    if not all(0.0 <= a <= 1.0 for a in albedo):
+        raise UserInputError(f"{path}: {PREFIX}albedo must lie in [0, 1]")
+    boundary = str(_get(prim, "boundary", "null"))
+    if boundary not in BOUNDARIES:
+        raise UserInputError(f"{path}: {PREFIX}boundary {boundary!r} is not one of {', '.join(BOUNDARIES)}")
+    g = float(_get(prim, "g", 0.0))
+    if not -1.0 < g < 1.0:
+        raise UserInputError(f"{path}: {PREFIX}g must lie in (-1, 1)")
+    record = {
+        "type": kind,
+        "sigma_t": [s / max(meters, 1e-30) for s in sigma_t],
+        "albedo": albedo,
+        "g": g,
+        "null_boundary": boundary == "null",
+    }
+    if kind == "heterogeneous":
+        dims = _get(prim, "densityDims")
+        values = _get(prim, "density")
+        if dims is None or values is None:
+            raise UserInputError(f"{path}: a heterogeneous medium needs {PREFIX}density and {PREFIX}densityDims")
+        nx, ny, nz = (int(v) for v in dims)
+        density = np.asarray(values, dtype=np.float32)
+        if min(nx, ny, nz) < 1 or density.size != nx * ny * nz:
+            raise UserInputError(
+                f"{path}: {PREFIX}density has {density.size} values, densityDims {nx}x{ny}x{nz} asks for {nx * ny * nz}"
+            )
+        if not np.all(np.isfinite(density)) or density.min() < 0:
+            raise UserInputError(f"{path}: {PREFIX}density must be finite and >= 0")
+        record["density"] = density.reshape(nz, ny, nx)
+        low, high = _local_extent(prim)
+        grid = np.eye(4)
+        grid[:3, :3] = np.diag(np.maximum(high - low, 1e-9))
+        grid[:3, 3] = low
+        record["grid_to_world"] = np.asarray(local_to_world, dtype=np.float64) @ grid
+    return record
+
+
+def _local_extent(prim) -> tuple[np.ndarray, np.ndarray]:
+    from pxr import Usd, UsdGeom
+
+    box = UsdGeom.Imageable(prim).ComputeLocalBound(Usd.TimeCode.Default(), UsdGeom.Tokens.default_).GetRange()
+    low, high = np.array(box.GetMin(), dtype=np.float64), np.array(box.GetMax(), dtype=np.float64)
+    if box.IsEmpty() or not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
+        raise UserInputError(f"{prim.GetPath()}: a heterogeneous medium needs a gprim with an extent")
+    return low, high
+
+
+def attach_media(prim, parts: list, to_mitsuba: np.ndarray, local_to_world: np.ndarray) -> None:
+    """Give every part record of ``prim`` its medium (``record["medium"]``) when it is a medium boundary."""
+    medium = read_medium(prim, to_mitsuba, local_to_world)
+    if medium is None:
+        return
+    for record, _ in parts:
+        record["medium"] = medium
