@@ -152,7 +152,6 @@ def test_camera_and_effects_come_from_the_plugins(tmp_path, mi):
     [
         ("<scene version='3.0.0'><shape type='sphere'>", "not well-formed XML"),
         ("<shape type='sphere'/>", "not a Mitsuba <scene>"),
-        ("<scene version='3.0.0'><medium type='homogeneous' id='m'/></scene>", "participating media"),
         (
             "<scene version='3.0.0'><shape type='ply'><string name='filename' value='../x.ply'/></shape></scene>",
             "names '../x.ply', which does not exist",

@@ -213,6 +213,17 @@ def test_the_scenes_own_transport_is_read_through_wrappers(tmp_path, mi, integra
     assert make_render_plan(translated.effects, RenderOptions(max_depth=-1), translated.max_depth).max_depth == -1
 
 
+def test_hide_emitters_is_not_honoured_and_says_so(tmp_path, mi):
+    path = tmp_path / "t.xml"
+    path.write_text(
+        '<scene version="3.0.0"><integrator type="moment"><integrator type="path">'
+        '<boolean name="hide_emitters" value="true"/></integrator></integrator>'
+        f'<sensor type="perspective">{FILM}</sensor><emitter type="constant"/><shape type="sphere"/></scene>'
+    )
+    translated, _ = load_mitsuba_xml(path, frames=1)
+    assert len(translated.warnings) == 1 and "hide_emitters is not honoured" in translated.warnings[0]
+
+
 def test_another_integrator_gets_one_warning(tmp_path, mi):
     path = tmp_path / "t.xml"
     path.write_text(
@@ -342,6 +353,10 @@ def test_the_commands_refuse_a_missing_define_in_one_line(tmp_path, mi, capsys):
     assert main(["scenes", "check", str(source), "--define", "fov=45", "-D", "integrator=path"]) == 0
     report = json.loads(capsys.readouterr().out)
     assert report["render_plan"]["max_depth"] == -1  # integrator=path: full transport
+    assert report["transport"].startswith("full transport")
+    assert main(["scenes", "check", str(source), "--define", "fov=45"]) == 0
+    transport = json.loads(capsys.readouterr().out)["transport"]
+    assert "max_depth 2" in transport and "'direct' in 'moment'" in transport
     preview = tmp_path / "p.png"
     args = ["scenes", "preview", str(source), "-D", "fov=45", "--out", str(preview), "--width", "8", "--height", "8"]
     assert main([*args, "--spp", "2"]) == 0 and preview.is_file()

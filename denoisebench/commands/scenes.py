@@ -19,6 +19,7 @@ import sys
 
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.render_plan import make_render_plan
+from denoisebench.generator.dataset_run import transport_note
 from denoisebench.generator.dataset_scenes import stage_options
 from denoisebench.generator.mitsuba_xml import load_mitsuba_xml, parse_defines
 from denoisebench.generator.preview import render_preview, tone_map_preview, write_png
@@ -189,6 +190,7 @@ def _check(args) -> int:
                 "effects_declared": list(translated.effects_declared),
                 "effects_inferred": list(translated.effects_inferred),
                 "render_plan": plan.to_dict(),
+                "transport": plan.transport_line() + transport_note(translated, plan),
             },
             indent=2,
             sort_keys=True,

@@ -264,7 +264,7 @@ def render_versions() -> dict[str, str]:
     return versions
 
 
-def _transport_origin(translated, plan) -> str:
+def transport_note(translated, plan) -> str:
     """`` (<which integrator>)`` when a Mitsuba XML scene's own integrator restricts transport, else ""."""
     origin = translated.scene_dict.get("transport_origin", "") if isinstance(translated.scene_dict, dict) else ""
     return f" ({origin})" if origin and plan.max_depth_source == "stage" else ""
@@ -283,7 +283,7 @@ def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -
         "spp": sorted(set(int(s) for s in request.spp)),
         "ref_spp": request.ref_spp,
         "ref_error": request.ref_error,
-        "transport": plan.transport_line() + _transport_origin(translated, plan),
+        "transport": plan.transport_line() + transport_note(translated, plan),
         "usd": f"{spec.name}/{spec.stage_files[0]}",  # scene.usda, or scene.xml for --xml
         "stage_files": list(spec.stage_files),
         "stage_sha256": scenes_mod.stage_digest(spec.stage_dir, spec.stage_files),

@@ -60,8 +60,9 @@ Notes
   ``max_depth`` 2, which is what is rendered. Either is recorded like a stage's ``maxDepth`` (plan
   source ``"stage"``, with :attr:`XmlStructure.transport_origin` saying which integrator asked);
   ``--max-depth`` still wins. Any other integrator type gets one warning: full transport is
-  rendered. Pitfall: ``direct``'s ``hide_emitters`` and sample counts are not honoured (the counts
-  change noise, not the expectation). Participating media (``<medium>``
+  rendered. Pitfalls: ``direct``'s sample counts are not honoured (they change noise, not the
+  expectation); ``hide_emitters`` (any integrator) is not honoured either, with one warning, since
+  it changes the image. Participating media (``<medium>``
   bound to shapes or the sensor) are rendered by the volumetric tracer (render/volpath.py) and
   add the ``media`` effect.
 * Refusals are one-line :class:`~denoisebench.errors.UserInputError` (exit 2): a missing file,
@@ -125,6 +126,7 @@ class XmlStructure:
     wrappers: tuple[str, ...] = ()  # wrapper integrators read through, outermost first
     max_depth: int | None = None  # the scene's own restriction (None: unbounded / full transport)
     transport_origin: str = ""  # which integrator asked for max_depth, e.g. "integrator 'direct' in 'moment'"
+    notes: list[str] = field(default_factory=list)  # integrator settings that are not honoured (become warnings)
     files: list[str] = field(default_factory=list)  # every file name as written (parameters substituted)
     resolved: dict[str, Path] = field(default_factory=dict)  # name as written -> the file Mitsuba loads
     documents: list[Path] = field(default_factory=list)  # the XML files read: the scene first, then includes
@@ -219,6 +221,8 @@ def _transport(structure: XmlStructure, chain, path: Path) -> None:
     structure.integrator, structure.wrappers = names[-1], tuple(names[:-1])
     inner = chain[-1].props
     where = f"integrator {names[-1]!r}" + "".join(f" in {w!r}" for w in reversed(names[:-1]))
+    if "hide_emitters" in inner.keys() and bool(inner["hide_emitters"]):
+        structure.notes.append(f"{where}: hide_emitters is not honoured (emitters seen by the camera are rendered)")
     if names[-1] in DIRECT_INTEGRATORS:
         structure.max_depth, structure.transport_origin = DIRECT_MAX_DEPTH, f"{where}: direct illumination only"
     elif names[-1] in PATH_INTEGRATORS and "max_depth" in inner.keys():
@@ -507,6 +511,7 @@ def load_mitsuba_xml(
     warnings = []
     if len(scene.sensors()) > 1 and not auto_camera:
         warnings.append(f"{path.name}: {len(scene.sensors())} sensors; the first is the camera")
+    warnings.extend(f"{path.name}: {note}" for note in structure.notes)
     if structure.integrator not in (None, *PATH_INTEGRATORS, *DIRECT_INTEGRATORS):
         warnings.append(
             f"{path.name}: integrator {structure.integrator!r} is replaced by denoisebench's path tracer "
