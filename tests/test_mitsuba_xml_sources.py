@@ -466,3 +466,19 @@ def test_a_dataset_that_recorded_absolute_paths_resumes_without_rendering(tmp_pa
     assert "0 frame(s) rendered" in capsys.readouterr().out
     assert json.loads(path.read_text())["config_hash"] == config_hash(config)  # its own hash, kept
     assert {p: p.stat().st_mtime_ns for p in sorted(out.rglob("*.exr"))} == stamps
+
+
+def test_an_orthographic_dataset_records_its_projection_and_noisebase_refuses_it(tmp_path, mi, capsys):
+    pytest.importorskip("noisebase")
+    source = tmp_path / "ortho.xml"
+    source.write_text(ORTHO)
+    out = tmp_path / "ds"
+    args = ["generate", "--out", str(out), "--mitsuba", str(source), "--frames", "2", "--width", "8", "--height", "8"]
+    assert main([*args, "--spp", "2", "--ref-spp", "4", "--ref-error", "0", "--samples", "--quiet"]) == 0
+    manifest = json.loads((out / "dataset.json").read_text())
+    assert manifest["scenes"]["xml_ortho"]["camera"]["projection"] == "orthographic"
+    capsys.readouterr()
+    never = tmp_path / "nb"
+    assert main(["export", str(out), str(never), "--format", "noisebase", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "orthographic camera" in err and "\n" not in err and not never.exists()

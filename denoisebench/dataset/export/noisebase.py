@@ -379,6 +379,10 @@ def plan_export(dataset: Dataset, spp: int | None, layout: str) -> dict[str, lis
         chosen = _samples_spp(dataset, scene, spp)
         if "fov_x_deg" not in info.camera:
             raise UserInputError(f"scene {scene!r} has no camera field of view in the manifest")
+        if info.camera.get("projection", "perspective") != "perspective":
+            raise UserInputError(
+                f"scene {scene!r} has an {info.camera['projection']} camera; Noisebase's format holds perspective ones"
+            )
         plan.setdefault(splits[scene], []).append((scene, chosen))
     if layout == "train":
         for split, entries in plan.items():
