@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 from denoisebench.dataset import disk_space, open_dataset
+from denoisebench.denoisers.registry import check_denoiser_spec
 from denoisebench.errors import UserInputError
 from denoisebench.leaderboard.benchmark_run import run_benchmark
 from denoisebench.leaderboard.report import write_report
@@ -35,6 +36,7 @@ from denoisebench.plugins import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT
 from denoisebench.plugins.proxy import add_arguments as add_isolation_arguments
 from denoisebench.plugins.proxy import limits_from_args
 from denoisebench.plugins.sandbox import protect
+from denoisebench.sampling.registry import check_sampler_spec
 
 EPILOG = """examples:
   run-benchmark --data out/dataset --out report/
@@ -210,6 +212,12 @@ def _run(args) -> int:
         specs = [s for s in specs if s != "none"] or ["identity"]
         if args.executor != "local":
             raise UserInputError("--samplers runs with --executor local only")
+    for spec in specs:  # a misspelled name is refused before any file is written
+        if spec not in ("all", "none"):
+            check_denoiser_spec(spec)
+    for spec in samplers:
+        if spec != "none":
+            check_sampler_spec(spec)
     config = BenchmarkConfig(
         denoisers=specs,
         spp=_int_list(args.spp) if args.spp else [],

@@ -11,6 +11,9 @@ A plugin (anything but a built-in) runs in a worker process of its own, as in th
 the reason instead of ending this command, and its inputs are copies it cannot use to change what
 the check compares against.
 
+A failing case's line says what it tests and what usually fixes it; where the denoiser raised,
+--verbose prints its traceback below the table and --json carries it (``traceback``).
+
 Exit codes: 0 every case passed, 1 some case failed, 2 the denoiser cannot be found or built
 (or an unknown --case / malformed or unknown --option).
 """
@@ -18,6 +21,7 @@ Exit codes: 0 every case passed, 1 some case failed, 2 the denoiser cannot be fo
 from __future__ import annotations
 
 import json
+import logging
 import sys
 
 from tqdm import tqdm
@@ -37,6 +41,7 @@ EPILOG = """examples:
   denoisebench check-plugin rpf --case fireflies --case tiny
   denoisebench check-plugin my_package.denoise:MyDenoiser --option strength=0.5
   denoisebench check-plugin plugins/median.py:Median --json
+  denoisebench check-plugin plugins/mine.py:denoise --verbose      # a plain function; tracebacks shown
   denoisebench check-plugin plugins/slow.py:Slow --time-limit 300 --memory-limit 8192
   denoisebench check-plugin --list
   denoisebench check-plugin --sampler hachisuka2008
@@ -55,6 +60,9 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument("--case", action="append", default=None, metavar="NAME", help="run only this case; repeatable")
     parser.add_argument("--json", action="store_true", help="print the results as JSON instead of a table")
+    parser.add_argument(
+        "--verbose", action="store_true", help="print the traceback of every case where the denoiser raised"
+    )
     parser.add_argument("--list", action="store_true", help="list the known denoisers and the hard cases, then exit")
     parser.add_argument(
         "--sampler",
@@ -96,8 +104,8 @@ def _list() -> int:
     return 0
 
 
-def _table(label: str, outcomes) -> str:
-    rows = [("case", "result", "seconds", "sanitised", "detail")]
+def _table(label: str, outcomes, verbose: bool = False) -> str:
+    rows = [("case", "result", "seconds", "sanitised", "detail", "")]
     for outcome in outcomes:
         rows.append(
             (
@@ -106,14 +114,20 @@ def _table(label: str, outcomes) -> str:
                 f"{outcome.seconds:.3f}",
                 str(outcome.sanitized),
                 outcome.reason,
+                outcome.hint,
             )
         )
     widths = [max(len(row[i]) for row in rows) for i in range(4)]
     lines = [f"check-plugin {label}"]
     for row in rows:
         lines.append(("  ".join(cell.ljust(width) for cell, width in zip(row[:4], widths)) + "  " + row[4]).rstrip())
+        if row[1] == "FAIL" and row[5]:
+            lines.append(f"{'':<{widths[0]}}  hint: {row[5]}")
     passed = sum(outcome.passed for outcome in outcomes)
     lines.append(f"{passed}/{len(outcomes)} cases passed")
+    raised = [outcome for outcome in outcomes if outcome.traceback]
+    for outcome in raised if verbose else ():
+        lines += ["", f"traceback of case {outcome.case}:", outcome.traceback.rstrip()]
     return "\n".join(lines)
 
 
@@ -138,19 +152,31 @@ def run(args) -> int:
     denoiser = isolation.load(args.spec, options, policy=args.isolation, limits=limits)
     label = getattr(denoiser, "name", None) or args.spec
     outcomes = []
-    for case in tqdm(cases, desc=f"check {label}", unit="case", file=sys.stderr, leave=False):
-        outcomes.append(hard_cases.run_case(denoiser, case))
+    quiet = logging.getLogger("denoisebench.plugins")  # tracebacks go to the table (--verbose) or the JSON
+    level, quiet.level = quiet.level, logging.ERROR
+    try:
+        for case in tqdm(cases, desc=f"check {label}", unit="case", file=sys.stderr, leave=False):
+            outcomes.append(hard_cases.run_case(denoiser, case))
+    finally:
+        quiet.setLevel(level)
     if args.json:
         payload = {
             "denoiser": label,
             "spec": args.spec,
             "passed": all(o.passed for o in outcomes),
             "cases": [
-                {"case": o.case, "passed": o.passed, "reason": o.reason, "seconds": o.seconds, "sanitized": o.sanitized}
+                {
+                    "case": o.case,
+                    "passed": o.passed,
+                    "reason": o.reason,
+                    "seconds": o.seconds,
+                    "sanitized": o.sanitized,
+                    **({"hint": o.hint, "traceback": o.traceback} if not o.passed else {}),
+                }
                 for o in outcomes
             ],
         }
         print(json.dumps(payload, indent=2))
     else:
-        print(_table(label, outcomes))
+        print(_table(label, outcomes, verbose=args.verbose))
     return 0 if all(o.passed for o in outcomes) else 1

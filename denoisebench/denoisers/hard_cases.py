@@ -25,6 +25,11 @@ decide the scale of either side: identity passes, a filter that spreads a firefl
 neighbourhood or darkens the frame fails. When the input's robust mean is 0 (the black frame)
 the output's must be at most :data:`ABSOLUTE_TOLERANCE`.
 
+A failing case says in one line what it tests and what usually fixes it (:attr:`CaseResult.hint`:
+the case's own :attr:`HardCase.hint`, or the fix for the kind of failure where that is the clearer
+one: a wrong shape or dtype, a negative output, an exception), and keeps the denoiser's traceback
+where it raised (:attr:`CaseResult.traceback`).
+
 Notes:
     * The suite's frames are made once per call of :func:`hard_cases` with fixed seeds:
       results are reproducible.
@@ -58,6 +63,7 @@ class HardCase:
     description: str
     make: Callable[[], Sequence]
     expect_sanitized: bool = False  # the input holds NaN/Inf: the runner must have counted some
+    hint: str = ""  # what usually fixes a denoiser that fails this case (one line)
 
 
 @dataclass
@@ -70,6 +76,8 @@ class CaseResult:
     seconds: float = 0.0  # total time inside denoise() over the case's frames
     sanitized: int = 0  # NaN/Inf values the runner replaced in the inputs
     results: list[DenoiseResult] = field(default_factory=list)
+    hint: str = ""  # failed: what the case tests and what usually fixes it (one line)
+    traceback: str | None = None  # failed by raising: the denoiser's traceback
 
 
 def robust_mean(array: np.ndarray) -> float:
@@ -200,17 +208,83 @@ def _constant_features() -> Sequence:
 
 
 CASES: tuple[HardCase, ...] = (
-    HardCase("fireflies", "isolated samples of 1e5..1e6", _fireflies),
-    HardCase("black_frame", "every buffer and sample zero", _black_frame),
-    HardCase("zero_albedo", "albedo zero everywhere", _zero_albedo),
-    HardCase("dynamic_range", "colour spans 1e-6..1e6", _dynamic_range),
-    HardCase("nan_inf", "NaN/Inf in color and features", _nan_inf, expect_sanitized=True),
-    HardCase("constant_features", "every feature constant", _constant_features),
-    HardCase("one_spp", "1 sample per pixel", lambda: _sequence(_frame(spp=1, seed=17))),
-    HardCase("odd_size", "67×45 pixels", lambda: _sequence(_frame(width=67, height=45, seed=18))),
-    HardCase("tiny", "3×3 pixels", lambda: _sequence(_frame(width=3, height=3, seed=19))),
-    HardCase("one_frame_sequence", "a sequence of one frame", lambda: _sequence(_frame("motion_blur", seed=20))),
+    HardCase(
+        "fireflies",
+        "isolated samples of 1e5..1e6",
+        _fireflies,
+        hint="clamp or down-weight outlier samples (e.g. clip colour at a high percentile of its neighbourhood, "
+        "or filter in log space) instead of spreading them over the kernel",
+    ),
+    HardCase(
+        "black_frame",
+        "every buffer and sample zero",
+        _black_frame,
+        hint="guard every division by brightness, variance or a feature with an epsilon; a zero input gives a zero output",
+    ),
+    HardCase(
+        "zero_albedo",
+        "albedo zero everywhere",
+        _zero_albedo,
+        hint="demodulate by albedo + eps (e.g. color / (albedo + 1e-2)) and remodulate with the same eps",
+    ),
+    HardCase(
+        "dynamic_range",
+        "colour spans 1e-6..1e6",
+        _dynamic_range,
+        hint="filter in a range-compressed space (log1p, or x / (1 + x)) and map back; no absolute thresholds",
+    ),
+    HardCase(
+        "nan_inf",
+        "NaN/Inf in color and features",
+        _nan_inf,
+        expect_sanitized=True,
+        hint="inputs arrive sanitised (finite); a non-finite output comes from the denoiser's own arithmetic: "
+        "guard divisions and logs with an epsilon",
+    ),
+    HardCase(
+        "constant_features",
+        "every feature constant",
+        _constant_features,
+        hint="normalise features by their spread + eps (a feature without variance must not get an infinite weight)",
+    ),
+    HardCase(
+        "one_spp",
+        "1 sample per pixel",
+        lambda: _sequence(_frame(spp=1, seed=17)),
+        hint="every variance is 0 at 1 spp: add an epsilon where dividing by it, or estimate it from neighbours",
+    ),
+    HardCase(
+        "odd_size",
+        "67×45 pixels",
+        lambda: _sequence(_frame(width=67, height=45, seed=18)),
+        hint="pad to the network's or tile's multiple and crop back to the frame's H×W",
+    ),
+    HardCase(
+        "tiny",
+        "3×3 pixels",
+        lambda: _sequence(_frame(width=3, height=3, seed=19)),
+        hint="clip the kernel radius and padding to the image size (reflect padding needs pad < size)",
+    ),
+    HardCase(
+        "one_frame_sequence",
+        "a sequence of one frame",
+        lambda: _sequence(_frame("motion_blur", seed=20)),
+        hint="reset() must leave the denoiser ready for a first frame with no previous one",
+    ),
 )
+
+
+def failure_hint(case: HardCase, reason: str) -> str:
+    """One line: what ``case`` tests and what usually fixes a denoiser that failed it with ``reason``."""
+    if reason.startswith("raised") or " raised " in reason:
+        return f"tests {case.description}; the denoiser raised: check-plugin --verbose (or --json) shows where"
+    if "returned shape" in reason or "returned dtype" in reason or "not a numpy array" in reason:
+        fix = "return an H×W×3 float32 array, e.g. np.asarray(out, np.float32)[..., :3]"
+    elif "negative output" in reason:
+        fix = "clip the output at 0 (np.maximum(out, 0)); radiance is never negative"
+    else:
+        fix = case.hint
+    return f"tests {case.description}; usual fix: {fix}" if fix else f"tests {case.description}"
 
 
 def case_names() -> list[str]:
@@ -238,13 +312,17 @@ def run_case(denoiser: object, case: HardCase, *, name: str | None = None) -> Ca
     for frame, result in zip(sequence, results):
         if not result.ok:
             outcome.reason = f"frame {frame.index}: {result.error}"
+            outcome.traceback = result.traceback
+            outcome.hint = failure_hint(case, result.error or "")
             return outcome
         reason = energy_reason(result.output, frame.color)
         if reason is not None:
             outcome.reason = f"frame {frame.index}: {reason}"
+            outcome.hint = failure_hint(case, reason)
             return outcome
     if case.expect_sanitized and sanitized == 0:
         outcome.reason = "the input's NaN/Inf values were not counted as sanitised"
+        outcome.hint = failure_hint(case, outcome.reason)
         return outcome
     outcome.passed = True
     return outcome

@@ -4,7 +4,7 @@ Spec grammar (first match wins):
 
 ``NAME``
     a built-in (see :data:`BUILTINS`: ``identity``, ``cross_bilateral``, ``cross_bilateral_fast``,
-    ``cross_bilateral_high``, ``rpf``, ``rpf_fast``, ``nlmeans``, ``oidn``, ``oidn_balanced``, ``oidn_fast``, and the
+    ``cross_bilateral_high``, ``rpf``, ``rpf_fast``, ``lightfield``, ``nlmeans``, ``oidn``, ``oidn_balanced``, ``oidn_fast``, and the
     learned ``dpcn``, ``kpcn``, ``rae``, ``lbf``), else
     an entry point of the group ``denoisebench.denoisers`` (a plugin package declares
     ``[project.entry-points."denoisebench.denoisers"] my_denoiser = "my_pkg:MyDenoiser"``).
@@ -13,7 +13,8 @@ Spec grammar (first match wins):
     anything importable; ``ATTR`` may be dotted (``pkg.mod:Outer.Inner``).
 
 The object found may be a class (called with the options), a factory function (called with the
-options) or a ready instance (no options allowed). Presets are separate names (``cross_bilateral_fast``)
+options), a ready instance (no options allowed), or a plain function ``denoise(frame)`` (its attributes
+``needs``, ``temporal``, ``name`` declare the rest; options are bound as keywords). Presets are separate names (``cross_bilateral_fast``)
 and constructor options are keyword arguments: ``load_denoiser("cross_bilateral", radius=7)`` or, on
 the command line, ``--option radius=7``.
 
@@ -46,6 +47,7 @@ BUILTINS: dict[str, tuple[str, dict[str, Any]]] = {
     "cross_bilateral_high": ("denoisebench.baselines.cross_bilateral:CrossBilateral", {"preset": "high"}),
     "rpf": ("denoisebench.baselines.rpf:RandomParameterFilter", {}),
     "rpf_fast": ("denoisebench.baselines.rpf:RandomParameterFilter", {"preset": "fast"}),
+    "lightfield": ("denoisebench.baselines.lightfield:LightField", {}),
     "nlmeans": ("denoisebench.baselines.nlmeans:NLMeans", {}),
     "oidn": ("denoisebench.baselines.oidn:OIDN", {"quality": "high"}),
     "oidn_balanced": ("denoisebench.baselines.oidn:OIDN", {"quality": "balanced"}),
@@ -88,6 +90,7 @@ KIND = loading.PluginKind(
     option_error=UnknownOptionError,
     ready_options_error=TypeError,
     file_noun="plugin file",
+    arguments=("frame",),
 )
 
 
@@ -99,3 +102,9 @@ def available_denoisers() -> dict[str, str]:
 def load_denoiser(spec: str, **options: Any):
     """The denoiser ``spec`` names, constructed with ``options``. See the module docstring."""
     return loading.load(KIND, spec, options, _entry_points)
+
+
+def check_denoiser_spec(spec: str) -> None:
+    """:class:`UnknownDenoiserError` where ``spec`` names no denoiser, found without importing anything (a bare name
+    that is no built-in or entry point, a ``file.py`` that does not exist)."""
+    loading.check_spec(KIND, spec, _entry_points)

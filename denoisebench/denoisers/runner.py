@@ -25,12 +25,18 @@ Everything that calls a denoiser (the benchmark, ``check-plugin``, tests) goes t
 * **Outputs.** Must be a numpy array of shape H×W×3, dtype float32, every value finite. Anything
   else (an exception, NaN output, wrong shape or dtype) is recorded as ``status="failed"`` with a
   one-line reason; the run goes on. ``KeyboardInterrupt`` and ``SystemExit`` still propagate.
+* **Tracebacks.** A denoiser that raises (in this process or in its worker) keeps its traceback in
+  :attr:`DenoiseResult.traceback`, and the first of each distinct failure of a denoiser is logged
+  with it on the logger :data:`LOG` (``denoisebench.plugins``: a warning, which reaches stderr where
+  logging is not configured), so that the author can see where it raised.
 * **Sequences.** ``reset()`` is called before each sequence, then the frames go in order.
 """
 
 from __future__ import annotations
 
+import logging
 import time
+import traceback
 import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -61,6 +67,7 @@ class DenoiseResult:
     seconds: float | None = None  # time inside denoise(); None when it was not called
     output: np.ndarray | None = None  # H×W×3 float32 when status is "ok"
     sanitized: dict[str, int] = field(default_factory=dict)  # buffer -> NaN/Inf values replaced
+    traceback: str | None = None  # the denoiser's traceback where it raised
 
     @property
     def ok(self) -> bool:
@@ -185,6 +192,24 @@ def check_output(output: object, height: int, width: int) -> str | None:
 # --------------------------------------------------------------------------------------------------
 # running
 
+#: Where a raising denoiser's traceback is logged (once per distinct error, at most :data:`LOG_PER_DENOISER` per denoiser).
+LOG = logging.getLogger("denoisebench.plugins")
+#: The most tracebacks logged for one denoiser in one process (distinct errors each).
+LOG_PER_DENOISER = 3
+_LOGGED: set[tuple[str, str]] = set()
+
+
+def _raised(label: str, where: str, reason: str, error: BaseException) -> str | None:
+    """The traceback of ``error`` (a worker's, where it carries one), logged the first time it is seen."""
+    if isinstance(error, PluginFailure):
+        text = error.traceback
+    else:
+        text = "".join(traceback.format_exception(type(error), error, error.__traceback__))
+    if text and (label, reason) not in _LOGGED and sum(seen == label for seen, _ in _LOGGED) < LOG_PER_DENOISER:
+        _LOGGED.add((label, reason))
+        LOG.warning("denoiser %s failed on %s: %s\n%s", label, where, reason, text.rstrip())
+    return text or None
+
 
 def run_frame(denoiser: object, frame: Frame, *, name: str | None = None, keep_output: bool = True) -> DenoiseResult:
     """Denoise one frame under the contract; never raises for a failing denoiser."""
@@ -206,10 +231,12 @@ def run_frame(denoiser: object, frame: Frame, *, name: str | None = None, keep_o
     except PluginFailure as error:  # an isolated call: the reason is already one line
         result.seconds = denoiser.last_seconds if isolated else time.perf_counter() - started
         result.error = str(error)
+        result.traceback = _raised(label, f"{frame.scene} frame {frame.index}", result.error, error)
         return result
     except Exception as error:  # noqa: BLE001 - contained and recorded
         result.seconds = time.perf_counter() - started
         result.error = f"raised {one_line(error)}"
+        result.traceback = _raised(label, f"{frame.scene} frame {frame.index}", result.error, error)
         return result
     result.seconds = denoiser.last_seconds if isolated else time.perf_counter() - started
     reason = check_output(output, frame.height, frame.width)
@@ -233,7 +260,8 @@ def run_sequence(
             reset()
         except Exception as error:  # noqa: BLE001
             reason = str(error) if isinstance(error, PluginFailure) else f"reset() raised {one_line(error)}"
-            return [DenoiseResult(label, f.scene, f.index, STATUS_FAILED, reason) for f in frames]
+            text = _raised(label, "reset()", reason, error)
+            return [DenoiseResult(label, f.scene, f.index, STATUS_FAILED, reason, traceback=text) for f in frames]
     return [run_frame(denoiser, frame, name=label, keep_output=keep_output) for frame in frames]
 
 

@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import functools
 import math
+import sys
 import warnings
 
 import numpy as np
@@ -336,9 +337,24 @@ def flip_map(pred, ref, ppd: float | None = None) -> np.ndarray:
 
 @functools.cache
 def _colour():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # "Matplotlib related API features are not available"
-        import colour
+    """colour-science, imported without OpenImageIO.
+
+    colour's ``colour.io`` imports OpenImageIO where it is installed (the OIDN toolkit's peer check
+    installs it) and keeps its ``TypeDesc`` objects in module globals, which outlive the interpreter's
+    teardown: nanobind then prints ``leaked N instances!`` and ~20 more lines at every exit. ΔE2000 needs
+    none of colour's image I/O, so OpenImageIO is masked while colour is imported (colour then takes it
+    for missing) and left importable for anyone else afterwards.
+    """
+    masked = "OpenImageIO" not in sys.modules
+    if masked:
+        sys.modules["OpenImageIO"] = None  # an import of it raises ImportError meanwhile
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # "Matplotlib related API features are not available"
+            import colour
+    finally:
+        if masked and sys.modules.get("OpenImageIO", 0) is None:
+            del sys.modules["OpenImageIO"]
     return colour
 
 

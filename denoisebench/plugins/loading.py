@@ -3,7 +3,7 @@
 The denoisers' and the samplers' registries (``denoisers/registry.py``, ``sampling/registry.py``) find
 their plugins by one grammar, so the resolution lives here once, parametrised by a :class:`PluginKind`
 (the noun and error classes of messages, the entry-point group, the built-ins, the method that marks a
-ready instance, and the protocol check). Spec grammar, first match wins:
+ready instance, the arguments of that method, and the protocol check). Spec grammar, first match wins:
 
 ``NAME``
     a built-in of ``kind.builtins`` (``name -> ("module:attr", default options)``, imported on first
@@ -13,8 +13,15 @@ ready instance, and the protocol check). Spec grammar, first match wins:
     anything importable; ``ATTR`` may be dotted (``pkg.mod:Outer.Inner``). With more than one colon
     the last one splits, so a file path holding a colon still names its file.
 
-The object found may be a class or a factory (called with the options) or a ready instance (an object
-with a callable ``kind.method``; no options allowed).
+The object found may be
+
+* a class or a factory (called with the options);
+* a ready instance (an object with a callable ``kind.method``; no options allowed);
+* a plain function of the method's arguments (``def denoise(frame)``, ``def sample(budget, rounds)``):
+  it becomes the method of a :class:`FunctionPlugin`, with the options bound as keywords, and the
+  function's own attributes (``denoise.needs = {"color", "albedo"}``, ``name``, ``temporal``) read as
+  the instance's. A function whose required arguments, less the options, are none is a factory; any
+  other count is refused with a message that says what to write.
 
 Notes
 -----
@@ -23,11 +30,14 @@ Notes
   not silently ignored), ``kind.load_error`` where the plugin was found but failed to import or
   construct. All are :class:`~denoisebench.errors.UserInputError`, so the CLI exits 2.
 * A ``file.py`` plugin is imported under a module name made from its resolved path, so two files of
-  the same name do not replace each other in ``sys.modules``.
+  the same name do not replace each other in ``sys.modules``. Its folder is put first on ``sys.path``
+  (as ``python file.py`` does), so that it can import the modules beside it; in the sandbox that folder
+  is readable (:func:`denoisebench.plugins.sandbox.readable_paths`) and nothing else of the host is.
 """
 
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.metadata
 import importlib.util
@@ -48,6 +58,7 @@ class PluginKind:
     ``where_prefix`` precedes the origin in a load error (``cannot import {where_prefix}built-in 'x'``);
     ``file_noun`` names a missing ``file.py`` (``no such plugin file``); ``ready_options_error`` is
     raised when options are given to a ready instance (a ``TypeError`` is reported as a load error).
+    ``arguments`` are those of ``method`` (a plain function taking exactly these is the method itself).
     """
 
     noun: str
@@ -61,6 +72,27 @@ class PluginKind:
     ready_options_error: type[Exception]
     file_noun: str
     where_prefix: str = ""
+    arguments: tuple[str, ...] = ()
+
+
+class FunctionPlugin:
+    """A plugin made of a plain function: the function (options bound) is its ``kind.method``.
+
+    ``name``, ``needs``, ``temporal`` and ``trained_scenes`` are the function's own attributes where it
+    has them (``denoise.needs = {"color", "albedo"}``); the protocol's defaults otherwise.
+    """
+
+    ATTRIBUTES = ("name", "needs", "temporal", "trained_scenes")
+
+    def __init__(self, method: str, function: Callable, options: Mapping[str, Any]):
+        setattr(self, method, functools.partial(function, **options) if options else function)
+        self._function = function
+        for attribute in self.ATTRIBUTES:
+            if hasattr(function, attribute):
+                setattr(self, attribute, getattr(function, attribute))
+
+    def __repr__(self) -> str:
+        return f"<plugin function {getattr(self._function, '__qualname__', self._function)!r}>"
 
 
 def entry_points(group: str) -> dict[str, importlib.metadata.EntryPoint]:
@@ -84,7 +116,7 @@ def available(kind: PluginKind, points: Mapping[str, importlib.metadata.EntryPoi
 
 def import_target(kind: PluginKind, target: str) -> Any:
     """The object ``MODULE:ATTR`` or ``file.py:ATTR`` names (``kind.unknown_error`` where nothing has it)."""
-    module_name, _, attr_path = target.rpartition(":") if target.count(":") > 1 else target.partition(":")
+    module_name, attr_path = _target(target)
     if not module_name or not attr_path:
         raise kind.unknown_error(f"bad {kind.noun} spec {target!r}: expected NAME or MODULE:ATTR")
     if module_name.endswith(".py"):
@@ -92,6 +124,9 @@ def import_target(kind: PluginKind, target: str) -> Any:
         if not path.is_file():
             raise kind.unknown_error(f"no such {kind.file_noun} {module_name!r}")
         unique = f"denoisebench_{kind.noun}_{abs(hash(str(path.resolve())))}"
+        folder = str(path.resolve().parent)
+        if folder not in sys.path:
+            sys.path.insert(0, folder)  # its own modules import as they do under `python file.py`
         spec = importlib.util.spec_from_file_location(unique, path)
         module = importlib.util.module_from_spec(spec)
         sys.modules[unique] = module
@@ -116,10 +151,13 @@ def import_target(kind: PluginKind, target: str) -> Any:
     return obj
 
 
-def check_options(kind: PluginKind, obj: Any, spec: str, options: Mapping[str, Any]) -> None:
-    """``kind.option_error`` when ``obj`` (class or factory) takes no keyword named like an option.
+def check_options(
+    kind: PluginKind, obj: Any, spec: str, options: Mapping[str, Any], skip: tuple[str, ...] = ()
+) -> None:
+    """``kind.option_error`` when ``obj`` (class, factory or plain function) takes no keyword named like an option.
 
-    A constructor with ``**kwargs``, or one whose signature cannot be read, accepts anything.
+    A constructor with ``**kwargs``, or one whose signature cannot be read, accepts anything; ``skip``
+    are arguments no option may give (a plain function's ``frame``).
     """
     if not options or not callable(obj):
         return
@@ -129,7 +167,7 @@ def check_options(kind: PluginKind, obj: Any, spec: str, options: Mapping[str, A
         return
     if any(p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters):
         return
-    known = [p.name for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    known = [p.name for p in parameters if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and p.name not in skip]
     unknown = [key for key in options if key not in known]
     if unknown:
         raise kind.option_error(
@@ -138,13 +176,47 @@ def check_options(kind: PluginKind, obj: Any, spec: str, options: Mapping[str, A
         )
 
 
+def _required(obj: Any, options: Mapping[str, Any]) -> list[str] | None:
+    """The positional arguments ``obj`` (a function) requires that ``options`` do not give; None where unreadable."""
+    try:
+        parameters = inspect.signature(obj).parameters.values()
+    except (TypeError, ValueError):
+        return None
+    positional = (inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD)
+    return [p.name for p in parameters if p.kind in positional and p.default is p.empty and p.name not in options]
+
+
+def _function_plugin(kind: PluginKind, obj: Any, spec: str, options: Mapping[str, Any]) -> Any | None:
+    """A :class:`FunctionPlugin` where ``obj`` is a plain function of ``kind.arguments``; None for a factory.
+
+    TypeError (what to write instead) for a function that is neither.
+    """
+    if not kind.arguments or isinstance(obj, type) or not callable(obj):
+        return None
+    required = _required(obj, options)
+    if not required:
+        return None
+    if len(required) == len(kind.arguments):
+        check_options(kind, obj, spec, options, skip=tuple(required))
+        return FunctionPlugin(kind.method, obj, options)
+    wanted = ", ".join(kind.arguments)
+    raise TypeError(
+        f"{spec!r} requires the arguments ({', '.join(required)}): a {kind.noun} plugin is a function "
+        f"{kind.method}({wanted}), a class whose instances have {kind.method}({wanted}), or a factory "
+        "that takes only options"
+    )
+
+
 def instantiate(kind: PluginKind, obj: Any, spec: str, options: Mapping[str, Any]) -> Any:
     """``obj`` constructed with ``options`` (a ready instance as it is), named ``spec`` where it has no name."""
     ready = not isinstance(obj, type) and callable(getattr(obj, kind.method, None))
+    function = None if ready else _function_plugin(kind, obj, spec, options)
     if ready:
         if options:
             raise kind.ready_options_error(f"{spec!r} is a ready instance; it takes no options ({', '.join(options)})")
         instance = obj
+    elif function is not None:
+        instance = function
     elif callable(obj):
         check_options(kind, obj, spec, options)
         instance = obj(**options)
@@ -157,6 +229,41 @@ def instantiate(kind: PluginKind, obj: Any, spec: str, options: Mapping[str, Any
             pass
     kind.validate(instance, spec)  # TypeError for an object that does not speak the protocol
     return instance
+
+
+def _target(spec: str) -> tuple[str, str]:
+    """``(module, attr)`` of a ``MODULE:ATTR`` / ``file.py:ATTR`` spec (the last colon splits where there are more)."""
+    module_name, _, attr_path = spec.rpartition(":") if spec.count(":") > 1 else spec.partition(":")
+    return module_name, attr_path
+
+
+def check_spec(kind: PluginKind, spec: str, points: Callable[[], Mapping[str, importlib.metadata.EntryPoint]]) -> None:
+    """``kind.unknown_error`` where ``spec`` names nothing, found without importing anything.
+
+    A bare name must be a built-in or an entry point; a ``file.py:ATTR`` spec's file must exist; a
+    ``MODULE:ATTR`` spec is left to :func:`load`. So a command refuses a misspelled name before it
+    writes anything.
+    """
+    if not isinstance(spec, str) or not spec.strip():
+        raise kind.unknown_error(f"empty {kind.noun} spec")
+    spec = spec.strip()
+    if spec in kind.builtins:
+        return
+    if ":" in spec:
+        module_name, attr_path = _target(spec)
+        if not module_name or not attr_path:
+            raise kind.unknown_error(f"bad {kind.noun} spec {spec!r}: expected NAME or MODULE:ATTR")
+        if module_name.endswith(".py") and not Path(module_name).is_file():
+            raise kind.unknown_error(f"no such {kind.file_noun} {module_name!r}")
+        return
+    found = points()
+    if spec not in found:
+        raise kind.unknown_error(_unknown(kind, spec, found))
+
+
+def _unknown(kind: PluginKind, spec: str, found: Mapping[str, importlib.metadata.EntryPoint]) -> str:
+    known = ", ".join(available(kind, found))
+    return f"unknown {kind.noun} {spec!r}; known: {known} (or give MODULE:ATTR)"
 
 
 def load(
@@ -183,8 +290,7 @@ def load(
         found = points()
         entry_point = found.get(spec)
         if entry_point is None:
-            known = ", ".join(available(kind, found))
-            raise kind.unknown_error(f"unknown {kind.noun} {spec!r}; known: {known} (or give MODULE:ATTR)")
+            raise kind.unknown_error(_unknown(kind, spec, found))
         kwargs, where = dict(options), f"entry point {spec!r} ({entry_point.value})"
         loader = entry_point.load
     where = f"{kind.where_prefix}{where}"

@@ -61,6 +61,7 @@ KIND = loading.PluginKind(
     ready_options_error=SamplerLoadError,
     file_noun="sampler file",
     where_prefix="sampler ",
+    arguments=("budget", "rounds"),
 )
 
 
@@ -72,3 +73,9 @@ def available_samplers() -> dict[str, str]:
 def load_sampler(spec: str, **options: Any):
     """The sampler ``spec`` names, constructed with ``options`` (module docstring)."""
     return loading.load(KIND, spec, options, _entry_points)
+
+
+def check_sampler_spec(spec: str) -> None:
+    """:class:`UnknownSamplerError` where ``spec`` names no sampler, found without importing anything (a bare name
+    that is no built-in or entry point, a ``file.py`` that does not exist)."""
+    loading.check_spec(KIND, spec, _entry_points)
