@@ -1,0 +1,13 @@
+"""The command line's --help texts name what the registries hold."""
+
+from __future__ import annotations
+
+import re
+
+from denoisebench import cli
+from denoisebench.commands import train
+
+
+def test_top_level_help_names_every_trainable_model():
+    listed = re.search(r"\(([^)]*)\)", cli.COMMANDS["train"][1]).group(1)
+    assert [name.strip() for name in listed.split(",")] == list(train.MODELS)
