@@ -48,8 +48,8 @@ class Row:
 
     @property
     def agrees(self) -> bool:
-        """Corrected (cheap) within 1.96 × the combined se (+ the dear reference's own floor) of raw (dear)."""
-        return abs(self.corrected - self.raw_dear) <= Z95 * math.hypot(self.se, self.se_dear) + self.floor_dear
+        """Corrected (cheap) within 1.96 × the combined se of the dear reference's corrected score."""
+        return abs(self.corrected - (self.raw_dear - self.floor_dear)) <= Z95 * math.hypot(self.se, self.se_dear)
 
     def spp_needed(self, ref_spp: int, accuracy: float) -> tuple[float, float]:
         """(reference spp for the raw score, for the corrected score) to be within ``accuracy`` of the truth."""
@@ -76,7 +76,15 @@ def _scores(pred: np.ndarray, ref: np.ndarray, ref_var: np.ndarray, metric: str)
 
 
 def measure(
-    families=FAMILIES, *, size: int = 32, spp: int = 4, ref_spp: int = 64, factor: int = 16, seed: int = 100, out=None
+    families=FAMILIES,
+    *,
+    size: int = 32,
+    spp: int = 4,
+    ref_spp: int = 64,
+    factor: int = 16,
+    seed: int = 100,
+    metrics=METRICS,
+    out=None,
 ) -> list[Row]:
     """Rows for the noisy input and OIDN on one frame of each family (see the module docstring)."""
     from denoisebench.baselines.oidn import OIDN
@@ -99,7 +107,7 @@ def measure(
             outputs = {"noisy": color, "oidn": np.asarray(denoiser.denoise(frame), dtype=np.float32)}
             share = noisy_value_share(cheap.buffers["color"], cheap.buffers["color_var"])
             for label, pred in outputs.items():
-                for metric in METRICS:
+                for metric in metrics:
                     raw_c, floor_c, se_c = _scores(pred, cheap.buffers["color"], cheap.buffers["color_var"], metric)
                     raw_d, floor_d, se_d = _scores(pred, dear.buffers["color"], dear.buffers["color_var"], metric)
                     rows.append(

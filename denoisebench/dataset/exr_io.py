@@ -52,6 +52,7 @@ from denoisebench.dataset.errors import DatasetError
 #: Channel names of each known layer, in array order (variances use their base's names).
 CHANNEL_NAMES: dict[str, tuple[str, ...]] = {
     "color": ("R", "G", "B"),
+    "color_half": ("R", "G", "B"),  # a reference's half (generator.render.reference: half references)
     "diffuse": ("R", "G", "B"),
     "specular": ("R", "G", "B"),
     "albedo": ("R", "G", "B"),

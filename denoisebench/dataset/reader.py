@@ -10,7 +10,8 @@ A Frame carries the noisy buffers (``color``, features, ``*_var``), ``reference`
 color, H×W×3) when the scene has one, ``samples`` (S×H×W×C per buffer) when per-sample data was
 written, and ``meta``: the frame record's ``file``, ``seconds``, ``seconds_per_spp``, ``rel_se``,
 and ``reference_file``, ``reference_spp``, ``reference_seconds``, ``reference_rel_se``,
-``reference_too_noisy`` and ``reference_buffers`` (every layer of the reference file: ``color``,
+``reference_too_noisy``, ``reference_half_spp`` (the spp of the reference's two halves, or None:
+``metrics.half_reference``) and ``reference_buffers`` (every layer of the reference file: ``color``,
 ``color_var`` and, when written, ``diffuse``/``specular`` and their variances).
 
 Every problem is a one-line :class:`~denoisebench.dataset.errors.DatasetError` naming the scene,
@@ -311,6 +312,7 @@ class Dataset:
                 reference_seconds=ref_record.get("seconds"),
                 reference_rel_se=ref_record.get("rel_se"),
                 reference_too_noisy=ref_record.get("reference_too_noisy", False),
+                reference_half_spp=(ref_record.get("reference_adaptive") or {}).get("half_spp"),
                 reference_buffers=ref_layers,
             )
         sample_data = None

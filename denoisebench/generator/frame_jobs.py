@@ -58,7 +58,7 @@ from denoisebench.generator.render.reference import render_adaptive, round_seed
 from denoisebench.generator.render.scene import build_mitsuba_scene
 
 #: Reference layers besides color and color_var (the renderer's reference output).
-REFERENCE_EXTRA = ("diffuse", "diffuse_var", "specular", "specular_var")
+REFERENCE_EXTRA = ("diffuse", "diffuse_var", "specular", "specular_var", "color_half")
 
 
 @dataclass(frozen=True)

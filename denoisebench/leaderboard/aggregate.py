@@ -177,11 +177,15 @@ def aggregate(rule: str, mine: dict, noisy: dict | None = None, ses: dict | None
     return value, (None if low is None else back(low)), (None if high is None else back(high)), len(terms)
 
 
-def corrected_values(mine: dict, floors: dict, ses: dict | None = None) -> tuple[dict, list[str]]:
+def corrected_values(
+    mine: dict, floors: dict, ses: dict | None = None, higher_is_better: bool = False
+) -> tuple[dict, list[str]]:
     """({scene: score − floor}, scenes raised to their se) over the scenes of ``mine`` with a floor.
 
-    A corrected value below the scene's se (the reference's standard error of that score) is raised
+    A corrected error below the scene's se (the reference's standard error of that score) is raised
     to it (module Notes); with no se (a reference without variance) a value ≤ 0 keeps its raw score.
+    A higher-is-better score (SSIM, PSNR: their floor is measured from half references) is only
+    corrected, never raised.
     """
     ses = ses or {}
     out, raised = {}, []
@@ -192,6 +196,9 @@ def corrected_values(mine: dict, floors: dict, ses: dict | None = None) -> tuple
             continue
         corrected = value - floor
         se = ses.get(scene)
+        if higher_is_better:
+            out[scene] = corrected
+            continue
         if is_finite(se) and se > 0:
             if corrected < se:
                 corrected = se
@@ -405,6 +412,11 @@ def unresolved_references(
 def excluded_scenes(unresolved: list[Unresolved]) -> list[str]:
     """The scenes the headline aggregates leave out (sorted, each once)."""
     return sorted({u.scene for u in unresolved})
+
+
+def higher_is_better(metric: str) -> bool:
+    """The registry's direction of ``metric``; False (an error) for names it does not know."""
+    return _higher_is_better(metric)
 
 
 def _higher_is_better(metric: str) -> bool:

@@ -207,10 +207,11 @@ def metric_cell(data: RunData, label: str, spp: int, metric: str, scenes: list[s
         return Cell(value, low, high, count, rule, raw=value, raw_low=low, raw_high=high)
     # relative_to_input: the floor relative to the input's own score (noisy is None otherwise)
     floor = agg.aggregate(rule, floors, noisy)[0]
-    corrected, raised = agg.corrected_values(mine, floors, ses)
+    higher = agg.higher_is_better(metric)
+    corrected, raised = agg.corrected_values(mine, floors, ses, higher)
     noisy_corrected = None
     if noisy is not None:
-        noisy_corrected = agg.corrected_values(noisy, noisy_floors or {}, noisy_ses)[0]
+        noisy_corrected = agg.corrected_values(noisy, noisy_floors or {}, noisy_ses, higher)[0]
     c_value, c_low, c_high, c_count = agg.aggregate(rule, corrected, noisy_corrected, ses)
     return Cell(c_value, c_low, c_high, c_count, rule, floor, value, low, high, len(raised))
 

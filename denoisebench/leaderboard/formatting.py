@@ -64,12 +64,12 @@ def _has_floor(rows, metric: str) -> bool:
 
 
 def _metric_columns(rows, metrics: list[str]) -> tuple[list[str], list]:
-    """Headings and cell makers: each metric; one with a floor leads with its floor-corrected value
-    (heading ``… − floor``, with its interval), then the raw score and the floor beside it."""
+    """Headings and cell makers: each metric; one with a floor leads with its corrected value (heading
+    ``… corrected``, with its interval), then the raw score and the floor beside it."""
     header, makers = [], []
     for m in metrics:
         floored = _has_floor(rows, m)
-        header.append(metric_heading(m) + (" − floor" if floored else ""))
+        header.append(metric_heading(m) + (" corrected" if floored else ""))
         makers.append(lambda r, m=m: cell_text(r.metrics.get(m)))
         if floored:
             header += [f"{m} raw", f"{m} floor"]

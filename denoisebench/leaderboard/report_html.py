@@ -182,9 +182,9 @@ def _results(report: ReportModel) -> str:
         "the geometric-mean share of the input's score left), so that no single bright scene decides. A bootstrap "
         "95&nbsp;% interval over scenes, which includes the reference's own uncertainty, is in brackets when there "
         "are at least two scenes; \u2193 lower is better, \u2191 higher is better. Seconds are per frame. "
-        "<b>floor</b>: the score a perfect denoiser would get against this noisy reference (from its variance "
-        "buffer); <b>\u2212 floor</b>: the score corrected for it, an unbiased estimate of the error against the "
-        "noise-free image.</p>"
+        "<b>floor</b>: what the reference's own noise adds to a score; <b>corrected</b>: the score less its "
+        "floor (against the noise-free image); <b>raw</b>: as measured against the reference.</p>",
+        f'<p class="note">{e(notes.correction_text(report))}</p>',
     ]
     parts += [f'<p class="error">Not held-out: {e(line)}</p>' for line in fmt.not_held_out_lines(report)]
     parts += [

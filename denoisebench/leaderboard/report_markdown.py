@@ -65,9 +65,11 @@ def render_markdown(report: ReportModel) -> str:
         "",
         "Scores combined over scenes by each metric's rule (scale-free ones by their mean; linear ones by the "
         "geometric mean or relative to the noisy input, as marked), with a bootstrap 95 % interval over scenes "
-        "that includes the reference's uncertainty (↓ lower is better, ↑ higher). *floor*: the score of a perfect "
-        "denoiser against this noisy reference; *− floor*: the score corrected for it (unbiased against the "
-        "noise-free image).",
+        "that includes the reference's uncertainty (↓ lower is better, ↑ higher). *floor*: what the reference's "
+        "own noise adds to a score; *corrected*: the score less its floor (against the noise-free image); *raw*: "
+        "as measured against the reference.",
+        "",
+        md(notes.correction_text(report)),
         "",
     ]
     lines += [f"> **Not held-out:** {md(line)}\n" for line in fmt.not_held_out_lines(report)]

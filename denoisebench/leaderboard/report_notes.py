@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from denoisebench.leaderboard import formatting as fmt
+from denoisebench.metrics import get_metric
 
 if TYPE_CHECKING:
     from denoisebench.leaderboard.report_model import ReportModel
@@ -124,3 +125,42 @@ def sampler_rows(report: ReportModel) -> tuple[list[str], list[list[str]]]:
             ]
         )
     return header, rows
+
+
+def correction_text(report: ReportModel) -> str:
+    """Which scores lead corrected for the reference's noise, and how (the rule, stated once)."""
+    closed, measured, none = [], [], []
+    shown = report.frame_metrics + report.sequence_metrics
+    for metric in shown:
+        cells = [r.metrics.get(metric) for r in report.summary]
+        if any(c is not None and c.floor is not None for c in cells):
+            (closed if _has_closed_floor(metric) else measured).append(metric)
+        else:
+            none.append(metric)
+    parts = [
+        "Scores are corrected for the reference's own noise, and the corrected value leads every table, figure and "
+        "verdict (raw score and floor beside it): corrected = score − floor, where the floor is what the "
+        "reference's noise adds to the score, and the interval carries the reference's uncertainty."
+    ]
+    if closed:
+        parts.append(f"Closed-form floor from the reference's variance: {', '.join(closed)}.")
+    if measured:
+        parts.append(
+            f"Floor measured from the reference's two independent halves (score against each half and the full "
+            f"reference: its 1/spp trend): {', '.join(measured)}."
+        )
+    if none:
+        parts.append(f"Not corrected (no floor, and no half references or a sequence score): {', '.join(none)}.")
+    parts.append(
+        "A corrected error below the reference's standard error is shown at that resolution (it cannot be told "
+        "from 0). A scene is set apart only when its floor is still growing, its reference is too noisy for a "
+        "floor, or no two entries there differ by more than it resolves."
+    )
+    return " ".join(parts)
+
+
+def _has_closed_floor(metric: str) -> bool:
+    try:
+        return get_metric(metric).floor_fn is not None
+    except ValueError:
+        return False

@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.metadata
+import math
 import platform
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -62,6 +63,7 @@ from denoisebench.leaderboard.store import ResultsStore
 from denoisebench.leaderboard.strips import cut
 from denoisebench.metrics import compute_metrics
 from denoisebench.metrics.cost import total_seconds
+from denoisebench.metrics.half_reference import half_reference_floor, other_half
 from denoisebench.metrics.registry import default_metric_names, expand_metric_names, get_metric
 from denoisebench.metrics.validation import MetricNotApplicable
 from denoisebench.plugins import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, Limits
@@ -287,10 +289,39 @@ def _applicable(compute: Callable[[list[str]], dict], names: list[str]) -> tuple
     return results, skipped
 
 
-def _frame_metrics(pred: np.ndarray, ref: np.ndarray, names: list[str], ref_var=None, trim=None):
-    """(values, floors, ref_se, not applicable {name: reason}) of the per-frame metrics."""
+def _frame_metrics(pred: np.ndarray, ref: np.ndarray, names: list[str], ref_var=None, trim=None, halves=None):
+    """(values, floors, ref_se, not applicable {name: reason}) of the per-frame metrics.
+
+    ``halves`` (:func:`_reference_halves`): the reference's two halves and their spp; the metrics
+    without a closed-form floor then get the floor measured from them (:mod:`denoisebench.metrics.half_reference`)."""
     results, skipped = _applicable(lambda chosen: compute_metrics(pred, ref, chosen, ref_var=ref_var, trim=trim), names)
-    return (*_split_results(results), skipped)
+    values, floors, ses = _split_results(results)
+    if halves is not None:
+        (half_a, half_b), full_spp, half_spp = halves
+        open_ = [n for n in values if n not in floors and math.isfinite(values[n])]
+        if open_:
+            against_a = compute_metrics(pred, half_a, open_, trim=trim)
+            against_b = compute_metrics(pred, half_b, open_, trim=trim)
+            for name in open_:
+                measured = half_reference_floor(
+                    values[name], (against_a[name].value, against_b[name].value), full_spp, half_spp
+                )
+                if math.isfinite(measured.floor) and math.isfinite(measured.se):
+                    floors[name], ses[name] = measured.floor, measured.se
+    return values, floors, ses, skipped
+
+
+def _reference_halves(frame):
+    """((half a, half b), full spp, (spp a, spp b)) of the frame's reference, or None without halves."""
+    meta = frame.meta if isinstance(frame.meta, dict) else {}
+    half = meta.get("reference_buffers", {}).get("color_half")
+    half_spp, full_spp = meta.get("reference_half_spp"), meta.get("reference_spp")
+    if half is None or not half_spp or not full_spp or frame.reference is None:
+        return None
+    if np.shape(half) != np.shape(frame.reference) or sum(half_spp) != int(full_spp):
+        return None
+    other = other_half(frame.reference, half, int(full_spp), tuple(half_spp))
+    return (np.asarray(half, np.float32), other.astype(np.float32)), int(full_spp), tuple(int(s) for s in half_spp)
 
 
 def _sequence_metrics(outputs, refs, motion, names: list[str], ref_vars=None, trim=None):
@@ -355,7 +386,7 @@ def measure_unit(
         if ok:
             try:
                 record.metrics, record.floors, record.ref_se, record.not_applicable = _frame_metrics(
-                    output, frame.reference, spatial, _reference_variance(frame), trim
+                    output, frame.reference, spatial, _reference_variance(frame), trim, _reference_halves(frame)
                 )
             except ValueError as exc:  # a metric refusing this output is the denoiser's failure
                 record.status, record.error, ok = "failed", f"metrics: {exc}", False

@@ -14,6 +14,14 @@ Rounds and seeds:
     ``MAX_ROUNDS * round_spp <= cap`` samples (the cap rounded down to whole rounds), and at least
     ``MIN_ROUNDS`` rounds (batch means need several batches).
 
+Half references:
+    The even rounds (0, 2, 4, ...) and the odd rounds are two independent references of about half
+    the spp. The file keeps the even rounds' mean as ``color_half`` (the odd rounds' mean follows
+    from the full one: ``(N · full − N_even · half) / N_odd``) and the record their spp as
+    ``half_spp``. Scores without a closed-form noise floor (FLIP, SSIM, PSNR, ...) measure the
+    reference's effect from them (the score against each half and against the full reference gives
+    its 1/spp trend: ``denoisebench.metrics.half_reference``).
+
 Robust floor estimate (why not just the sample variance):
     Fireflies are rare, very bright paths. With them the per-sample variance is unbiased but very
     skewed: most pixels have not met their firefly yet and under-report, a few report huge values,
@@ -94,6 +102,7 @@ class RoundMerger:
         self._sum = {}  # name → Σ_k m_k
         self._m2 = {}  # name → Σ_k M2_k (within-round)
         self._sq = {}  # name → Σ_k m_k²
+        self._even = None  # Σ of color's round means over the even rounds (0, 2, 4, ...): the half reference
 
     def add(self, buffers: dict) -> None:
         """Add one round's buffers (``name`` = mean of the round, ``name_var`` = variance of that mean)."""
@@ -108,7 +117,18 @@ class RoundMerger:
             self._sum[name] += m
             self._m2[name] += within
             self._sq[name] += np.square(m)
+            if name == "color" and self.rounds % 2 == 0:
+                self._even = m.copy() if self._even is None else self._even + m
         self.rounds += 1
+
+    @property
+    def half_spp(self) -> tuple[int, int] | None:
+        """(spp of the even rounds, spp of the odd rounds): the two independent half references; None
+        with fewer than 2 rounds."""
+        if self.rounds < 2:
+            return None
+        even = (self.rounds + 1) // 2
+        return even * self.round_spp, (self.rounds - even) * self.round_spp
 
     @property
     def spp(self) -> int:
@@ -149,6 +169,10 @@ class RoundMerger:
         for name in self._sum:
             out[name] = self.mean(name).astype(np.float32)
             out[f"{name}_var"] = self.pooled_var(name).astype(np.float32)
+        if self.half_spp is not None and self._even is not None:
+            # the even rounds' mean: one of two independent half references (the other is the odd
+            # rounds', recovered from the full mean: leaderboard.half_reference)
+            out["color_half"] = (self._even / ((self.rounds + 1) // 2)).astype(np.float32)
         return out
 
 
@@ -217,6 +241,7 @@ def render_adaptive(render_round, cap: int, ref_error: float) -> AdaptiveOutcome
         "floor": floor,
         "floor_pooled": pooled,
         "floor_growth": growth,
+        "half_spp": list(merger.half_spp) if merger.half_spp is not None else None,
         "stopped_at_cap": not reached,
         "seconds": seconds,
     }

@@ -1,0 +1,141 @@
+"""Time verdicts that hold on a busy machine (issue 42 item 5).
+
+The same benchmark is timed twice on one small rendered dataset: on an otherwise idle machine and
+beside a CPU-bound load on every core. Every time verdict of the report (the accuracy-against-time
+readings, the equal-time and equal-quality verdicts) that both runs give must point the same way:
+a verdict may be withheld under load (its ratio's bounds then straddle 1), never reversed.
+
+This reads the clock on purpose: it is the only way to test robustness to load. Nothing asserts a
+speed; only that the two runs' conclusions do not contradict each other.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import re
+import time
+
+import pytest
+
+from denoisebench.leaderboard import analysis, equal_tables, report, time_model
+from denoisebench.leaderboard.benchmark_run import run_benchmark
+from denoisebench.leaderboard.runner import BenchmarkConfig
+from denoisebench.leaderboard.store import ResultsStore
+
+DENOISERS = ["cross_bilateral_fast", "nlmeans"]
+TIME_AT = (96, 96)
+
+
+def _spin(until: float) -> None:
+    x = 0
+    while time.time() < until:
+        x += 1
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory):
+    from denoisebench.cli import main
+    from denoisebench.dataset import open_dataset
+
+    out = tmp_path_factory.mktemp("load") / "ds"
+    args = ["generate", "--out", str(out), "--families", "cornell", "--scenes", "1", "--frames", "2"]
+    args += ["--width", "24", "--height", "24", "--spp", "1,2,4", "--ref-spp", "64", "--quiet"]
+    assert main(args) == 0
+    return open_dataset(out)
+
+
+def _verdicts(store, run_id, dataset) -> dict[tuple, str]:
+    """{(what, denoiser, spp or target): "denoiser" | "render"} of every time verdict in the report."""
+    built = report.build_report(store, run_id, dataset, time_at=TIME_AT)
+    kinds = {}
+    for metric, sentences in built.readings.items():
+        for text in sentences:
+            found = re.match(r"(\S+) at (\d+) spp ", text)
+            if not found:
+                continue
+            key = ("reading", metric, found.group(1), int(found.group(2)))
+            if "rendering more samples is cheaper" in text:
+                kinds[key] = "render"
+            elif "of its time (" in text:
+                kinds[key] = "denoiser"
+    for text in built.verdicts:
+        found = re.match(r"Equal quality \((\S+)\): (\S+) reaches the error of ([\d.]+)-spp", text)
+        if found:
+            key = ("equal_quality", *found.groups())
+            if "rendering more samples is cheaper" in text:
+                kinds[key] = "render"
+            elif "of rendering's time" in text and "about" not in text:
+                kinds[key] = "denoiser"
+        found = re.match(r"Equal time \((\S+)\)", text)
+        if found:
+            kinds[("equal_time", found.group(1))] = "render" if "rendering alone has the lowest" in text else "denoiser"
+    return kinds
+
+
+def _run(dataset, db, loaded: bool) -> dict[tuple, str]:
+    workers = []
+    if loaded:
+        until = time.time() + 600
+        workers = [
+            multiprocessing.Process(target=_spin, args=(until,), daemon=True) for _ in range(os.cpu_count() or 2)
+        ]
+        for w in workers:
+            w.start()
+    try:
+        with ResultsStore(db) as store:
+            config = BenchmarkConfig(DENOISERS, [1, 2, 4], split="all", metrics=["relmse", "flip"])
+            plan = run_benchmark(dataset, config, store, progress=False)
+            instances = {d.label: d.instance for d in plan.denoisers}
+            time_model.measure_run_timings(store, dataset, plan, instances, (96, 96), progress=False)
+            return _verdicts(store, plan.run_id, dataset)
+    finally:
+        for w in workers:
+            w.terminate()
+            w.join()
+
+
+def test_time_verdicts_do_not_flip_beside_a_cpu_bound_load(dataset, tmp_path):
+    idle = _run(dataset, tmp_path / "idle.sqlite", loaded=False)
+    busy = _run(dataset, tmp_path / "busy.sqlite", loaded=True)
+    assert idle, "the idle run gave no time verdict to compare"
+    flipped = {key: (idle[key], busy[key]) for key in idle.keys() & busy.keys() if idle[key] != busy[key]}
+    assert not flipped, flipped
+
+
+def test_ratio_bounds_hold_the_nominal_ratio_and_widen_with_the_spread():
+    render = time_model.RenderCost(100, 0.5, 0.1, [1, 4], spread=1.5)
+    model = time_model.TimeModel((10, 10), 100, (10, 10), render)
+    model.denoisers["d"] = time_model.DenoiserCost("d", 100, {1: 0.4}, spread=2.0)
+    low, high = model.ratio_bounds("d", 1, 8)
+    nominal = model.total_seconds("d", 1) / model.render_seconds(8)
+    assert low < nominal < high
+    # rendering at its slowest and the denoiser at its fastest, and the other way round
+    assert low == pytest.approx((1.5 * 0.6 + 0.4) / (1.5 * 1.3)) and high == pytest.approx((0.6 + 0.8) / 1.3)
+    tight = time_model.TimeModel((10, 10), 100, (10, 10), time_model.RenderCost(100, 0.5, 0.1, [1, 4], spread=1.0))
+    tight.denoisers["d"] = time_model.DenoiserCost("d", 100, {1: 0.4}, spread=1.0)
+    assert tight.ratio_bounds("d", 1, 8) == pytest.approx((nominal, nominal))
+
+
+def test_a_verdict_whose_bounds_straddle_one_is_withheld():
+    # a denoiser at 1 spp matching 4-spp rendering at about its time: no verdict either way
+    render = time_model.RenderCost(100, 0.0, 1.0, [1, 4], spread=1.3)
+    model = time_model.TimeModel((10, 10), 100, (10, 10), render)
+    model.denoisers["d"] = time_model.DenoiserCost("d", 100, {1: 3.0}, spread=1.3)
+    points = [
+        analysis.Point("noisy", 1, 1.0, 0.4),
+        analysis.Point("noisy", 4, 4.0, 0.1),
+        analysis.Point("d", 1, 4.0, 0.1),
+    ]
+    fit = analysis.NoisyFit(0.0, -1.0, 1.0, [1, 4], False)
+    at = analysis.AccuracyTime("relmse", points, fit, None, None, [], model=model)
+    at.noisy_curve = {1: 0.4, 4: 0.1}
+    sentence = next(s for s in analysis.readings(at) if s.startswith("d at 1 spp"))
+    assert "no time verdict" in sentence and "cheaper" not in sentence
+    tables = equal_tables.Tables("relmse", (10, 10), False, [], [], ["d"])
+    row = equal_tables.EqualQualityRow(0.1, 4.0, 4.0, "measured")
+    row.needs["d"] = (equal_tables.Estimate(1.0, "measured"), equal_tables.Estimate(4.0, "measured"))
+    row.ratio_bounds["d"] = model.ratio_bounds("d", 1, 4)
+    tables.equal_quality.append(row)
+    (text,) = equal_tables.verdicts(tables)
+    assert "about rendering's time" in text and "cheaper" not in text
