@@ -102,6 +102,6 @@ def test_check_prints_plan_and_warnings():
 
     result = run_cli("scenes", "check", DATA / "unsupported_and_degenerate.usda")
     assert result.returncode == 0
-    assert "warning: /World/Hair: prim type BasisCurves is not supported; skipped" in result.stderr
+    assert "warning: /World/Hair: prim type NurbsCurves is not supported; skipped" in result.stderr
     plan = json.loads(result.stdout)["render_plan"]
     assert plan["camera_model"] == "pinhole" and plan["random_parameters"] == ["pixel", "light", "bounce"]

@@ -296,7 +296,7 @@ def test_bad_stage_is_a_one_line_user_error(name, message):
 def test_unsupported_prims_and_degenerate_input_warn_once_each():
     translated = translate_usd(DATA / "unsupported_and_degenerate.usda")
     warnings = translated.warnings
-    assert "/World/Hair: prim type BasisCurves is not supported; skipped" in warnings
+    assert "/World/Hair: prim type NurbsCurves is not supported; skipped" in warnings
     assert "/World/Dust: prim type Points is not supported; skipped" in warnings
     assert "/World/Sliver: 2 face(s) with fewer than 3 vertices cannot be triangulated; skipped" in warnings
     assert "/World/Flat: RectLight has zero area; skipped (it would emit nothing)" in warnings

@@ -484,18 +484,18 @@ def test_unsupported_only_stage_and_usd_diagnostics(tmp_path, capfd):
     stage = new_stage(path)
     add_camera(stage)
     UsdLux.DomeLight.Define(stage, "/Dome")
-    curves = UsdGeom.BasisCurves.Define(stage, "/Hair")
+    curves = UsdGeom.NurbsCurves.Define(stage, "/Hair")  # BasisCurves render since issue 44
     curves.CreatePointsAttr([(0, 0, 0), (0, 1, 0), (1, 1, 0), (1, 2, 0)])
     curves.CreateCurveVertexCountsAttr([4])
     stage.GetRootLayer().Save()
-    with pytest.raises(UserInputError, match=r"nothing renderable.*BasisCurves"):
+    with pytest.raises(UserInputError, match=r"nothing renderable.*NurbsCurves"):
         translate_usd(path, strict=True)
     result = run_cli("scenes", "preview", path, "--out", tmp_path / "p.png", "--width", 8, "--height", 8, "--spp", 1)
     assert result.returncode == 2 and "Traceback" not in result.stderr and len(result.stderr.strip().splitlines()) == 1
 
     text = path.read_text().replace(
-        'def BasisCurves "Hair"',
-        'def Xform "Ref" (prepend references = [@./missing_a.usda@, @./missing_b.usda@]) {}\ndef BasisCurves "Hair"',
+        'def NurbsCurves "Hair"',
+        'def Xform "Ref" (prepend references = [@./missing_a.usda@, @./missing_b.usda@]) {}\ndef NurbsCurves "Hair"',
     )
     text += '\ndef Cube "Box" {}\n'
     path = tmp_path / "with_references.usda"  # a new file: the open layer above is cached by USD
@@ -514,7 +514,7 @@ def test_preview_prints_warnings_before_rendering(tmp_path, monkeypatch):
 
     path = lit_box_stage(tmp_path / "s.usda")
     stage = Usd.Stage.Open(str(path))
-    UsdGeom.BasisCurves.Define(stage, "/Hair")
+    UsdGeom.NurbsCurves.Define(stage, "/Hair")
     stage.GetRootLayer().Save()
     events = []
 
@@ -527,7 +527,7 @@ def test_preview_prints_warnings_before_rendering(tmp_path, monkeypatch):
         preview.render_preview(
             path, width=8, height=8, spp=1, before_render=lambda t: events.append(("warnings", tuple(t.warnings)))
         )
-    assert events[0][0] == "warnings" and any("BasisCurves" in w for w in events[0][1]) and events[1] == "render"
+    assert events[0][0] == "warnings" and any("NurbsCurves" in w for w in events[0][1]) and events[1] == "render"
 
 
 # ------------------------------------------------------------------ moving objects

@@ -40,6 +40,10 @@ from denoisebench.generator.usd.textures import shader_id as _shader_id
 
 DEFAULT_GREY = (0.18, 0.18, 0.18)
 _SKIPPED_INPUTS = ("normal", "displacement", "occlusion")
+#: A hair surface (issue 44): a Shader with this ``info:id`` → Mitsuba's ``hair`` BSDF (Chiang et al. 2016),
+#: its authored inputs passed as they are (floats; ``sigma_a`` a colour, used instead of the melanins).
+HAIR_ID = "denoisebench_hair"
+HAIR_INPUTS = ("eumelanin", "pheomelanin", "longitudinal_roughness", "azimuthal_roughness", "scale_tilt", "eta")
 
 
 @dataclass
@@ -80,6 +84,8 @@ def translate_material(material, warnings: list[str]) -> MaterialInfo:
         if translated is not None:
             return _from_materialx(translated, path, "MaterialX network in USD", _shader_id(mtlx_shader), "")
     shader = material.ComputeSurfaceSource()[0] if material else None
+    if shader and _shader_id(shader) == HAIR_ID:
+        return _hair(shader, path)
     if not shader or _shader_id(shader) != "UsdPreviewSurface":
         kind = _shader_id(shader) or "no surface shader"
         warnings.append(f"{path}: surface '{kind}' is not UsdPreviewSurface; grey diffuse used")
@@ -177,6 +183,25 @@ def translate_material(material, warnings: list[str]) -> MaterialInfo:
     if mask is not None:
         info.bsdf = {"type": "mask", "opacity": mask, "bsdf": info.bsdf}
     return info
+
+
+def _hair(shader, path: str) -> MaterialInfo:
+    """A ``denoisebench_hair`` surface → Mitsuba ``hair`` (a rough, glossy fibre: effect ``glossy``)."""
+    bsdf: dict = {"type": "hair"}
+    for name in HAIR_INPUTS:
+        shader_input = shader.GetInput(name)
+        value = shader_input.Get() if shader_input else None
+        if value is not None:
+            bsdf[name] = float(check_finite(value, str(shader.GetPath()), f"inputs:{name}"))
+    sigma = shader.GetInput("sigma_a")
+    if sigma and sigma.Get() is not None:
+        bsdf["sigma_a"] = _rgb(check_finite(sigma.Get(), str(shader.GetPath()), "inputs:sigma_a"))
+        bsdf.pop("eumelanin", None)  # Mitsuba takes absorption or pigmentation, not both
+        bsdf.pop("pheomelanin", None)
+    roughness = float(bsdf.get("longitudinal_roughness", 0.3))
+    return MaterialInfo(
+        bsdf=bsdf, roughness=roughness, metallic=1.0, report={"material": path, "kind": "denoisebench hair"}
+    )
 
 
 def _from_materialx(translated, path: str, kind: str, surface: str, document: str) -> MaterialInfo:

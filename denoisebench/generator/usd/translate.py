@@ -27,7 +27,7 @@ import numpy as np
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.render_plan import STAGE_MAX_DEPTH_KEY, check_max_depth
 from denoisebench.generator.contract.translated_scene import TranslatedScene, shutter_keys
-from denoisebench.generator.usd import geometry, instancers
+from denoisebench.generator.usd import curves, geometry, instancers
 from denoisebench.generator.usd.additions import add_auto_camera, add_default_lights, stage_has_light
 from denoisebench.generator.usd.camera import find_camera, read_camera
 from denoisebench.generator.usd.effects import infer_effects
@@ -189,6 +189,18 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
                     bind(record, material, into=records)
                 instance_groups.append({"name": group["name"], "shapes": records, "to_world": group["to_world"]})
             continue
+        if prim.IsA(UsdGeom.BasisCurves):
+            if len(frames) > 1 and (
+                geometry.is_transform_animated(prim)
+                or UsdGeom.BasisCurves(prim).GetPointsAttr().GetNumTimeSamples() > 1
+            ):
+                warnings.append(f"{path}: animated curves are not supported; rendered at their first-frame pose")
+            record = curves.read_curves(
+                prim, to_mitsuba @ geometry.local_to_world(prim, frames[0]), warnings, frames[0]
+            )
+            if record is not None:
+                bind(record, bound_material(prim, materials, warnings))
+            continue
         if prim.IsA(UsdGeom.Gprim):
             if not (prim.IsA(UsdGeom.Mesh) or type_name in geometry.SUPPORTED_PRIMITIVES):
                 warnings.append(f"{path}: prim type {type_name} is not supported; skipped")
@@ -342,6 +354,9 @@ def scene_bounds(translated: TranslatedScene) -> tuple[np.ndarray, np.ndarray]:
             center = np.asarray(shape["center"])
             lows.append(center - shape["radius"])
             highs.append(center + shape["radius"])
+        elif shape["kind"] == "curves":
+            lows.append((shape["points"][:, :3] - shape["points"][:, 3:]).min(0))
+            highs.append((shape["points"][:, :3] + shape["points"][:, 3:]).max(0))
         else:
             lows.append(shape["positions"].min(0))
             highs.append(shape["positions"].max(0))
