@@ -67,9 +67,10 @@ def our_reference(scene, translated, plan, frame, spp=OURS_SPP, seed=11, size=SI
 
 
 def mitsuba_path(mi, translated, scene, frame, aperture_scale=1.0):
-    """REPLICAS independent renders by Mitsuba ``path`` at its defaults (box filter), R×H×W×3."""
+    """REPLICAS independent renders by Mitsuba ``path`` at its defaults (box filter), R×H×W×3; ``volpath``
+    (also at its defaults) for a scene with participating media, which ``path`` does not render."""
     sensor = mi.load_dict(sensor_dict(translated.camera, frame, SIZE, SIZE, REPLICA_SPP, aperture_scale=aperture_scale))
-    integrator = mi.load_dict({"type": "path"})
+    integrator = mi.load_dict({"type": "volpath" if "media" in translated.effects else "path"})
     images = [
         np.array(mi.render(scene, sensor=sensor, integrator=integrator, seed=500 + k, spp=REPLICA_SPP))[..., :3]
         for k in range(REPLICAS)
