@@ -364,7 +364,7 @@ def test_the_commands_refuse_a_missing_define_in_one_line(tmp_path, mi, capsys):
     usd = tmp_path / "x.usda"
     usd.write_text("#usda 1.0\n")
     assert main(["scenes", "check", str(usd), "-D", "a=1"]) == 2
-    assert "--define applies to Mitsuba XML scenes" in capsys.readouterr().err
+    assert "--define and --mitsuba-path apply to Mitsuba XML scenes" in capsys.readouterr().err
 
 
 # ------------------------------------------------------------ Mitsuba's own test scenes
@@ -422,12 +422,19 @@ def test_the_z_test_rejects_full_transport_for_the_direct_scene(mi):
 
 @needs_data
 @pytest.mark.parametrize(
-    "name, depth",
-    [("bsdf_diffuse_plain.xml", None), ("sensor_thinlens.xml", None), ("integrator_direct_both.xml", 2)],
+    "name, depth, search",
+    [
+        ("bsdf_diffuse_plain.xml", None, False),
+        ("sensor_thinlens.xml", None, False),
+        ("integrator_direct_both.xml", 2, False),
+        ("sensor_orthographic.xml", None, True),  # written for Mitsuba's -a: --mitsuba-path common
+    ],
 )
-def test_documentation_scenes_load_as_shipped(mi, name, depth):
+def test_documentation_scenes_load_as_shipped(mi, name, depth, search):
     # <path value="../../common"/>, includes from include/, $spp without a <default> (sensor_thinlens)
-    translated, scene = load_mitsuba_xml(Path(MITSUBA_DATA) / "docs" / "scenes" / name, frames=1)
+    data = Path(MITSUBA_DATA)
+    search_paths = [data / "common"] if search else []
+    translated, scene = load_mitsuba_xml(data / "docs" / "scenes" / name, frames=1, search_paths=search_paths)
     assert scene.shapes() and translated.camera.frames == 1 and translated.max_depth == depth
 
 
@@ -482,3 +489,38 @@ def test_an_orthographic_dataset_records_its_projection_and_noisebase_refuses_it
     assert main(["export", str(out), str(never), "--format", "noisebase", "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert "orthographic camera" in err and "\n" not in err and not never.exists()
+
+
+def test_mitsuba_path_is_searched_after_the_scenes_folder_and_not_recorded(tmp_path, mi):
+    from denoisebench.generator.mitsuba_xml import read_structure as structure_of
+
+    # a scene written for Mitsuba's -a (as Mitsuba's sensor_orthographic.xml): names a mesh in no folder of its own
+    (tmp_path / "lib" / "meshes").mkdir(parents=True)
+    (tmp_path / "lib" / "meshes" / "t.obj").write_text(TRIANGLE)
+    (tmp_path / "scene").mkdir()
+    source = tmp_path / "scene" / "a.xml"
+    source.write_text(
+        f"""<scene version="3.0.0"><sensor type="perspective">{FILM}</sensor><emitter type="constant"/>
+  <shape type="obj"><string name="filename" value="meshes/t.obj"/></shape></scene>
+"""
+    )
+    with pytest.raises(UserInputError, match="names 'meshes/t.obj', which does not exist"):
+        structure_of(source)
+    with pytest.raises(UserInputError, match="--mitsuba-path .*nowhere: no such folder"):
+        structure_of(source, search_paths=[tmp_path / "nowhere"])
+    found = structure_of(source, search_paths=[tmp_path / "lib"])
+    assert found.resolved["meshes/t.obj"] == (tmp_path / "lib" / "meshes" / "t.obj").resolve()
+    # the scene's own folder comes first, as with Mitsuba's -a
+    (tmp_path / "scene" / "meshes").mkdir()
+    (tmp_path / "scene" / "meshes" / "t.obj").write_text(TRIANGLE)
+    found = structure_of(source, search_paths=[tmp_path / "lib"])
+    assert found.resolved["meshes/t.obj"] == (tmp_path / "scene" / "meshes" / "t.obj").resolve()
+    (tmp_path / "scene" / "meshes" / "t.obj").unlink()
+    out = tmp_path / "ds"
+    args = ["generate", "--out", str(out), "--mitsuba", str(source), "--frames", "1", "--width", "8", "--height", "8"]
+    args += ["--spp", "1", "--ref-spp", "4", "--ref-error", "0", "--quiet", "--mitsuba-path", str(tmp_path / "lib")]
+    assert main(args) == 0
+    manifest = json.loads((out / "dataset.json").read_text())
+    assert str(tmp_path) not in json.dumps(manifest["config"])
+    assert (out / "xml_a" / "meshes" / "t.obj").read_text() == TRIANGLE
+    assert main(["scenes", "check", str(source), "--mitsuba-path", str(tmp_path / "lib")]) == 0

@@ -38,8 +38,8 @@ the file, which must lie in its folder), copies it with those files into OUT/xml
 renders it from its first sensor (perspective or thinlens) held still over --frames frames, with effects
 inferred from its plugins. Media and other sensors are refused (exit 2); another integrator gets a warning.
 --auto-camera gives it the orbit --usd stages get (around its bounding box, +Y up) instead of its sensor.
-Its files are found as Mitsuba finds them (<path> directives included; they may lie anywhere) and copied
-with it; the copy (<path>s removed, names that leave its folder moved under files/, parameters written in
+Its files are found as Mitsuba finds them (<path> directives, the scene's folder, --mitsuba-path DIR as
+Mitsuba's -a; they may lie anywhere) and copied with it; the copy (<path>s removed, names that leave its folder moved under files/, parameters written in
 as <default>s) loads on another machine. --define NAME=VALUE (repeatable, Mitsuba's -D) sets its
 $parameters; $spp and the film size ($res, $resx, $resy) need none: denoisebench sets its own. Its
 integrator's restriction is honoured and recorded: path/volpath max_depth, and `direct` (read through
@@ -82,6 +82,8 @@ EPILOG = """examples:
   generate-dataset --out data/asset --usd asset.usdz --auto-camera --default-light --frames 8 --spp 4
   generate-dataset --out data/bitterli --mitsuba staircase/scene_v3.xml --frames 4 --spp 1,4 --ref-spp 1024
   generate-dataset --out data/docs --mitsuba mitsuba-data/docs/scenes/sensor_thinlens.xml --frames 1
+  generate-dataset --out data/ortho --mitsuba mitsuba-data/docs/scenes/sensor_orthographic.xml \
+      --mitsuba-path mitsuba-data/common --frames 1   # a scene written for Mitsuba's -a
   generate-dataset --out data/mts --mitsuba mitsuba-data/tests/scenes/floating_sphere/test_directional_direct.xml \
       --define integrator=path --frames 1   # the scene's $integrator: path instead of its default, direct
 """
@@ -180,6 +182,14 @@ def add_arguments(parser) -> None:
         "size ($res, $resx, $resy) need none: denoisebench sets its own",
     )
     parser.add_argument(
+        "--mitsuba-path",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="also find the --mitsuba scenes' files in DIR, after each scene's own folder (repeatable; "
+        "Mitsuba's -a); the dataset's copies hold every file, so DIR is not recorded",
+    )
+    parser.add_argument(
         "--camera", default=None, metavar="PATH", help="camera prim of the --usd stages (default: the first)"
     )
     parser.add_argument(
@@ -236,6 +246,7 @@ def request_from_args(args):
         default_light=args.default_light,
         independent_rungs=args.independent_rungs,
         defines=tuple(parse_defines(args.define).items()),
+        search_paths=tuple(args.mitsuba_path),
         force=args.force,
     )
 

@@ -64,6 +64,13 @@ def _add_stage_options(parser) -> None:
         help="set a $NAME parameter of a Mitsuba XML scene (repeatable; Mitsuba's -D); $spp and the film "
         "size ($res, $resx, $resy) need none: denoisebench sets its own",
     )
+    parser.add_argument(
+        "--mitsuba-path",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="also find a Mitsuba XML scene's files in DIR, after its own folder (repeatable; Mitsuba's -a)",
+    )
 
 
 def is_xml(path) -> bool:
@@ -83,9 +90,14 @@ def translate_options(args, frames: int = 8) -> dict:
                     f"{flag} applies to USD stages; a Mitsuba XML scene uses its first sensor "
                     "or --auto-camera, and its own emitters"
                 )
-        return {"frames": frames, "auto_camera": bool(args.auto_camera), "defines": parse_defines(args.define)}
-    if getattr(args, "define", None):
-        raise UserInputError("--define applies to Mitsuba XML scenes ($parameters), not to USD stages")
+        return {
+            "frames": frames,
+            "auto_camera": bool(args.auto_camera),
+            "defines": parse_defines(args.define),
+            "search_paths": tuple(getattr(args, "mitsuba_path", ()) or ()),
+        }
+    if getattr(args, "define", None) or getattr(args, "mitsuba_path", None):
+        raise UserInputError("--define and --mitsuba-path apply to Mitsuba XML scenes, not to USD stages")
 
     return {**stage_options(args.camera, args.auto_camera, args.default_light, frames), "strict": True}
 

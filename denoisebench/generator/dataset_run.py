@@ -87,6 +87,9 @@ class GenerateRequest:
     default_light: bool = False  # --default-light: light --usd stages that have no light
     independent_rungs: bool = False  # --independent-rungs: every spp its own render (default: nested rungs)
     defines: tuple[tuple[str, str], ...] = ()  # --define NAME=VALUE: parameters of the --mitsuba scenes
+    # --mitsuba-path DIR: more folders to find the --mitsuba scenes' files in. Not in the config: the copies
+    # hold every file they need, and a machine's folders must not change the config hash.
+    search_paths: tuple[str, ...] = ()
 
     def define_dict(self) -> dict[str, str]:
         """The --define parameters as a dict (later ones win, as on Mitsuba's command line)."""
@@ -157,7 +160,13 @@ def validate_request(request: GenerateRequest) -> None:
     for path in request.usd:
         scenes_mod.check_user_stage(path, request.stage_options())
     for path in request.xml:
-        scenes_mod.check_xml_scene(path, request.frames, auto_camera=request.auto_camera, defines=request.define_dict())
+        scenes_mod.check_xml_scene(
+            path,
+            request.frames,
+            auto_camera=request.auto_camera,
+            defines=request.define_dict(),
+            search_paths=request.search_paths,
+        )
 
 
 def _file_sha256(path: Path) -> str:
@@ -331,7 +340,12 @@ def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names:
     for path, name in zip(request.xml, scenes_mod.user_scene_names(list(request.xml), taken, prefix="xml_")):
         folder = writer.scene_dir(name)
         files = scenes_mod.copy_xml_scene(
-            path, folder, request.frames, auto_camera=request.auto_camera, defines=request.define_dict()
+            path,
+            folder,
+            request.frames,
+            auto_camera=request.auto_camera,
+            defines=request.define_dict(),
+            search_paths=request.search_paths,
         )
         entries.append(
             SceneSpec(

@@ -309,18 +309,27 @@ def xml_camera(path: Path) -> dict:
     return {"frames": int(record["frames"]), "auto_camera": bool(record.get("auto_camera", False))}
 
 
-def check_xml_scene(path: str | Path, frames: int, auto_camera: bool = False, defines: dict | None = None):
+def check_xml_scene(
+    path: str | Path, frames: int, auto_camera: bool = False, defines: dict | None = None, search_paths=()
+):
     """Load and check a Mitsuba XML scene before anything is written (UserInputError, one line);
-    ``defines``: its parameters (``--define``)."""
+    ``defines``: its parameters (``--define``); ``search_paths``: ``--mitsuba-path`` folders."""
     path = Path(path)
     if path.suffix.lower() != ".xml":
         raise UserInputError(f"{path}: expected a Mitsuba .xml scene file")
-    translated, _ = load_mitsuba_xml(path, frames=frames, auto_camera=auto_camera, defines=defines)
+    translated, _ = load_mitsuba_xml(
+        path, frames=frames, auto_camera=auto_camera, defines=defines, search_paths=search_paths
+    )
     return translated
 
 
 def copy_xml_scene(
-    path: str | Path, scene_dir: Path, frames: int, auto_camera: bool = False, defines: dict | None = None
+    path: str | Path,
+    scene_dir: Path,
+    frames: int,
+    auto_camera: bool = False,
+    defines: dict | None = None,
+    search_paths=(),
 ) -> tuple[str, ...]:
     """Copy a Mitsuba XML scene to ``scene_dir/scene.xml`` with every file it names (``portable_files``:
     loadable on another machine with no options, ``defines`` written into it), and ``camera.json``
@@ -330,7 +339,7 @@ def copy_xml_scene(
     datasets made then keep their stage digests)."""
     path = Path(path)
     scene_dir.mkdir(parents=True, exist_ok=True)
-    copy = portable_files(path, defines)
+    copy = portable_files(path, defines, search_paths)
     files = []
     for relative, data in sorted(copy.items()):
         if relative != XML_NAME:

@@ -20,7 +20,9 @@ Notes
 * Files: every ``filename`` the scene names (an element ``<string name="filename" ...>`` or a
   ``filename`` attribute: includes, spectra) is found as Mitsuba finds it: its file resolver searches
   the ``<path>`` folders (relative to the scene file, the last one first), then the scene file's
-  folder, then Mitsuba's defaults (the working directory, Mitsuba's own data). The user's scene may
+  folder, then ``search_paths`` (``--mitsuba-path DIR``, Mitsuba's ``-a``: for scenes written to be
+  loaded with one, such as Mitsuba's ``sensor_orthographic.xml``), then Mitsuba's defaults (the
+  working directory, Mitsuba's own data). The user's scene may
   name files anywhere; a name that resolves to no file is a one-line error. Pitfall: an included
   file's names resolve like the main file's (relative to the main file's folder, not the include's),
   as Mitsuba does.
@@ -74,6 +76,7 @@ from __future__ import annotations
 
 import re
 import xml.etree.ElementTree as ElementTree
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
@@ -153,19 +156,46 @@ def _parse(path: Path, shown: Path) -> ElementTree.Element:
     return root
 
 
-def _mitsuba_parse(mi, path: Path, defines: dict[str, str]):
+@contextmanager
+def _searching(mi, folders):
+    """Mitsuba's thread file resolver with ``folders`` in front (Mitsuba's ``-a``), restored afterwards,
+    also of what the parser prepends to it (``<path>`` directives)."""
+    resolver = mi.file_resolver()
+    saved = [str(p) for p in resolver]
+    try:
+        for folder in reversed(list(folders)):
+            resolver.prepend(str(folder))
+        yield resolver
+    finally:
+        resolver.clear()
+        for folder in saved:
+            resolver.append(folder)
+
+
+def search_folders(folders, shown: str = "--mitsuba-path") -> list[Path]:
+    """``--mitsuba-path`` folders as absolute paths; UserInputError (one line) for one that is no folder."""
+    out = []
+    for folder in folders or ():
+        if not Path(folder).is_dir():
+            raise UserInputError(f"{shown} {folder}: no such folder")
+        out.append(Path(folder).resolve())
+    return out
+
+
+def _mitsuba_parse(mi, path: Path, defines: dict[str, str], search: list[Path] = ()):
     """``(ParserState, parameters, placeholders, <path> folders)`` from Mitsuba's own parser.
 
     Mitsuba's ``parse_file`` prepends the ``<path>`` folders to the thread's file resolver and leaves
-    them there; they are read off and the resolver is restored."""
-    resolver = mi.file_resolver()
+    them there; they are read off and the resolver is restored. ``search``: ``--mitsuba-path``
+    folders, searched after the scene's own folder (as Mitsuba's ``-a``)."""
     parameters = dict(defines)
     placeholders: list[str] = []
     while True:
-        saved = [str(p) for p in resolver]
         try:
-            state = mi.parser.parse_file(mi.parser.ParserConfig(mi.variant()), str(path), **parameters)
-            now = [str(p) for p in resolver]
+            with _searching(mi, search) as resolver:
+                before = len(resolver)
+                state = mi.parser.parse_file(mi.parser.ParserConfig(mi.variant()), str(path), **parameters)
+                now = [str(p) for p in resolver]
         except Exception as error:  # noqa: BLE001 - Mitsuba raises RuntimeError with its parser's message
             text = " ".join(str(error).split())
             undefined = _UNDEFINED.search(text)
@@ -184,11 +214,7 @@ def _mitsuba_parse(mi, path: Path, defines: dict[str, str]):
                     f"{path}: --define {unused.group(1)}=...: the scene has no parameter ${unused.group(1)}"
                 ) from None
             raise UserInputError(f"{path}: Mitsuba cannot parse the scene ({_short(error)})") from None
-        finally:
-            resolver.clear()
-            for folder in saved:
-                resolver.append(folder)
-        added = now[: max(0, len(now) - len(saved))]
+        added = now[: max(0, len(now) - before)]
         return state, parameters, tuple(placeholders), [Path(p) for p in added]
 
 
@@ -269,17 +295,19 @@ def _resolve(mi, name: str, search_paths: list[Path]) -> Path | None:
     return found.resolve() if found.is_file() else None
 
 
-def read_structure(path: Path, defines: dict[str, str] | None = None) -> XmlStructure:
-    """Parse ``path`` with Mitsuba's parser (``defines``: ``--define`` parameters) and find every file
-    it names as Mitsuba's file resolver does (module Notes); UserInputError (one line) on bad input."""
+def read_structure(path: Path, defines: dict[str, str] | None = None, search_paths=()) -> XmlStructure:
+    """Parse ``path`` with Mitsuba's parser (``defines``: ``--define`` parameters; ``search_paths``:
+    ``--mitsuba-path`` folders, Mitsuba's ``-a``) and find every file it names as Mitsuba's file
+    resolver does (module Notes); UserInputError (one line) on bad input."""
     path = Path(path)
     _parse(path, path)  # well-formed, a <scene>: the clear messages first
     mi = load_mitsuba()
-    state, parameters, placeholders, added = _mitsuba_parse(mi, path.resolve(), dict(defines or {}))
+    search = search_folders(search_paths)
+    state, parameters, placeholders, added = _mitsuba_parse(mi, path.resolve(), dict(defines or {}), search)
     folder = path.resolve().parent
     defaults = [Path(str(p)) for p in mi.file_resolver()]
     out = XmlStructure(parameters=parameters, placeholders=placeholders)
-    out.search_paths = [*added, folder, *defaults]
+    out.search_paths = [*added, folder, *search, *defaults]
     out.documents = [Path(str(f)).resolve() for f in state.files] or [path.resolve()]
     out.has_media = any(node.type == mi.ObjectType.Medium for node in state.nodes)
     _transport(out, _integrator_chain(mi, state), path)
@@ -292,7 +320,7 @@ def read_structure(path: Path, defines: dict[str, str] | None = None) -> XmlStru
                 continue
             found = _resolve(mi, name, out.search_paths)
             if found is None:
-                searched = ", ".join(str(p) for p in out.search_paths[: len(added) + 1])
+                searched = ", ".join(str(p) for p in out.search_paths[: len(added) + 1 + len(search)])
                 raise UserInputError(f"{path}: names {name!r}, which does not exist (searched {searched})")
             out.files.append(name)
             out.resolved[name] = found
@@ -338,10 +366,12 @@ def copy_names(structure: XmlStructure) -> dict[Path, str]:
     return out
 
 
-def dependencies(path: Path, structure: XmlStructure | None = None, defines=None) -> list[tuple[Path, str]]:
+def dependencies(
+    path: Path, structure: XmlStructure | None = None, defines=None, search_paths=()
+) -> list[tuple[Path, str]]:
     """``(absolute file, path relative to the copy's folder)`` of every file the scene names (the
     scene file itself excluded), sorted by the relative path (:func:`copy_names`)."""
-    structure = structure or read_structure(path, defines)
+    structure = structure or read_structure(path, defines, search_paths)
     names = copy_names(structure)
     return sorted(((a, r) for a, r in names.items() if r != XML_NAME), key=lambda item: item[1])
 
@@ -375,12 +405,12 @@ def _rewritten(root, structure: XmlStructure, names: dict[Path, str], values: di
     return changed
 
 
-def portable_files(path: Path, defines: dict[str, str] | None = None) -> dict[str, bytes]:
+def portable_files(path: Path, defines: dict[str, str] | None = None, search_paths=()) -> dict[str, bytes]:
     """The dataset copy of a scene: ``{path relative to the copy's folder: bytes}``, ``scene.xml``
     first (module Notes). XML documents are rewritten only where they must be; every other file is
-    copied byte for byte."""
+    copied byte for byte. The copy needs none of ``defines`` and ``search_paths`` to load."""
     path = Path(path)
-    structure = read_structure(path, defines)
+    structure = read_structure(path, defines, search_paths)
     names = copy_names(structure)
     documents = set(structure.documents)
     roots = {document: _parse(document, document) for document in structure.documents}
@@ -480,12 +510,17 @@ def infer_effects(mi, scene, camera: CameraTrack) -> tuple[str, ...]:
 
 
 def load_mitsuba_xml(
-    path: str | Path, frames: int = 8, auto_camera: bool = False, defines: dict[str, str] | None = None
+    path: str | Path,
+    frames: int = 8,
+    auto_camera: bool = False,
+    defines: dict[str, str] | None = None,
+    search_paths=(),
 ) -> tuple[TranslatedScene, object]:
     """``(TranslatedScene, mi.Scene)`` of a Mitsuba XML file; UserInputError (one line) on bad input.
 
     ``frames``: the camera track's length; ``auto_camera``: the orbit instead of the file's sensor;
-    ``defines``: the scene's parameters (``--define NAME=VALUE``; :func:`parse_defines`).
+    ``defines``: the scene's parameters (``--define NAME=VALUE``; :func:`parse_defines`);
+    ``search_paths``: more folders to find its files in (``--mitsuba-path``, Mitsuba's ``-a``).
 
     The TranslatedScene has no shapes of its own (``scene_dict["mitsuba_xml"]`` names the file):
     render the returned ``mi.Scene`` with its ``camera``. Its ``max_depth`` is the scene's own
@@ -496,10 +531,11 @@ def load_mitsuba_xml(
     path = Path(path)
     if not path.is_file():
         raise UserInputError(f"{path}: no such Mitsuba XML file")
-    structure = read_structure(path, defines)
+    structure = read_structure(path, defines, search_paths)
     mi = load_mitsuba()
     try:
-        scene = mi.load_file(str(path.resolve()), **structure.parameters)
+        with _searching(mi, search_folders(search_paths)):
+            scene = mi.load_file(str(path.resolve()), **structure.parameters)
     except Exception as error:
         raise UserInputError(f"{path}: Mitsuba cannot load the scene ({_short(error)})") from None
     if not scene.sensors() and not auto_camera:
