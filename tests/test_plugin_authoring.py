@@ -61,6 +61,10 @@ def _deeper(frame):
 
 def sample(budget, rounds):
     rounds.render(np.full((rounds.height, rounds.width), 2))
+
+
+def boom_sampler(budget, rounds):
+    raise RuntimeError("sampler bug on purpose")
 '''
 
 
@@ -135,6 +139,18 @@ def test_a_raising_plugin_in_this_process_keeps_its_traceback_and_logs_it(plugin
     assert all("_deeper" in (r.traceback or "") for r in results)
     logged = [r for r in caplog.records if r.name == "denoisebench.plugins"]
     assert len(logged) == 1 and "_deeper" in logged[0].getMessage()  # once per distinct error
+
+
+def test_a_raising_sampler_logs_its_traceback(plugin_dir, caplog):
+    sampler = IsolatedSampler(f"{plugin_dir}/plug.py:boom_sampler", sandboxed=SANDBOXED)
+    try:
+        with caplog.at_level("WARNING", logger="denoisebench.plugins"):
+            record = run_sampler(sampler, synthetic.constant(8, 8), Budget(spp=4))
+    finally:
+        sampler.close()
+    assert record.stopped == "error" and "sampler bug on purpose" in record.error
+    (logged,) = [r.getMessage() for r in caplog.records if r.name == "denoisebench.plugins"]
+    assert "plug.py" in logged and "boom_sampler" in logged
 
 
 def test_each_hard_case_has_a_hint():

@@ -27,16 +27,14 @@ Everything that calls a denoiser (the benchmark, ``check-plugin``, tests) goes t
   one-line reason; the run goes on. ``KeyboardInterrupt`` and ``SystemExit`` still propagate.
 * **Tracebacks.** A denoiser that raises (in this process or in its worker) keeps its traceback in
   :attr:`DenoiseResult.traceback`, and the first of each distinct failure of a denoiser is logged
-  with it on the logger :data:`LOG` (``denoisebench.plugins``: a warning, which reaches stderr where
-  logging is not configured), so that the author can see where it raised.
+  with it (:func:`denoisebench.plugins.proxy.log_failure`: a warning on the logger
+  ``denoisebench.plugins``, which reaches stderr where logging is not configured).
 * **Sequences.** ``reset()`` is called before each sequence, then the frames go in order.
 """
 
 from __future__ import annotations
 
-import logging
 import time
-import traceback
 import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -48,6 +46,7 @@ from denoisebench.denoisers.isolation import IsolatedDenoiser
 from denoisebench.denoisers.protocol import describe
 from denoisebench.errors import one_line
 from denoisebench.plugins import PluginFailure
+from denoisebench.plugins.proxy import log_failure
 
 STATUS_OK = "ok"
 STATUS_FAILED = "failed"
@@ -192,24 +191,6 @@ def check_output(output: object, height: int, width: int) -> str | None:
 # --------------------------------------------------------------------------------------------------
 # running
 
-#: Where a raising denoiser's traceback is logged (once per distinct error, at most :data:`LOG_PER_DENOISER` per denoiser).
-LOG = logging.getLogger("denoisebench.plugins")
-#: The most tracebacks logged for one denoiser in one process (distinct errors each).
-LOG_PER_DENOISER = 3
-_LOGGED: set[tuple[str, str]] = set()
-
-
-def _raised(label: str, where: str, reason: str, error: BaseException) -> str | None:
-    """The traceback of ``error`` (a worker's, where it carries one), logged the first time it is seen."""
-    if isinstance(error, PluginFailure):
-        text = error.traceback
-    else:
-        text = "".join(traceback.format_exception(type(error), error, error.__traceback__))
-    if text and (label, reason) not in _LOGGED and sum(seen == label for seen, _ in _LOGGED) < LOG_PER_DENOISER:
-        _LOGGED.add((label, reason))
-        LOG.warning("denoiser %s failed on %s: %s\n%s", label, where, reason, text.rstrip())
-    return text or None
-
 
 def run_frame(denoiser: object, frame: Frame, *, name: str | None = None, keep_output: bool = True) -> DenoiseResult:
     """Denoise one frame under the contract; never raises for a failing denoiser."""
@@ -231,12 +212,12 @@ def run_frame(denoiser: object, frame: Frame, *, name: str | None = None, keep_o
     except PluginFailure as error:  # an isolated call: the reason is already one line
         result.seconds = denoiser.last_seconds if isolated else time.perf_counter() - started
         result.error = str(error)
-        result.traceback = _raised(label, f"{frame.scene} frame {frame.index}", result.error, error)
+        result.traceback = log_failure("denoiser", label, f"{frame.scene} frame {frame.index}", result.error, error)
         return result
     except Exception as error:  # noqa: BLE001 - contained and recorded
         result.seconds = time.perf_counter() - started
         result.error = f"raised {one_line(error)}"
-        result.traceback = _raised(label, f"{frame.scene} frame {frame.index}", result.error, error)
+        result.traceback = log_failure("denoiser", label, f"{frame.scene} frame {frame.index}", result.error, error)
         return result
     result.seconds = denoiser.last_seconds if isolated else time.perf_counter() - started
     reason = check_output(output, frame.height, frame.width)
@@ -260,7 +241,7 @@ def run_sequence(
             reset()
         except Exception as error:  # noqa: BLE001
             reason = str(error) if isinstance(error, PluginFailure) else f"reset() raised {one_line(error)}"
-            text = _raised(label, "reset()", reason, error)
+            text = log_failure("denoiser", label, "reset()", reason, error)
             return [DenoiseResult(label, f.scene, f.index, STATUS_FAILED, reason, traceback=text) for f in frames]
     return [run_frame(denoiser, frame, name=label, keep_output=keep_output) for frame in frames]
 

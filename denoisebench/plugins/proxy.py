@@ -22,6 +22,8 @@ plain worker processes, without the sandbox: for machines where none starts, and
 
 from __future__ import annotations
 
+import logging
+import traceback as tb
 from collections.abc import Collection, Mapping
 from typing import ClassVar
 
@@ -46,6 +48,30 @@ class PluginFailure(RuntimeError):
     def __init__(self, reason: str, traceback: str | None = None):
         super().__init__(reason)
         self.traceback = traceback
+
+
+#: Where a raising plugin's traceback is logged (a warning: stderr where logging is not configured).
+LOG = logging.getLogger("denoisebench.plugins")
+#: The most tracebacks logged for one plugin in one process (distinct errors each).
+LOG_PER_PLUGIN = 3
+_LOGGED: set[tuple[str, str]] = set()
+
+
+def log_failure(noun: str, label: str, where: str, reason: str, error: BaseException) -> str | None:
+    """The plugin's traceback behind ``error`` (the worker's, for a :class:`PluginFailure`), or None.
+
+    The first time a plugin fails with ``reason`` it is logged on :data:`LOG` with its traceback (at
+    most :data:`LOG_PER_PLUGIN` distinct reasons per plugin), so that its author sees where it raised.
+    """
+    if isinstance(error, PluginFailure):
+        text = error.traceback
+    else:
+        text = "".join(tb.format_exception(type(error), error, error.__traceback__))
+    seen = sum(other == label for other, _ in _LOGGED)
+    if text and (label, reason) not in _LOGGED and seen < LOG_PER_PLUGIN:
+        _LOGGED.add((label, reason))
+        LOG.warning("%s %s failed on %s: %s\n%s", noun, label, where, reason, text.rstrip())
+    return text or None
 
 
 def failure_from(header: Mapping, default: str) -> PluginFailure:

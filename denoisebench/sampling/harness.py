@@ -53,6 +53,7 @@ import numpy as np
 
 from denoisebench.errors import one_line
 from denoisebench.generator.render.placed import check_positions
+from denoisebench.plugins.proxy import log_failure
 from denoisebench.sampling.allocation import allocate
 from denoisebench.sampling.protocol import Budget, BudgetExhausted, SamplerRequestError, sampler_name
 
@@ -361,6 +362,7 @@ def run_sampler(
     except Exception as failure:  # noqa: BLE001 - a failing sampler is recorded, its rounds kept
         error = one_line(failure)
         stopped = "error"
+        log_failure("sampler", name, f"a {handle.width}x{handle.height} frame", error, failure)
     if stopped == "sampler" and handle.exhausted:
         stopped = "budget"
     if handle.final is not None:
