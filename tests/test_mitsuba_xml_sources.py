@@ -524,3 +524,19 @@ def test_mitsuba_path_is_searched_after_the_scenes_folder_and_not_recorded(tmp_p
     assert str(tmp_path) not in json.dumps(manifest["config"])
     assert (out / "xml_a" / "meshes" / "t.obj").read_text() == TRIANGLE
     assert main(["scenes", "check", str(source), "--mitsuba-path", str(tmp_path / "lib")]) == 0
+
+
+def test_help_says_which_parameters_need_no_define(capsys):
+    import argparse
+
+    from denoisebench.commands import generate
+
+    parser = argparse.ArgumentParser(epilog=generate.EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    generate.add_arguments(parser)
+    parser.print_help()
+    text = " ".join(capsys.readouterr().out.split())
+    assert "--define NAME=VALUE, -D NAME=VALUE" in text and "--mitsuba-path DIR" in text
+    assert "$spp and the film size ($res, $resx, $resy) need none" in text
+    assert "--define integrator=path" in text
+    args = parser.parse_args(["--out", "o", "--mitsuba", "a.xml", "-D", "a=1", "--define", "b=2"])
+    assert generate.request_from_args(args).defines == (("a", "1"), ("b", "2"))

@@ -33,18 +33,17 @@ nothing renderable, refuses the command (one line, exit 2). --auto-camera's orbi
 frames when the stage has no time range) and --default-light's lights are written into the copied
 OUT/usd_<stem>/scene.usda.
 
---mitsuba FILE (alias --xml) loads a Mitsuba 3 scene file with Mitsuba (meshes and textures relative to
-the file, which must lie in its folder), copies it with those files into OUT/xml_<stem>/scene.xml and
-renders it from its first sensor (perspective or thinlens) held still over --frames frames, with effects
-inferred from its plugins. Media and other sensors are refused (exit 2); another integrator gets a warning.
---auto-camera gives it the orbit --usd stages get (around its bounding box, +Y up) instead of its sensor.
-Its files are found as Mitsuba finds them (<path> directives, the scene's folder, --mitsuba-path DIR as
-Mitsuba's -a; they may lie anywhere) and copied with it; the copy (<path>s removed, names that leave its folder moved under files/, parameters written in
-as <default>s) loads on another machine. --define NAME=VALUE (repeatable, Mitsuba's -D) sets its
-$parameters; $spp and the film size ($res, $resx, $resy) need none: denoisebench sets its own. Its
-integrator's restriction is honoured and recorded: path/volpath max_depth, and `direct` (read through
-wrappers such as moment and aov) as direct illumination only (max_depth 2); --max-depth wins. Sensors:
-perspective, thinlens, orthographic.
+--mitsuba FILE (alias --xml) loads a Mitsuba 3 scene file with Mitsuba and renders it from its first
+sensor (perspective, thinlens or orthographic) held still over --frames frames, with effects inferred
+from its plugins; other sensors are refused (exit 2). --auto-camera gives it the orbit --usd stages get
+(around its bounding box, +Y up) instead of its sensor. Its files are found as Mitsuba finds them
+(<path> directives, the scene's folder, then --mitsuba-path DIR as Mitsuba's -a; they may lie anywhere)
+and copied into OUT/xml_<stem>/: scene.xml (<path>s removed, names that leave its folder moved under
+files/, parameters written in as <default>s) loads on another machine with no options. --define
+NAME=VALUE (repeatable, Mitsuba's -D) sets its $parameters; $spp and the film size ($res, $resx, $resy)
+need none: denoisebench sets its own. Its integrator's restriction is honoured and recorded: a
+path-family max_depth, and `direct` (read through wrappers such as moment and aov) as direct
+illumination only (max_depth 2); --max-depth wins; another integrator gets a warning.
 
 Exit codes: 0 done, 2 bad input (one line, nothing written), 1 some frames failed to render
 (reported; the dataset is left resumable and marked incomplete).
@@ -82,9 +81,9 @@ EPILOG = """examples:
   generate-dataset --out data/asset --usd asset.usdz --auto-camera --default-light --frames 8 --spp 4
   generate-dataset --out data/bitterli --mitsuba staircase/scene_v3.xml --frames 4 --spp 1,4 --ref-spp 1024
   generate-dataset --out data/docs --mitsuba mitsuba-data/docs/scenes/sensor_thinlens.xml --frames 1
-  generate-dataset --out data/ortho --mitsuba mitsuba-data/docs/scenes/sensor_orthographic.xml \
+  generate-dataset --out data/ortho --mitsuba mitsuba-data/docs/scenes/sensor_orthographic.xml \\
       --mitsuba-path mitsuba-data/common --frames 1   # a scene written for Mitsuba's -a
-  generate-dataset --out data/mts --mitsuba mitsuba-data/tests/scenes/floating_sphere/test_directional_direct.xml \
+  generate-dataset --out data/mts --mitsuba mitsuba-data/tests/scenes/floating_sphere/test_directional_direct.xml \\
       --define integrator=path --frames 1   # the scene's $integrator: path instead of its default, direct
 """
 
