@@ -42,7 +42,7 @@ def test_merged_statistics_equal_those_of_the_concatenated_samples():
     means = np.stack([r.mean(axis=0) for r in rounds])
     np.testing.assert_allclose(merger.batch_var(), means.var(axis=0, ddof=1) / 5, rtol=1e-10)
     out = merger.buffers()
-    assert out["color"].dtype == np.float32 and set(out) == {"color", "color_var"}
+    assert out["color"].dtype == np.float32 and set(out) == {"color", "color_var", "color_half"}
     robust, pooled = merger.floors()
     assert pooled == pytest.approx(floor_of(merger.mean(), merger.pooled_var()))
     assert robust == max(pooled, floor_of(merger.mean(), merger.batch_var()))

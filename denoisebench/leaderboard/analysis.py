@@ -192,7 +192,7 @@ def summary_table(data: RunData, exclude=()) -> list[SummaryRow]:
     return rows
 
 
-def metric_cell(data: RunData, label: str, spp: int, metric: str, scenes: list[str]) -> Cell:
+def metric_cell(data: RunData, label: str, spp: int, metric: str, scenes: list[str] | None) -> Cell:
     """One metric of one denoiser at one spp, aggregated over ``scenes`` by the metric's rule.
 
     With floors on every scene the cell leads with the corrected aggregate (:class:`Cell`); for

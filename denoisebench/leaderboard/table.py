@@ -5,8 +5,9 @@ code replaces the older number); the run id and its date are shown, so numbers f
 are never silently mixed. The value combines the scenes by the metric's aggregation rule
 (:mod:`.aggregate`: per scene the mean over its frames, or the sequence's temporal value; then the
 mean, the geometric mean, or the geometric mean of the ratio to the same run's noisy input), so a
-bright scene never decides a linear score; failed units count as failed, not as missing, and rank
-last.
+bright scene never decides a linear score; a score with a reference-noise floor is ranked corrected,
+as the report's tables show it (the same :func:`.analysis.metric_cell`); failed units count as
+failed, not as missing, and rank last.
 
 Notes
 -----
@@ -26,9 +27,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard.aggregate import aggregate
+from denoisebench.leaderboard.analysis import metric_cell
 from denoisebench.leaderboard.finite import finite_mean
-from denoisebench.leaderboard.names import NOISY
 from denoisebench.leaderboard.run_index import RunIndex
 from denoisebench.leaderboard.store import ResultsStore
 from denoisebench.metrics import get_metric
@@ -111,10 +111,10 @@ def leaderboard(
         if not labels:
             continue
         run_index = RunIndex(all_units, store.frames(run_id), store.sequence_metrics(run_id))
-        noisy = run_index.per_scene(NOISY, spp, m.name)[0] if m.aggregate == "relative_to_input" else None
         for label in sorted(labels):
             ok = run_index.ok_frames(label, spp)
-            value = aggregate(m.aggregate, run_index.per_scene(label, spp, m.name)[0], noisy)[0]
+            # the report's own cell: corrected for the reference's noise where the score has a floor
+            value = metric_cell(run_index, label, spp, m.name, None).value
             failed = sum(1 for u in run_index.units_of(label, spp) if u.status != "ok")
             where = dimension.get(label, (None, label))
             if value is None and not failed:  # this run did not compute the metric: look further back
