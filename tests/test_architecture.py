@@ -172,3 +172,16 @@ def test_no_import_cycles_between_modules_at_import_time():
         if module not in state and visit(module, [module]):
             break
     assert not cycle, " -> ".join(cycle)
+
+
+def test_one_plugin_shell():
+    """Worker processes, their limits, the sandbox and the reply format live in ``plugins/`` only."""
+    shell = ("WorkerProcess(", "Connection(", "set_rlimits(", "send_bytes(", "class Limits", "sandbox.command(")
+    bad = sorted(
+        f"{path.relative_to(PACKAGE.parent)}: {needle}"
+        for path in PACKAGE.rglob("*.py")
+        if "plugins" not in path.relative_to(PACKAGE).parts
+        for needle in shell
+        if needle in path.read_text()
+    )
+    assert not bad, "plugin-shell code outside denoisebench/plugins/:\n" + "\n".join(bad)

@@ -164,6 +164,8 @@ class PluginProxy:
 
     def send(self, message: tuple) -> None:
         """Send a (pickled) message to the worker; PluginFailure where it has gone."""
+        if self._worker is None:
+            raise PluginFailure(f"the {self.noun}'s worker is not running (closed, or ended by an earlier failure)")
         try:
             self._worker.send(message)
         except WorkerGone as gone:
