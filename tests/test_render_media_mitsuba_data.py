@@ -59,4 +59,5 @@ def test_participating_media_scene_passes_mitsubas_z_test(mi, name):
     plan = make_render_plan(translated.effects_inferred, stage_max_depth=translated.max_depth)
     frame = render_frame(scene, translated.camera, 0, plan, width=width, height=height, spp=spp, seed=0, reference=True)
     fraction, passed = mitsuba_z_test(mi, frame.buffers["color"], ref, ref_var, spp)
+    print(f"{name}: {fraction:.4%} of pixel-channels accepted")
     assert passed, f"{name}: {fraction:.4%} of pixel-channels accepted (Mitsuba asks 99.75 %)"

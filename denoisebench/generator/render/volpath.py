@@ -103,6 +103,8 @@ class _Shadow:
     medium: object
     tr: object
     active: object
+    si: object  # the surface ahead, kept across null collisions (``fresh``: intersect anew)
+    fresh: object
 
 
 def _transmittance(mi, dr, scene, sampler, o, d, dist, medium, time, wavelengths, active):
@@ -119,6 +121,8 @@ def _transmittance(mi, dr, scene, sampler, o, d, dist, medium, time, wavelengths
         medium=mi.MediumPtr(medium),
         tr=mi.Color3f(1.0),
         active=mi.Bool(active),
+        si=dr.zeros(mi.SurfaceInteraction3f, dr.width(dist)),
+        fresh=mi.Bool(True),
     )
 
     def cond(state):
@@ -127,7 +131,8 @@ def _transmittance(mi, dr, scene, sampler, o, d, dist, medium, time, wavelengths
     def body(state):
         active = state.active & (state.remaining > 0.0)
         ray = _segment_ray(mi, state.o, d, state.remaining, time, wavelengths)
-        si = scene.ray_intersect(ray, mi.RayFlags.All, False, active)
+        fresh = active & state.fresh
+        si = dr.select(fresh, scene.ray_intersect(ray, mi.RayFlags.All, False, fresh), state.si)
         end = dr.minimum(si.t, state.remaining)
         medium = state.medium
         in_medium = active & (medium != None)  # noqa: E711 (a Dr.Jit pointer comparison)
@@ -159,6 +164,9 @@ def _transmittance(mi, dr, scene, sampler, o, d, dist, medium, time, wavelengths
         state.remaining = dr.select(collided | at_surface, state.remaining - moved, state.remaining)
         state.medium = next_medium
         state.tr = tr
+        state.si = si
+        state.si.t = dr.select(collided, si.t - mei.t, si.t)
+        state.fresh = ~collided
         state.active = (collided | at_surface) & (dr.max(tr) > 0.0) & (state.remaining > 0.0)
         return (state,)
 
@@ -184,6 +192,8 @@ class _VolState:
     prev_pdf: object
     prev_delta: object
     active: object
+    si: object  # the surface ``ray`` meets, kept across null collisions (``fresh``: intersect anew)
+    fresh: object
     feats: dict | None = None
 
 
@@ -256,6 +266,8 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
         prev_pdf=mi.Float(1.0),
         prev_delta=mi.Bool(True),  # the camera: an emitter it sees has MIS weight 1
         active=dr.full(mi.Bool, True, lanes),
+        si=dr.zeros(mi.SurfaceInteraction3f, lanes),
+        fresh=dr.full(mi.Bool, True, lanes),
         feats=feats,
     )
     body = functools.partial(_iteration, mi, dr, scene, opts)
@@ -299,7 +311,10 @@ def _iteration(mi, dr, scene, opts: KernelOptions, state: _VolState):
     ray, medium, beta, active = state.ray, state.medium, state.beta, state.active
     first = active & (state.depth == 0)
 
-    si = scene.ray_intersect(ray, mi.RayFlags.All, False, active)
+    # After a null collision the ray goes on along the same line: the surface ahead is the one found
+    # before, nearer by the distance flown (no new traversal; Mitsuba's volpath does the same).
+    fresh = active & state.fresh
+    si = dr.select(fresh, scene.ray_intersect(ray, mi.RayFlags.All, False, fresh), state.si)
     end = dr.minimum(si.t, ray.maxt)
 
     # ---------------------------------------------------------------- medium
@@ -455,6 +470,9 @@ def _iteration(mi, dr, scene, opts: KernelOptions, state: _VolState):
 
     state.sampler = sampler
     state.ray = next_ray
+    state.si = si
+    state.si.t = dr.select(null, si.t - mei.t, si.t)
+    state.fresh = ~null
     state.medium = next_medium
     state.beta = beta
     state.eta = eta
