@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from denoisebench.errors import UserInputError
 from denoisebench.generator.render.motion import ShutterMotionScene
 
 
@@ -29,9 +30,17 @@ def scene_media(scene) -> list:
 
 
 def scene_has_media(scene) -> bool:
-    """True when some shape or sensor of ``scene`` (a ``mi.Scene``) is bound to a participating medium."""
+    """True when some shape or sensor of ``scene`` (a ``mi.Scene``) is bound to a participating medium.
+
+    A :class:`ShutterMotionScene` (shapes moving within the shutter) with media is refused (one-line
+    UserInputError): the volumetric tracer does not intersect moving shapes."""
     if isinstance(scene, ShutterMotionScene):
-        scene = scene.base
+        if scene_media(scene.base):
+            raise UserInputError(
+                "participating media in a scene whose shapes move within the shutter are not supported "
+                "(render without motion blur, or without the medium)"
+            )
+        return False
     return bool(scene_media(scene))
 
 

@@ -200,6 +200,8 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
             medium = mi.load_dict(medium_dict(mi, record["medium"]))
             if record["medium"]["null_boundary"]:
                 bsdf = mi.load_dict({"type": "null"})
+            if shutter_motion and "shutter_motion" in record:
+                raise UserInputError(f"{record['name']}: a medium boundary moving within the shutter is not supported")
         if shutter_motion and "shutter_motion" in record:
             local = object_space(record)
             points = local["positions"].astype(np.float64)
