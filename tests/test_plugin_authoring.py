@@ -179,11 +179,15 @@ def test_one_failure_type_and_one_limits_for_both_proxies(plugin_dir):
         sampler.close()
 
 
-def test_a_misspelled_denoiser_writes_no_files(tmp_path, capsys):
+def test_a_refused_run_writes_no_files(tmp_path, capsys):
     dataset = make_synthetic_dataset(tmp_path / "ds", scenes=1, frames=1, height=8, width=8, spp=(1,))
     argv = ["benchmark", "--data", str(dataset), "--denoisers", "identiy", "--out", str(tmp_path / "out")]
     assert cli.main([*argv, "--db", str(tmp_path / "r.sqlite")]) == 2
     assert "unknown denoiser 'identiy'" in capsys.readouterr().err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+    argv = [*argv[:4], "identity", "--option", "identity:strength=1", *argv[5:]]  # refused while loading
+    assert cli.main([*argv, "--db", str(tmp_path / "r.sqlite")]) == 2
+    assert "has no option 'strength'" in capsys.readouterr().err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
 
 

@@ -188,6 +188,12 @@ def run(args) -> int:
         return _run(args)
 
 
+def _remove_store(path: str) -> None:
+    """Delete the SQLite file ``path`` and its journal, WAL and shared-memory files."""
+    for suffix in ("", "-journal", "-wal", "-shm"):
+        Path(f"{path}{suffix}").unlink(missing_ok=True)
+
+
 def _run(args) -> int:
     limits = limits_from_args(args)  # bad limits are exit 2 before anything else
     trim = None
@@ -240,8 +246,16 @@ def _run(args) -> int:
 
     protect(dataset.root, args.db, None if args.no_report else args.out)  # hidden from every sandboxed worker
     started = time.perf_counter()
-    with ResultsStore(args.db) as store:
+    fresh = not Path(args.db).exists()
+    store = ResultsStore(args.db)
+    try:
         plan = run_benchmark(dataset, config, store, executor=args.executor)
+    except UserInputError:  # refused (an unknown option, ...): a store this command created goes again
+        store.close()
+        if fresh:
+            _remove_store(args.db)
+        raise
+    with store:
         units = store.units(plan.run_id)
         failed = [u for u in units if u["status"] != "ok"]
         print(
