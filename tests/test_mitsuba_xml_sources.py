@@ -540,3 +540,32 @@ def test_help_says_which_parameters_need_no_define(capsys):
     assert "--define integrator=path" in text
     args = parser.parse_args(["--out", "o", "--mitsuba", "a.xml", "-D", "a=1", "--define", "b=2"])
     assert generate.request_from_args(args).defines == (("a", "1"), ("b", "2"))
+
+
+@pytest.mark.parametrize(
+    "tamper, message",
+    [
+        ('<path value="/tmp"/>', "has a <path> directive"),
+        ('<include filename="../../outside.xml"/>', "outside the dataset's scene folder"),
+        (
+            '<shape type="obj"><string name="filename" value="../../outside.obj"/></shape>',
+            "outside the dataset's scene",
+        ),
+    ],
+)
+def test_a_datasets_copy_is_confined_to_its_folder(tmp_path, mi, tamper, message):
+    from denoisebench.generator.dataset_scenes import load_scene_file
+
+    (tmp_path / "outside.obj").write_text(TRIANGLE)
+    (tmp_path / "outside.xml").write_text('<scene version="3.0.0"><shape type="sphere"/></scene>\n')
+    folder = tmp_path / "ds" / "xml_x"
+    folder.mkdir(parents=True)
+    body = f'<sensor type="perspective">{FILM}</sensor><emitter type="constant"/><shape type="sphere"/>'
+    (folder / XML_NAME).write_text(f'<scene version="3.0.0">{body}</scene>\n')
+    assert load_scene_file(folder / XML_NAME)[0].camera.frames == 1  # untampered: loads
+    (folder / XML_NAME).write_text(f'<scene version="3.0.0">{tamper}{body}</scene>\n')
+    with pytest.raises(UserInputError, match=message) as caught:
+        load_scene_file(folder / XML_NAME)
+    assert "\n" not in str(caught.value)
+    if ".obj" in tamper:  # the user's own scene on the command line may name files anywhere
+        assert load_mitsuba_xml(folder / XML_NAME, frames=1)[0].camera.frames == 1

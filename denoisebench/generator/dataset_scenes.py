@@ -288,10 +288,11 @@ XML_CAMERA = "camera.json"
 
 def load_scene_file(path: str | Path):
     """``(TranslatedScene, mi.Scene or None)`` of a dataset's scene file: ``scene.usda`` translated by
-    USD (None: ``build_mitsuba_scene`` makes the Mitsuba scene), ``scene.xml`` loaded by Mitsuba."""
+    USD (None: ``build_mitsuba_scene`` makes the Mitsuba scene), ``scene.xml`` loaded by Mitsuba,
+    confined to its folder (a dataset's files are untrusted: no ``<path>``, no file outside it)."""
     path = Path(path)
     if path.suffix.lower() == ".xml":
-        return load_mitsuba_xml(path, **xml_camera(path))
+        return load_mitsuba_xml(path, **xml_camera(path), confined=True)
 
     return translate_usd(path), None
 

@@ -33,6 +33,8 @@ Notes
   that were defined (``--define`` and the placeholders) written as ``<default>``\\ s, so the copy
   loads on another machine with no options and renders the same scene. A file that needs none of
   that is copied byte for byte. The user's own file is never changed.
+* Confinement protects datasets (untrusted files), not the user's own input: a dataset's copy is
+  loaded ``confined`` (no ``<path>``, no include or file outside its folder; one-line refusal).
 * Camera: the scene's first sensor (``perspective``, ``thinlens`` or ``orthographic``; others are
   refused), held still over ``frames`` frames (a static camera track: zero camera motion). Its
   ``to_world`` (Mitsuba's convention, looking down +Z) becomes the track's USD-convention pose by the
@@ -295,16 +297,37 @@ def _resolve(mi, name: str, search_paths: list[Path]) -> Path | None:
     return found.resolve() if found.is_file() else None
 
 
-def read_structure(path: Path, defines: dict[str, str] | None = None, search_paths=()) -> XmlStructure:
+def _outside(file: Path, folder: Path) -> bool:
+    try:
+        file.relative_to(folder)
+    except ValueError:
+        return True
+    return False
+
+
+def read_structure(
+    path: Path, defines: dict[str, str] | None = None, search_paths=(), confined: bool = False
+) -> XmlStructure:
     """Parse ``path`` with Mitsuba's parser (``defines``: ``--define`` parameters; ``search_paths``:
     ``--mitsuba-path`` folders, Mitsuba's ``-a``) and find every file it names as Mitsuba's file
-    resolver does (module Notes); UserInputError (one line) on bad input."""
+    resolver does (module Notes); UserInputError (one line) on bad input.
+
+    ``confined``: ``path`` is a dataset's copy (an untrusted file): it may have no ``<path>``
+    directives and name no file outside its own folder (a portable copy never does).
+    """
     path = Path(path)
-    _parse(path, path)  # well-formed, a <scene>: the clear messages first
+    root = _parse(path, path)  # well-formed, a <scene>: the clear messages first
+    folder = path.resolve().parent
+    if confined:
+        if search_paths or any(True for _ in root.iter("path")):
+            raise UserInputError(f"{path}: a dataset's scene file has a <path> directive (its copy never does)")
+        for include in root.iter("include"):
+            name = include.get("filename") or ""
+            if _kept_name(name) is None and "$" not in name:
+                raise UserInputError(f"{path}: includes {name!r}, outside the dataset's scene folder")
     mi = load_mitsuba()
     search = search_folders(search_paths)
     state, parameters, placeholders, added = _mitsuba_parse(mi, path.resolve(), dict(defines or {}), search)
-    folder = path.resolve().parent
     defaults = [Path(str(p)) for p in mi.file_resolver()]
     out = XmlStructure(parameters=parameters, placeholders=placeholders)
     out.search_paths = [*added, folder, *search, *defaults]
@@ -324,6 +347,10 @@ def read_structure(path: Path, defines: dict[str, str] | None = None, search_pat
                 raise UserInputError(f"{path}: names {name!r}, which does not exist (searched {searched})")
             out.files.append(name)
             out.resolved[name] = found
+    if confined:
+        for file in [*out.documents, *out.resolved.values()]:
+            if _outside(file, folder):
+                raise UserInputError(f"{path}: names {file}, outside the dataset's scene folder")
     return out
 
 
@@ -515,12 +542,14 @@ def load_mitsuba_xml(
     auto_camera: bool = False,
     defines: dict[str, str] | None = None,
     search_paths=(),
+    confined: bool = False,
 ) -> tuple[TranslatedScene, object]:
     """``(TranslatedScene, mi.Scene)`` of a Mitsuba XML file; UserInputError (one line) on bad input.
 
     ``frames``: the camera track's length; ``auto_camera``: the orbit instead of the file's sensor;
     ``defines``: the scene's parameters (``--define NAME=VALUE``; :func:`parse_defines`);
-    ``search_paths``: more folders to find its files in (``--mitsuba-path``, Mitsuba's ``-a``).
+    ``search_paths``: more folders to find its files in (``--mitsuba-path``, Mitsuba's ``-a``);
+    ``confined``: the file is a dataset's copy, whose files must lie in its folder (:func:`read_structure`).
 
     The TranslatedScene has no shapes of its own (``scene_dict["mitsuba_xml"]`` names the file):
     render the returned ``mi.Scene`` with its ``camera``. Its ``max_depth`` is the scene's own
@@ -531,7 +560,7 @@ def load_mitsuba_xml(
     path = Path(path)
     if not path.is_file():
         raise UserInputError(f"{path}: no such Mitsuba XML file")
-    structure = read_structure(path, defines, search_paths)
+    structure = read_structure(path, defines, search_paths, confined=confined)
     mi = load_mitsuba()
     try:
         with _searching(mi, search_folders(search_paths)):
