@@ -231,3 +231,14 @@ def test_run_benchmark_scores_plain_function_plugins_quietly(tmp_path, plugin_di
     for label in (f"{tmp_path}/my_denoiser.py:denoise", f"{plugin_dir}/plug.py:denoise"):
         assert rows[label]["failed_units"] == 0 and rows[label]["errors"] == [], rows.get(label)
         assert rows[label]["metrics"], rows[label]
+
+
+def test_a_plugin_that_fails_to_load_shows_its_traceback_with_verbose(tmp_path, capsys):
+    (tmp_path / "broken.py").write_text("import math\n\nmath.no_such_function()\n\n\ndef denoise(frame):\n    pass\n")
+    argv = ["check-plugin", f"{tmp_path}/broken.py:denoise", "--case", "tiny", "--isolation", POLICY]
+    assert cli.main(argv) == 2
+    assert "Traceback" not in capsys.readouterr().err  # one line without --verbose
+    assert cli.main([*argv, "--verbose"]) == 2
+    err = capsys.readouterr().err
+    assert "broken.py\", line 3" in err and "math.no_such_function()" in err
+    assert err.rstrip().splitlines()[-1].startswith("error: cannot import")

@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 import logging
 import sys
+import traceback
 
 from tqdm import tqdm
 
@@ -61,7 +62,9 @@ def add_arguments(parser) -> None:
     parser.add_argument("--case", action="append", default=None, metavar="NAME", help="run only this case; repeatable")
     parser.add_argument("--json", action="store_true", help="print the results as JSON instead of a table")
     parser.add_argument(
-        "--verbose", action="store_true", help="print the traceback of every case where the denoiser raised"
+        "--verbose",
+        action="store_true",
+        help="print the traceback of every case where the denoiser raised (and of a plugin that fails to load)",
     )
     parser.add_argument("--list", action="store_true", help="list the known denoisers and the hard cases, then exit")
     parser.add_argument(
@@ -131,6 +134,17 @@ def _table(label: str, outcomes, verbose: bool = False) -> str:
     return "\n".join(lines)
 
 
+def _load_traceback(error: BaseException) -> str | None:
+    """Where a plugin that failed to load raised: its worker's traceback, or this process's cause."""
+    text = getattr(error, "traceback", None)
+    if text:
+        return text.rstrip()
+    cause = error.__cause__
+    if cause is None:
+        return None
+    return "".join(traceback.format_exception(type(cause), cause, cause.__traceback__)).rstrip()
+
+
 def run(args) -> int:
     if args.list:
         return _list()
@@ -149,7 +163,12 @@ def run(args) -> int:
         cases = hard_cases.hard_cases(args.case)
     except ValueError as error:
         raise UserInputError(str(error)) from None
-    denoiser = isolation.load(args.spec, options, policy=args.isolation, limits=limits)
+    try:
+        denoiser = isolation.load(args.spec, options, policy=args.isolation, limits=limits)
+    except UserInputError as error:
+        if args.verbose:  # the plugin's own traceback above the one-line error
+            print(_load_traceback(error) or "(no traceback: the plugin did not raise)", file=sys.stderr)
+        raise
     label = getattr(denoiser, "name", None) or args.spec
     outcomes = []
     quiet = logging.getLogger("denoisebench.plugins")  # tracebacks go to the table (--verbose) or the JSON

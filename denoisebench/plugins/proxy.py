@@ -117,7 +117,8 @@ class PluginProxy:
         """Start a worker (``args``, ``fds`` passed on to the worker side) and load the plugin there.
 
         Returns the load reply's header (what the worker's instance declared); raises the protocol's
-        load error where the plugin does not load, or the worker fails meanwhile.
+        load error where the plugin does not load (its ``traceback`` attribute: the worker's, where the
+        plugin raised), or the worker fails meanwhile.
         """
         self.close()
         self._worker = process.WorkerProcess(
@@ -139,8 +140,11 @@ class PluginProxy:
             self.close()
             kind, message = str(header.get("error_type", "")), str(header.get("error", "load failed"))
             if kind in self.load_errors:
-                raise self.load_errors[kind](message.removeprefix(f"{kind}: "))
-            raise self.load_error(f"cannot load {self.noun} {self.spec!r}: {message}")
+                error = self.load_errors[kind](message.removeprefix(f"{kind}: "))
+            else:
+                error = self.load_error(f"cannot load {self.noun} {self.spec!r}: {message}")
+            error.traceback = str(header["traceback"]) if header.get("traceback") else None
+            raise error
         return header
 
     def check_enabled(self) -> None:
