@@ -1,6 +1,6 @@
-"""The plugin sandbox (issue 33): hostile plugins, each contained, the rest of the run unchanged.
+"""The plugin sandbox: hostile plugins, each contained, the rest of the run unchanged.
 
-Each plugin below does what a hostile submitter tried on a 32 px Cornell dataset (issue 33), and
+Each plugin below does what a hostile submitter tried on a 32 px Cornell dataset, and
 knows the paths it attacks (they are written into its source, as a submitter who read the docs
 would guess them), besides looking them up through ``/proc/<ppid>/cmdline``, ``/proc/<ppid>/cwd``
 and its environment. ``run-benchmark`` runs them as a subprocess from inside the dataset folder,

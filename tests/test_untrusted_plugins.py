@@ -1,4 +1,4 @@
-"""Untrusted plugins (issue 16, findings 1-3 and 8): worker isolation, limits, copies, no reference.
+"""Untrusted plugins: worker isolation, limits, copies, no reference.
 
 The plugins below misbehave the ways a probe of the released commands did: ``sys.exit(3)`` and
 ``os._exit(3)`` (which ended run-benchmark with exit 3, nothing recorded, on every re-run), a
