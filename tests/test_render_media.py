@@ -449,3 +449,23 @@ def test_every_baseline_passes_the_hard_case_rules_on_media_frames(fog_dataset):
         if not outcome.passed:
             failed[baseline] = outcome.reason
     assert not failed
+
+
+def test_fog_smoke_has_held_out_variants(tmp_path):
+    """About a fifth of the seeds draw media train stages never show; the stage records its pool."""
+    from denoisebench.generator.usd.translate import translate_usd
+    from denoisebench.scenes import get_family
+    from denoisebench.scenes.families.fog_smoke import HELD_OUT, TRAIN, variant_pool
+
+    pools = [variant_pool(seed) for seed in range(200)]
+    assert 0.1 < pools.count("held_out") / len(pools) < 0.3
+    assert not set(HELD_OUT.values()) & set(TRAIN.values())
+    held = pools.index("held_out")
+    translated = translate_usd(get_family("fog_smoke").author(tmp_path / "held", seed=held, frames=1))
+    assert translated.variants == {"pool": "held_out", **HELD_OUT}
+    media = [s["medium"] for s in translated.scene_dict["shapes"] if "medium" in s]
+    (fog,) = [m for m in media if m["type"] == "homogeneous" and m["null_boundary"]]
+    assert fog["g"] < 0  # back-scattering fog: held out
+    train = pools.index("train")
+    translated = translate_usd(get_family("fog_smoke").author(tmp_path / "train", seed=train, frames=1))
+    assert translated.variants == {"pool": "train", **TRAIN}
