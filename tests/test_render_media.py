@@ -469,3 +469,24 @@ def test_fog_smoke_has_held_out_variants(tmp_path):
     train = pools.index("train")
     translated = translate_usd(get_family("fog_smoke").author(tmp_path / "train", seed=train, frames=1))
     assert translated.variants == {"pool": "train", **TRAIN}
+
+
+def test_usdvol_volume_is_a_one_line_error_never_dropped_light(tmp_path):
+    from pxr import Sdf, Usd, UsdGeom, UsdLux, UsdVol
+
+    from denoisebench.errors import UserInputError
+    from denoisebench.generator.usd.translate import translate_usd
+
+    stage = Usd.Stage.CreateNew(str(tmp_path / "smoke.usda"))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.Sphere.Define(stage, "/World/Ball")
+    UsdLux.DomeLight.Define(stage, "/World/Sky")
+    UsdGeom.Camera.Define(stage, "/World/Camera").AddTranslateOp().Set((0.0, 0.0, 6.0))
+    volume = UsdVol.Volume.Define(stage, "/World/Smoke")
+    field = UsdVol.OpenVDBAsset.Define(stage, "/World/Smoke/density")
+    field.GetFilePathAttr().Set(Sdf.AssetPath("smoke.vdb"))
+    volume.CreateFieldRelationship("density", field.GetPath())
+    stage.Save()
+    with pytest.raises(UserInputError, match="UsdVol volumes are not rendered") as error:
+        translate_usd(tmp_path / "smoke.usda")
+    assert "density (OpenVDBAsset)" in str(error.value) and "\n" not in str(error.value)

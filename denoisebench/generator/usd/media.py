@@ -124,3 +124,27 @@ def attach_media(prim, parts: list, to_mitsuba: np.ndarray, local_to_world: np.n
         return
     for record, _ in parts:
         record["medium"] = medium
+
+
+def refuse_volume(prim) -> None:
+    """A UsdVol ``Volume``: a one-line UserInputError (rendering it without its medium would drop light).
+
+    Its fields are files (OpenVDB ``.vdb``, Field3D) that this build does not read: the ``openvdb``
+    Python module is not in the environment (Debian ships it as ``python3-openvdb``, for the system
+    Python only). The error names the fields and points at the ``denoisebench:medium:*`` encoding.
+    """
+    from pxr import UsdVol
+
+    fields = UsdVol.Volume(prim).GetFieldPaths()
+    kinds = sorted({str(prim.GetStage().GetPrimAtPath(path).GetTypeName()) or "?" for path in fields.values()})
+    try:
+        import openvdb  # noqa: F401
+
+        reason = "reading their fields is not implemented"
+    except ImportError:
+        reason = "the openvdb Python module is not installed (Debian: python3-openvdb)"
+    listed = ", ".join(f"{name} ({kind})" for name, kind in zip(sorted(fields), kinds)) if fields else "no fields"
+    raise UserInputError(
+        f"{prim.GetPath()}: UsdVol volumes are not rendered ({listed}; {reason}); bind the medium to a gprim "
+        f"with {PREFIX}* attributes instead (README, 'Participating media')"
+    )

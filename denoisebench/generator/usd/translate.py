@@ -33,7 +33,7 @@ from denoisebench.generator.usd.camera import find_camera, read_camera
 from denoisebench.generator.usd.effects import infer_effects
 from denoisebench.generator.usd.lights import read_light
 from denoisebench.generator.usd.materials import bound_material
-from denoisebench.generator.usd.media import attach_media
+from denoisebench.generator.usd.media import attach_media, refuse_volume
 from denoisebench.generator.usd.stage import frame_range, open_stage, stage_to_mitsuba_matrix
 from denoisebench.scenes.effects import METADATA_KEY, validate_effects
 
@@ -202,6 +202,8 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
                 bind(record, bound_material(prim, materials, warnings))
             continue
         if prim.IsA(UsdGeom.Gprim):
+            if type_name == "Volume":
+                refuse_volume(prim)  # its fields hold a medium we cannot read: a one-line error, never dropped light
             if not (prim.IsA(UsdGeom.Mesh) or type_name in geometry.SUPPORTED_PRIMITIVES):
                 warnings.append(f"{path}: prim type {type_name} is not supported; skipped")
                 continue
