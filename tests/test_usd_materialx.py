@@ -278,6 +278,17 @@ def test_mtlx_document_referenced_from_usd(tmp_path):
     assert "textures" in translated.effects_inferred
     image = _render(translated)
     assert np.isfinite(image).all() and image.mean() > 0.01
+    summary = translated.summary()
+    assert summary["shapes"] == {"mesh": 1, "sphere": 1} and summary["materials"][0]["document"] == "m.mtlx"
+
+    # generate --usd copies the stage with its dependencies: the document and the textures it names.
+    from denoisebench.generator.dataset_scenes import copy_user_stage
+
+    files = copy_user_stage(path, tmp_path / "out" / "scene")
+    assert {"m.mtlx", "tex/albedo.png", "tex/rough.png", "tex/normal.png"} <= set(files)
+    copied = translate_usd(tmp_path / "out" / "scene" / files[0])
+    (bsdf,) = copied.scene_dict["bsdfs"].values()
+    assert bsdf["bsdf"]["type"] == "normalmap" and copied.materials[0]["kind"] == "MaterialX document"
 
 
 CHESS = os.environ.get("OPENCHESSSET")

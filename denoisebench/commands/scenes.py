@@ -203,6 +203,7 @@ def _check(args) -> int:
                 "effects_inferred": list(translated.effects_inferred),
                 "render_plan": plan.to_dict(),
                 "transport": plan.transport_line() + transport_note(translated, plan),
+                "translated": translated.summary(),
             },
             indent=2,
             sort_keys=True,

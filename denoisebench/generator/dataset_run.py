@@ -300,6 +300,7 @@ def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -
         "effects": {"declared": list(translated.effects_declared), "inferred": list(translated.effects_inferred)},
         **({"variants": dict(translated.variants)} if translated.variants else {}),  # held-out pools
         "plan": plan.to_dict(),
+        "translated": translated.summary(),  # shapes, instances, how each material was translated
         "camera": {
             "prim_path": camera.prim_path,
             "fov_x_deg": float(camera.fov_x_deg),

@@ -46,6 +46,7 @@ from denoisebench.dataset import layout
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.errors import UserInputError
 from denoisebench.generator.mitsuba_xml import XML_NAME, load_mitsuba_xml, portable_files
+from denoisebench.generator.usd.materialx import document_files
 from denoisebench.generator.usd.translate import apply_additions, translate_usd
 from denoisebench.scenes.effects import METADATA_KEY
 
@@ -166,6 +167,8 @@ def user_stage_dependencies(path: Path) -> list[tuple[Path, str]]:
     layers, assets, _unresolved = UsdUtils.ComputeAllDependencies(str(path))
     quiet.TakeCoalescedDiagnostics()
     del quiet
+    # usd-core cannot open .mtlx documents: their textures are found by reading them (issue 44).
+    assets = list(assets) + [f for a in assets if str(a).lower().endswith(".mtlx") for f in document_files(a)]
     out = []
     for layer_or_asset in [layer.realPath for layer in layers[1:]] + list(assets):
         absolute = Path(layer_or_asset).resolve()

@@ -78,6 +78,20 @@ class TranslatedScene:
         """Some shape moves while the shutter is open (a record holds ``shutter_motion``): object motion blur."""
         return any("shutter_motion" in shape for shape in self.scene_dict["shapes"])
 
+    def summary(self) -> dict:
+        """What was translated, for ``scenes check`` and the manifest: shape counts by kind, instances,
+        and each material's translation (kind, surface, document, fallbacks)."""
+        kinds: dict[str, int] = {}
+        for shape in self.scene_dict.get("shapes", []):
+            kinds[shape["kind"]] = kinds.get(shape["kind"], 0) + 1
+        groups = self.scene_dict.get("instance_groups", [])
+        return {
+            "shapes": kinds,
+            "instances": int(sum(len(g["to_world"]) for g in groups)),
+            "instance_prototypes": len(groups),
+            "materials": list(self.materials),
+        }
+
     @property
     def effects(self) -> tuple[str, ...]:
         """The effects the render plan must honour: union of declared and inferred."""

@@ -42,6 +42,8 @@ DEFAULT_GREY = (0.18, 0.18, 0.18)
 _SKIPPED_INPUTS = ("normal", "displacement", "occlusion")
 #: A hair surface (issue 44): a Shader with this ``info:id`` → Mitsuba's ``hair`` BSDF (Chiang et al. 2016),
 #: its authored inputs passed as they are (floats; ``sigma_a`` a colour, used instead of the melanins).
+#: Connected to ``outputs:denoisebench:surface`` (our render context: other renderers keep the universal
+#: ``outputs:surface``, e.g. a UsdPreviewSurface fallback) or to the universal output itself.
 HAIR_ID = "denoisebench_hair"
 HAIR_INPUTS = ("eumelanin", "pheomelanin", "longitudinal_roughness", "azimuthal_roughness", "scale_tilt", "eta")
 
@@ -83,6 +85,9 @@ def translate_material(material, warnings: list[str]) -> MaterialInfo:
         translated = materialx.translate_usd_network(mtlx_shader, warnings)
         if translated is not None:
             return _from_materialx(translated, path, "MaterialX network in USD", _shader_id(mtlx_shader), "")
+    hair = material.ComputeSurfaceSource("denoisebench")[0] if material else None
+    if hair and _shader_id(hair) == HAIR_ID:
+        return _hair(hair, path)
     shader = material.ComputeSurfaceSource()[0] if material else None
     if shader and _shader_id(shader) == HAIR_ID:
         return _hair(shader, path)

@@ -711,6 +711,26 @@ def translate_document_material(path: str, name: str, warnings: list[str]) -> tu
     return _principled(_MxNode(shader, str(Path(path).parent)), warnings), category
 
 
+def document_files(path: str | Path) -> list[str]:
+    """Absolute paths of the existing files a ``.mtlx`` document's ``filename`` inputs name (its textures),
+    for copying a stage with its dependencies; an unreadable document names none."""
+    try:
+        document = read_document(path)
+    except Exception:
+        return []
+    folder = os.path.dirname(os.path.abspath(str(path)))
+    out = set()
+    for element in document.traverseTree():
+        if element.getCategory() == "input" and element.getType() == "filename":
+            if element.getDocument() != document or not element.getValueString():
+                continue
+            text = element.getResolvedValueString()
+            resolved = text if os.path.isabs(text) else os.path.join(folder, text)
+            if os.path.isfile(resolved):
+                out.add(os.path.normpath(resolved))
+    return sorted(out)
+
+
 def mtlx_reference(stage, target_path) -> tuple[str, str] | None:
     """The ``.mtlx`` document and material name a binding target means, or None.
 

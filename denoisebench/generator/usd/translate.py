@@ -19,6 +19,7 @@ writes into the copied stage), else the first camera; ``auto_camera``/``default_
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -268,8 +269,16 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
         seed=int(metadata["seed"]) if "seed" in metadata else None,
         max_depth=stage_depth,
         variants=_variants(stage),
-        materials=[dict(m.report) for m in used_materials if m.report],
+        materials=[_relative_report(m.report, source) for m in used_materials if m.report],
     )
+
+
+def _relative_report(report: dict, source: str) -> dict:
+    """A material's translation record with its ``.mtlx`` document relative to the stage's folder."""
+    out = dict(report)
+    if out.get("document") and source:
+        out["document"] = Path(os.path.relpath(out["document"], Path(source).resolve().parent)).as_posix()
+    return out
 
 
 def _variants(stage) -> dict:

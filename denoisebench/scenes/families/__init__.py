@@ -13,6 +13,7 @@ from denoisebench.scenes.families import (
     depth_of_field,
     dim_room,
     fog_smoke,
+    fur_field,
     glass_env,
     glossy_fireflies,
     motion_blur,
@@ -133,5 +134,15 @@ ALL: tuple[SceneFamily, ...] = (
         1.0,
         "partial orbit",
         fog_smoke.build,
+    ),
+    SceneFamily(
+        "fur_field",
+        fur_field.EFFECTS,
+        "Production-style USD: thousands of grass curves and a furry critter (hair BSDF), an instanced field "
+        "of pebbles and mushrooms (PointInstancer), MaterialX materials; held-out fur and prototype variants.",
+        "Y",
+        1.0,
+        "low orbit",
+        fur_field.build,
     ),
 )
