@@ -153,3 +153,31 @@ def test_animated_instancer_is_written_out_with_per_frame_positions(tmp_path):
         frames = shape["frame_positions"]
         assert frames.shape[0] == 2
         assert np.allclose(frames[1] - frames[0], [0.1, 0.0, 0.0], atol=1e-5)
+
+
+def test_animated_instancer_moves_within_the_shutter_and_has_motion_vectors(tmp_path):
+    from pxr import Usd, UsdGeom
+
+    from denoisebench.generator.contract.render_plan import make_render_plan
+    from denoisebench.generator.render.frame import render_frame
+    from denoisebench.generator.render.scene import build_mitsuba_scene
+
+    path = author_instanced(tmp_path / "blur.usda", animated=True)
+    stage = Usd.Stage.Open(str(path))
+    camera = UsdGeom.Camera(stage.GetPrimAtPath("/Camera"))
+    camera.CreateShutterOpenAttr(-0.25)
+    camera.CreateShutterCloseAttr(0.25)
+    stage.GetRootLayer().Save()
+    translated = translate_usd(path)
+    assert translated.shutter_moving and "motion_blur" in translated.effects_inferred
+    for shape in translated.scene_dict["shapes"]:
+        motion = shape["shutter_motion"]
+        shift = motion["to_world"][-1][:3, 3] - motion["to_world"][0][:3, 3]
+        assert np.allclose(shift, [0.1, 0.0, 0.0], atol=1e-5)  # keys span frame 0 to frame 1 (held at the ends)
+    plan = make_render_plan(translated.effects)
+    scene = build_mitsuba_scene(translated, frame=1)
+    out = render_frame(scene, translated.camera, 1, plan, width=32, height=32, spp=4, seed=1)
+    motion = out.buffers["motion"]
+    assert np.isfinite(motion).all()
+    moving = np.abs(motion[..., 0]) > 0.2
+    assert 0.02 < moving.mean() < 0.6  # the instances moved +x between frames: pixels on them carry motion
