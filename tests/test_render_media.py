@@ -253,8 +253,11 @@ def test_media_frames_have_every_feature_and_the_medium_albedo(mi):
     assert np.linalg.norm(p) < 1.0 and p[2] > 0.8
     assert 2.9 < b["depth"][SIZE // 2, SIZE // 2, 0] < 3.3
     assert frame.samples is not None
-    for name in ("light", "bounce", "position2", "normal2", "pixel"):
+    for name in ("light", "bounce", "position2", "normal2", "pixel", "medium"):
         assert name in frame.samples and np.isfinite(frame.samples[name]).all(), name
+    # every camera ray at the centre flies into the fog first: its free flight's number is drawn
+    centre_u = frame.samples["medium"][:, SIZE // 2, SIZE // 2, 0]
+    assert np.all((centre_u > 0) & (centre_u < 1)) and np.unique(centre_u).size == centre_u.size
 
 
 def test_media_renders_are_deterministic_and_nested(mi):
@@ -271,12 +274,15 @@ def test_media_renders_are_deterministic_and_nested(mi):
     np.testing.assert_array_equal(stream.buffers()["color"], full.buffers["color"])
 
 
-def test_media_is_an_effect_that_changes_no_plan_setting():
-    """``media`` is in the vocabulary; the plan records it, and the scene itself decides the tracer."""
+def test_media_is_an_effect_that_adds_only_its_random_parameter():
+    """``media`` is in the vocabulary; the plan records it and the ``medium`` random parameter; the scene
+    itself decides the tracer."""
     assert "media" in EFFECTS
     with_media, without = make_render_plan(("media", "glossy")), make_render_plan(("glossy",))
     assert with_media.effects == ("glossy", "media")
     assert with_media.features == without.features and with_media.max_depth == without.max_depth
+    assert with_media.random_parameters == ("pixel", "medium", "light", "bounce")
+    assert without.random_parameters == ("pixel", "light", "bounce")
 
 
 def test_scene_without_media_never_enters_the_medium_code(mi, monkeypatch):

@@ -43,6 +43,8 @@ def test_each_effect_present_and_absent(effect):
         assert make_render_plan([effect]).lobe_split
     elif effect == "glossy":
         assert make_render_plan([effect]).lobe_split and not make_render_plan(["textures"]).lobe_split
+    elif effect == "media":  # the first free flight's random number joins the per-sample random parameters
+        assert "medium" in with_effect.random_parameters and "medium" not in without.random_parameters
     else:  # textures, area_lights, environment, indirect change what is rendered, not how
         import dataclasses
 
@@ -84,7 +86,7 @@ def test_pure_and_order_independent():
 def test_json_round_trip():
     plan = make_render_plan(EFFECTS, RenderOptions(per_sample=True))
     data = json.loads(plan.to_json())
-    assert data["random_parameters"] == ["pixel", "lens", "time", "light", "bounce"]
+    assert data["random_parameters"] == ["pixel", "lens", "time", "medium", "light", "bounce"]
     assert data["sample_features"] == ["position2", "normal2"]
     assert RenderPlan.from_dict(data) == plan
     # a plan stored before sample_features existed reads back with it empty

@@ -119,8 +119,9 @@ DEFAULT_FEATURES = ("position", "normal", "albedo", "position2", "normal2")
 CLUSTER_FEATURES = ("normal", "albedo")
 PAPER_BOXES = (55, 35, 17, 7)  # at the paper's image size
 PAPER_SIZE = 128  # boxes keep their paper size from 128 px up: the noise per pixel does not shrink with the image
-RANDOM_PARAMETERS = ("lens", "time", "light", "bounce")
-PATH_RANDOM_PARAMETERS = ("light", "bounce")  # the path's own random numbers (else: the variance heuristic)
+RANDOM_PARAMETERS = ("lens", "time", "medium", "light", "bounce")
+#: the path's own random numbers (else: the variance heuristic); ``medium``: its first free flight in a medium
+PATH_RANDOM_PARAMETERS = ("medium", "light", "bounce")
 SIGMA8_SQUARED = 0.02  # the paper's σ² at 8 spp; σ² = 8 σ_8² / S
 CLUSTER_TOLERANCE = 0.1
 _EPS = 1e-10

@@ -65,6 +65,7 @@ CHANNEL_NAMES: dict[str, tuple[str, ...]] = {
     "pixel": ("X", "Y"),
     "lens": ("U", "V"),
     "time": ("T",),
+    "medium": ("U",),  # the number that drew the first free flight in a medium (participating media)
     "light": ("U", "V"),
     "bounce": ("U", "V"),
     # per-sample second-hit features (where the first bounce lands)

@@ -105,8 +105,9 @@ class RenderPlan:
             depth of field, ``time`` with motion blur, and ``light`` and ``bounce`` (the first vertex's
             light-sample and bounce-direction random numbers, :data:`BOUNCE_RANDOM_PARAMETERS`) when
             paths bounce (``max_depth`` unbounded or > 1: :func:`paths_bounce`, the rule the
-            feature renderer writes them by). Like ``lens`` and ``time`` they are written only with
-            per-sample data (``per_sample``).
+            feature renderer writes them by); ``medium`` with participating media (the number that drew
+            the path's first free flight in a medium, render/volpath.py). Like ``lens`` and ``time`` they
+            are written only with per-sample data (``per_sample``).
         sample_features: feature channels only the per-sample data holds: the second hit's
             ``position2`` and ``normal2`` (:data:`SECOND_HIT_FEATURES`) when paths bounce, else empty.
             Plans stored before this field existed read back with it empty.
@@ -187,6 +188,7 @@ def make_render_plan(effects, options: RenderOptions | None = None, stage_max_de
 
     bounce = paths_bounce(max_depth)
     random_parameters = ("pixel",) + (("lens",) if depth_of_field else ()) + (("time",) if motion_blur else ())
+    random_parameters += ("medium",) if "media" in present else ()
     random_parameters += BOUNCE_RANDOM_PARAMETERS if bounce else ()
     features = ("albedo", "normal", "depth", "position", "roughness", "motion")
     return RenderPlan(

@@ -86,7 +86,7 @@ TARGET_LANES = 1 << 14
 
 #: Channels of each per-sample buffer, in output order: the dataset's buffers but motion (per pixel, not sampled).
 SAMPLE_BUFFERS = {name: count for name, count in BUFFER_CHANNELS.items() if name != "motion"}
-RANDOM_PARAMETER_CHANNELS = {"pixel": 2, "lens": 2, "time": 1}
+RANDOM_PARAMETER_CHANNELS = {"pixel": 2, "lens": 2, "time": 1, "medium": 1}
 #: Per-sample channels of paths that bounce (render_integrator's ``second_hit``): the first vertex's
 #: light-sample and bounce-direction random numbers, and the bounce ray's hit point and normal.
 SECOND_HIT_CHANNELS = {"light": 2, "bounce": 2, "position2": 3, "normal2": 3}
@@ -397,7 +397,11 @@ class FrameStream:
             sample_channels = {k: c for k, c in SAMPLE_BUFFERS.items() if k in stat_channels}
             # light/bounce (listed by the plan when paths bounce) come with the second-hit channels below
             sample_channels.update(
-                {k: RANDOM_PARAMETER_CHANNELS[k] for k in plan.random_parameters if k in RANDOM_PARAMETER_CHANNELS}
+                {
+                    k: RANDOM_PARAMETER_CHANNELS[k]
+                    for k in plan.random_parameters
+                    if k in RANDOM_PARAMETER_CHANNELS and (k != "medium" or opts.media)  # the volumetric tracer's
+                }
             )
             if opts.second_hit:
                 sample_channels.update(SECOND_HIT_CHANNELS)

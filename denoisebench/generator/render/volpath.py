@@ -39,9 +39,10 @@ albedo):
 * lobe split: light a medium scattering sends on goes to **diffuse**; a surface first vertex splits as
   in the surface tracer (next-event estimation by BSDF lobe, the rest by the sampled lobe).
 
-Per-sample random parameters: ``light`` is the first real event's emitter sample, ``bounce`` its
-direction sample (BSDF or phase function), ``position2``/``normal2`` the second real event's point
-and normal (0 for a medium event, or where the path ends first).
+Per-sample random parameters: ``medium`` is the number that drew the path's first free flight in a
+medium before its first real event (0 where there is none), ``light`` is the first real event's
+emitter sample, ``bounce`` its direction sample (BSDF or phase function), ``position2``/``normal2``
+the second real event's point and normal (0 for a medium event, or where the path ends first).
 """
 
 from __future__ import annotations
@@ -248,6 +249,8 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             "rough": mi.Float(0.0),
             "hit": mi.Bool(False),
             "pending": mi.Bool(False),  # albedo still to be read past a delta chain
+            "medium_u": mi.Float(0.0),  # the number of the first free flight in a medium (0: none)
+            "medium_set": mi.Bool(False),
         }
         if opts.second_hit:
             feats.update(light=mi.Point2f(0.0), bounce=mi.Point2f(0.0), p2=mi.Point3f(0.0), n2=mi.Normal3f(0.0))
@@ -289,6 +292,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
         )
         out["roughness"] = dr.select(hit, f["rough"], 0.0)
         out["albedo"] = dr.select(f["pending"], 0.0, f["albedo"])
+        out["medium"] = f["medium_u"]
         if opts.motion:
             prev = camera.previous_pose(time)
             target = dr.select(hit, f["p"], camera_dir)
@@ -319,7 +323,8 @@ def _iteration(mi, dr, scene, opts: KernelOptions, state: _VolState):
 
     # ---------------------------------------------------------------- medium
     in_medium = active & (medium != None)  # noqa: E711 (a Dr.Jit pointer comparison)
-    channel, u = _channel_sample(mi, dr, sampler.next_1d())
+    flight_u = sampler.next_1d()
+    channel, u = _channel_sample(mi, dr, flight_u)
     mray = mi.Ray3f(ray.o, ray.d, end, ray.time, ray.wavelengths)
     mei = medium.sample_interaction(mray, u, channel, in_medium)
     collided = in_medium & mei.is_valid()
@@ -432,6 +437,9 @@ def _iteration(mi, dr, scene, opts: KernelOptions, state: _VolState):
         f["rough"] = dr.select(here, dr.select(real, 1.0, rough), f["rough"])
         f["hit"] = f["hit"] | here
         f["albedo"] = dr.select(here, albedo_here, f["albedo"])
+        flight = first & in_medium & ~f["medium_set"]
+        f["medium_u"] = dr.select(flight, flight_u, f["medium_u"])
+        f["medium_set"] = f["medium_set"] | flight
         if opts.follow_delta_albedo:
             # the albedo looks through delta surfaces (mirror, glass) to the first smooth vertex or scattering
             resolve = f["pending"] & (real | (surface_vertex & smooth))
