@@ -242,3 +242,14 @@ def test_a_plugin_that_fails_to_load_shows_its_traceback_with_verbose(tmp_path, 
     err = capsys.readouterr().err
     assert "broken.py\", line 3" in err and "math.no_such_function()" in err
     assert err.rstrip().splitlines()[-1].startswith("error: cannot import")
+
+
+def test_check_plugin_sampler_shows_where_a_plain_function_sampler_raised(plugin_dir, capsys):
+    argv = ["check-plugin", "--sampler", f"{plugin_dir}/plug.py:boom_sampler", "--isolation", POLICY]
+    assert cli.main([*argv, "--json"]) == 1
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["reasons"][0].endswith("the sampler failed: RuntimeError: sampler bug on purpose")
+    assert "boom_sampler" in summary["budgets"][0]["tracebacks"][0]
+    assert cli.main([*argv, "--verbose"]) == 1
+    out = capsys.readouterr().out
+    assert "traceback of the sampler:" in out and 'raise RuntimeError("sampler bug on purpose")' in out

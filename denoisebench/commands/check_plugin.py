@@ -20,6 +20,7 @@ Exit codes: 0 every case passed, 1 some case failed, 2 the denoiser cannot be fo
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import sys
@@ -134,6 +135,18 @@ def _table(label: str, outcomes, verbose: bool = False) -> str:
     return "\n".join(lines)
 
 
+@contextlib.contextmanager
+def _tracebacks_in_the_output():
+    """A plugin's tracebacks go to this command's table (--verbose) or JSON, not to the log on stderr."""
+    log = logging.getLogger("denoisebench.plugins")
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
+
+
 def _load_traceback(error: BaseException) -> str | None:
     """Where a plugin that failed to load raised: its worker's traceback, or this process's cause."""
     text = getattr(error, "traceback", None)
@@ -153,7 +166,10 @@ def run(args) -> int:
     if args.sampler:
         limits = limits_from_args(args)
         options = parse_options(args.option)
-        return check_sampler(args.spec, options, as_json=args.json, isolation=args.isolation, limits=limits)
+        with _tracebacks_in_the_output():
+            return check_sampler(
+                args.spec, options, as_json=args.json, isolation=args.isolation, limits=limits, verbose=args.verbose
+            )
 
     from denoisebench.denoisers import hard_cases, isolation
 
@@ -171,13 +187,9 @@ def run(args) -> int:
         raise
     label = getattr(denoiser, "name", None) or args.spec
     outcomes = []
-    quiet = logging.getLogger("denoisebench.plugins")  # tracebacks go to the table (--verbose) or the JSON
-    level, quiet.level = quiet.level, logging.ERROR
-    try:
+    with _tracebacks_in_the_output():
         for case in tqdm(cases, desc=f"check {label}", unit="case", file=sys.stderr, leave=False):
             outcomes.append(hard_cases.run_case(denoiser, case))
-    finally:
-        quiet.setLevel(level)
     if args.json:
         payload = {
             "denoiser": label,

@@ -56,6 +56,7 @@ class BudgetOutcome:
     pixels_without_samples: int  # the largest over seeds
     stopped: list[str] = field(default_factory=list)
     errors: list[str] = field(default_factory=list)
+    tracebacks: list[str] = field(default_factory=list)  # where the sampler raised, once each
 
 
 @dataclass
@@ -75,7 +76,7 @@ class CheckOutcome:
 
 
 def _one_budget(make_sampler, spp: float, seeds, size: int) -> BudgetOutcome:
-    rel, deviations, variances, spent, empty, stopped, errors = [], [], [], [], [], [], []
+    rel, deviations, variances, spent, empty, stopped, errors, traces = [], [], [], [], [], [], [], []
     for seed in seeds:
         frame = check_frame(size, size, seed=seed)
         try:
@@ -89,6 +90,8 @@ def _one_budget(make_sampler, spp: float, seeds, size: int) -> BudgetOutcome:
             _close(sampler)
         if result.error:
             errors.append(result.error)
+        if result.traceback and result.traceback not in traces:
+            traces.append(result.traceback)
         image = np.asarray(result.buffers["color"], dtype=np.float64)
         truth = frame.truth
         rel.append(float(np.mean((image - truth) ** 2 / (truth**2 + EPSILON))))
@@ -100,7 +103,7 @@ def _one_budget(make_sampler, spp: float, seeds, size: int) -> BudgetOutcome:
         empty.append(result.pixels_without_samples)
         stopped.append(result.stopped)
     if not rel:
-        return BudgetOutcome(spp, float("inf"), float("inf"), 0.0, 0.0, size * size, stopped, errors)
+        return BudgetOutcome(spp, float("inf"), float("inf"), 0.0, 0.0, size * size, stopped, errors, traces)
     return BudgetOutcome(
         spp=spp,
         rel_mse=float(np.mean(rel)),
@@ -110,6 +113,7 @@ def _one_budget(make_sampler, spp: float, seeds, size: int) -> BudgetOutcome:
         pixels_without_samples=int(max(empty)),
         stopped=stopped,
         errors=errors,
+        tracebacks=traces,
     )
 
 
@@ -169,11 +173,13 @@ def check_sampler(
     as_json: bool = False,
     isolation: str = "plugins",
     limits: Limits | None = None,
+    verbose: bool = False,
 ) -> int:
     """``check-plugin --sampler SPEC``: load (a one-line error, exit 2, when it cannot), check, print; 0 pass, 1 fail.
 
     A plugin runs in a worker (:mod:`.isolation`, under ``limits``) unless ``isolation`` is ``"none"``
-    (``"all"``: built-ins too).
+    (``"all"``: built-ins too). ``verbose``: the table is followed by where the sampler raised (the JSON
+    always carries it, ``tracebacks`` of each budget).
     """
     policy = sampler_policy(isolation)
 
@@ -189,4 +195,8 @@ def check_sampler(
 
     outcome = convergence_check(make_sampler, name=name, progress=progress)
     print(json.dumps({"spec": spec, **outcome.summary()}, indent=2) if as_json else format_check(outcome))
+    if verbose and not as_json:
+        traces = dict.fromkeys(trace for budget in outcome.budgets for trace in budget.tracebacks)
+        for trace in traces:
+            print(f"\ntraceback of the sampler:\n{trace.rstrip()}")
     return 0 if outcome.passed else 1

@@ -53,6 +53,7 @@ import numpy as np
 
 from denoisebench.errors import one_line
 from denoisebench.generator.render.placed import check_positions
+from denoisebench.plugins import PluginFailure
 from denoisebench.plugins.proxy import log_failure
 from denoisebench.sampling.allocation import allocate
 from denoisebench.sampling.protocol import Budget, BudgetExhausted, SamplerRequestError, sampler_name
@@ -102,6 +103,7 @@ class SamplerResult:
     final_decision_seconds: float
     budget_samples: int | None
     pixel_means: dict[str, np.ndarray] | None = None  # the renderer's buffers where a reconstruction replaced them
+    traceback: str | None = None  # where the sampler raised (``stopped == "error"``)
 
     @property
     def samples(self) -> int:
@@ -353,16 +355,16 @@ def run_sampler(
     """
     name = sampler_name(sampler)
     handle = RoundHandle(frame, budget, max_rounds=max_rounds, clock=clock)
-    error = None
+    error = trace = None
     stopped = "sampler"
     try:
         sampler.sample(budget, handle)
     except BudgetExhausted:
         stopped = handle.stop_reason or "budget"
     except Exception as failure:  # noqa: BLE001 - a failing sampler is recorded, its rounds kept
-        error = one_line(failure)
+        error = str(failure) if isinstance(failure, PluginFailure) else one_line(failure)  # a worker's: one line
         stopped = "error"
-        log_failure("sampler", name, f"a {handle.width}x{handle.height} frame", error, failure)
+        trace = log_failure("sampler", name, f"a {handle.width}x{handle.height} frame", error, failure)
     if stopped == "sampler" and handle.exhausted:
         stopped = "budget"
     if handle.final is not None:
@@ -392,6 +394,7 @@ def run_sampler(
         final_decision_seconds=final_decision,
         budget_samples=handle._total,
         pixel_means=pixel_means,
+        traceback=trace,
     )
 
 
