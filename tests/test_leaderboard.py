@@ -27,8 +27,9 @@ def db(tmp_path_factory):
         expected = {}
         for run in store.runs():
             for f in store.frames(run["run_id"]):
-                if f["spp"] == 1:
-                    expected.setdefault((run["run_id"], f["denoiser"]), []).append(f["metrics"]["relmse"])
+                if f["spp"] == 1:  # the report's corrected score: relmse less its reference-noise floor
+                    corrected = f["metrics"]["relmse"] - f["floors"]["relmse"]
+                    expected.setdefault((run["run_id"], f["denoiser"]), []).append(corrected)
     return path, {key: float(np.mean(v)) for key, v in expected.items()}
 
 
@@ -42,11 +43,12 @@ def test_ranks_across_runs_with_means_from_the_store(db, capsys):
     assert _table(capsys, "--db", str(path))[0].startswith("leaderboard: relmse_robust (lower is better) at 1 spp")
     lines = _table(capsys, "--db", str(path), "--metric", "relmse")
     assert lines[0].startswith("leaderboard: relmse (lower is better) at 1 spp")
-    rows = [line.split() for line in lines[3:]]
+    start = next(i for i, line in enumerate(lines) if line.startswith("-")) + 1  # after the notes and rules
+    rows = [line.split() for line in lines[start:]]
     names = [r[1] for r in rows]
     assert names[0] == "cross_bilateral_fast"  # a denoiser beats the 1-spp input
     assert set(names) == {"cross_bilateral_fast", "identity", "noisy"}
-    # the value shown is the mean over frames stored for the newest run that measured it
+    # the value shown is the corrected mean over frames stored for the newest run that measured it
     newest = {}
     for (run_id, label), value in expected.items():
         newest.setdefault(label, []).append((run_id, value))
@@ -60,7 +62,8 @@ def test_ranks_across_runs_with_means_from_the_store(db, capsys):
 def test_higher_is_better_metric_ranks_descending(db, capsys):
     path, _ = db
     lines = _table(capsys, "--db", str(path), "--metric", "ssim", "--spp", "4")
-    values = [float(line.split()[2]) for line in lines[3:]]
+    start = next(i for i, line in enumerate(lines) if line.startswith("-")) + 1
+    values = [float(line.split()[2]) for line in lines[start:]]
     assert values == sorted(values, reverse=True) and len(values) == 3
 
 

@@ -46,7 +46,7 @@ Notes
   - ``reference_too_noisy``: more than :data:`NOISY_VALUES_LIMIT` of the reference's values have a
     noise comparable to their signal (variance above ``floors.SECOND_ORDER_LIMIT · (r² + 0.01)``),
     where the floor's expansion is outside its stated validity (:mod:`denoisebench.metrics.floors`);
-  - ``cannot_rank``: no two entries on the scene (denoisers and the noisy input, at one spp) differ
+  - ``cannot_rank``: no two entries on the scene (denoisers and the noisy input, at every spp) differ
     by more than the reference resolves (95 %, the two se added): nothing there can be ranked.
 
   Such a scene is listed apart with its reason and the reference spp that would bring its floor to a
@@ -307,25 +307,27 @@ def reference_states(scene_records: dict[str, dict]) -> dict[str, dict]:
 def _can_rank(data, scene: str, metric: str) -> bool | None:
     """Whether two entries on ``scene`` differ in ``metric`` by more than the reference resolves.
 
-    Corrected scores (:func:`corrected_values`) at each spp, every pair of labels; a difference is
-    resolved when it exceeds 1.96 × (se_a + se_b) (one reference: correlated, so the sum bounds the
-    se of the difference). None when no se is stored (nothing to judge with)."""
-    judged = False
+    Entries are every (label, spp) (the noisy input at rising spp is the curve a report compares
+    against); corrected scores (:func:`corrected_values`). A difference is resolved when it exceeds
+    1.96 × (se_a + se_b) (one reference: correlated, so the sum bounds the se of the difference).
+    Identical outputs (identity and the input) are no pair to judge. None when nothing can be judged
+    (no se stored, or every entry the same)."""
+    entries = []
     for spp in data.spp:
-        entries = []
         for label in data.labels:
             values, floors, ses = data.per_scene(label, spp, metric, [scene])
             if scene not in values or not is_finite(values[scene]):
                 continue
             corrected, _ = corrected_values(values, floors, ses)
-            entries.append((corrected[scene], ses.get(scene)))
-        for i, (a, sa) in enumerate(entries):
-            for b, sb in entries[i + 1 :]:
-                if not (is_finite(sa) or is_finite(sb)):
-                    continue
-                judged = True
-                if abs(a - b) > Z95 * ((sa or 0.0) + (sb or 0.0)):
-                    return True
+            entries.append((values[scene], corrected[scene], ses.get(scene)))
+    judged = False
+    for i, (raw_a, a, sa) in enumerate(entries):
+        for raw_b, b, sb in entries[i + 1 :]:
+            if not (is_finite(sa) or is_finite(sb)) or math.isclose(raw_a, raw_b, rel_tol=1e-12, abs_tol=0.0):
+                continue
+            judged = True
+            if abs(a - b) > Z95 * ((sa or 0.0) + (sb or 0.0)):
+                return True
     return False if judged else None
 
 

@@ -57,6 +57,7 @@ from denoisebench.leaderboard.names import (  # noqa: F401 (ERROR_METRICS: re-ex
     NOISY,
 )
 from denoisebench.leaderboard.run_index import RunIndex
+from denoisebench.metrics import floors
 
 #: Scenes a per-effect column needs (on one scene a column is that scene's score, not the effect's).
 MIN_EFFECT_SCENES = 2
@@ -159,6 +160,41 @@ class RunData(RunIndex):
     units = _DictView("unit_rows")
     frames = _DictView("frame_rows")
     sequences = _DictView("sequence_rows")
+
+
+#: References read per scene to measure their noise (evenly spaced frames; the largest share is kept).
+NOISE_CHECK_FRAMES = 4
+
+
+def reference_noisy_shares(dataset, scenes: list[str]) -> dict[str, float]:
+    """{scene: largest share of reference values too noisy for a floor} over a few frames of each scene
+    (:func:`denoisebench.metrics.floors.noisy_value_share`); scenes without a reference variance are left out."""
+    out = {}
+    for scene in scenes:
+        info = dataset.scene(scene)
+        count = info.frame_count
+        picks = sorted({round(i * (count - 1) / max(NOISE_CHECK_FRAMES - 1, 1)) for i in range(NOISE_CHECK_FRAMES)})
+        shares = []
+        for index in picks if count else []:
+            try:
+                layers, _ = dataset.reference(scene, index)
+            except Exception:  # noqa: BLE001 - a missing or unreadable reference: its units failed already
+                continue
+            if "color_var" in layers:
+                shares.append(floors.noisy_value_share(layers["color"], layers["color_var"]))
+        if shares:
+            out[scene] = max(shares)
+    return out
+
+
+def set_apart(data: RunData, dataset) -> list[agg.Unresolved]:
+    """The scenes of a run whose scores cannot rank (:func:`.aggregate.unresolved_references`), judged
+    from the dataset's reference records and a few of its references (:func:`reference_noisy_shares`):
+    the one rule the report and ``denoisebench leaderboard`` share."""
+    states = agg.reference_states({s: dataset.scene(s).record for s in data.scenes})
+    for scene, share in reference_noisy_shares(dataset, data.scenes).items():
+        states.setdefault(scene, {})["noisy_share"] = share
+    return agg.unresolved_references(data, states)
 
 
 def summary_table(data: RunData, exclude=()) -> list[SummaryRow]:

@@ -44,7 +44,7 @@ from denoisebench.leaderboard.report_markdown import render_markdown
 from denoisebench.leaderboard.report_model import ReportModel
 from denoisebench.leaderboard.stability import stability_table
 from denoisebench.leaderboard.store import ResultsStore
-from denoisebench.metrics import floors, relmse_map
+from denoisebench.metrics import relmse_map
 from denoisebench.metrics.colorvideovdp import viewing_conditions
 
 
@@ -300,31 +300,6 @@ def _dataset_size(dataset: Dataset, scenes: list[str]) -> tuple[int, int]:
     return int(record.get("width", 0)), int(record.get("height", 0))
 
 
-#: References read per scene to measure their noise (evenly spaced frames; the largest share is kept).
-NOISE_CHECK_FRAMES = 4
-
-
-def _reference_noisy_shares(dataset: Dataset, scenes: list[str]) -> dict[str, float]:
-    """{scene: largest share of reference values too noisy for a floor} over a few frames of each scene
-    (:func:`denoisebench.metrics.floors.noisy_value_share`); scenes without a reference variance are left out."""
-    out = {}
-    for scene in scenes:
-        info = dataset.scene(scene)
-        count = info.frame_count
-        picks = sorted({round(i * (count - 1) / max(NOISE_CHECK_FRAMES - 1, 1)) for i in range(NOISE_CHECK_FRAMES)})
-        shares = []
-        for index in picks if count else []:
-            try:
-                layers, _ = dataset.reference(scene, index)
-            except Exception:  # noqa: BLE001 - a missing or unreadable reference: its units failed already
-                continue
-            if "color_var" in layers:
-                shares.append(floors.noisy_value_share(layers["color"], layers["color_var"]))
-        if shares:
-            out[scene] = max(shares)
-    return out
-
-
 def build_report(
     store: ResultsStore,
     run_id: str,
@@ -339,10 +314,7 @@ def build_report(
     :data:`.time_model.DEFAULT_TIME_AT`), projected from the run's timings (:mod:`.time_model`)."""
     data = analysis.RunData(store, run_id)
     # scenes whose reference cannot resolve the headline scores: listed apart, out of the aggregates
-    states = agg.reference_states({s: dataset.scene(s).record for s in data.scenes})
-    for scene, share in _reference_noisy_shares(dataset, data.scenes).items():
-        states.setdefault(scene, {})["noisy_share"] = share
-    unresolved = agg.unresolved_references(data, states)
+    unresolved = analysis.set_apart(data, dataset)
     summary = analysis.summary_table(data, exclude=() if include_unresolved else agg.excluded_scenes(unresolved))
     reference = _reference_info(dataset, data.scenes)
     model = time_model.build_time_model(

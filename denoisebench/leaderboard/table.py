@@ -26,11 +26,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from denoisebench.dataset import open_dataset
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard.analysis import metric_cell
+from denoisebench.leaderboard.analysis import RunData, metric_cell, set_apart
 from denoisebench.leaderboard.finite import finite_mean
-from denoisebench.leaderboard.run_index import RunIndex
 from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.leaderboard.time_model import build_time_model, read_timings
 from denoisebench.metrics import get_metric
 
 
@@ -46,6 +47,41 @@ class Entry:
     created_at: str
     sampler: str | None = None  # the live sampler that made the input (None: the dataset's stored input)
     denoiser_label: str | None = None  # the denoiser run on it (None: none)
+
+
+@dataclass
+class Ranking:
+    """What :func:`leaderboard` returns: the metric, spp, dataset hash, entries best first, and the lines
+    that say how the numbers were read (scenes left out, the seconds' basis)."""
+
+    metric: object
+    spp: int
+    data_hash: str
+    entries: list[Entry]
+    notes: list[str]
+
+    def __iter__(self):  # (metric, spp, data_hash, entries), as callers unpack it
+        return iter((self.metric, self.spp, self.data_hash, self.entries))
+
+    def __getitem__(self, index: int):
+        return (self.metric, self.spp, self.data_hash, self.entries)[index]
+
+    def text(self) -> str:
+        """:func:`format_leaderboard` of this ranking, its notes included."""
+        return format_leaderboard(self.metric, self.spp, self.data_hash, self.entries, self.notes)
+
+
+def ranks(entries: list[Entry]) -> list[int | None]:
+    """Competition ranks of entries sorted best first: equal values share a rank (1, 1, 3); None unranked."""
+    out: list[int | None] = []
+    for i, e in enumerate(entries):
+        if e.value is None:
+            out.append(None)
+        elif i and entries[i - 1].value == e.value:
+            out.append(out[-1])
+        else:
+            out.append(i + 1)
+    return out
 
 
 def pick_dataset(store: ResultsStore, dataset: str | None) -> str:
@@ -72,17 +108,35 @@ def leaderboard(
     spp: int | None = None,
     dataset: str | None = None,
     sampler: str | None = None,
-):
-    """(metric object, spp, dataset hash, entries ranked best first).
+    *,
+    run: str | None = None,
+    split: str | None = None,
+    include_unresolved: bool = False,
+    time_at: tuple[int, int] | None = None,
+) -> Ranking:
+    """The ranking (:class:`Ranking`, entries best first) of ``metric`` at ``spp`` on one dataset.
 
     ``sampler``: rank only the entries whose input that live sampler made (``""``: only those on the
-    dataset's stored inputs, the noisy input among them); None: every entry."""
+    dataset's stored inputs, the noisy input among them); None: every entry. ``run`` (a run id
+    prefix) and ``split`` keep only the runs they name. Each run is read as its report reads it: the
+    scenes its report sets apart are left out (unless ``include_unresolved``; judged when the run's
+    dataset folder is still there), scores are the report's corrected cells, and seconds are the
+    run's time model at ``time_at`` (default the report's, 1920×1080, projected)."""
     try:
         m = get_metric(metric)
     except ValueError as exc:
         raise UserInputError(str(exc)) from None
     data_hash = pick_dataset(store, dataset)
     runs = store.runs(data_hash)  # newest first
+    if run is not None:
+        runs = [r for r in runs if r.run_id.startswith(run)]
+        if not runs:
+            raise UserInputError(f"no run {run!r} on dataset {data_hash[:12]} in {store.path}")
+    if split is not None:
+        splits = sorted({str(r.config.get("split")) for r in runs})
+        runs = [r for r in runs if str(r.config.get("split")) == split]
+        if not runs:
+            raise UserInputError(f"no run on split {split!r}; runs here are on: {', '.join(splits)}")
     available = sorted({u.spp for r in runs for u in store.units(r.run_id)})
     if not available:
         raise UserInputError(f"{store.path}: no results for dataset {data_hash[:12]}")
@@ -99,8 +153,9 @@ def leaderboard(
             )
     entries: dict[str, Entry] = {}
     unmeasured: dict[str, Entry] = {}
-    for run in runs:
-        run_id = run.run_id
+    notes: list[str] = []
+    for row in runs:
+        run_id = row.run_id
         dimension = {d.label: (d.sampler, d.denoiser_label) for d in store.denoisers(run_id)}
         all_units = store.units(run_id)
         labels = {
@@ -110,26 +165,24 @@ def leaderboard(
         } - set(entries)
         if not labels:
             continue
-        run_index = RunIndex(all_units, store.frames(run_id), store.sequence_metrics(run_id))
+        data = RunData(store, run_id)
+        scenes, model, note = _as_its_report(store, data, row, include_unresolved, time_at)
+        notes += note
         for label in sorted(labels):
-            ok = run_index.ok_frames(label, spp)
+            ok = [f for f in data.ok_frames(label, spp) if f.scene in scenes]
             # the report's own cell: corrected for the reference's noise where the score has a floor
-            value = metric_cell(run_index, label, spp, m.name, None).value
-            failed = sum(1 for u in run_index.units_of(label, spp) if u.status != "ok")
+            value = metric_cell(data, label, spp, m.name, sorted(scenes)).value
+            failed = sum(1 for u in data.units_of(label, spp) if u.status != "ok")
             where = dimension.get(label, (None, label))
             if value is None and not failed:  # this run did not compute the metric: look further back
-                unmeasured.setdefault(label, Entry(label, None, len(ok), 0, None, None, run_id, run.created_at, *where))
+                unmeasured.setdefault(label, Entry(label, None, len(ok), 0, None, None, run_id, row.created_at, *where))
                 continue
+            denoise = finite_mean(f.denoise_seconds for f in ok)
+            total = finite_mean(f.total_seconds for f in ok)
+            if model is not None:
+                denoise, total = model.denoise_seconds(label, spp), model.total_seconds(label, spp)
             entries[label] = Entry(
-                label,
-                value if not failed else None,
-                len(ok),
-                failed,
-                finite_mean(f.denoise_seconds for f in ok),
-                finite_mean(f.total_seconds for f in ok),
-                run_id,
-                run.created_at,
-                *where,
+                label, value if not failed else None, len(ok), failed, denoise, total, run_id, row.created_at, *where
             )
     for label, entry in unmeasured.items():
         entries.setdefault(label, entry)
@@ -137,7 +190,43 @@ def leaderboard(
     ranked = sorted(
         entries.values(), key=lambda e: (e.value is None, sign * e.value if e.value is not None else 0.0, e.denoiser)
     )
-    return m, spp, data_hash, ranked
+    return Ranking(m, spp, data_hash, ranked, list(dict.fromkeys(notes)))
+
+
+def _as_its_report(store, data, row, include_unresolved: bool, time_at) -> tuple[set[str], object, list[str]]:
+    """(scenes the run's report aggregates, its time model or None, lines saying how) for one run."""
+    scenes = set(data.scenes)
+    try:
+        dataset = open_dataset(row.dataset_path, verify=False)
+    except Exception:  # noqa: BLE001 - moved or deleted: rank what the store holds, and say so
+        dataset = None
+    if dataset is None:
+        return (
+            scenes,
+            None,
+            [
+                f"run {row.run_id[:8]}: its dataset folder {row.dataset_path} is not readable here: no scene set apart, "
+                "seconds as measured at the dataset's size (its report projects them)"
+            ],
+        )
+    notes = []
+    apart = set_apart(data, dataset)
+    if apart and not include_unresolved:
+        scenes -= {u.scene for u in apart}
+        notes.append(
+            f"run {row.run_id[:8]}: left out as in its report: "
+            + "; ".join(f"{u.scene} ({u.reason})" for u in apart)
+            + " (--include-unresolved keeps them)"
+        )
+    record = dataset.scene(data.scenes[0]).record if data.scenes else {}
+    size = (int(record.get("width", 0)), int(record.get("height", 0)))
+    model = build_time_model(data, read_timings(store, row.run_id), time_at, size) if size[0] else None
+    if model is not None:
+        w, h = model.time_at
+        notes.append(
+            f"seconds per frame at {w}×{h}" + (" (projected, as in the run's report)" if model.projected else "")
+        )
+    return scenes, model, notes
 
 
 def by_sampler(entries: list[Entry]) -> dict[str | None, list[Entry]]:
@@ -154,8 +243,8 @@ def _fmt(value: float | None, digits: int = 4) -> str:
     return f"{value:.{digits}g}"
 
 
-def format_leaderboard(metric, spp: int, data_hash: str, entries: list[Entry]) -> str:
-    """A plain-text table for the terminal."""
+def format_leaderboard(metric, spp: int, data_hash: str, entries: list[Entry], notes=()) -> str:
+    """A plain-text table for the terminal (``notes``: :attr:`Ranking.notes`, printed under the heading)."""
     arrow = "higher is better" if metric.higher_is_better else "lower is better"
     if metric.aggregate == "relative_to_input":
         arrow += "; per scene relative to the noisy input, geometric mean over scenes"
@@ -163,11 +252,11 @@ def format_leaderboard(metric, spp: int, data_hash: str, entries: list[Entry]) -
         arrow += "; geometric mean over scenes"
     header = ["#", "denoiser", metric.name, "s/frame denoise", "s/frame total", "frames", "run", "date"]
     rows = []
-    for rank, e in enumerate(entries, 1):
+    for rank, e in zip(ranks(entries), entries):
         value = _fmt(e.value) if e.value is not None else ("failed" if e.failed_units else "—")
         rows.append(
             [
-                str(rank) if e.value is not None else "-",
+                str(rank) if rank is not None else "-",
                 e.denoiser,
                 value,
                 _fmt(e.denoise_seconds, 3),
@@ -187,6 +276,7 @@ def format_leaderboard(metric, spp: int, data_hash: str, entries: list[Entry]) -
 
     out = [
         f"leaderboard: {metric.name} ({arrow}) at {spp} spp, dataset {data_hash[:12]}",
+        *(f"  {note}" for note in notes),
         line(header),
         line(["-" * w for w in widths]),
     ]
