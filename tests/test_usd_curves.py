@@ -3,6 +3,9 @@ Mitsuba's own ``bsplinecurve`` of the same control points, features on curves, t
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -179,3 +182,16 @@ def test_hair_material_becomes_mitsubas_hair_bsdf(tmp_path):
         mi.render(build_mitsuba_scene(translated, sensor_dict(translated.camera, 0, SIZE, SIZE, 8), {"type": "path"}))
     )
     assert np.isfinite(image).all() and image.max() > 0.01
+
+
+HDMITSUBA = os.environ.get("HDMITSUBA_ASSETS")  # google/hdmitsuba's test assets (a copy of its usd folder)
+
+
+@pytest.mark.skipif(not HDMITSUBA, reason="HDMITSUBA_ASSETS (google/hdmitsuba test assets) not set")
+def test_blender_bezier_curve_export(tmp_path):
+    """Blender 4.5's export: two Bézier curves (7 and 10 points), widths 'varying' (one per segment end)."""
+    translated = translate_usd(Path(HDMITSUBA) / "shapes" / "curve.usda", default_light=True)
+    assert not [w for w in translated.warnings if "curve" in w], translated.warnings
+    (record,) = translated.scene_dict["shapes"]
+    assert list(record["counts"]) == [4] * 5  # 2 + 3 segments, each its own B-spline
+    assert np.allclose(record["points"][:, 3], 0.05)

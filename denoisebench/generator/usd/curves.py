@@ -44,7 +44,9 @@ _BASES = {
 TO_BSPLINE = {name: np.linalg.solve(_BSPLINE, matrix) for name, matrix in _BASES.items()}
 
 
-def _per_vertex_widths(widths, interpolation: str, counts: np.ndarray, total: int, kind: str, path, warnings):
+def _per_vertex_widths(
+    widths, interpolation: str, counts: np.ndarray, total: int, kind: str, basis: str, path, warnings
+):
     """Widths → one width per control point."""
     if widths is None or len(widths) == 0:
         warnings.append(f"{path}: no widths; {DEFAULT_WIDTH:g} stage units used")
@@ -59,7 +61,7 @@ def _per_vertex_widths(widths, interpolation: str, counts: np.ndarray, total: in
     if interpolation == "varying":
         # One width per segment end: spread over each curve's points linearly.
         out, start = [], 0
-        varying = _varying_counts(counts, kind)
+        varying = _varying_counts(counts, kind, basis)
         for count, n in zip(counts, varying):
             values = widths[start : start + n]
             start += n
@@ -73,9 +75,13 @@ def _per_vertex_widths(widths, interpolation: str, counts: np.ndarray, total: in
     return np.full(total, widths[0])
 
 
-def _varying_counts(counts, kind: str) -> list[int]:
+def _varying_counts(counts, kind: str, basis: str) -> list[int]:
+    """Varying values per curve: one per segment end (nonperiodic): linear c, Bézier (c − 1)/3 + 1,
+    B-spline and Catmull-Rom c − 2."""
     if kind == "linear":
         return [int(c) for c in counts]
+    if basis == "bezier":
+        return [max((int(c) - 1) // 3 + 1, 2) for c in counts]
     return [max(int(c) - 2, 2) for c in counts]
 
 
@@ -127,7 +133,7 @@ def read_curves(prim, to_world: np.ndarray, warnings: list[str], time: float = 0
     if widths is not None:
         widths = check_finite(widths, path, "widths")
     radii = 0.5 * _per_vertex_widths(
-        widths, str(curves.GetWidthsInterpolation()), counts, len(points), kind, path, warnings
+        widths, str(curves.GetWidthsInterpolation()), counts, len(points), kind, basis, path, warnings
     )
     world = points @ to_world[:3, :3].T + to_world[:3, 3]
     scale = float(np.mean(np.linalg.norm(to_world[:3, :3], axis=0)))
