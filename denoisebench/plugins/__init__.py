@@ -18,7 +18,7 @@ their protocol, which stays in ``denoisers/`` and ``sampling/``. The modules:
 :mod:`.sandbox`
     the bubblewrap command line.
 
-Imports nothing of the project but :mod:`denoisebench.errors`; ``denoisers`` and ``sampling`` import it.
+Imports no stage of the project (only :mod:`denoisebench.errors`); ``denoisers``, ``sampling`` and the benchmark import it.
 """
 
 from denoisebench.plugins.process import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, Limits, SandboxUnavailableError
