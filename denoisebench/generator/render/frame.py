@@ -47,6 +47,7 @@ Conventions:
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import struct
 import time as _time
@@ -270,12 +271,20 @@ class _FreezeOrTrace:
 
     def __call__(self, *args):
         if self.frozen is not None:
+            # Python's cyclic collector must not free Dr.Jit objects left by an earlier mi.load_file or
+            # mi.render while a pass records: Dr.Jit aborts the process then (seen with Mitsuba XML
+            # scenes loaded in the same process). No collection runs during the call; none is lost.
+            enabled = gc.isenabled()
+            gc.disable()
             try:
                 return self.frozen(*args)
             except RuntimeError as error:
                 if "frozen function" not in str(error):
                     raise
                 self.frozen = None
+            finally:
+                if enabled:
+                    gc.enable()
         return self.function(*args)
 
 
