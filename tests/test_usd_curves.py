@@ -195,3 +195,57 @@ def test_blender_bezier_curve_export(tmp_path):
     (record,) = translated.scene_dict["shapes"]
     assert list(record["counts"]) == [4] * 5  # 2 + 3 segments, each its own B-spline
     assert np.allclose(record["points"][:, 3], 0.05)
+
+
+HAIR_MTLX = """<?xml version="1.0"?>
+<materialx version="1.39">
+  <chiang_hair_roughness name="rough" type="multioutput">
+    <input name="longitudinal" type="float" value="0.3" />
+    <input name="azimuthal" type="float" value="0.4" />
+  </chiang_hair_roughness>
+  <chiang_hair_absorption_from_color name="absorb" type="vector3">
+    <input name="color" type="color3" value="0.5, 0.3, 0.1" />
+    <input name="azimuthal_roughness" type="float" value="0.4" />
+  </chiang_hair_absorption_from_color>
+  <chiang_hair_bsdf name="hair" type="BSDF">
+    <input name="roughness_R" type="vector2" nodename="rough" output="roughness_R" />
+    <input name="absorption_coefficient" type="vector3" nodename="absorb" />
+    <input name="cuticle_angle" type="float" value="0.55" />
+  </chiang_hair_bsdf>
+  <surface name="hair_surface" type="surfaceshader">
+    <input name="bsdf" type="BSDF" nodename="hair" />
+  </surface>
+  <surfacematerial name="M_Hair" type="material">
+    <input name="surfaceshader" type="surfaceshader" nodename="hair_surface" />
+  </surfacematerial>
+</materialx>
+"""
+
+
+def test_materialx_chiang_hair_becomes_mitsubas_hair_bsdf(tmp_path):
+    from pxr import Usd, UsdShade
+
+    from denoisebench.generator.render.scene import build_mitsuba_scene, sensor_dict
+    from denoisebench.mitsuba_runtime import load_mitsuba
+
+    path = _stage(tmp_path / "mtlx_hair.usda")[0]
+    (tmp_path / "hair.mtlx").write_text(HAIR_MTLX)
+    stage = Usd.Stage.Open(str(path))
+    stage.DefinePrim("/World/Mtlx", "Scope").GetReferences().AddReference("./hair.mtlx", "/MaterialX/Materials")
+    curves = stage.GetPrimAtPath("/World/Hair")
+    UsdShade.MaterialBindingAPI.Apply(curves)
+    curves.GetRelationship("material:binding").SetTargets(["/World/Mtlx/M_Hair"])
+    stage.GetRootLayer().Save()
+    translated = translate_usd(path)
+    (bsdf,) = translated.scene_dict["bsdfs"].values()
+    factor = 5.969 - 0.215 * 0.4 + 2.532 * 0.4**2 - 10.73 * 0.4**3 + 5.574 * 0.4**4 + 0.245 * 0.4**5
+    sigma = np.square(np.log([0.5, 0.3, 0.1]) / factor)
+    assert bsdf["type"] == "hair" and bsdf["eta"] == pytest.approx(1.55)
+    assert bsdf["longitudinal_roughness"] == pytest.approx(0.3) and bsdf["azimuthal_roughness"] == pytest.approx(0.4)
+    assert bsdf["scale_tilt"] == pytest.approx(9.0)
+    assert np.allclose(bsdf["sigma_a"]["value"], sigma, rtol=1e-4)
+    assert translated.materials[0]["surface"] == "chiang_hair_bsdf"
+    mi = load_mitsuba()
+    sensor = sensor_dict(translated.camera, 0, SIZE, SIZE, 8)
+    image = np.array(mi.render(build_mitsuba_scene(translated, sensor, {"type": "path"})))
+    assert np.isfinite(image).all() and image.max() > 0.01

@@ -44,6 +44,9 @@ min, max, absval, sqrt, remap, smoothstep, luminance, dotproduct, extract, conve
 combine2/3/4, dot, separate3). A texture combined with a constant stays a texture (its pixels
 computed); two textures combine pixel by pixel (the smaller resampled, nearest). Any other node:
 one warning ``<node>: MaterialX node '<category>' is not translated; <input> uses <fallback>``.
+Hair: a ``surface`` node over a ``chiang_hair_bsdf`` becomes Mitsuba's ``hair`` BSDF (:func:`_hair`),
+with ``chiang_hair_roughness``, ``chiang_hair_absorption_from_color`` and
+``deon_hair_absorption_from_melanin`` evaluated as MaterialX's own GLSL library does.
 Each translated material records how (:attr:`MaterialInfo.report`): the document, the surface
 shader, and the fallbacks taken; the manifest lists them.
 """
@@ -411,6 +414,24 @@ class Evaluator:
             source = arg("in", 3)
             index = {"outr": 0, "outx": 0, "outg": 1, "outy": 1, "outb": 2, "outz": 2}.get(output, 0)
             return _combine(lambda a: a[..., index : index + 1], source)
+        if category == "chiang_hair_absorption_from_color":  # MaterialX's genglsl formula (Chiang et al. 2016)
+            colour, beta = arg("color", 3), arg("azimuthal_roughness", 1)
+
+            def from_colour(c, b):
+                factor = 5.969 - 0.215 * b + 2.532 * b**2 - 10.73 * b**3 + 5.574 * b**4 + 0.245 * b**5
+                return np.square(np.log(np.clip(c, 0.001, 1.0)) / factor)
+
+            return _combine(from_colour, colour, _channels(beta, 3))
+        if category == "deon_hair_absorption_from_melanin":  # MaterialX's genglsl formula (d'Eon et al. 2011)
+            concentration, redness = arg("melanin_concentration", 1), arg("melanin_redness", 1)
+            eumelanin, pheomelanin = arg("eumelanin_color", 3), arg("pheomelanin_color", 3)
+
+            def from_melanin(m, r, eu, pheo):
+                melanin = -np.log(np.maximum(1.0 - m, 1e-4))
+                eu_log, pheo_log = -np.log(np.maximum(eu, 1e-6)), -np.log(np.maximum(pheo, 1e-6))
+                return np.maximum(melanin * (1.0 - r) * eu_log + melanin * r * pheo_log, 0.0)
+
+            return _combine(from_melanin, _channels(concentration, 3), _channels(redness, 3), eumelanin, pheomelanin)
         if category in ("combine2", "combine3", "combine4"):
             count = int(category[-1])
             parts = [arg(f"in{i + 1}", 1) for i in range(count)]
@@ -678,6 +699,61 @@ def _principled(surface, warnings: list[str]) -> Translation:
     return translation
 
 
+def _hair(surface, warnings: list[str]) -> Translation | None:
+    """A ``surface`` node whose ``bsdf`` is a ``chiang_hair_bsdf`` → Mitsuba's ``hair`` (the same model).
+
+    ``roughness_R`` from a ``chiang_hair_roughness`` node gives Mitsuba's longitudinal and azimuthal
+    roughness directly; a raw ``roughness_R`` (MaterialX's variance and logistic scale) is inverted
+    through that node's mapping. ``cuticle_angle`` (0..1, 0.5 = none) → ``scale_tilt`` in degrees;
+    ``absorption_coefficient`` → ``sigma_a``. Tints other than white and TT/TRT scales other than
+    MaterialX's defaults (Mitsuba fixes 0.5 and 2) warn."""
+    upstream = surface.connection("bsdf")
+    if upstream is None or upstream[0].category != "chiang_hair_bsdf":
+        return None
+    hair = upstream[0]
+    translation = Translation(bsdf={}, emission=None, roughness=0.3, metallic=1.0, opacity=1.0, cutout=False)
+    evaluator = Evaluator(warnings, translation.fallbacks)
+
+    def note(line: str) -> None:
+        warnings.append(f"{hair.label}: {line}")
+        translation.fallbacks.append(line)
+
+    def number(node, name: str, size: int, default) -> np.ndarray:
+        got = evaluator.input(node, name, size)
+        if got is None:
+            return np.asarray(default, dtype=np.float64)
+        if got.textured:
+            note(f"textured {name} is not supported; its mean used")
+        return got.array.reshape(-1, size).mean(0).astype(np.float64)
+
+    bsdf: dict = {"type": "hair", "eta": round(float(number(hair, "ior", 1, [1.55])[0]), 6)}
+    source = hair.connection("roughness_R")
+    if source is not None and source[0].category == "chiang_hair_roughness":
+        longitudinal = float(number(source[0], "longitudinal", 1, [0.1])[0])
+        azimuthal = float(number(source[0], "azimuthal", 1, [0.2])[0])
+        scales = number(source[0], "scale_TT", 1, [0.5])[0], number(source[0], "scale_TRT", 1, [2.0])[0]
+        if abs(scales[0] - 0.5) > 1e-6 or abs(scales[1] - 2.0) > 1e-6:
+            note("scale_TT/scale_TRT other than 0.5/2 are not supported; Mitsuba's 0.5/2 used")
+    else:
+        variance, logistic = number(hair, "roughness_R", 2, [0.1, 0.1])
+        beta = np.linspace(0.001, 1.0, 2000)
+        v = np.square(0.726 * beta + 0.812 * beta**2 + 3.7 * beta**20)
+        s = 0.265 * beta + 1.194 * beta**2 + 5.372 * beta**22
+        longitudinal = float(np.interp(variance, v, beta))
+        azimuthal = float(np.interp(logistic, s, beta))
+    bsdf["longitudinal_roughness"] = round(float(np.clip(longitudinal, 0.001, 1.0)), 6)
+    bsdf["azimuthal_roughness"] = round(float(np.clip(azimuthal, 0.001, 1.0)), 6)
+    bsdf["scale_tilt"] = round(float(number(hair, "cuticle_angle", 1, [0.5])[0]) * 180.0 - 90.0, 6)
+    for name in ("tint_R", "tint_TT", "tint_TRT"):
+        if np.any(np.abs(number(hair, name, 3, [1.0, 1.0, 1.0]) - 1.0) > 1e-4):
+            note(f"{name} other than white is not supported; white used")
+    absorption = np.maximum(number(hair, "absorption_coefficient", 3, [0.0, 0.0, 0.0]), 0.0)
+    bsdf["sigma_a"] = {"type": "rgb", "value": [round(float(v), 6) for v in absorption]}
+    translation.bsdf = bsdf
+    translation.roughness = bsdf["longitudinal_roughness"]
+    return translation
+
+
 # --------------------------------------------------------------------------------------------------
 # Entry points (USD side)
 
@@ -685,6 +761,8 @@ def _principled(surface, warnings: list[str]) -> Translation:
 def translate_usd_network(shader, warnings: list[str]) -> Translation | None:
     """A MaterialX surface shader authored in USD → Translation (None: not a supported surface)."""
     node = _UsdNode(shader)
+    if node.category == "surface":
+        return _hair(node, warnings)
     if node.category not in SURFACES:
         return None
     return _principled(node, warnings)
@@ -705,6 +783,10 @@ def translate_document_material(path: str, name: str, warnings: list[str]) -> tu
         return None, ""
     shader = shaders[0]
     category = shader.getCategory()
+    if category == "surface":
+        hair = _hair(_MxNode(shader, str(Path(path).parent)), warnings)
+        if hair is not None:
+            return hair, "chiang_hair_bsdf"
     if category not in SURFACES:
         warnings.append(f"{path}: material '{name}': surface '{category}' is not translated; grey diffuse used")
         return None, category
