@@ -8,11 +8,17 @@ Notes
 -----
 * **Per-scene value.** A metric the run stored per sequence (temporal metrics, :mod:`.store`'s
   ``sequence_metrics``) and not per frame has the sequence's value on a scene; any other metric the
-  mean over the scene's successful frames. Which table holds it decides, not the metric registry, so
-  a run whose plugin metric is no longer installed reads the same. Values that are not finite are
-  left out (:mod:`.finite`).
-* **Floors.** A scene's floor is the mean of its frames' floors (all frames must have one) and its
-  reference standard error that of the mean over frames, sqrt(Σ se²)/n.
+  **trimmed mean** over the scene's successful frames: sorted by value, ⌈:data:`FRAME_TRIM` · n⌉
+  frames dropped at each end when there are at least 3 (one of 3 to 8 frames: the median of 3, the
+  mean of the middle 6 of 8), so that no single frame decides a scene (the trimmed mean of robust
+  statistics: Tukey & McLaughlin 1963; Wilcox, "Introduction to Robust Estimation and Hypothesis
+  Testing", who recommends 20 %; 12.5 % drops exactly one frame of eight). One frame blown up by any
+  factor moves the scene's value by at most (largest kept − smallest kept) / kept count
+  (tests/test_run_index_robust.py). Which table holds it decides, not the metric registry, so a run
+  whose plugin metric is no longer installed reads the same. Values that are not finite are left out
+  (:mod:`.finite`). :meth:`RunIndex.deciding_frames` names frames far above their scene's median.
+* **Floors.** A scene's floor is the mean of its kept frames' floors (all must have one) and its
+  reference standard error that of the mean over them, sqrt(Σ se²)/n.
 * **Indexed once.** Frames are grouped by (label, spp) and (label, spp, scene), sequence values by
   (label, spp, scene, metric), units by (label, spp), when the index is built: a lookup never
   rescans the run's rows. Lists keep the store's order (label, scene, spp, frame).
@@ -22,8 +28,23 @@ from __future__ import annotations
 
 import math
 
-from denoisebench.leaderboard.finite import finite_mean, finite_values
+from denoisebench.leaderboard.finite import finite_mean, finite_values, is_finite
 from denoisebench.leaderboard.records import FrameRow, SequenceRow, UnitRow
+
+#: Share of a scene's frames dropped at each end of the sorted values (at least 3 frames): one of 8.
+FRAME_TRIM = 0.125
+#: A frame whose value is above this multiple of its scene's median decides that scene's plain mean.
+DECIDING_FACTOR = 10.0
+
+
+def kept_frames(frames: list, metric: str) -> list:
+    """The frames a scene's value averages: finite ones, sorted by value, without the ⌈FRAME_TRIM·n⌉
+    lowest and highest when there are at least 3 (module Notes)."""
+    rows = sorted((f for f in frames if is_finite(f.metrics.get(metric))), key=lambda f: f.metrics[metric])
+    if len(rows) < 3:
+        return rows
+    k = math.ceil(FRAME_TRIM * len(rows))
+    return rows[k : len(rows) - k]
 
 
 class RunIndex:
@@ -83,8 +104,20 @@ class RunIndex:
         if self.is_sequence_metric(metric):
             values = [s.value for s in self._sequences.get((label, spp, scene, metric), [])]
         else:
-            values = [f.metrics.get(metric) for f in self.ok_frames(label, spp, scene)]
+            values = [f.metrics.get(metric) for f in kept_frames(self.ok_frames(label, spp, scene), metric)]
         return finite_mean(values)
+
+    def deciding_frames(self, label: str, spp: int, scene: str, metric: str) -> list[tuple[int, float, float]]:
+        """[(frame, value, scene median)] of frames whose ``metric`` is over :data:`DECIDING_FACTOR` × the
+        scene's median: the frames a plain mean would be decided by (the trimmed mean drops them)."""
+        frames = [f for f in self.ok_frames(label, spp, scene) if is_finite(f.metrics.get(metric))]
+        if len(frames) < 3:
+            return []
+        values = sorted(f.metrics[metric] for f in frames)
+        median = values[len(values) // 2] if len(values) % 2 else 0.5 * sum(values[len(values) // 2 - 1 :][:2])
+        if not median > 0:
+            return []
+        return [(f.frame, f.metrics[metric], median) for f in frames if f.metrics[metric] > DECIDING_FACTOR * median]
 
     def scene_floor(self, label: str, spp: int, scene: str, metric: str) -> tuple[float | None, float | None]:
         """(floor, ref_se) of a metric on one scene: frames' mean floor, se of the frames' mean."""
@@ -92,7 +125,7 @@ class RunIndex:
             rows = self._sequences.get((label, spp, scene, metric), [])
             floors, ses = finite_values(r.floor for r in rows), finite_values(r.ref_se for r in rows)
         else:
-            frames = self.ok_frames(label, spp, scene)
+            frames = kept_frames(self.ok_frames(label, spp, scene), metric)
             floors = finite_values(f.floors.get(metric) for f in frames)
             ses = finite_values(f.ref_se.get(metric) for f in frames)
             if len(floors) != len(frames):
