@@ -242,12 +242,16 @@ def copy_user_stage(path: str | Path, scene_dir: Path, options: dict | None = No
 
 def _with_additions(stage_path: Path, options: dict) -> str:
     """The copied root layer's text with the camera choice, auto camera and default lights authored into it."""
-    from pxr import Sdf, Usd
+    from pxr import Sdf, Usd, UsdUtils
 
     cached = Sdf.Layer.Find(str(stage_path))
     if cached is not None:
         cached.Reload(force=True)  # USD keeps open layers by path: read the bytes just written
+    # USD's own messages (e.g. the .mtlx references usd-core cannot open) are the translator's to report.
+    quiet = UsdUtils.CoalescingDiagnosticDelegate()
     stage = Usd.Stage.Open(str(stage_path))
+    quiet.TakeCoalescedDiagnostics()
+    del quiet
     layer = stage.GetRootLayer()
     stage.SetEditTarget(layer)
     camera = apply_additions(

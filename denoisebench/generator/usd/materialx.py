@@ -480,7 +480,7 @@ class Evaluator:
         return None
 
 
-@functools.lru_cache(maxsize=64)
+@functools.lru_cache(maxsize=16)
 def _decoded(path: str, mtime: float, srgb: bool, size: int) -> np.ndarray:
     """An image's first ``size`` channels as float32 (sRGB decoded when asked); shared, read-only."""
     pixels, _ = _read_rgba(path, Path(path).suffix)
@@ -533,6 +533,13 @@ def _param(val: Val, name: str, evaluator: Evaluator, translation: Translation) 
     if "to_uv" in meta:
         bitmap["to_uv"] = meta["to_uv"]
     return bitmap
+
+
+def _clipped(val: Val) -> Val:
+    """``val`` clamped to [0, 1]; an image already inside stays the same array (no copy of large textures)."""
+    if float(val.array.min()) >= 0.0 and float(val.array.max()) <= 1.0:
+        return val
+    return _combine(lambda a: np.clip(a, 0.0, 1.0), val)
 
 
 def _mean(val: Val | None, default: float) -> float:
@@ -624,13 +631,13 @@ def _principled(surface, warnings: list[str]) -> Translation:
             lambda c, t: c * (1.0 - transmission) + np.square(t) * transmission, colour, _channels(tint, 3)
         )
         principled["spec_trans"] = transmission
-    colour = _combine(lambda c: np.clip(c, 0.0, 1.0), colour)
+    colour = _clipped(colour)
     principled["base_color"] = _param(colour, label, evaluator, translation)
 
     for key, target, default in (("roughness", "roughness", 0.2), ("metallic", "metallic", 0.0)):
         got = get(key, 1)
         got = Val(np.array([default], dtype=np.float32)) if got is None else got
-        got = _combine(lambda a: np.clip(a, 0.0, 1.0), got)
+        got = _clipped(got)
         principled[target] = _param(got, label, evaluator, translation)
         setattr(translation, key, _mean(got, default))
     anisotropic = float(np.clip(constant("anisotropic", 1, 0.0), 0.0, 1.0))
