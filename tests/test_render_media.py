@@ -496,3 +496,43 @@ def test_usdvol_volume_is_a_one_line_error_never_dropped_light(tmp_path):
     with pytest.raises(UserInputError, match="UsdVol volumes are not rendered") as error:
         translate_usd(tmp_path / "smoke.usda")
     assert "density (OpenVDBAsset)" in str(error.value) and "\n" not in str(error.value)
+
+
+def test_usd_camera_inside_fog_finds_its_medium_and_agrees_with_volpath(mi, tmp_path):
+    """A USD camera inside a fog box (no sensor: the tracer finds the enclosing medium) against Mitsuba
+    ``volpath`` given that medium as its sensor's."""
+    from pxr import Usd, UsdGeom, UsdLux
+
+    from denoisebench.generator.render.scene import build_mitsuba_scene, sensor_dict
+    from denoisebench.generator.usd.translate import translate_usd
+    from denoisebench.scenes.media import author_medium
+
+    stage = Usd.Stage.CreateNew(str(tmp_path / "room.usda"))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    fog = UsdGeom.Cube.Define(stage, "/World/Fog")
+    fog.AddScaleOp().Set((6.0, 6.0, 6.0))  # [-6, 6]^3 around the camera and the ball
+    author_medium(fog, sigma_t=(0.3, 0.3, 0.3), albedo=(0.8, 0.8, 0.8), g=0.4)
+    UsdGeom.Sphere.Define(stage, "/World/Ball")
+    UsdLux.SphereLight.Define(stage, "/World/Lamp").AddTranslateOp().Set((2.0, 2.5, 1.0))
+    UsdGeom.Camera.Define(stage, "/World/Camera").AddTranslateOp().Set((0.0, 0.5, 4.0))
+    stage.Save()
+    translated = translate_usd(tmp_path / "room.usda")
+    scene = build_mitsuba_scene(translated)
+    plan = make_render_plan(translated.effects_inferred)
+    ours = render_frame(scene, translated.camera, 0, plan, width=SIZE, height=SIZE, spp=SPP, seed=4, reference=True)
+    (air,) = [s.interior_medium() for s in scene.shapes() if s.interior_medium() is not None]
+    sensor = mi.load_dict({**sensor_dict(translated.camera, 0, SIZE, SIZE, SPP // REPLICAS), "medium": air})
+    integrator = mi.load_dict({"type": "volpath"})
+    replicas = np.stack(
+        [
+            np.array(mi.render(scene, sensor=sensor, integrator=integrator, seed=60 + k))[..., :3]
+            for k in range(REPLICAS)
+        ]
+    ).astype(np.float64)
+    z_blocks, z_image = _z_scores(ours.buffers["color"], ours.buffers["color_var"], replicas)
+    assert np.abs(z_blocks).max() < 4.5 and np.abs(z_image).max() < 4.0, (z_image, np.abs(z_blocks).max())
+    # in vacuum the image is another (the fog matters): the probe really found the camera's medium
+    vacuum = mi.load_dict(sensor_dict(translated.camera, 0, SIZE, SIZE, SPP // REPLICAS))
+    clear = np.array(mi.render(scene, sensor=vacuum, integrator=integrator, seed=1))[..., :3]
+    assert abs(clear.mean() - ours.buffers["color"].mean()) > 0.1 * ours.buffers["color"].mean()

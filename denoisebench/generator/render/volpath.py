@@ -23,7 +23,9 @@ evaluated through ``Medium.sample_interaction`` and ``PhaseFunction.sample``/``e
 * **Boundaries**: a surface whose sampled lobe is null (``null`` BSDF, a mask's transparent part) is
   crossed without counting as a vertex; any crossing of a shape with ``interior``/``exterior`` media
   switches the ray's medium (``SurfaceInteraction.target_medium``), dielectric boundaries included
-  (subsurface scattering). The camera ray starts in the sensor's medium.
+  (subsurface scattering). The camera ray starts in the sensor's medium (Mitsuba XML scenes); a scene
+  without a sensor (a translated USD stage) finds the medium around the camera by walking the camera
+  ray to the first medium boundary it meets and taking that boundary's medium on the camera's side.
 * ``max_depth`` counts real events (medium scatterings and non-null surface vertices) as Mitsuba's
   ``volpath`` does; Russian roulette after each real event from ``rr_depth`` on, with Mitsuba's
   survival probability ``min(max(throughput) * eta^2, 0.95)``.
@@ -175,6 +177,36 @@ def _transmittance(mi, dr, scene, sampler, o, d, dist, medium, time, wavelengths
     return state.tr, state.sampler
 
 
+#: Surfaces a probe passes (those that bound no medium) before it gives up: the camera is then in none.
+PROBE_SURFACES = 16
+
+
+def _enclosing_medium(mi, dr, scene, ray):
+    """The medium around each camera ray's origin (MediumPtr per lane): walk along the ray past surfaces
+    that bound no medium to the first that does; its medium on the origin's side encloses the origin
+    (none when the walk escapes). Closed boundaries make this exact; :data:`PROBE_SURFACES` bounds it."""
+    found = dr.zeros(mi.MediumPtr, dr.width(ray.o.x))
+    origin = mi.Point3f(ray.o)
+    active = dr.full(mi.Bool, True, dr.width(ray.o.x))
+    count = mi.UInt32(0)
+
+    def body(origin, found, active, count):
+        si = scene.ray_intersect(mi.Ray3f(origin, ray.d, dr.inf, ray.time, ray.wavelengths), active)
+        boundary = active & si.is_valid() & si.is_medium_transition()
+        found = dr.select(boundary, si.target_medium(-ray.d), found)
+        origin = dr.select(active & si.is_valid(), si.spawn_ray(ray.d).o, origin)
+        active = active & si.is_valid() & ~boundary & (count + 1 < PROBE_SURFACES)
+        return origin, found, active, count + 1
+
+    _, found, _, _ = dr.while_loop(
+        state=(origin, found, active, count),
+        cond=lambda origin, found, active, count: active,
+        body=body,
+        label="denoisebench camera medium probe",
+    )
+    return found
+
+
 @dataclass
 class _VolState:
     """The volumetric path loop's state (a Dr.Jit PyTree); fields as in :func:`trace`."""
@@ -238,6 +270,10 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     medium = dr.zeros(mi.MediumPtr, lanes)
     if start_medium is not None:
         medium = dr.select(dr.full(mi.Bool, True, lanes), mi.MediumPtr(start_medium), medium)
+    elif not scene.sensors():
+        # A scene without a sensor (a translated USD stage: our camera is no Mitsuba sensor): the camera
+        # is in the medium whose boundary it sees from inside (a camera in a fog box).
+        medium = _enclosing_medium(mi, dr, scene, ray)
 
     features = opts.features
     feats = None
