@@ -37,7 +37,8 @@ albedo):
 * ``albedo``: the medium's single-scattering albedo ``sigma_s / sigma_t`` at the scattering point;
 * ``normal``: 0 (a phase function has no normal; OIDN's convention for volumes is a zero normal);
 * ``position``/``depth``: the scattering point; ``roughness``: 1 (scattering spreads light over all
-  directions); ``motion``: the scattering point reprojected (media are static);
+  directions); ``motion``: the scattering point reprojected (media are static; a first hit on a moving
+  mesh reprojects where its point was, as the surface tracer does);
 * lobe split: light a medium scattering sends on goes to **diffuse**; a surface first vertex splits as
   in the surface tracer (next-event estimation by BSDF lobe, the rest by the sampled lobe).
 
@@ -53,7 +54,12 @@ import functools
 from dataclasses import dataclass
 
 from denoisebench.generator.render.camera import DrCamera
-from denoisebench.generator.render.integrator import KernelOptions, _first_vertex_bsdf, _mis_weight
+from denoisebench.generator.render.integrator import (
+    KernelOptions,
+    _first_vertex_bsdf,
+    _mis_weight,
+    _previous_point,
+)
 from denoisebench.generator.render.media import camera_medium
 from denoisebench.generator.render.motion import ShutterMotionScene
 
@@ -288,6 +294,8 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             "medium_u": mi.Float(0.0),  # the number of the first free flight in a medium (0: none)
             "medium_set": mi.Bool(False),
         }
+        if opts.object_motion:
+            feats["was"] = mi.Point3f(0.0)  # where the first event's surface point was one frame earlier
         if opts.second_hit:
             feats.update(light=mi.Point2f(0.0), bounce=mi.Point2f(0.0), p2=mi.Point3f(0.0), n2=mi.Normal3f(0.0))
     state = _VolState(
@@ -334,7 +342,8 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             target = dr.select(hit, f["p"], camera_dir)
             w = dr.select(hit, 1.0, 0.0)
             now_xy, front_now = camera.project(pose, target, w)
-            prev_xy, front_prev = camera.project(prev, target, w)
+            was = dr.select(hit, f["was"], camera_dir) if opts.object_motion else target
+            prev_xy, front_prev = camera.project(prev, was, w)
             keep = front_now & front_prev
             out["motion"] = dr.select(keep, mi.Vector2f(prev_xy - now_xy), mi.Vector2f(0.0))
         if opts.second_hit:
@@ -472,6 +481,10 @@ def _iteration(mi, dr, scene, opts: KernelOptions, state: _VolState):
         f["n"] = dr.select(here & surface_vertex, si.sh_frame.n, dr.select(here, mi.Normal3f(0.0), f["n"]))
         f["rough"] = dr.select(here, dr.select(real, 1.0, rough), f["rough"])
         f["hit"] = f["hit"] | here
+        if opts.object_motion:  # moving meshes: the hit point's previous-frame position (media are static)
+            at_mesh = here & surface_vertex
+            was = dr.dispatch(si.shape, _previous_point, si, at_mesh)
+            f["was"] = dr.select(at_mesh, was, dr.select(here, mei.p, f["was"]))
         f["albedo"] = dr.select(here, albedo_here, f["albedo"])
         flight = first & in_medium & ~f["medium_set"]
         f["medium_u"] = dr.select(flight, flight_u, f["medium_u"])
