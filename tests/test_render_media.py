@@ -566,4 +566,8 @@ def test_motion_vectors_follow_moving_objects_in_media_scenes(tmp_path):
     ours, theirs = frames["media"].buffers["motion"], frames["surface"].buffers["motion"]
     assert np.abs(theirs).max() > 0.05  # something moves
     np.testing.assert_allclose(ours, theirs, atol=1e-3)
-    np.testing.assert_allclose(frames["media"].buffers["position"], frames["surface"].buffers["position"], atol=1e-4)
+    # and every first-hit feature is the surface tracer's where no medium is seen
+    for name in ("position", "normal", "depth", "albedo", "roughness"):
+        np.testing.assert_allclose(
+            frames["media"].buffers[name], frames["surface"].buffers[name], atol=1e-4, err_msg=name
+        )
