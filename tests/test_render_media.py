@@ -571,3 +571,25 @@ def test_motion_vectors_follow_moving_objects_in_media_scenes(tmp_path):
         np.testing.assert_allclose(
             frames["media"].buffers[name], frames["surface"].buffers[name], atol=1e-4, err_msg=name
         )
+
+
+def test_a_medium_on_a_material_fills_every_gprim_bound_to_it(tmp_path):
+    from denoisebench.generator.usd.translate import translate_usd
+    from denoisebench.scenes.authoring import SceneBuilder
+    from denoisebench.scenes.media import author_medium
+
+    b = SceneBuilder(tmp_path, "test", 0, 1, ("specular", "transmission", "media"))
+    jade = b.material("Jade", diffuse=(1.0, 1.0, 1.0), roughness=0.0, opacity=0.0, ior=1.6)
+    author_medium(jade, sigma_t=(8.0, 8.0, 8.0), albedo=(0.6, 0.9, 0.8), g=0.2)
+    b.sphere("A", 0.5, jade, translate=(-1.0, 0.5, 0.0))
+    b.sphere("B", 0.4, jade, translate=(1.0, 0.4, 0.0))
+    b.sphere("Plain", 0.4, b.material("Grey"), translate=(0.0, 0.4, -1.0))
+    b.dome_light("Sky", intensity=1.0)
+    b.camera(np.stack([np.eye(4)]), focal_length_mm=35.0, clipping=(0.1, 100.0))
+    translated = translate_usd(b.save())
+    media = {
+        s["name"].rsplit("/", 1)[-1]: s.get("medium") for s in translated.scene_dict["shapes"] if s["kind"] == "sphere"
+    }
+    assert media["Plain"] is None and "media" in translated.effects_inferred
+    for name in ("A", "B"):
+        assert media[name]["albedo"] == pytest.approx([0.6, 0.9, 0.8]) and not media[name]["null_boundary"]

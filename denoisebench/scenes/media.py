@@ -20,13 +20,15 @@ def author_medium(
     albedo=(0.8, 0.8, 0.8),
     g: float = 0.0,
     density: np.ndarray | None = None,
-    boundary: str = "null",
+    boundary: str | None = None,
 ) -> None:
-    """Make ``gprim`` (a UsdGeom gprim or its prim) the boundary of a medium.
+    """Make ``gprim`` (a UsdGeom gprim or its prim; or a UsdShade Material: every gprim bound to it) the
+    boundary of a medium.
 
     ``density`` (heterogeneous only) is a z×y×x array over the gprim's local extent; it multiplies
     ``sigma_t`` (extinction per stage unit). ``boundary``: ``"null"`` (invisible) or ``"surface"`` (the
-    bound material is the boundary's surface).
+    bound material is the boundary's surface); None writes nothing: a gprim's default is ``null``, a
+    material's ``surface``.
     """
     prim = gprim.GetPrim() if hasattr(gprim, "GetPrim") else gprim
     prim.CreateAttribute(PREFIX + "type", Sdf.ValueTypeNames.Token, custom=True).Set(kind)
@@ -37,7 +39,8 @@ def author_medium(
         Gf.Vec3f(*(float(v) for v in albedo))
     )
     prim.CreateAttribute(PREFIX + "g", Sdf.ValueTypeNames.Float, custom=True).Set(float(g))
-    prim.CreateAttribute(PREFIX + "boundary", Sdf.ValueTypeNames.Token, custom=True).Set(boundary)
+    if boundary is not None:
+        prim.CreateAttribute(PREFIX + "boundary", Sdf.ValueTypeNames.Token, custom=True).Set(boundary)
     if density is not None:
         grid = np.asarray(density, dtype=np.float32)
         if grid.ndim != 3:

@@ -20,8 +20,10 @@ attribute                              type         meaning
                                                     material: subsurface scattering)
 =====================================  ===========  =====================================================
 
-The density grid spans the gprim's local extent (its bounding box in its own space), so it moves and
-scales with the gprim. Media do not nest: a ray leaving a medium boundary is in no medium (Mitsuba's
+The attributes may instead sit on a **Material** prim: every gprim bound to it (its own binding;
+GeomSubsets are not read) bounds that medium, with ``surface`` as the default boundary (the material
+is the surface of, e.g., skin or jade); a gprim's own attributes win. The density grid spans the
+gprim's local extent (its bounding box in its own space), so it moves and scales with the gprim. Media do not nest: a ray leaving a medium boundary is in no medium (Mitsuba's
 convention without an ``exterior``), so boundaries should not overlap. ``denoisebench.scenes.media``
 authors these attributes. Bad values (a negative extinction, an albedo outside [0, 1], a
 grid whose size does not match its dims) are one-line errors, never a crash.
@@ -52,30 +54,33 @@ def _triple(value, what: str, path: str) -> list[float]:
     return out
 
 
-def read_medium(prim, to_mitsuba: np.ndarray, local_to_world: np.ndarray) -> dict | None:
-    """The medium record of ``prim`` (None without ``denoisebench:medium:type``); module docstring.
+def read_medium(prim, to_mitsuba: np.ndarray, local_to_world: np.ndarray, source=None) -> dict | None:
+    """The medium record of gprim ``prim`` (None without ``denoisebench:medium:type``); module docstring.
 
     ``to_mitsuba``: stage → Mitsuba world (its scale converts the extinction per stage unit to per
     meter); ``local_to_world``: the gprim's local → Mitsuba world matrix (the grid's placement).
+    ``source``: the prim holding the attributes when it is not ``prim`` (its bound material: then the
+    boundary defaults to ``surface``); the grid always spans ``prim``'s extent.
     """
-    kind = _get(prim, "type")
+    holder = prim if source is None else source
+    kind = _get(holder, "type")
     if kind is None:
         return None
-    path = str(prim.GetPath())
+    path = str(holder.GetPath())
     kind = str(kind)
     if kind not in TYPES:
         raise UserInputError(f"{path}: {PREFIX}type {kind!r} is not one of {', '.join(TYPES)}")
     meters = abs(float(np.linalg.det(np.asarray(to_mitsuba, dtype=np.float64)[:3, :3]))) ** (1.0 / 3.0)
-    sigma_t = _triple(_get(prim, "sigmaT", (1.0, 1.0, 1.0)), "sigmaT", path)
-    albedo = _triple(_get(prim, "albedo", (0.8, 0.8, 0.8)), "albedo", path)
+    sigma_t = _triple(_get(holder, "sigmaT", (1.0, 1.0, 1.0)), "sigmaT", path)
+    albedo = _triple(_get(holder, "albedo", (0.8, 0.8, 0.8)), "albedo", path)
     if min(sigma_t) < 0:
         raise UserInputError(f"{path}: {PREFIX}sigmaT must be >= 0")
     if not all(0.0 <= a <= 1.0 for a in albedo):
         raise UserInputError(f"{path}: {PREFIX}albedo must lie in [0, 1]")
-    boundary = str(_get(prim, "boundary", "null"))
+    boundary = str(_get(holder, "boundary", "null" if source is None else "surface"))
     if boundary not in BOUNDARIES:
         raise UserInputError(f"{path}: {PREFIX}boundary {boundary!r} is not one of {', '.join(BOUNDARIES)}")
-    g = float(_get(prim, "g", 0.0))
+    g = float(_get(holder, "g", 0.0))
     if not -1.0 < g < 1.0:
         raise UserInputError(f"{path}: {PREFIX}g must lie in (-1, 1)")
     record = {
@@ -86,8 +91,8 @@ def read_medium(prim, to_mitsuba: np.ndarray, local_to_world: np.ndarray) -> dic
         "null_boundary": boundary == "null",
     }
     if kind == "heterogeneous":
-        dims = _get(prim, "densityDims")
-        values = _get(prim, "density")
+        dims = _get(holder, "densityDims")
+        values = _get(holder, "density")
         if dims is None or values is None:
             raise UserInputError(f"{path}: a heterogeneous medium needs {PREFIX}density and {PREFIX}densityDims")
         nx, ny, nz = (int(v) for v in dims)
@@ -107,6 +112,14 @@ def read_medium(prim, to_mitsuba: np.ndarray, local_to_world: np.ndarray) -> dic
     return record
 
 
+def _bound_material_prim(prim):
+    """The prim of the material bound to ``prim`` (the gprim's own binding; GeomSubsets are not read), or None."""
+    from pxr import UsdShade
+
+    material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+    return material.GetPrim() if material else None
+
+
 def _local_extent(prim) -> tuple[np.ndarray, np.ndarray]:
     from pxr import Usd, UsdGeom
 
@@ -118,8 +131,13 @@ def _local_extent(prim) -> tuple[np.ndarray, np.ndarray]:
 
 
 def attach_media(prim, parts: list, to_mitsuba: np.ndarray, local_to_world: np.ndarray) -> None:
-    """Give every part record of ``prim`` its medium (``record["medium"]``) when it is a medium boundary."""
+    """Give every part record of ``prim`` its medium (``record["medium"]``) when it is a medium boundary:
+    its own ``denoisebench:medium:*`` attributes, else its bound material's."""
     medium = read_medium(prim, to_mitsuba, local_to_world)
+    if medium is None:
+        material = _bound_material_prim(prim)
+        if material is not None and _get(material, "type") is not None:
+            medium = read_medium(prim, to_mitsuba, local_to_world, source=material)
     if medium is None:
         return
     for record, _ in parts:
