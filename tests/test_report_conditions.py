@@ -47,6 +47,7 @@ RESULTS_KEYS = [
     "unresolved_references",
     "not_applicable",
     "stability",
+    "deciding_frames",
     "frames",
     "sequence_metrics",
 ]
@@ -90,7 +91,7 @@ def test_the_report_model_is_a_documented_record_read_by_attribute_or_key(report
         if isinstance(a, ast.AnnAssign) and isinstance(doc, ast.Expr) and isinstance(doc.value, ast.Constant)
     }
     names = [f.name for f in dataclasses.fields(ReportModel)]
-    assert set(names) == documented and len(names) == 31
+    assert set(names) == documented and len(names) == 32
     root = report.parent
     with ResultsStore(root / "db.sqlite", readonly=True) as store:
         (run,) = store.runs()

@@ -434,6 +434,15 @@ def accuracy_time(data: RunData, summary: list[SummaryRow], metric: str, referen
     return at
 
 
+def spp_text(spp: float) -> str:
+    """``"16-spp"`` for a whole (measured) spp, ``"≈ 2.4-spp (interpolated)"`` for a fractional one: a
+    rendering time read between rungs is never shown as if a rung had been rendered."""
+    if abs(spp - round(spp)) <= 1e-6 * max(spp, 1.0):
+        return f"{round(spp):,}-spp"
+    digits = f"{spp:.2g}" if spp < 10 else f"{spp:,.0f}"
+    return f"≈ {digits}-spp (interpolated)"
+
+
 def _ratio_text(ratio: float) -> str:
     return f"1/{1 / ratio:.0f}" if ratio < 0.5 else f"{100 * ratio:.0f} %"
 
@@ -479,19 +488,21 @@ def readings(at: AccuracyTime) -> list[str]:
         bounds = at.model.ratio_bounds(p.denoiser, p.spp, spp_eq) if at.model is not None else None
         if bounds is not None and bounds[0] <= 1 <= bounds[1]:
             text = (
-                f"{p.denoiser} at {p.spp} spp matches {spp_eq:,.0f}-spp rendering in {at.metric} in "
+                f"{p.denoiser} at {p.spp} spp matches {spp_text(spp_eq)} rendering in {at.metric} in "
                 f"{p.seconds:.3g} s against {seconds_eq:.3g} s per frame: {_ratio_text(bounds[0])} to "
                 f"{_ratio_text(bounds[1])} of its time across the timings' spread, so no time verdict{note}."
             )
         elif ratio <= 1:
-            spread = f", {_ratio_text(bounds[0])}–{_ratio_text(bounds[1])} across the timings' spread" if bounds else ""
+            spread = ""
+            if bounds and _ratio_text(bounds[0]) != _ratio_text(bounds[1]):
+                spread = f", {_ratio_text(bounds[0])}–{_ratio_text(bounds[1])} across the timings' spread"
             text = (
-                f"{p.denoiser} at {p.spp} spp matches {spp_eq:,.0f}-spp rendering in {at.metric} "
+                f"{p.denoiser} at {p.spp} spp matches {spp_text(spp_eq)} rendering in {at.metric} "
                 f"at {_ratio_text(ratio)} of its time ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame{spread}){note}."
             )
         else:
             text = (
-                f"{p.denoiser} at {p.spp} spp reaches the {at.metric} of {spp_eq:,.0f}-spp rendering but takes "
+                f"{p.denoiser} at {p.spp} spp reaches the {at.metric} of {spp_text(spp_eq)} rendering but takes "
                 f"{ratio:.2g}× as long ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame): rendering more samples is cheaper{note}."
             )
         score = -math.log(ratio)

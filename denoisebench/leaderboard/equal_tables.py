@@ -316,7 +316,7 @@ def verdicts(tables: Tables) -> list[str]:
         ratio, row, (spp, seconds) = best
         bound = "at most " if spp.how == "at_most" else ""
         low, high = row.ratio_bounds.get(label, (ratio, ratio))
-        spread = f"; {_pct(low)}–{_pct(high)} across the timings' spread" if high > low else ""
+        spread = f"; {_pct(low)}–{_pct(high)} across the timings' spread" if _pct(low) != _pct(high) else ""
         if high < 0.95:
             tail = f"{_pct(ratio)} of rendering's time{spread}"
         elif low > 1.05:

@@ -30,6 +30,8 @@ LEAD_METRICS = (
 #: Left out of the summary tables to keep them readable (still in results.json/csv; the temporal
 #: ones are in the flicker table).
 HIDDEN_IN_TABLES = ("grad_l1", "temporal_l1", "temporal_l1_warped")
+#: Most "not distinguishable" sentences a report lists (the rest are in results.json).
+MAX_PAIR_LINES = 12
 #: How a heading names an aggregation rule other than the mean (see leaderboard.aggregate).
 RULE_NOTE = {"geomean": "geo. mean", "relative_to_input": "× input"}
 
@@ -140,6 +142,10 @@ def indistinguishable_lines(report: dict) -> list[str]:
             f"{p.spp} spp, {p.metric}: {p.a} and {p.b} are not distinguishable at this reference quality "
             f"(difference {num(p.difference)}{scale}; the reference resolves ±{num(p.resolution)})."
         )
+    if len(lines) > MAX_PAIR_LINES:  # a reference that resolves little makes dozens: the table reads them
+        lines = lines[:MAX_PAIR_LINES] + [
+            f"... and {len(lines) - MAX_PAIR_LINES} more pairs (results.json, not_distinguishable)"
+        ]
     return lines
 
 

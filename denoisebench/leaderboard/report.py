@@ -300,6 +300,29 @@ def _dataset_size(dataset: Dataset, scenes: list[str]) -> tuple[int, int]:
     return int(record.get("width", 0)), int(record.get("height", 0))
 
 
+def _deciding_frames(data: analysis.RunData, metric: str | None) -> list[dict]:
+    """Frames over 10× their scene's median of ``metric`` (:meth:`.run_index.RunIndex.deciding_frames`)."""
+    if metric is None or metric not in data.frame_metric_names:
+        return []
+    found = []
+    for label in data.labels:
+        for spp in data.spp:
+            for scene in data.scenes:
+                for frame, value, median in data.deciding_frames(label, spp, scene, metric):
+                    found.append(
+                        {
+                            "label": label,
+                            "spp": spp,
+                            "scene": scene,
+                            "frame": frame,
+                            "metric": metric,
+                            "value": value,
+                            "median": median,
+                        }
+                    )
+    return found
+
+
 def build_report(
     store: ResultsStore,
     run_id: str,
@@ -379,6 +402,7 @@ def build_report(
         palette=palette,
         frames=data.frames,
         sequences=data.sequences,
+        deciding_frames=_deciding_frames(data, lead[0] if lead else None),
     )
 
 
@@ -449,6 +473,7 @@ def results_json(report: ReportModel) -> dict:
             **({"samplers": report_samplers.as_json(report.samplers)} if report.samplers else {}),
             **({"cvvdp_viewing": report.cvvdp_viewing} if report.cvvdp_viewing else {}),
             "stability": report.stability,
+            "deciding_frames": report.deciding_frames,
             "frames": report.frames,
             "sequence_metrics": report.sequences,
         }

@@ -77,6 +77,19 @@ def render_markdown(report: ReportModel) -> str:
     for spp in report.spp:
         header, rows = fmt.summary_rows(report, spp)
         lines += [f"### {spp} spp", ""] + _table(header, rows)
+    deciding = notes.deciding_frame_lines(report)
+    if deciding:
+        lines += (
+            [
+                "### Frames that would decide a mean",
+                "",
+                "A scene's score is the trimmed mean of its frames (one frame in eight dropped at each end), so these "
+                "frames, far above the rest of their scene, do not decide it; look at them in the frames' EXRs.",
+                "",
+            ]
+            + [f"- {md(line)}" for line in deciding]
+            + [""]
+        )
     pairs = fmt.indistinguishable_lines(report)
     if pairs:
         lines += ["### Not distinguishable at this reference quality", ""] + [f"- {md(p)}" for p in pairs] + [""]

@@ -13,7 +13,7 @@ Notes
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # annotations only: report.py imports these modules where it builds the model
@@ -88,6 +88,9 @@ class ReportModel:
     """Every frame row of the run with its metrics, floors and seconds (results.csv, results.json)."""
     sequences: list
     """Every temporal metric row of the run (results.json's ``sequence_metrics``)."""
+    deciding_frames: list = field(default_factory=list)
+    """Frames a plain mean would be decided by (over 10× their scene's median of the lead score):
+    label, spp, scene, frame, value, median; the trimmed scene value leaves them out."""
 
     def __getitem__(self, key: str):
         if key not in self._names():

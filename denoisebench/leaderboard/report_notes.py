@@ -164,3 +164,16 @@ def _has_closed_floor(metric: str) -> bool:
         return get_metric(metric).floor_fn is not None
     except ValueError:
         return False
+
+
+def deciding_frame_lines(report: ReportModel) -> list[str]:
+    """One sentence per frame that would decide its scene's plain mean of the lead score (at most 12)."""
+    items = report.deciding_frames or []
+    lines = [
+        f"{d['label']} at {d['spp']} spp on {d['scene']}, frame {d['frame']}: {d['metric']} {d['value']:.3g} against "
+        f"the scene's median {d['median']:.3g}"
+        for d in items[:12]
+    ]
+    if len(items) > 12:
+        lines.append(f"... and {len(items) - 12} more (results.json, deciding_frames)")
+    return lines
