@@ -103,5 +103,22 @@ def test_check_prints_plan_and_warnings():
     result = run_cli("scenes", "check", DATA / "unsupported_and_degenerate.usda")
     assert result.returncode == 0
     assert "warning: /World/Hair: prim type NurbsCurves is not supported; skipped" in result.stderr
-    plan = json.loads(result.stdout)["render_plan"]
+    out = json.loads(result.stdout)
+    plan = out["render_plan"]
     assert plan["camera_model"] == "pinhole" and plan["random_parameters"] == ["pixel", "light", "bounce"]
+    # the warnings are in the output too, not only on stderr (issue 40)
+    assert "/World/Hair: prim type NurbsCurves is not supported; skipped" in out["warnings"]
+
+
+def test_check_explains_each_declared_effect_it_could_not_infer(tmp_path):
+    import json
+
+    from denoisebench.scenes import get_family
+
+    stage = get_family("cornell").author(str(tmp_path / "c"), seed=0, frames=1)
+    result = run_cli("scenes", "check", stage)
+    assert result.returncode == 0, result.stderr
+    out = json.loads(result.stdout)
+    assert "indirect" in out["effects_declared"] and "indirect" not in out["effects_inferred"]
+    assert "declared only" in out["effects_explained"]["indirect"]
+    assert set(out["effects_explained"]) == set(out["effects_declared"]) ^ set(out["effects_inferred"])

@@ -25,6 +25,7 @@ from denoisebench.generator.mitsuba_xml import load_mitsuba_xml, parse_defines
 from denoisebench.generator.preview import render_preview, tone_map_preview, write_png
 from denoisebench.generator.usd.translate import translate_usd
 from denoisebench.scenes import get_family, list_families
+from denoisebench.scenes.effects import DECLARED_ONLY
 
 EPILOG = """examples:
   denoisebench scenes list
@@ -186,6 +187,43 @@ def _preview(args) -> int:
     return 0
 
 
+#: What the translator looks for to infer each effect (scenes.effects' vocabulary), for ``scenes check``.
+INFERRED_FROM = {
+    "depth_of_field": "a camera with fStop > 0",
+    "motion_blur": "an open shutter with an animated camera or prim",
+    "glossy": "a rough specular lobe (0 < roughness < ~0.4 with metallic or specular)",
+    "specular": "a delta lobe (roughness ~0: a mirror or smooth dielectric)",
+    "transmission": "opacity < 1 (refraction through a dielectric)",
+    "textures": "a UsdUVTexture input",
+    "area_lights": "a Rect, Sphere or Disk light, or emissive geometry",
+    "environment": "a Dome light",
+    "media": "a participating medium",
+}
+
+
+def explain_effects(declared, inferred) -> dict[str, str]:
+    """{effect: why it is declared but not inferred, or inferred but not declared}: every difference said."""
+    declared, inferred = set(declared), set(inferred)
+    out = {}
+    for effect in sorted(declared - inferred):
+        if effect in DECLARED_ONLY:
+            out[effect] = (
+                "declared only: no stage shows by itself whether multi-bounce light matters; it names a per-effect "
+                "column and decides nothing else (every scene renders full transport)"
+            )
+        else:
+            out[effect] = (
+                f"declared, but the stage has no {INFERRED_FROM.get(effect, 'sign of it')}: the render plan honours "
+                "it anyway (the plan uses declared and inferred effects together)"
+            )
+    if declared:
+        for effect in sorted(inferred - declared):
+            out[effect] = (
+                f"found on the stage ({INFERRED_FROM.get(effect, 'a sign of it')}) though not declared: the plan honours it"
+            )
+    return out
+
+
 def _check(args) -> int:
     if is_xml(args.usd):
         translated, _ = load_mitsuba_xml(args.usd, **translate_options(args))
@@ -201,6 +239,8 @@ def _check(args) -> int:
                 "camera": translated.camera.prim_path,
                 "effects_declared": list(translated.effects_declared),
                 "effects_inferred": list(translated.effects_inferred),
+                "effects_explained": explain_effects(translated.effects_declared, translated.effects_inferred),
+                "warnings": list(translated.warnings),
                 "render_plan": plan.to_dict(),
                 "transport": plan.transport_line() + transport_note(translated, plan),
                 "translated": translated.summary(),
