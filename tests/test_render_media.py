@@ -593,3 +593,48 @@ def test_a_medium_on_a_material_fills_every_gprim_bound_to_it(tmp_path):
     assert media["Plain"] is None and "media" in translated.effects_inferred
     for name in ("A", "B"):
         assert media[name]["albedo"] == pytest.approx([0.6, 0.9, 0.8]) and not media[name]["null_boundary"]
+
+
+def test_nested_media_get_the_enclosing_medium_as_exterior_and_agree_with_volpath(mi, tmp_path):
+    """Smoke inside a fog bank (both null boundaries, USD): leaving the smoke a ray is in the fog again."""
+    from denoisebench.generator.render.media import enclosing_media
+    from denoisebench.generator.render.scene import build_mitsuba_scene, sensor_dict
+    from denoisebench.generator.usd.translate import translate_usd
+    from denoisebench.scenes import camera_paths, geometry
+    from denoisebench.scenes.authoring import SceneBuilder
+    from denoisebench.scenes.media import author_medium
+
+    b = SceneBuilder(tmp_path, "test", 0, 1, ("media",))
+    haze = b.material("Haze")
+    b.mesh("Floor", geometry.grid(8.0, 8.0, 1, 1, axis="y"), b.material("Floor", diffuse=(0.5, 0.5, 0.5)))
+    fog = b.cube("Fog", 1.0, haze, translate=(0.0, 1.0, 0.0), scale=(3.0, 2.0, 3.0))
+    author_medium(fog, sigma_t=(0.4, 0.4, 0.4), albedo=(0.9, 0.9, 0.9))
+    smoke = b.sphere("Smoke", 0.6, haze, translate=(0.0, 1.0, 0.0))
+    author_medium(smoke, sigma_t=(3.0, 3.0, 3.0), albedo=(0.7, 0.5, 0.4), g=0.3)
+    b.sphere_light("Lamp", 0.3, intensity=40.0, translate=(2.5, 3.0, 2.0))
+    b.camera(camera_paths.dolly((0.0, 1.2, 5.0), (0.0, 1.2, 5.0), (0.0, 1.0, 0.0), 1), focal_length_mm=35.0)
+    translated = translate_usd(b.save())
+    shapes = translated.scene_dict["shapes"]
+    outer = enclosing_media(shapes)
+    (inner,) = outer  # the smoke sits in the fog; the fog in nothing
+    assert shapes[inner]["name"].endswith("Smoke") and shapes[outer[inner]]["name"].endswith("Fog")
+    scene = build_mitsuba_scene(translated)
+    (nested,) = [s for s in scene.shapes() if s.exterior_medium() is not None]  # the smoke ball
+    fog_medium = next(
+        s.interior_medium()
+        for s in scene.shapes()
+        if s.interior_medium() is not nested.interior_medium() and s.interior_medium() is not None
+    )
+    assert nested.exterior_medium() is fog_medium
+    plan = make_render_plan(translated.effects_inferred)
+    ours = render_frame(scene, translated.camera, 0, plan, width=SIZE, height=SIZE, spp=SPP, seed=8, reference=True)
+    sensor = mi.load_dict(sensor_dict(translated.camera, 0, SIZE, SIZE, SPP // REPLICAS))
+    integrator = mi.load_dict({"type": "volpath"})
+    replicas = np.stack(
+        [
+            np.array(mi.render(scene, sensor=sensor, integrator=integrator, seed=80 + k))[..., :3]
+            for k in range(REPLICAS)
+        ]
+    ).astype(np.float64)
+    z_blocks, z_image = _z_scores(ours.buffers["color"], ours.buffers["color_var"], replicas)
+    assert np.abs(z_blocks).max() < 4.5 and np.abs(z_image).max() < 4.0, (z_image, np.abs(z_blocks).max())

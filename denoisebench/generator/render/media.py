@@ -80,3 +80,67 @@ def medium_dict(mi, medium: dict) -> dict:
         "scale": 1.0,
         "phase": phase,
     }
+
+
+def _inside_sphere(point: np.ndarray, record: dict) -> bool:
+    return float(np.linalg.norm(point - np.asarray(record["center"], dtype=np.float64))) < float(record["radius"])
+
+
+def _inside_mesh(point: np.ndarray, record: dict) -> bool:
+    """Ray parity (Möller-Trumbore over every triangle) along a direction no axis-aligned mesh shares."""
+    positions = np.asarray(record["positions"], dtype=np.float64)
+    faces = np.asarray(record["faces"], dtype=np.int64).reshape(-1, 3)
+    v0, v1, v2 = positions[faces[:, 0]], positions[faces[:, 1]], positions[faces[:, 2]]
+    d = np.array([0.5773, 0.5774, 0.5775]) / np.linalg.norm([0.5773, 0.5774, 0.5775])
+    e1, e2 = v1 - v0, v2 - v0
+    p = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, p)
+    ok = np.abs(det) > 1e-12
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = point - v0
+    u = np.einsum("ij,ij->i", s, p) * inv
+    q = np.cross(s, e1)
+    v = (q @ d) * inv
+    t = np.einsum("ij,ij->i", e2, q) * inv
+    hits = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 1e-9)
+    return bool(np.count_nonzero(hits) % 2)
+
+
+def _surface_point(record: dict) -> np.ndarray:
+    if record.get("kind") == "sphere":
+        return np.asarray(record["center"], dtype=np.float64) + np.array([0.0, float(record["radius"]), 0.0])
+    return np.asarray(record["positions"], dtype=np.float64)[0]
+
+
+def _box_volume(record: dict) -> float:
+    if record.get("kind") == "sphere":
+        return (2.0 * float(record["radius"])) ** 3
+    positions = np.asarray(record["positions"], dtype=np.float64)
+    return float(np.prod(positions.max(0) - positions.min(0)))
+
+
+def enclosing_media(records: list[dict]) -> dict[int, int]:
+    """Nested media: for each shape record with a ``medium``, the index of the innermost other medium
+    record whose (closed) shape contains it (absent: it sits in no medium).
+
+    A boundary inside another's medium has that medium as its exterior (Mitsuba's ``exterior``), so a
+    ray leaving smoke inside fog is in the fog again. Containment is tested at a point of the inner
+    boundary's surface (spheres: analytically; meshes: ray parity).
+    """
+    boundaries = [i for i, r in enumerate(records) if "medium" in r and (r.get("kind") == "sphere" or "positions" in r)]
+    out = {}
+    for i in boundaries:
+        point = _surface_point(records[i])
+        containers = [
+            j
+            for j in boundaries
+            if j != i
+            and (
+                _inside_sphere(point, records[j])
+                if records[j].get("kind") == "sphere"
+                else _inside_mesh(point, records[j])
+            )
+        ]
+        if containers:
+            out[i] = min(containers, key=lambda j: _box_volume(records[j]))
+    return out

@@ -11,7 +11,8 @@ to reproject the point the surface occupied in the previous frame (object motion
 Analytic spheres never move (moving spheres are tessellated), so they need no attribute.
 
 Media: a shape record with ``medium`` (generator/usd/media.py) gets that medium as its interior, and a
-``null`` BSDF when no material is bound to it (an invisible boundary: fog, smoke).
+``null`` BSDF when no material is bound to it (an invisible boundary: fog, smoke); one inside another
+medium's boundary gets that medium as its exterior (:func:`~denoisebench.generator.render.media.enclosing_media`).
 
 Motion within the shutter: shapes whose records hold ``shutter_motion`` (rigid shapes of a stage with
 an open shutter) are, when :func:`build_mitsuba_scene` is asked for the feature renderer (no sensor,
@@ -35,7 +36,7 @@ import numpy as np
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.contract.translated_scene import TranslatedScene
-from denoisebench.generator.render.media import medium_dict
+from denoisebench.generator.render.media import enclosing_media, medium_dict
 from denoisebench.generator.render.motion import MovingShapes, ShutterMotionScene, object_space, plan_layout
 from denoisebench.mitsuba_runtime import load_mitsuba
 
@@ -69,12 +70,14 @@ def _emitter_object(mi, record: dict):
 PREVIOUS_POSITION = "vertex_prev_position"
 
 
-def _build_mesh(mi, record: dict, bsdf, emitter, frame: int | None = None, medium=None):
+def _build_mesh(mi, record: dict, bsdf, emitter, frame: int | None = None, medium=None, exterior=None):
     props = mi.Properties()
     if bsdf is not None:
         props["bsdf"] = bsdf
     if medium is not None:
         props["interior"] = medium
+    if exterior is not None:
+        props["exterior"] = exterior
     if emitter is not None:
         props["emitter"] = emitter
     positions, faces = record["positions"], record["faces"]
@@ -187,6 +190,9 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
     black = None
     moving = translated.moving
     out: dict = {"type": "scene"}
+    # Participating media, one Mitsuba object each, shared as one boundary's interior and another's exterior
+    media = {i: mi.load_dict(medium_dict(mi, r["medium"])) for i, r in enumerate(data["shapes"]) if "medium" in r}
+    outer = enclosing_media(data["shapes"]) if media else {}
     for index, record in enumerate(data["shapes"]):
         emitter = _emitter_object(mi, record["emitter"]) if "emitter" in record else None
         bsdf = bsdfs.get(record.get("bsdf")) if record.get("bsdf") else None
@@ -195,9 +201,9 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
             black = black or mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}})
             bsdf = black
         key = f"shape_{index:04d}"
-        medium = None
-        if "medium" in record:  # a medium boundary (generator/usd/media.py): its interior, null unless a material
-            medium = mi.load_dict(medium_dict(mi, record["medium"]))
+        medium = media.get(index)  # a medium boundary (generator/usd/media.py): its interior, null unless a material
+        exterior = media.get(outer.get(index))  # nested in another medium: that one outside it
+        if medium is not None:
             if record["medium"]["null_boundary"]:
                 bsdf = mi.load_dict({"type": "null"})
             if shutter_motion and "shutter_motion" in record:
@@ -219,10 +225,12 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
                 shape["emitter"] = emitter
             if medium is not None:
                 shape["interior"] = medium
+            if exterior is not None:
+                shape["exterior"] = exterior
             out[key] = shape
         else:
             try:
-                out[key] = _build_mesh(mi, record, bsdf, emitter, frame if moving else None, medium)
+                out[key] = _build_mesh(mi, record, bsdf, emitter, frame if moving else None, medium, exterior)
             except Exception as error:  # a prim that breaks Mitsuba is skipped with its warning
                 skipped(f"{record['name']}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
     groups = data.get("instance_groups", [])

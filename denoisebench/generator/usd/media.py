@@ -23,8 +23,9 @@ attribute                              type         meaning
 The attributes may instead sit on a **Material** prim: every gprim bound to it (its own binding;
 GeomSubsets are not read) bounds that medium, with ``surface`` as the default boundary (the material
 is the surface of, e.g., skin or jade); a gprim's own attributes win. The density grid spans the
-gprim's local extent (its bounding box in its own space), so it moves and scales with the gprim. Media do not nest: a ray leaving a medium boundary is in no medium (Mitsuba's
-convention without an ``exterior``), so boundaries should not overlap. ``denoisebench.scenes.media``
+gprim's local extent (its bounding box in its own space), so it moves and scales with the gprim. Media nest: a closed boundary inside another's medium gets that medium as its
+exterior (render/media.py ``enclosing_media``), so a ray leaving smoke inside fog is in the fog again;
+boundaries should not otherwise intersect. ``denoisebench.scenes.media``
 authors these attributes. Bad values (a negative extinction, an albedo outside [0, 1], a
 grid whose size does not match its dims) are one-line errors, never a crash.
 """

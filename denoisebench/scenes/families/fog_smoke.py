@@ -4,8 +4,8 @@ Meters, Y up. A roof with a square opening shades a box of thin homogeneous fog 
 forward scattering), so the sun draws a shaft of light through it; beside it, in the sun, a plume of
 smoke is a heterogeneous medium on a seeded procedural density grid; in front, a glass sphere filled
 with a dense, nearly white medium scatters light under its surface (subsurface scattering). A dim sky
-dome fills the shadows. Media do not overlap (generator/usd/media.py: no nesting), and the camera
-stays outside every medium.
+dome fills the shadows. The media sit apart (none inside another), and the camera stays outside
+every medium.
 
 Held-out variation (as the cluttered family's): :func:`variant_pool` puts about
 :data:`HELD_OUT_FRACTION` of seeds in the ``held_out`` pool, whose stages draw media that train stages
