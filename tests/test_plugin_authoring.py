@@ -231,6 +231,21 @@ def test_run_benchmark_scores_plain_function_plugins_quietly(tmp_path, plugin_di
     for label in (f"{tmp_path}/my_denoiser.py:denoise", f"{plugin_dir}/plug.py:denoise"):
         assert rows[label]["failed_units"] == 0 and rows[label]["errors"] == [], rows.get(label)
         assert rows[label]["metrics"], rows[label]
+    # the newcomer's last step: the leaderboard shows the report's numbers for that run (issue 40)
+    board = subprocess.run(
+        [sys.executable, "-m", "denoisebench.cli", "leaderboard", "--db", str(tmp_path / "r.sqlite"), "--spp", "1"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=tmp_path,
+    )
+    assert board.returncode == 0, board.stderr[-3000:]
+    lines = board.stdout.strip().splitlines()
+    table = lines[next(i for i, line in enumerate(lines) if line.startswith("-")) + 1 :]
+    shown = {line.split()[1]: float(line.split()[2]) for line in table}
+    assert set(shown) == set(rows)
+    for label, value in shown.items():
+        assert value == pytest.approx(rows[label]["metrics"]["relmse_robust"]["mean"], rel=1e-3), label
 
 
 def test_a_plugin_that_fails_to_load_shows_its_traceback_with_verbose(tmp_path, capsys):
