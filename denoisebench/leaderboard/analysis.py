@@ -61,6 +61,8 @@ from denoisebench.metrics import floors
 
 #: Scenes a per-effect column needs (on one scene a column is that scene's score, not the effect's).
 MIN_EFFECT_SCENES = 2
+#: A time ratio within this of 1 (at both ends of its spread) is "about rendering's time": no verdict.
+ABOUT = 0.05
 #: Assumed slope of log(error) vs log(spp) when only one input spp was measured.
 DEFAULT_SLOPE = {"relmse_robust": -1.0, "relmse": -1.0, "mse": -1.0, "flip": -0.5}
 
@@ -486,24 +488,27 @@ def readings(at: AccuracyTime) -> list[str]:
             notes.append(f"beyond the {at.reference_spp}-spp reference, whose own noise then dominates the score")
         note = f" ({'; '.join(notes)})" if notes else ""
         bounds = at.model.ratio_bounds(p.denoiser, p.spp, spp_eq) if at.model is not None else None
-        if bounds is not None and bounds[0] <= 1 <= bounds[1]:
-            text = (
-                f"{p.denoiser} at {p.spp} spp matches {spp_text(spp_eq)} rendering in {at.metric} in "
-                f"{p.seconds:.3g} s against {seconds_eq:.3g} s per frame: {_ratio_text(bounds[0])} to "
-                f"{_ratio_text(bounds[1])} of its time across the timings' spread, so no time verdict{note}."
-            )
-        elif ratio <= 1:
-            spread = ""
-            if bounds and _ratio_text(bounds[0]) != _ratio_text(bounds[1]):
-                spread = f", {_ratio_text(bounds[0])}–{_ratio_text(bounds[1])} across the timings' spread"
+        low, high = bounds if bounds is not None else (ratio, ratio)
+        spread = ""
+        if _ratio_text(low) != _ratio_text(high):
+            spread = f", {_ratio_text(low)}–{_ratio_text(high)} across the timings' spread"
+        # one rule with the equal-quality verdicts (equal_tables.verdicts): a saving or a loss only
+        # beyond 5 % either side of rendering's time, at both ends of the timings' spread
+        if high < 1 - ABOUT:
             text = (
                 f"{p.denoiser} at {p.spp} spp matches {spp_text(spp_eq)} rendering in {at.metric} "
                 f"at {_ratio_text(ratio)} of its time ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame{spread}){note}."
             )
-        else:
+        elif low > 1 + ABOUT:
             text = (
                 f"{p.denoiser} at {p.spp} spp reaches the {at.metric} of {spp_text(spp_eq)} rendering but takes "
-                f"{ratio:.2g}× as long ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame): rendering more samples is cheaper{note}."
+                f"{ratio:.2g}× as long ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame{spread}): rendering more "
+                f"samples is cheaper{note}."
+            )
+        else:
+            text = (
+                f"{p.denoiser} at {p.spp} spp matches {spp_text(spp_eq)} rendering in {at.metric} in about its time "
+                f"({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame{spread}): no time verdict{note}."
             )
         score = -math.log(ratio)
         if p.denoiser not in best or score > best[p.denoiser][0]:

@@ -37,6 +37,8 @@ from denoisebench.leaderboard.formatting import num
 from denoisebench.leaderboard.names import NOISY
 from denoisebench.metrics.registry import metric_names
 
+#: A time ratio within this of 1 is "about rendering's time" (the same rule as analysis.readings).
+ABOUT = 0.05
 #: Multiples of the top rung the equal-quality table adds as (extrapolated) targets.
 EXTRA_TARGETS = (4, 16)
 #: An extrapolation further than this multiple of the top rung is not given (a nearly flat last segment
@@ -317,9 +319,9 @@ def verdicts(tables: Tables) -> list[str]:
         bound = "at most " if spp.how == "at_most" else ""
         low, high = row.ratio_bounds.get(label, (ratio, ratio))
         spread = f"; {_pct(low)}–{_pct(high)} across the timings' spread" if _pct(low) != _pct(high) else ""
-        if high < 0.95:
+        if high < 1 - ABOUT:
             tail = f"{_pct(ratio)} of rendering's time{spread}"
-        elif low > 1.05:
+        elif low > 1 + ABOUT:
             tail = f"{ratio:.2g}× rendering's time{spread}: rendering more samples is cheaper"
         else:
             tail = f"about rendering's time ({_pct(low)}–{_pct(high)} across the timings' spread: no saving shown)"
