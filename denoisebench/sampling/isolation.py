@@ -119,7 +119,13 @@ class IsolatedSampler(PluginProxy):
 
 
 class ProxyHandle:
-    """The sampler's ``rounds`` inside the worker: the RoundHandle's interface, served by the parent."""
+    """The sampler's ``rounds`` inside the worker: the RoundHandle's interface, served by the parent.
+
+    Count rounds only: ``dimensions`` is None (no placed rounds through the worker yet; ``mdas`` run
+    isolated falls back to its image-space tree).
+    """
+
+    dimensions = None
 
     def __init__(self, conn, budget: Budget, width: int, height: int):
         self._conn = conn
