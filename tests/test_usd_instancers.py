@@ -201,3 +201,31 @@ def test_our_renderer_sees_instances_as_the_flattened_prims(tmp_path):
     assert flat["depth"].max() > 0
     for name in ("color", "albedo", "normal", "depth"):
         assert np.abs(instanced[name] - flat[name]).mean() < 1e-3 * (1 + np.abs(flat[name]).mean()), name
+
+
+def test_velocities_move_instances_between_and_within_frames(tmp_path):
+    """Positions authored once, velocities in units per second: USD extrapolates, the instances move."""
+    from pxr import Gf, Usd, UsdGeom
+
+    path = author_instanced(tmp_path / "velocity.usda")
+    stage = Usd.Stage.Open(str(path))
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(1)
+    stage.SetTimeCodesPerSecond(24)
+    instancer = UsdGeom.PointInstancer(stage.GetPrimAtPath("/World/Instancer"))
+    positions = instancer.GetPositionsAttr().Get()
+    instancer.GetPositionsAttr().Clear()
+    instancer.GetPositionsAttr().Set(positions, 0)
+    instancer.CreateVelocitiesAttr().Set([Gf.Vec3f(2.4, 0.0, 0.0)] * len(positions), 0)
+    camera = UsdGeom.Camera(stage.GetPrimAtPath("/Camera"))
+    camera.CreateShutterOpenAttr(0.0)
+    camera.CreateShutterCloseAttr(0.5)
+    stage.GetRootLayer().Save()
+    translated = translate_usd(path)
+    shapes = translated.scene_dict["shapes"]
+    assert "instance_groups" not in translated.scene_dict and len(shapes) == 4
+    for shape in shapes:
+        assert np.allclose(shape["frame_positions"][1] - shape["frame_positions"][0], [0.1, 0.0, 0.0], atol=1e-5)
+        motion = shape["shutter_motion"]
+        half = int(np.flatnonzero(np.isclose(motion["times"], 0.5))[0])
+        assert np.allclose(motion["to_world"][half][:3, 3] - motion["to_world"][0][:3, 3], [0.05, 0, 0], atol=1e-5)

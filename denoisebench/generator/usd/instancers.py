@@ -19,7 +19,8 @@ What an instancer means here (USD's PointInstancer schema):
   mesh per prototype part instead (Mitsuba 3.9's JIT variants trace every instance as its own nested
   virtual call: 1 000 instances took 95 s to render here, against 1.6 s written out); the contract
   still holds the geometry once.
-* **Animated instancers** (time-sampled positions, orientations, scales or indices, an animated
+* **Animated instancers** (time-sampled positions, orientations, scales or indices, non-zero
+  ``velocities`` or ``angularVelocities`` (USD extrapolates positions along them), an animated
   instancer transform, or moving prototype geometry) are written out as plain shapes, one per
   instance and prototype part, each with its per-frame vertices (``frame_positions``: object motion
   between frames and motion vectors) and, when the shutter is open and the prototype is rigid, its
@@ -70,6 +71,11 @@ def is_animated(instancer) -> bool:
     )
     if any(a is not None and a and a.GetNumTimeSamples() > 1 for a in attributes):
         return True
+    for attribute in (instancer.GetVelocitiesAttr(), instancer.GetAngularVelocitiesAttr()):
+        # USD moves instances along their velocities between position samples (and past the last one).
+        values = attribute.Get(attribute.GetTimeSamples()[0]) if attribute.GetNumTimeSamples() else attribute.Get()
+        if values is not None and len(values) and np.any(np.asarray(values, dtype=np.float64) != 0):
+            return True
     return geometry.is_transform_animated(instancer.GetPrim())
 
 
@@ -147,7 +153,7 @@ def read_instancer(prim, to_mitsuba, frames, camera, warnings: list[str], gprim_
         warnings.append(f"{path}: protoIndices do not match prototypes/positions; skipped")
         return [], []
     base = to_mitsuba @ geometry.local_to_world(prim, frames[0])
-    animated = len(frames) > 1 and is_animated(instancer)
+    animated = (len(frames) > 1 or camera.has_open_shutter) and is_animated(instancer)
     plain: list = []
     groups: list[dict] = []
     for proto_index, root in enumerate(roots):
