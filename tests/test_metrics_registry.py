@@ -55,6 +55,21 @@ def test_every_metric_is_registered_with_its_properties():
         assert m.better(m.perfect, m.worst), n
 
 
+def test_entries_are_declared_once_beside_their_functions():
+    """The registry holds exactly the modules' METRICS entries, in order; each WORST comes from them."""
+    from denoisebench.metrics import registry
+
+    declared = [m for module in registry.BUILTIN_MODULES for m in module.METRICS]
+    assert [m.name for m in declared] == M.metric_names()
+    for module in registry.BUILTIN_MODULES:
+        assert module.WORST == {m.name: m.worst for m in module.METRICS}, module.__name__
+        for m in module.METRICS:
+            assert M.get_metric(m.name) is m
+            assert m.fn.__module__ == module.__name__, m.name
+    with pytest.raises(TypeError):
+        M.Metric("x", M.mse, False, "linear", "spatial", math.inf, 0.0)  # every field is a keyword
+
+
 def test_every_metric_states_its_aggregation_and_linear_scores_are_never_plain_means():
     # scale-dependent scores of linear radiance: an arithmetic mean over scenes would let the
     # brightest scene decide (issue 15: temporal_l1 ranked the noisy input above oidn)
@@ -67,7 +82,16 @@ def test_every_metric_states_its_aggregation_and_linear_scores_are_never_plain_m
         assert M.get_metric(n).aggregate in ("mean", "geomean", "relative_to_input"), n
     assert {n for n in ALL if M.get_metric(n).floor_fn is not None} == {"mse", "relmse", "temporal_relmse"}
     with pytest.raises(ValueError, match="aggregate"):
-        M.Metric("x", M.mse, False, "linear", "spatial", math.inf, 0.0, aggregate="median")
+        M.Metric(
+            name="x",
+            fn=M.mse,
+            higher_is_better=False,
+            domain="linear",
+            kind="spatial",
+            worst=math.inf,
+            perfect=0.0,
+            aggregate="median",
+        )
 
 
 def test_compute_metrics_reports_floors_with_the_reference_variance(frames):
@@ -94,9 +118,8 @@ def test_plugins_register_and_are_computed(frames):
     def max_abs(p, r):
         return float(np.max(np.abs(np.asarray(p, float) - r)))
 
-    metric = M.Metric(
-        "max_abs", max_abs, higher_is_better=False, domain="linear", kind="spatial", worst=math.inf, perfect=0.0
-    )
+    entry = dict(higher_is_better=False, domain="linear", kind="spatial", worst=math.inf, perfect=0.0)
+    metric = M.Metric(name="max_abs", fn=max_abs, **entry)
     M.register_metric(metric)
     try:
         with pytest.raises(ValueError, match="already registered"):
@@ -111,9 +134,9 @@ def test_plugins_register_and_are_computed(frames):
         M.unregister_metric("max_abs")
     assert "max_abs" not in M.metric_names()
     with pytest.raises(ValueError):
-        M.Metric("Bad Name", max_abs, False, "linear", "spatial", math.inf, 0.0)
+        M.Metric(name="Bad Name", fn=max_abs, **entry)
     with pytest.raises(ValueError, match="alias"):
-        M.register_metric(M.Metric("delta_e", max_abs, False, "linear", "spatial", math.inf, 0.0))
+        M.register_metric(M.Metric(name="delta_e", fn=max_abs, **entry))
 
 
 # --------------------------------------------------------------------------- compute_metrics

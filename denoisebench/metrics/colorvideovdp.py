@@ -86,6 +86,7 @@ from contextlib import contextmanager
 
 import numpy as np
 
+from denoisebench.metrics.metric import Metric, worst_values
 from denoisebench.metrics.torch_threads import one_torch_thread
 from denoisebench.metrics.validation import check_sequences
 
@@ -97,6 +98,7 @@ __all__ = [
     "DISPLAY_DESCRIPTION",
     "FPS",
     "TARGET_KEY_CD_M2",
+    "METRICS",
     "WORST",
     "cvvdp",
     "exposure_from_reference",
@@ -127,7 +129,6 @@ DISPLAY_MODEL = {
     "reflectivity": 0.005,
     "ppd": 75.40,
 }
-WORST = -math.inf  # JOD is unbounded below; a non-finite prediction gets -inf
 
 _REC709_Y = np.array([0.2126, 0.7152, 0.0722])
 _LOCK = threading.Lock()
@@ -270,7 +271,7 @@ def cvvdp(pred_seq, ref_seq, *, fps: float = FPS) -> float:
     if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be a finite number > 0, got {fps!r}")
     if c.nonfinite_count:
-        return WORST
+        return WORST["cvvdp"]
     import torch
 
     k = exposure_from_reference(c.ref)
@@ -297,3 +298,21 @@ def _quiet():
             yield
     finally:
         logging.disable(previous)
+
+
+METRICS: tuple[Metric, ...] = (
+    Metric(
+        name="cvvdp",
+        fn=cvvdp,
+        higher_is_better=True,
+        domain="linear",
+        kind="temporal",
+        worst=-math.inf,  # JOD is unbounded below
+        perfect=10.0,
+        description="ColorVideoVDP (cvvdp) at 30 fps: " + DISPLAY_DESCRIPTION,
+        unit="JOD",
+    ),
+)
+
+#: Worst value, returned for a prediction with NaN/Inf (from :data:`METRICS`).
+WORST: dict[str, float] = worst_values(METRICS)

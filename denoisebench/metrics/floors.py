@@ -60,13 +60,15 @@ from typing import NamedTuple
 
 import numpy as np
 
-from denoisebench.metrics.spatial import EPS_RELMSE
 from denoisebench.metrics.validation import check_pair
 
+#: relMSE's ε: relmse = mean((p − r)² / (r² + EPS_RELMSE)) (:func:`.spatial.relmse`).
+EPS_RELMSE = 0.01
 #: relmse_floor adds its second-order terms only where v ≤ this × (r² + 0.01) (relative noise ≲ 30 %).
 SECOND_ORDER_LIMIT = 0.1
 
 __all__ = [
+    "EPS_RELMSE",
     "SECOND_ORDER_LIMIT",
     "Floor",
     "as_variance",
@@ -172,7 +174,7 @@ def noisy_value_share(ref, ref_var) -> float:
     The values with ``v > SECOND_ORDER_LIMIT · (r² + 0.01)`` (relative noise above ~30 %): there the
     relMSE floor's expansion does not hold (module Notes) and only its first-order term is used, which
     underestimates the noise's share. A reference where many values are so has no usable floor: the
-    leaderboard sets its scene apart above 5 % (``leaderboard.aggregate.NOISY_VALUES_LIMIT``).
+    leaderboard sets its scene apart above 5 % (``analysis.aggregate.NOISY_VALUES_LIMIT``).
     """
     r = np.asarray(ref, dtype=np.float64)
     v = as_variance(ref_var, r.shape)

@@ -24,6 +24,7 @@ import math
 
 import numpy as np
 
+from denoisebench.metrics.metric import Metric, worst_values
 from denoisebench.metrics.spatial import mean_of_map
 from denoisebench.metrics.validation import Checked, check_pair
 
@@ -38,14 +39,13 @@ __all__ = [
     "hfen",
     "hfen_map",
     "laplacian_of_gaussian",
+    "METRICS",
     "WORST",
 ]
 
 HFEN_SIGMA = 1.5
 HFEN_SIZE = 15  # kernel width, as in Ravishankar & Bresler 2011 (fspecial('log', 15, 1.5))
 EPS_HFEN = 0.01
-
-WORST: dict[str, float] = {"grad_l1": math.inf, "hfen": math.inf}
 
 
 def _error(c: Checked) -> np.ndarray:
@@ -133,3 +133,36 @@ def hfen_map(pred, ref) -> np.ndarray:
         return np.full(c.ref.shape[:2], WORST["hfen"])
     per_pixel, denom = _hfen_parts(c)
     return per_pixel / denom
+
+
+# --------------------------------------------------------------------------- entries
+
+METRICS: tuple[Metric, ...] = (
+    Metric(
+        name="grad_l1",
+        fn=grad_l1,
+        map_fn=grad_l1_map,
+        higher_is_better=False,
+        domain="linear",
+        kind="gradient",
+        worst=math.inf,
+        perfect=0.0,
+        description="mean |grad p - grad r| (forward differences)",
+        aggregate="relative_to_input",
+    ),
+    Metric(
+        name="hfen",
+        fn=hfen,
+        map_fn=hfen_map,
+        higher_is_better=False,
+        domain="linear",
+        kind="gradient",
+        worst=math.inf,
+        perfect=0.0,
+        description="rms(LoG(p) - LoG(r)) / (rms(LoG(r)) + 0.01), LoG sigma 1.5",
+        aggregate="relative_to_input",
+    ),
+)
+
+#: Worst value of each metric, returned for a prediction with NaN/Inf (from :data:`METRICS`).
+WORST: dict[str, float] = worst_values(METRICS)

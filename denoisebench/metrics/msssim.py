@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from denoisebench.metrics.metric import Metric, worst_values
 from denoisebench.metrics.tonemap import tonemap
 from denoisebench.metrics.torch_threads import one_torch_thread
 from denoisebench.metrics.validation import MetricNotApplicable, check_pair
@@ -34,12 +35,11 @@ from denoisebench.metrics.validation import MetricNotApplicable, check_pair
 # Lazy imports: torch (1 s) and pytorch-msssim are imported when MS-SSIM is computed, so that
 # the metric registry stays cheap to import.
 
-__all__ = ["WEIGHTS", "WIN_SIZE", "WIN_SIGMA", "WORST", "msssim", "msssim_scales", "ms_ssim_tensor"]
+__all__ = ["WEIGHTS", "WIN_SIZE", "WIN_SIGMA", "METRICS", "WORST", "msssim", "msssim_scales", "ms_ssim_tensor"]
 
 WEIGHTS = (0.0448, 0.2856, 0.3001, 0.2363, 0.1333)
 WIN_SIZE = 11
 WIN_SIGMA = 1.5
-WORST = 0.0
 
 
 def msssim_scales(height: int, width: int, win_size: int = WIN_SIZE) -> int:
@@ -99,8 +99,25 @@ def msssim(pred, ref) -> float:
     c = check_pair(pred, ref)
     msssim_scales(*c.ref.shape[:2])
     if c.nonfinite_count:
-        return WORST
+        return WORST["msssim"]
     import torch
 
     with one_torch_thread(), torch.no_grad():
         return float(ms_ssim_tensor(_nchw(tonemap(c.pred)), _nchw(tonemap(c.ref))))
+
+
+METRICS: tuple[Metric, ...] = (
+    Metric(
+        name="msssim",
+        fn=msssim,
+        higher_is_better=True,
+        domain="tonemapped",
+        kind="spatial",
+        worst=0.0,  # each scale's term is clamped at 0: MS-SSIM lies in [0, 1]
+        perfect=1.0,
+        description="MS-SSIM (pytorch-msssim, win 11, sigma 1.5, data_range 1); fewer scales below 161 px",
+    ),
+)
+
+#: Worst value, returned for a prediction with NaN/Inf (from :data:`METRICS`).
+WORST: dict[str, float] = worst_values(METRICS)

@@ -51,6 +51,7 @@ import math
 
 import numpy as np
 
+from denoisebench.metrics.metric import Metric, worst_values
 from denoisebench.metrics.msssim import ms_ssim_tensor
 from denoisebench.metrics.torch_threads import one_torch_thread
 from denoisebench.metrics.validation import MetricNotApplicable, check_pair, check_sequences
@@ -62,6 +63,7 @@ __all__ = [
     "ACES_INPUT",
     "ACES_OUTPUT",
     "FLIP_PPD",
+    "METRICS",
     "WORST",
     "nb_aces",
     "nb_encode",
@@ -92,18 +94,6 @@ ACES_OUTPUT = np.array(
 GAMMA = 2.2
 FLIP_PPD = (0.7 * 3840 / 0.7) * math.pi / 180
 RMAE_EPS = 0.01
-
-WORST: dict[str, float] = {
-    "nb_psnr": 0.0,  # encoded values lie in [0, 1]: MSE ≤ 1
-    "nb_ssim": -1.0,
-    "nb_msssim": 0.0,
-    "nb_flip": 1.0,
-    "nb_tpsnr": 20.0 * math.log10(0.5),  # differences lie in [−1, 1]: MSE ≤ 4
-    "nb_trmae": math.inf,
-}
-
-#: The set ``--metrics noisebase`` selects, in their table's order.
-NOISEBASE_METRICS = ("nb_psnr", "nb_ssim", "nb_msssim", "nb_flip", "nb_tpsnr", "nb_trmae")
 
 
 def nb_aces(rgb: np.ndarray) -> np.ndarray:
@@ -229,3 +219,76 @@ def nb_trmae(pred_seq, ref_seq) -> float:
         for dp, dr in zip(*d)
     ]
     return float(np.mean(values))
+
+
+# --------------------------------------------------------------------------- entries
+
+METRICS: tuple[Metric, ...] = (
+    Metric(
+        name="nb_psnr",
+        fn=nb_psnr,
+        higher_is_better=True,
+        domain="noisebase",
+        kind="spatial",
+        worst=0.0,  # encoded values lie in [0, 1]: MSE ≤ 1
+        perfect=math.inf,
+        description="Noisebase PSNR: 8-bit ACES (gamma 2.2, truncated) frames, peak 1",
+        unit="dB",
+    ),
+    Metric(
+        name="nb_ssim",
+        fn=nb_ssim,
+        higher_is_better=True,
+        domain="noisebase",
+        kind="spatial",
+        worst=-1.0,
+        perfect=1.0,
+        description="Noisebase SSIM (pytorch-msssim) of the 8-bit frames' luminance",
+    ),
+    Metric(
+        name="nb_msssim",
+        fn=nb_msssim,
+        higher_is_better=True,
+        domain="noisebase",
+        kind="spatial",
+        worst=0.0,
+        perfect=1.0,
+        description="Noisebase MS-SSIM (pytorch-msssim) of the 8-bit frames' luminance",
+    ),
+    Metric(
+        name="nb_flip",
+        fn=nb_flip,
+        higher_is_better=False,
+        domain="noisebase",
+        kind="spatial",
+        worst=1.0,
+        perfect=0.0,
+        description="Noisebase LDR-FLIP of the 8-bit frames at 67.02 ppd",
+    ),
+    Metric(
+        name="nb_tpsnr",
+        fn=nb_tpsnr,
+        higher_is_better=True,
+        domain="noisebase",
+        kind="temporal",
+        worst=20.0 * math.log10(0.5),  # differences lie in [−1, 1]: MSE ≤ 4
+        perfect=math.inf,
+        description="Noisebase tPSNR: mean over pairs of PSNR of 8-bit frame differences",
+        unit="dB",
+    ),
+    Metric(
+        name="nb_trmae",
+        fn=nb_trmae,
+        higher_is_better=False,
+        domain="noisebase",
+        kind="temporal",
+        worst=math.inf,
+        perfect=0.0,
+        description="Noisebase tRMAE: mean over pairs of mean(|dp-dr|/(|dr|+0.01))/3 of 8-bit frames",
+    ),
+)
+
+#: Worst value of each metric, returned for a prediction with NaN/Inf (from :data:`METRICS`).
+WORST: dict[str, float] = worst_values(METRICS)
+#: The set ``--metrics noisebase`` selects, in their table's order.
+NOISEBASE_METRICS: tuple[str, ...] = tuple(m.name for m in METRICS)

@@ -46,8 +46,11 @@ Notes
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from denoisebench.metrics.metric import Metric, worst_values
 from denoisebench.metrics.tonemap import srgb_oetf
 from denoisebench.metrics.torch_threads import one_torch_thread
 from denoisebench.metrics.validation import MetricNotApplicable, check_pair
@@ -57,6 +60,7 @@ __all__ = [
     "HABLE_SCALE",
     "HABLE_WHITE",
     "SSIM_WINDOW",
+    "METRICS",
     "WORST",
     "OIDN_METRICS",
     "hable_filmic",
@@ -70,14 +74,6 @@ HABLE = (0.22, 0.30, 0.10, 0.20, 0.01, 0.30)
 HABLE_SCALE = 1.758141  # their exposure bias: 18 % grey to mid grey
 HABLE_WHITE = 11.2
 SSIM_WINDOW = 11
-
-WORST: dict[str, float] = {
-    "oidn_psnr": 0.0,  # transformed values lie in [0, 1]: MSE ≤ 1
-    "oidn_ssim": -1.0,
-}
-
-#: The set ``--metrics oidn`` selects: the two scores ``compare_image.py`` prints by default.
-OIDN_METRICS = ("oidn_psnr", "oidn_ssim")
 
 
 def _hable_raw(v: np.ndarray) -> np.ndarray:
@@ -146,3 +142,37 @@ def oidn_ssim(pred, ref, *, exposure: float = 1.0) -> float:
     p, r = _nchw(oidn_srgb(c.pred, exposure)), _nchw(oidn_srgb(c.ref, exposure))
     with one_torch_thread(), torch.no_grad():
         return float(ssim(p, r, data_range=1.0, win_size=SSIM_WINDOW, win_sigma=1.5, size_average=True))
+
+
+# --------------------------------------------------------------------------- entries
+
+METRICS: tuple[Metric, ...] = (
+    Metric(
+        name="oidn_psnr",
+        fn=oidn_psnr,
+        higher_is_better=True,
+        domain="oidn",
+        kind="spatial",
+        worst=0.0,  # transformed values lie in [0, 1]: MSE ≤ 1
+        perfect=math.inf,
+        description="OIDN compare_image.py PSNR: Hable filmic + sRGB of max(x, 0), peak 1",
+        unit="dB",
+    ),
+    Metric(
+        name="oidn_ssim",
+        fn=oidn_ssim,
+        higher_is_better=True,
+        domain="oidn",
+        kind="spatial",
+        worst=-1.0,
+        perfect=1.0,
+        description=(
+            "OIDN compare_image.py SSIM (win 11, sigma 1.5, data_range 1) of the Hable + sRGB images, mean of R, G, B"
+        ),
+    ),
+)
+
+#: Worst value of each metric, returned for a prediction with NaN/Inf (from :data:`METRICS`).
+WORST: dict[str, float] = worst_values(METRICS)
+#: The set ``--metrics oidn`` selects: the two scores ``compare_image.py`` prints by default.
+OIDN_METRICS: tuple[str, ...] = tuple(m.name for m in METRICS)

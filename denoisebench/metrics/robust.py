@@ -59,12 +59,14 @@ import numpy as np
 
 from denoisebench.metrics import temporal as tm
 from denoisebench.metrics.floors import Floor, as_variance, relmse_floor, squared_error_floor
+from denoisebench.metrics.metric import Metric, worst_values
 from denoisebench.metrics.spatial import _pixelwise_map, _rel_sq
 from denoisebench.metrics.validation import check_pair
 
 __all__ = [
     "DEFAULT_TRIM",
     "MAX_TRIM",
+    "METRICS",
     "WORST",
     "check_trim",
     "trimmed_count",
@@ -81,7 +83,6 @@ __all__ = [
 DEFAULT_TRIM = 0.001
 #: A trim fraction must lie in [0, MAX_TRIM).
 MAX_TRIM = 0.5
-WORST: dict[str, float] = {"relmse_robust": math.inf, "temporal_relmse_robust": math.inf}
 
 
 def check_trim(trim) -> float:
@@ -211,3 +212,38 @@ def temporal_relmse_robust_floor(
     """Reference-noise floor and se of :func:`temporal_relmse_robust`: temporal_relmse's over the kept pixels."""
     _, _, keep, diff, denom, var = _pairs(pred_seq, ref_seq, motion, depth, masks, depth_tolerance, trim, ref_var)
     return squared_error_floor(diff, var, denom, valid=keep[..., None], correlation=3.0)
+
+
+# --------------------------------------------------------------------------- entries
+
+METRICS: tuple[Metric, ...] = (
+    Metric(
+        name="relmse_robust",
+        fn=relmse_robust,
+        map_fn=relmse_robust_map,
+        higher_is_better=False,
+        domain="linear",
+        kind="spatial",
+        worst=math.inf,
+        perfect=0.0,
+        description="relMSE without the highest 0.1 % of per-pixel errors (--trim; robust.py)",
+        accepts=("trim",),
+        floor_fn=relmse_robust_floor,
+    ),
+    Metric(
+        name="temporal_relmse_robust",
+        fn=temporal_relmse_robust,
+        map_fn=temporal_relmse_robust_map,
+        higher_is_better=False,
+        domain="linear",
+        kind="temporal",
+        worst=math.inf,
+        perfect=0.0,
+        description="temporal_relmse without each pair's highest 0.1 % of per-pixel values (--trim; robust.py)",
+        accepts=("motion", "depth", "masks", "trim"),
+        floor_fn=temporal_relmse_robust_floor,
+    ),
+)
+
+#: Worst value of each metric, returned for a prediction with NaN/Inf (from :data:`METRICS`).
+WORST: dict[str, float] = worst_values(METRICS)

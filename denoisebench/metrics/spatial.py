@@ -5,17 +5,9 @@ Scalars are float64 means; maps are H×W float64 (channels averaged). A predicti
 gives the metric's worst value (``validation``'s policy); a non-finite reference, mismatched
 shapes or a wrong layout are a ``ValueError``.
 
-====================  ==========  ===============  ==========================================
-metric                domain      higher is better worst value (non-finite prediction)
-====================  ==========  ===============  ==========================================
-mse, l1               linear      no               +inf
-relmse (ε = 0.01)     linear      no               +inf
-smape (ε = 0.01)      linear      no               1.0  (each term is < 1)
-psnr                  tone-mapped yes              0.0 dB (tone-mapped MSE ≤ 1)
-ssim                  tone-mapped yes              -1.0
-flip (HDR-FLIP)       linear      no               1.0  (FLIP lies in [0, 1])
-deltae2000            Reinhard    no               +inf
-====================  ==========  ===============  ==========================================
+Each metric's entry (direction, domain, worst value for a non-finite prediction, aggregation,
+floor) is declared once, in :data:`METRICS` at the end of this module; :data:`WORST` is derived
+from it.
 
 Notes
 -----
@@ -52,6 +44,8 @@ import warnings
 
 import numpy as np
 
+from denoisebench.metrics.floors import EPS_RELMSE, mse_floor, relmse_floor
+from denoisebench.metrics.metric import Metric, worst_values
 from denoisebench.metrics.tonemap import reinhard, tonemap
 from denoisebench.metrics.validation import Checked, MetricNotApplicable, check_pair
 
@@ -80,10 +74,10 @@ __all__ = [
     "deltae2000_map",
     "linear_srgb_to_lab",
     "delta_e2000_lab",
+    "METRICS",
     "WORST",
 ]
 
-EPS_RELMSE = 0.01
 EPS_SMAPE = 0.01
 SSIM_SIGMA = 1.5
 SSIM_MIN_SIZE = 11  # 2 * int(3.5 * 1.5 + 0.5) + 1: scikit-image's Gaussian window
@@ -91,18 +85,6 @@ FLIP_BLACK_LUMINANCE = 1e-6  # below this maximum luminance the reference counts
 _F32_MAX = float(np.finfo(np.float32).max)
 _F32_EPS = float(np.finfo(np.float32).eps)
 _REC709_LUMINANCE = np.array([0.2126, 0.7152, 0.0722], dtype=np.float32)  # FLIP's weights
-
-#: Worst value of each metric, returned for a prediction with NaN/Inf.
-WORST: dict[str, float] = {
-    "mse": math.inf,
-    "relmse": math.inf,
-    "smape": 1.0,
-    "l1": math.inf,
-    "psnr": 0.0,
-    "ssim": -1.0,
-    "flip": 1.0,
-    "deltae2000": math.inf,
-}
 
 
 # --------------------------------------------------------------------------- pixel-wise errors
@@ -390,3 +372,104 @@ def deltae2000(pred, ref) -> float:
 def deltae2000_map(pred, ref) -> np.ndarray:
     """Per-pixel CIEDE2000 (H×W); +inf at pixels with a non-finite channel."""
     return _deltae_map(check_pair(pred, ref))
+
+
+# --------------------------------------------------------------------------- entries
+
+METRICS: tuple[Metric, ...] = (
+    Metric(
+        name="mse",
+        fn=mse,
+        map_fn=mse_map,
+        higher_is_better=False,
+        domain="linear",
+        kind="spatial",
+        worst=math.inf,
+        perfect=0.0,
+        description="mean squared error",
+        aggregate="geomean",
+        floor_fn=mse_floor,
+    ),
+    Metric(
+        name="relmse",
+        fn=relmse,
+        map_fn=relmse_map,
+        higher_is_better=False,
+        domain="linear",
+        kind="spatial",
+        worst=math.inf,
+        perfect=0.0,
+        description="mean((p-r)^2 / (r^2 + 0.01))",
+        floor_fn=relmse_floor,
+    ),
+    Metric(
+        name="smape",
+        fn=smape,
+        map_fn=smape_map,
+        higher_is_better=False,
+        domain="linear",
+        kind="spatial",
+        worst=1.0,  # each term is < 1
+        perfect=0.0,
+        description="mean(|p-r| / (|p| + |r| + 0.01))",
+    ),
+    Metric(
+        name="l1",
+        fn=l1,
+        map_fn=l1_map,
+        higher_is_better=False,
+        domain="linear",
+        kind="spatial",
+        worst=math.inf,
+        perfect=0.0,
+        description="mean absolute error",
+        aggregate="geomean",
+    ),
+    Metric(
+        name="psnr",
+        fn=psnr,
+        higher_is_better=True,
+        domain="tonemapped",
+        kind="spatial",
+        worst=0.0,  # tone-mapped values lie in [0, 1): MSE ≤ 1
+        perfect=math.inf,
+        description="PSNR of tone-mapped images, peak 1",
+        unit="dB",
+    ),
+    Metric(
+        name="ssim",
+        fn=ssim,
+        map_fn=ssim_map,
+        higher_is_better=True,
+        domain="tonemapped",
+        kind="spatial",
+        worst=-1.0,
+        perfect=1.0,
+        description="SSIM (scikit-image, Gaussian sigma 1.5, data_range 1)",
+    ),
+    Metric(
+        name="flip",
+        fn=flip,
+        map_fn=flip_map,
+        higher_is_better=False,
+        domain="linear",
+        kind="spatial",
+        worst=1.0,  # FLIP lies in [0, 1]
+        perfect=0.0,
+        description="HDR-FLIP (flip-evaluator)",
+    ),
+    Metric(
+        name="deltae2000",
+        fn=deltae2000,
+        map_fn=deltae2000_map,
+        higher_is_better=False,
+        domain="reinhard",
+        kind="spatial",
+        worst=math.inf,
+        perfect=0.0,
+        description="CIEDE2000 (colour-science) of Reinhard-mapped linear sRGB",
+    ),
+)
+
+#: Worst value of each metric, returned for a prediction with NaN/Inf (from :data:`METRICS`).
+WORST: dict[str, float] = worst_values(METRICS)

@@ -1,13 +1,8 @@
 """Temporal (flicker) metrics of a sequence: T×H×W×3 arrays or lists of H×W×3 frames, T ≥ 2.
 
-=======================  ==========  ===============  =============================
-metric                   domain      higher is better worst (non-finite prediction)
-=======================  ==========  ===============  =============================
-temporal_l1              linear      no               +inf
-temporal_l1_warped       linear      no               +inf
-temporal_relmse          linear      no               +inf
-tpsnr                    tone-mapped yes              20·log10(1/2) ≈ −6.02 dB
-=======================  ==========  ===============  =============================
+Each metric's entry (direction, domain, worst value for a non-finite prediction, aggregation,
+context keywords, floor) is declared once, in :data:`METRICS` at the end of this module;
+:data:`WORST` is derived from it.
 
 Notes
 -----
@@ -63,7 +58,8 @@ import math
 
 import numpy as np
 
-from denoisebench.metrics.floors import Floor, as_variance, squared_error_floor
+from denoisebench.metrics.floors import EPS_RELMSE, Floor, as_variance, squared_error_floor
+from denoisebench.metrics.metric import Metric, worst_values
 from denoisebench.metrics.tonemap import tonemap
 from denoisebench.metrics.validation import Checked, as_depth, as_mask, as_motion, check_sequences
 
@@ -71,6 +67,7 @@ from denoisebench.metrics.validation import Checked, as_depth, as_mask, as_motio
 
 __all__ = [
     "DEPTH_TOLERANCE",
+    "METRICS",
     "WORST",
     "warp_previous",
     "disocclusion_mask",
@@ -86,15 +83,8 @@ __all__ = [
 ]
 
 DEPTH_TOLERANCE = 0.1
-#: The relMSE epsilon (spatial.EPS_RELMSE), also in temporal_relmse's denominator.
-EPS_TEMPORAL_RELMSE = 0.01
-
-WORST: dict[str, float] = {
-    "temporal_l1": math.inf,
-    "temporal_l1_warped": math.inf,
-    "temporal_relmse": math.inf,
-    "tpsnr": 20.0 * math.log10(0.5),
-}
+#: The relMSE epsilon, also in temporal_relmse's denominator.
+EPS_TEMPORAL_RELMSE = EPS_RELMSE
 
 
 # --------------------------------------------------------------------------- warping
@@ -403,3 +393,64 @@ def tpsnr(pred_seq, ref_seq, *, masks=None) -> float:
     if err == 0.0:
         return math.inf
     return 10.0 * math.log10(1.0 / err)
+
+
+# --------------------------------------------------------------------------- entries
+
+METRICS: tuple[Metric, ...] = (
+    Metric(
+        name="temporal_l1",
+        fn=temporal_l1,
+        map_fn=temporal_l1_map,
+        higher_is_better=False,
+        domain="linear",
+        kind="temporal",
+        worst=math.inf,
+        perfect=0.0,
+        description="mean |(p_t - p_t-1) - (r_t - r_t-1)|",
+        accepts=("masks",),
+        aggregate="relative_to_input",
+    ),
+    Metric(
+        name="temporal_l1_warped",
+        fn=temporal_l1_warped,
+        map_fn=temporal_l1_warped_map,
+        higher_is_better=False,
+        domain="linear",
+        kind="temporal",
+        worst=math.inf,
+        perfect=0.0,
+        description="temporal_l1 with frame t-1 warped by the motion buffer, disocclusions masked",
+        accepts=("motion", "depth", "masks"),
+        requires=("motion",),
+        aggregate="relative_to_input",
+    ),
+    Metric(
+        name="temporal_relmse",
+        fn=temporal_relmse,
+        map_fn=temporal_relmse_map,
+        higher_is_better=False,
+        domain="linear",
+        kind="temporal",
+        worst=math.inf,
+        perfect=0.0,
+        description="mean((dp - dr)^2 / (m^2 + 0.01)), warped frame differences, m = 3x3 mean |r_t|",
+        accepts=("motion", "depth", "masks"),
+        floor_fn=temporal_relmse_floor,
+    ),
+    Metric(
+        name="tpsnr",
+        fn=tpsnr,
+        higher_is_better=True,
+        domain="tonemapped",
+        kind="temporal",
+        worst=20.0 * math.log10(0.5),  # tone-mapped frame differences lie in (-1, 1): MSE < 4
+        perfect=math.inf,
+        description="PSNR of tone-mapped frame differences, peak 1",
+        unit="dB",
+        accepts=("masks",),
+    ),
+)
+
+#: Worst value of each metric, returned for a prediction with NaN/Inf (from :data:`METRICS`).
+WORST: dict[str, float] = worst_values(METRICS)
