@@ -12,9 +12,9 @@ from denoisebench.scenes.authoring import SceneBuilder
 from denoisebench.scenes.effects import validate_effects
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SceneFamily:
-    """A seeded procedural generator of one kind of scene.
+    """A seeded procedural generator of one kind of scene; every field is a keyword.
 
     Attributes:
         name: the CLI name.
