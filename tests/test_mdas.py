@@ -256,3 +256,19 @@ def test_mdas_beats_its_own_pixel_means_on_a_rendered_defocused_scene(defocused)
         uniform.append(_rel_mse(run_sampler(Uniform(), frame, Budget(spp=4)).buffers["color"], ref))
     print(f"relMSE mdas {np.mean(ours):.4f} its pixel means {np.mean(means):.4f} uniform {np.mean(uniform):.4f}")
     assert np.mean(ours) < np.mean(means) and np.mean(ours) < np.mean(uniform)
+
+
+def test_mdas_keeps_to_a_seconds_budget_with_placed_rounds():
+    """Placed samples cost 10 µs each (reported exactly), the clock stands still: the harness's seconds rule holds."""
+
+    class Costed(SyntheticLightField):
+        def render_placed(self, film, lens=None, time=None):
+            out = super().render_placed(film, lens, time)
+            out.seconds = len(out.placed["color"]) * 1e-5
+            return out
+
+    result = run_sampler(MDAS(), Costed(16, 16, seed=0), Budget(seconds=0.02), clock=lambda: 0.0)
+    assert result.error is None and result.budget_samples is None
+    assert 0.9 * 0.02 <= result.seconds <= 0.02 + 1e-9, result.summary()
+    assert result.rounds[0].granted <= 256 and result.pixels_without_samples == 0  # the probe: <= 1 spp
+    assert len(result.rounds) >= 2 and result.pixel_means is not None
