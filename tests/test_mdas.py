@@ -70,6 +70,22 @@ def test_placed_samples_land_where_asked_and_see_what_the_stream_sample_there_se
     np.testing.assert_allclose(out.placed["diffuse"] + out.placed["specular"], out.placed["color"], atol=1e-5)
 
 
+def test_replayed_placed_rounds_are_the_bits_of_traced_ones(defocused, monkeypatch):
+    """Placed passes are dr.freeze-recorded and replayed: rounds of several sizes give what fresh traces give."""
+    from denoisebench.generator.render import placed
+
+    rng = np.random.default_rng(5)
+    rounds = [(rng.random((n, 2)) * SIZE, rng.random((n, 2))) for n in (300, 700, 300)]
+    outs = {}
+    for frozen in (True, False):
+        monkeypatch.setattr(placed, "FREEZE_PLACED", frozen)
+        frame, _ = _frame(defocused, seed=4)
+        outs[frozen] = [frame.render_placed(film, lens).placed for film, lens in rounds]
+    for replayed, traced in zip(outs[True], outs[False]):
+        for name in traced:
+            np.testing.assert_array_equal(replayed[name], traced[name], err_msg=name)
+
+
 def test_uniform_placed_samples_are_unbiased_and_pool_with_count_rounds(defocused):
     """Over 12 seeds, 2 count samples + 3 uniform placed samples per pixel average to the reference (z-tests)."""
     translated, scene = defocused
