@@ -48,6 +48,11 @@ EPILOG = """examples:
   denoisebench check-plugin --list
   denoisebench check-plugin --sampler hachisuka2008
   denoisebench check-plugin --sampler my_package.sampling:MySampler --option rounds=8 --json
+
+documentation:
+  docs/plugins.md   writing a denoiser plugin: what frame holds, what to return, the hard cases
+  docs/samplers.md  --sampler: the sampler protocol and its convergence check
+  docs/sandbox.md   --isolation, --time-limit, --memory-limit: how plugins are isolated and sandboxed
 """
 
 

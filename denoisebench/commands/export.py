@@ -39,6 +39,9 @@ EPILOG = """examples:
   denoisebench export data/small oidn_data --format oidn --features hdr,alb,nrm,z --tile-size 64
   denoisebench export data/samples nb_data --format noisebase --spp 8
   denoisebench export data/samples nb_test --format noisebase --layout test --scenes cornell_000,dim_room_000
+
+documentation:
+  docs/datasets.md  "Exporting to other tools": OIDN's training toolkit and Noisebase, step by step
 """
 
 

@@ -85,6 +85,13 @@ EPILOG = """examples:
       --mitsuba-path mitsuba-data/common --frames 1   # a scene written for Mitsuba's -a
   generate-dataset --out data/mts --mitsuba mitsuba-data/tests/scenes/floating_sphere/test_directional_direct.xml \\
       --define integrator=path --frames 1   # the scene's $integrator: path instead of its default, direct
+
+documentation:
+  docs/datasets.md    nested --spp ladders and --independent-rungs, datasets of 10 000 frames
+  docs/references.md  --ref-error, --ref-spp, --max-depth: full transport and adaptive references
+  docs/scenes.md      --usd, --camera, --auto-camera, --default-light, --mitsuba, --define, --mitsuba-path
+  docs/scale-out.md   --executor ray, --ray-address, --ray-cpus-per-task
+  docs/sandbox.md     the bounds on sizes, spp and counts ("Bounds and outputs")
 """
 
 
@@ -135,7 +142,7 @@ def add_arguments(parser) -> None:
         default=None,
         metavar="E",
         help="render references until their noise floor (a perfect denoiser's relMSE) is <= E "
-        "(default %g); 0: no adaptation" % _defaults()[0],
+        "(default %g); 0: no adaptation; docs/references.md" % _defaults()[0],
     )
     parser.add_argument(
         "--max-depth",
@@ -206,7 +213,7 @@ def add_arguments(parser) -> None:
         "--executor",
         choices=("local", "ray"),
         default="local",
-        help="local: this process, all cores (default); ray: spread frames over a Ray cluster",
+        help="local: this process, all cores (default); ray: spread frames over a Ray cluster (docs/scale-out.md)",
     )
     parser.add_argument("--ray-address", default=None, help="Ray cluster address (default: start a local cluster)")
     parser.add_argument(

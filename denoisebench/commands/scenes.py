@@ -38,6 +38,11 @@ EPILOG = """examples:
   denoisebench scenes check mitsuba-data/scenes/cbox/cbox.xml
   denoisebench scenes preview cbox.xml --auto-camera --out cbox_orbit.png --frame 4
   denoisebench scenes check mitsuba-data/tests/scenes/floating_sphere/test_directional_direct.xml -D integrator=path
+
+documentation:
+  docs/scenes.md      the families, the supported USD subset (--camera, --auto-camera, --default-light),
+                      Mitsuba XML scenes (--define, --mitsuba-path), participating media
+  docs/references.md  --max-depth: restricting light transport on purpose
 """
 
 

@@ -50,6 +50,10 @@ EPILOG = """examples:
   denoisebench train --model dpcn --data data/mine --steps 0 --resume denoisebench/models/weights/dpcn_small.pt --out d.pt --evaluate
   denoisebench train --model rae --data data/small --steps 0 --resume rae.pt --out rae.pt --evaluate
   denoisebench benchmark ... --denoiser kpcn --option checkpoint=kpcn.pt   # use the result
+
+documentation:
+  docs/training.md  training the learned denoisers; the shipped weights' model cards
+                    (denoisebench/models/weights/*.md)
 """
 
 MODELS = ("dpcn", "kpcn", "rae", "lbf")
