@@ -165,5 +165,5 @@ def refuse_volume(prim) -> None:
     listed = ", ".join(f"{name} ({kind})" for name, kind in zip(sorted(fields), kinds)) if fields else "no fields"
     raise UserInputError(
         f"{prim.GetPath()}: UsdVol volumes are not rendered ({listed}; {reason}); bind the medium to a gprim "
-        f"with {PREFIX}* attributes instead (README, 'Participating media')"
+        f"with {PREFIX}* attributes instead (docs/scenes.md, 'Participating media')"
     )

@@ -2,7 +2,7 @@
 
 Walks the composed stage once (active, visible, non-guide prims), translating gprims, materials,
 lights and the camera, and reads the stage's effects (declared in its metadata, inferred from
-what is in it). The README's "Supported USD subset" section lists what is understood; anything
+what is in it). docs/scenes.md, "Supported USD subset", lists what is understood; anything
 else gets one warning naming the prim. A stage that does not open, or has no camera, is a
 :class:`UserInputError` (the CLI exits 2).
 
