@@ -288,3 +288,20 @@ def test_mdas_keeps_to_a_seconds_budget_with_placed_rounds():
     assert 0.9 * 0.02 <= result.seconds <= 0.02 + 1e-9, result.summary()
     assert result.rounds[0].granted <= 256 and result.pixels_without_samples == 0  # the probe: <= 1 spp
     assert len(result.rounds) >= 2 and result.pixel_means is not None
+
+
+def test_placed_rounds_cross_the_plugin_worker():
+    """mdas in a worker (unsandboxed) places the same samples as in this process; the proxy forwards no reconstruction."""
+    from denoisebench.plugins import Limits
+    from denoisebench.sampling.isolation import IsolatedSampler
+
+    isolated = IsolatedSampler("mdas", None, Limits(), sandboxed=False)
+    try:
+        result = run_sampler(isolated, SyntheticLightField(16, 8, seed=0), Budget(spp=4))
+    finally:
+        isolated.close()
+    direct = run_sampler(MDAS(), SyntheticLightField(16, 8, seed=0), Budget(spp=4))
+    assert result.error is None and len(result.rounds) == len(direct.rounds) >= 2
+    np.testing.assert_array_equal(result.spp, direct.spp)
+    np.testing.assert_array_equal(result.buffers["color"], direct.pixel_means["color"])
+    assert result.pixel_means is None

@@ -35,7 +35,7 @@ Notes
   samples' values in request order (``RoundBuffers.placed``) with the pooled pixel buffers. Each
   position is one sample of its pixel's budget; a request over what is left keeps its first rows
   (a sampler lists its positions most wanted first) and sets :attr:`RoundHandle.cut`. Frames that
-  cannot place (synthetic frames, a plugin's worker) have ``dimensions`` None; count rounds are
+  cannot place (count-only synthetic frames) have ``dimensions`` None; count rounds are
   unchanged for every sampler.
 * **Reconstruction.** A sampler with a ``reconstruct(rounds)`` method (a built-in: a plugin's proxy
   forwards none) may replace the scored ``color``, ``diffuse`` and ``specular`` with its own image

@@ -76,15 +76,40 @@ class IsolatedSampler(PluginProxy):
             raise SamplerRequestError("a round request whose bytes do not match its shape")
         return np.frombuffer(payload, dtype=dtype).reshape(shape).copy()
 
+    def _positions(self, header: dict, payload: bytes | None, dims) -> dict:
+        """A placed round's request (N×D float64: film x, y, then lens u, v, then time) as ``render_placed``'s arguments."""
+        if dims is None:
+            raise SamplerRequestError("this frame cannot place samples (RoundHandle.dimensions is None)")
+        width = 2 + 2 * ("lens" in dims) + ("time" in dims)
+        try:
+            rows, columns = (int(n) for n in header["shape"])
+            dtype = np.dtype(str(header["dtype"]))
+        except (KeyError, TypeError, ValueError):
+            raise SamplerRequestError("malformed placed round request") from None
+        if dtype != np.dtype("<f8") or columns != width or rows < 1:
+            raise SamplerRequestError(f"a placed round is N×{width} float64 positions, got {rows}×{columns} of {dtype}")
+        if payload is None or len(payload) != rows * columns * 8:
+            raise SamplerRequestError("a placed round request whose bytes do not match its shape")
+        points = np.frombuffer(payload, dtype="<f8").reshape(rows, columns).copy()
+        out, at = {"film": points[:, :2], "lens": None, "time": None}, 2
+        if "lens" in dims:
+            out["lens"], at = points[:, at : at + 2], at + 2
+        if "time" in dims:
+            out["time"] = points[:, at]
+        return out
+
     def sample(self, budget, rounds) -> None:
         """Run the plugin's ``sample`` in the worker, serving its requests with ``rounds``."""
         self.check_enabled()
         if not self.running:
             self.name = self._start()
         shape = (rounds.height, rounds.width)
-        self.send(("sample", budget.spp, budget.seconds, rounds.width, rounds.height))
+        dims = getattr(rounds, "dimensions", None)
+        self.send(("sample", budget.spp, budget.seconds, rounds.width, rounds.height, dims))
         while True:
-            header, payload = self.receive("sample()", shape[0] * shape[1] * 8)
+            # a placed round's positions: at most 4x what is left (and a pixel's worth each), 5 float64 each
+            placed_bytes = 4 * (max(rounds.remaining_samples(), 0) + shape[0] * shape[1]) * 5 * 8
+            header, payload = self.receive("sample()", max(shape[0] * shape[1] * 8, placed_bytes))
             op = header.get("op")
             if op == "done":
                 return
@@ -96,9 +121,12 @@ class IsolatedSampler(PluginProxy):
                 self.send(("value", int(rounds.remaining_samples())))
             elif op == "seconds_left":
                 self.send(("value", rounds.seconds_left()))
-            elif op == "render":
+            elif op in ("render", "place"):
                 try:
-                    latest = rounds.render(self._counts(header, payload, shape))
+                    if op == "render":
+                        latest = rounds.render(self._counts(header, payload, shape))
+                    else:
+                        latest = rounds.render_placed(**self._positions(header, payload, dims))
                 except (BudgetExhausted, SamplerRequestError) as refusal:
                     self.send(("refused", type(refusal).__name__, str(refusal)))
                     continue
@@ -111,6 +139,7 @@ class IsolatedSampler(PluginProxy):
                         "counts": latest.counts,
                         "seconds": float(latest.seconds),
                         "samples": None if latest.samples is None else dict(latest.samples),
+                        "placed": None if getattr(latest, "placed", None) is None else dict(latest.placed),
                     },
                 }
                 self.send(("rendered", state))
@@ -121,15 +150,15 @@ class IsolatedSampler(PluginProxy):
 class ProxyHandle:
     """The sampler's ``rounds`` inside the worker: the RoundHandle's interface, served by the parent.
 
-    Count rounds only: ``dimensions`` is None (no placed rounds through the worker yet; ``mdas`` run
-    isolated falls back to its image-space tree).
+    ``dimensions`` is the frame's (None where it cannot place samples); :meth:`render_placed` sends the
+    positions as one N×D float64 array (film x, y, then lens u, v, then time), which the parent checks
+    and renders through its own handle.
     """
 
-    dimensions = None
-
-    def __init__(self, conn, budget: Budget, width: int, height: int):
+    def __init__(self, conn, budget: Budget, width: int, height: int, dimensions=None):
         self._conn = conn
         self.budget, self.width, self.height = budget, int(width), int(height)
+        self.dimensions = None if dimensions is None else tuple(str(d) for d in dimensions)
         self.counts = np.zeros((self.height, self.width), dtype=np.int32)
         self.latest = None
         self.cut = False
@@ -159,22 +188,46 @@ class ProxyHandle:
         if array.dtype.kind not in "iuf" or array.dtype == np.bool_:
             raise SamplerRequestError(f"a round's counts must be integers, got dtype {array.dtype}")
         reply(self._conn, {"op": "render", "shape": list(array.shape), "dtype": array.dtype.str}, array.tobytes())
+        return self._answer()
+
+    def render_placed(self, film, lens=None, time=None):
+        """One sample at each position (the harness's ``RoundHandle.render_placed``), rendered by the parent."""
+        if self.dimensions is None:
+            raise SamplerRequestError("this frame cannot place samples (RoundHandle.dimensions is None)")
+        film = np.asarray(film, dtype="<f8")
+        if film.ndim != 2 or film.shape[1] != 2:
+            raise SamplerRequestError(f"film positions must be an N×2 array (got shape {film.shape})")
+        columns = [film]
+        for name, value, channels in (("lens", lens, 2), ("time", time, 1)):
+            if name in self.dimensions:
+                if value is None:
+                    raise SamplerRequestError(f"this frame's plan samples {name}: give {name} positions")
+                columns.append(np.asarray(value, dtype="<f8").reshape(len(film), channels))
+        points = np.ascontiguousarray(np.concatenate(columns, axis=1))
+        reply(self._conn, {"op": "place", "shape": list(points.shape), "dtype": "<f8"}, points.tobytes())
+        return self._answer()
+
+    def _answer(self):
         answer = self._conn.recv()
         if answer[0] == "refused":
             _, kind, message = answer
             raise (BudgetExhausted if kind == "BudgetExhausted" else SamplerRequestError)(message)
         state = answer[1]
         self.counts, self.cut, self.exhausted = state["counts"], state["cut"], state["exhausted"]
-        self.latest = RoundBuffers(**state["round"])
+        round_state = dict(state["round"])
+        placed = round_state.pop("placed", None)
+        self.latest = RoundBuffers(**round_state)
+        self.latest.placed = placed
         return self.latest
 
 
 class SamplerService:
     """The worker's side (:mod:`denoisebench.plugins.worker`): one sampler, run against a :class:`ProxyHandle`.
 
-    Requests: ``("sample", spp, seconds, width, height)``, and the answers to the worker's own requests
+    Requests: ``("sample", spp, seconds, width, height, dimensions)``, and the answers to the worker's own requests
     (``("rendered", state)``, ``("refused", kind, message)``, ``("value", number)``). The worker sends a
-    JSON header, for a round request followed by the count map's raw bytes, and ends a ``sample`` with
+    JSON header, for a round request followed by the count map's raw bytes (a placed round's: its N×D
+    float64 positions), and ends a ``sample`` with
     ``{"op": "done"}`` or ``{"op": "error", ...}`` (everything the sampler raised, SystemExit too).
     """
 
@@ -190,8 +243,8 @@ class SamplerService:
         if message[0] != "sample":
             reply(self.conn, {"op": "error", "error": f"unknown request {message[0]!r}"})
             return
-        _, spp, seconds, width, height = message
-        handle = ProxyHandle(self.conn, Budget(spp=spp, seconds=seconds), width, height)
+        _, spp, seconds, width, height, *rest = message
+        handle = ProxyHandle(self.conn, Budget(spp=spp, seconds=seconds), width, height, rest[0] if rest else None)
         try:
             self.sampler.sample(handle.budget, handle)
         except BaseException as error:  # noqa: BLE001 - SystemExit too: the sampler's failure, one line

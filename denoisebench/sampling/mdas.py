@@ -55,9 +55,11 @@ Notes
   reading raw luminance; placement therefore reads luminance clamped at :data:`PLACEMENT_CLAMP`
   times its neighbourhood's median (the reconstruction still uses every sample as it is), which
   brought it to −2.8 % ± 3.4 % at 16 spp (uniform-only placement: −2.1 % ± 3.6 %).
-* **Frames that cannot place samples** (synthetic count frames, a plugin worker's proxy:
+* **Frames that cannot place samples** (synthetic count frames:
   ``rounds.dimensions`` is None) get the image-space tree of ``hachisuka2008`` and no reconstruction,
-  so ``mdas`` still spends its budget and passes the convergence check there.
+  so ``mdas`` still spends its budget and passes the convergence check there. Run in a plugin worker
+  (``--isolation all``) it places samples through the worker's proxy, but the proxy forwards no
+  reconstruction: the pixel means of its samples are scored.
 * The random numbers of the positions come from ``numpy.random.default_rng(seed)``: a run is
   deterministic per seed.
 """
