@@ -98,16 +98,16 @@ def _timed(fn) -> float:
 
 def measure_point(work: Path, total: int, scenes: int) -> dict[str, float]:
     """Seconds of every stage on a dataset of ``total`` frames (``scenes`` scenes)."""
+    from denoisebench.benchmark.run import run_benchmark
+    from denoisebench.benchmark.runner import BenchmarkConfig
     from denoisebench.cli import main
     from denoisebench.dataset import open_dataset
     from denoisebench.dataset.manifest import assign_splits
     from denoisebench.dataset.verify import run_files, verify_files
     from denoisebench.generator.dataset_run import generate_dataset
     from denoisebench.generator.executors import LocalExecutor
-    from denoisebench.leaderboard.benchmark_run import run_benchmark
-    from denoisebench.leaderboard.report import write_report
-    from denoisebench.leaderboard.runner import BenchmarkConfig
-    from denoisebench.leaderboard.store import ResultsStore
+    from denoisebench.reports.build import write_report
+    from denoisebench.results.store import ResultsStore
 
     out = work / f"ds{total}"
     request = _request(out, total // scenes, scenes)

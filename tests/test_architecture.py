@@ -24,7 +24,12 @@ ALLOWED = {
     "baselines": {"dataset", "denoisers", "metrics"},
     "models": {"dataset", "denoisers", "metrics", "baselines"},
     "metrics": set(),
-    "leaderboard": {
+    # the benchmark side, imports one way: benchmark → results ← analysis ← reports
+    "results": {"dataset", "metrics"},  # the store: the only package that speaks SQL
+    "analysis": {"results", "dataset", "metrics"},  # pure functions over a run's typed rows
+    "reports": {"analysis", "results", "dataset", "metrics", "plugins"},  # runs nothing (plugins: isolation_text)
+    "benchmark": {
+        "results",
         "dataset",
         "denoisers",
         "baselines",
@@ -185,3 +190,16 @@ def test_one_plugin_shell():
         if needle in path.read_text()
     )
     assert not bad, "plugin-shell code outside denoisebench/plugins/:\n" + "\n".join(bad)
+
+
+def test_only_the_results_store_speaks_sql():
+    """``sqlite3`` and SQL statements live in ``results/`` (and ``dataset/``'s own frame index) only."""
+    offenders = []
+    for path in PACKAGE.rglob("*.py"):
+        stage = _stage(_module_name(path))
+        if stage in ("results", "dataset"):
+            continue
+        text = path.read_text()
+        if "import sqlite3" in text or ".execute(" in text and "SELECT " in text:
+            offenders.append(_module_name(path))
+    assert not offenders, offenders

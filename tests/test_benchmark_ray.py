@@ -12,11 +12,11 @@ import textwrap
 
 import pytest
 
+from denoisebench.benchmark.run import run_benchmark
+from denoisebench.benchmark.runner import BenchmarkConfig
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.synthetic import make_synthetic_dataset
-from denoisebench.leaderboard.benchmark_run import run_benchmark
-from denoisebench.leaderboard.runner import BenchmarkConfig
-from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.results.store import ResultsStore
 
 PLUGIN = textwrap.dedent(
     """

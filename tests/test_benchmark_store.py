@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from denoisebench.dataset.synthetic import make_synthetic_dataset
-from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.results.store import ResultsStore
 
 FRAMES = 3
 

@@ -106,7 +106,7 @@ def test_check_prints_plan_and_warnings():
     out = json.loads(result.stdout)
     plan = out["render_plan"]
     assert plan["camera_model"] == "pinhole" and plan["random_parameters"] == ["pixel", "light", "bounce"]
-    # the warnings are in the output too, not only on stderr (issue 40)
+    # the warnings are in the output too, not only on stderr
     assert "/World/Hair: prim type NurbsCurves is not supported; skipped" in out["warnings"]
 
 

@@ -298,7 +298,7 @@ def test_writer_flags_reference_and_finalizes(tmp_path):
     assert manifest["complete"] and manifest["splits"]["test"] == ["s0"]
     ref = manifest["scenes"]["s0"]["renders"]["reference"]["0000"]
     noisy = [manifest["scenes"]["s0"]["renders"][k]["0000"]["rel_se"] for k in ("spp0001", "spp0004")]
-    # a 1-spp input has no variance estimate: unknown (None), never "less noisy" (issue 42 item 4)
+    # a 1-spp input has no variance estimate: unknown (None), never "less noisy"
     assert noisy[0] is None and noisy[1] > 0
     assert ref["noisy_rel_se_max"] == noisy[1]
     assert ref["reference_too_noisy"] == reference_quality(noisy, ref["rel_se"])

@@ -1,4 +1,4 @@
-"""Datasets at scale (issue 34): the frame-record index, old manifests, lazy readers, cheap checks first,
+"""Datasets at scale: the frame-record index, old manifests, lazy readers, cheap checks first,
 metrics that do not apply.
 
 Everything here is tiny (4×4 and 8×8 synthetic frames, no renderer). Speed itself is measured by
@@ -22,16 +22,16 @@ import numpy as np
 import pytest
 
 from denoisebench import cli
+from denoisebench.benchmark.runner import dataset_hash
 from denoisebench.dataset import layout, manifest_without_timings, open_dataset
 from denoisebench.dataset.errors import DatasetError
 from denoisebench.dataset.exr_io import canonical_json
 from denoisebench.dataset.manifest import load_header, load_manifest
 from denoisebench.dataset.synthetic import make_synthetic_dataset, synthetic_frame
 from denoisebench.dataset.writer import DatasetWriter
-from denoisebench.leaderboard.runner import dataset_hash
 
 REPO = Path(__file__).resolve().parents[1]
-#: A dataset made by denoisebench before issue 34 (schema version 1, records inline in dataset.json):
+#: A dataset made by an older denoisebench (schema version 1, records inline in dataset.json):
 #: make_synthetic_dataset(scenes=2, frames=2, height=8, width=8, spp=(1, 2), ref_spp=64) at commit 928c378.
 V1 = REPO / "tests" / "data" / "dataset_v1"
 #: runner.dataset_hash of V1 computed by that commit's code (sha256 of the whole manifest without timings).
@@ -191,9 +191,9 @@ def _unit_count(db: Path) -> int:
 
 
 def test_a_metric_that_cannot_apply_is_recorded_as_such_and_the_frame_keeps_its_other_metrics(tmp_path):
-    from denoisebench.leaderboard.benchmark_run import run_benchmark
-    from denoisebench.leaderboard.runner import BenchmarkConfig
-    from denoisebench.leaderboard.store import ResultsStore
+    from denoisebench.benchmark.run import run_benchmark
+    from denoisebench.benchmark.runner import BenchmarkConfig
+    from denoisebench.results.store import ResultsStore
 
     out = make_synthetic_dataset(tmp_path / "ds", scenes=1, frames=2, height=8, width=8, spp=(1,), ref_spp=4)
     config = BenchmarkConfig(denoisers=["identity"], spp=[1], split="all", metrics=["relmse", "ssim", "psnr"])

@@ -34,7 +34,7 @@ def _inseparable(effects: set[str]) -> bool:
 
 
 def test_every_demo_effect_has_two_scenes_and_a_scene_set_of_its_own(tmp_path):
-    """Issue 31: the per-effect table (geometric mean over the scenes with the effect) of one scene per
+    """the per-effect table (geometric mean over the scenes with the effect) of one scene per
     effect confounds effects; two effects over the same scenes give the same column."""
     scene_effects = _demo_scene_effects(tmp_path)
     assert any(name.startswith("cluttered_") for name in scene_effects)

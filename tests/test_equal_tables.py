@@ -9,9 +9,9 @@ import json
 
 import pytest
 
-from denoisebench.leaderboard import equal_tables as et
-from denoisebench.leaderboard.analysis import Cell, SummaryRow
-from denoisebench.leaderboard.names import NOISY
+from denoisebench.analysis import equal_tables as et
+from denoisebench.analysis.summary import Cell, SummaryRow
+from denoisebench.results.names import NOISY
 
 RUNGS = [1, 2, 4, 8, 16]
 

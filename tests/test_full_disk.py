@@ -1,4 +1,4 @@
-"""Full disks (issue 33): generate-dataset and run-benchmark on a small tmpfs stop in one line.
+"""Full disks: generate-dataset and run-benchmark on a small tmpfs stop in one line.
 
 Each test runs the commands inside a private mount namespace (``unshare -m``, root) where a tmpfs
 of a few hundred KiB is mounted over a folder of its own; the same namespace then grows the tmpfs

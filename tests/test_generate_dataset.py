@@ -373,7 +373,7 @@ def test_adaptive_reference_stops_at_target_or_names_capped_frames(tmp_path, cap
         assert (
             adaptive["floor"] <= 10 and not adaptive["stopped_at_cap"] and adaptive["floor_pooled"] <= adaptive["floor"]
         )
-    from denoisebench.leaderboard.report import _reference_info
+    from denoisebench.reports.build import _reference_info
 
     loose = open_dataset(tmp_path / "loose")
     described = _reference_info(loose, loose.scenes)["description"]  # the report's reference line

@@ -1,4 +1,4 @@
-"""Scores without a closed-form floor, corrected from two half references (issue 42 item 2).
+"""Scores without a closed-form floor, corrected from two half references.
 
 Truth: a smooth image ``R``; a prediction ``p`` = R with its own error; references ``R + n`` with
 Gaussian noise of variance ``v / N`` made as the mean of two independent halves. Over many reference
@@ -81,7 +81,7 @@ def test_the_merger_keeps_the_even_rounds_and_the_odd_ones_follow():
 
 
 def test_a_frame_with_half_references_carries_floors_for_its_open_scores():
-    from denoisebench.leaderboard.runner import _frame_metrics
+    from denoisebench.benchmark.runner import _frame_metrics
 
     truth = _truth(24)
     rng = np.random.default_rng(5)

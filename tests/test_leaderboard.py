@@ -5,12 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from denoisebench.benchmark.run import run_benchmark
+from denoisebench.benchmark.runner import BenchmarkConfig
 from denoisebench.cli import main
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.synthetic import make_synthetic_dataset
-from denoisebench.leaderboard.benchmark_run import run_benchmark
-from denoisebench.leaderboard.runner import BenchmarkConfig
-from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.results.store import ResultsStore
 
 
 @pytest.fixture(scope="module")

@@ -15,17 +15,18 @@ import sqlite3
 import numpy as np
 import pytest
 
+from denoisebench.analysis import ranking as table
+from denoisebench.analysis import summary as analysis
+from denoisebench.benchmark.ray_executor import light_plan, needed_denoisers
+from denoisebench.benchmark.run import run_benchmark
+from denoisebench.benchmark.runner import BenchmarkConfig, LoadedDenoiser, RunPlan, pending_groups
+from denoisebench.benchmark.sampler_units import SamplerPair, register_pairs
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.synthetic import make_synthetic_dataset
-from denoisebench.leaderboard import analysis, table
-from denoisebench.leaderboard.benchmark_run import run_benchmark
-from denoisebench.leaderboard.finite import finite_mean, finite_or_none, finite_values, is_finite
-from denoisebench.leaderboard.names import NOISY
-from denoisebench.leaderboard.ray_executor import light_plan, needed_denoisers
-from denoisebench.leaderboard.records import EntryRow, FrameRecord, FrameRow, UnitRecord, UnitRow
-from denoisebench.leaderboard.runner import BenchmarkConfig, LoadedDenoiser, RunPlan, pending_groups
-from denoisebench.leaderboard.sampler_units import SamplerPair, register_pairs
-from denoisebench.leaderboard.store import SCHEMA_VERSION, ResultsStore, sampler_dimension
+from denoisebench.results.finite import finite_mean, finite_or_none, finite_values, is_finite
+from denoisebench.results.names import NOISY
+from denoisebench.results.records import EntryRow, FrameRecord, FrameRow, UnitRecord, UnitRow
+from denoisebench.results.store import SCHEMA_VERSION, ResultsStore, sampler_dimension
 
 # ----------------------------------------------------------------------------------------------- finite
 

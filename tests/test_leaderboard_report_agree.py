@@ -1,4 +1,4 @@
-"""One story from report to leaderboard (issue 40 item 1): for one run, `denoisebench leaderboard`
+"""One story from report to leaderboard: for one run, `denoisebench leaderboard`
 shows the numbers the run's report shows: the same scenes (those the report sets apart left out),
 the corrected scores, the seconds on the report's time basis, and equal scores share a rank."""
 
@@ -8,14 +8,14 @@ import json
 
 import pytest
 
+from denoisebench.analysis import aggregate as agg
+from denoisebench.analysis import ranking as table
+from denoisebench.benchmark.run import run_benchmark
+from denoisebench.benchmark.runner import BenchmarkConfig
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.synthetic import make_synthetic_dataset
-from denoisebench.leaderboard import aggregate as agg
-from denoisebench.leaderboard import table
-from denoisebench.leaderboard.benchmark_run import run_benchmark
-from denoisebench.leaderboard.report import write_report
-from denoisebench.leaderboard.runner import BenchmarkConfig
-from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.reports.build import write_report
+from denoisebench.results.store import ResultsStore
 
 
 @pytest.fixture(scope="module")

@@ -133,7 +133,7 @@ def test_torchvision_compiled_ops_still_fail_loudly():
 
 
 def _dark_scene_with_black_background():
-    """Issue 29's case in small: a dark textured reference (mean Y ≈ 0.02) whose left 31 % is black."""
+    """The black-background case in small: a dark textured reference (mean Y ≈ 0.02) whose left 31 % is black."""
     yy, xx = np.mgrid[0:H, 0:W]
     base = 0.03 * (1 + 0.8 * np.sin(xx / 2.5) * np.cos(yy / 3.5))
     base[:, :10] = 0.0

@@ -72,7 +72,7 @@ def test_entries_are_declared_once_beside_their_functions():
 
 def test_every_metric_states_its_aggregation_and_linear_scores_are_never_plain_means():
     # scale-dependent scores of linear radiance: an arithmetic mean over scenes would let the
-    # brightest scene decide (issue 15: temporal_l1 ranked the noisy input above oidn)
+    # brightest scene decide (temporal_l1 ranked the noisy input above oidn)
     scale_dependent = {"mse", "l1", "grad_l1", "hfen", "temporal_l1", "temporal_l1_warped"}
     for n in ALL:
         m = M.get_metric(n)

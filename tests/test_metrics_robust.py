@@ -206,8 +206,8 @@ def test_registry_entries_and_compute_metrics_pass_the_trim():
 
 
 def test_run_benchmark_rejects_a_bad_trim_and_records_a_given_one(tmp_path, capsys):
+    from denoisebench.benchmark.runner import BenchmarkConfig
     from denoisebench.cli import main
-    from denoisebench.leaderboard.runner import BenchmarkConfig
 
     assert main(["benchmark", "--data", str(tmp_path), "--trim", "0.7"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

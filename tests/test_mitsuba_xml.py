@@ -3,7 +3,7 @@
 Peer: Mitsuba itself. The reference our feature renderer makes of a hand-written Cornell-like XML
 file is held against Mitsuba's ``path`` integrator at its defaults rendering the same file through
 the file's own sensor (so the camera conversion is checked too): image mean within 2 % and every
-12×12 block within 8 % (issue 32's criterion), with a control that the criterion rejects direct
+12×12 block within 8 % (the field-tools criterion), with a control that the criterion rejects direct
 light only. Effects and the camera are read off the loaded plugins; bad files are one-line refusals.
 """
 

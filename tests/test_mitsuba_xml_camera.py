@@ -1,4 +1,4 @@
-"""Mitsuba XML scenes in ``scenes check/preview`` and with ``--auto-camera`` (issue 32), at 16 px.
+"""Mitsuba XML scenes in ``scenes check/preview`` and with ``--auto-camera``, at 16 px.
 
 Peer for the orbit: the USD auto camera. The same box as a USD stage (translated with
 ``--auto-camera``) and as a Mitsuba XML file must get the same camera track in Mitsuba world space;

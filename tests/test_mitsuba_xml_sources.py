@@ -1,4 +1,4 @@
-"""Mitsuba scenes as their authors ship them (issue 39): ``<path>`` directives, ``--define``
+"""Mitsuba scenes as their authors ship them: ``<path>`` directives, ``--define``
 parameters, wrapped (``moment``, ``aov``) and ``direct`` integrators, orthographic sensors, and
 portable dataset configs.
 
@@ -445,7 +445,7 @@ def test_a_dataset_that_recorded_absolute_paths_resumes_without_rendering(tmp_pa
     from denoisebench.dataset.manifest import config_hash
     from denoisebench.generator.dataset_run import legacy_config
 
-    # a scene of the kind datasets held before issue 39: no <path>, no parameters, files in its folder
+    # a scene of the kind older datasets held: no <path>, no parameters, files in its folder
     source = tmp_path / "src" / "plain.xml"
     (source.parent / "meshes").mkdir(parents=True)
     (source.parent / "meshes" / "t.obj").write_text(TRIANGLE)
@@ -458,7 +458,7 @@ def test_a_dataset_that_recorded_absolute_paths_resumes_without_rendering(tmp_pa
     args = ["generate", "--out", str(out), "--mitsuba", str(source), "--frames", "1", "--width", "8", "--height", "8"]
     args += ["--spp", "1", "--ref-spp", "4", "--ref-error", "0", "--quiet"] + (["--auto-camera"] if legacy_key else [])
     assert main(args) == 0
-    # rewrite the manifest as the code before issue 39 wrote it: the file's absolute path (and, before
+    # rewrite the manifest as older code wrote it: the file's absolute path (and, before
     # the stage_options rename, usd_options), hashed over that
     path = out / "dataset.json"
     manifest = json.loads(path.read_text())

@@ -231,7 +231,7 @@ def test_run_benchmark_scores_plain_function_plugins_quietly(tmp_path, plugin_di
     for label in (f"{tmp_path}/my_denoiser.py:denoise", f"{plugin_dir}/plug.py:denoise"):
         assert rows[label]["failed_units"] == 0 and rows[label]["errors"] == [], rows.get(label)
         assert rows[label]["metrics"], rows[label]
-    # the newcomer's last step: the leaderboard shows the report's numbers for that run (issue 40)
+    # the newcomer's last step: the leaderboard shows the report's numbers for that run
     board = subprocess.run(
         [sys.executable, "-m", "denoisebench.cli", "leaderboard", "--db", str(tmp_path / "r.sqlite"), "--spp", "1"],
         capture_output=True,

@@ -1,4 +1,4 @@
-"""Lost Ray nodes (issue 33): a worker node killed mid-run changes no byte and loses no unit.
+"""Lost Ray nodes: a worker node killed mid-run changes no byte and loses no unit.
 
 A local multi-node cluster (``ray.cluster_utils.Cluster``: a head without CPUs and two worker nodes
 of one CPU, each its own raylet and workers) runs ``generate-dataset --executor ray`` and
@@ -9,7 +9,7 @@ What Ray retries, and what denoisebench retries
 -----------------------------------------------
 * **Ray** re-runs a task whose worker process or node died (a system failure), up to the task's
   ``max_retries``: 1 for a frame job (:class:`~denoisebench.generator.executors.RayExecutor`), Ray's
-  default 3 for a benchmark group (:mod:`denoisebench.leaderboard.ray_executor`). A finished task's
+  default 3 for a benchmark group (:mod:`denoisebench.benchmark.ray_executor`). A finished task's
   result that was lost with its node before the driver fetched it is rebuilt the same way (lineage
   reconstruction, within the same budget). Ray does not retry a task that raised (a render error).
 * **denoisebench** retries nothing inside a run; it makes a re-run safe. Only the driver writes:

@@ -1,6 +1,6 @@
 """Floor-corrected scores against a 256-spp reference, checked against a 16× more expensive reference.
 
-Issue 42 item 3: on the same inputs (same seed), the headline score (robust relMSE) of the noisy
+on the same inputs (same seed), the headline score (robust relMSE) of the noisy
 input and of OIDN, corrected against a 256-spp reference, must agree with the raw score against a
 4096-spp reference, on the four families of the issue (cornell, glossy_fireflies, depth_of_field,
 motion_blur). The rendering and scoring is ``bench/reference_correction.py``'s (its printout, at

@@ -147,8 +147,8 @@ def test_stage_metadata_max_depth_is_read(tmp_path):
 
 
 def test_report_names_restricted_transport_and_who_asked():
-    """The benchmark report's transport line reads the manifest plan (issue 14: reports show restrictions)."""
-    from denoisebench.leaderboard.report import _transport
+    """The benchmark report's transport line reads the manifest plan (reports show restrictions)."""
+    from denoisebench.reports.build import _transport
 
     assert _transport(make_render_plan(["glossy"]).to_dict()) == "full transport"
     assert _transport(make_render_plan([], RenderOptions(max_depth=2)).to_dict()) == "max_depth 2 (--max-depth)"

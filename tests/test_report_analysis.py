@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from denoisebench.leaderboard import analysis, images
-from denoisebench.leaderboard.names import NOISY
+from denoisebench.analysis import summary as analysis
+from denoisebench.reports import images
+from denoisebench.results.names import NOISY
 
 
 def _curve(seconds_per_spp=0.01, spps=(1, 4, 16), c=0.5):

@@ -78,10 +78,10 @@ def test_the_report_model_is_a_documented_record_read_by_attribute_or_key(report
     import inspect
 
     from denoisebench.dataset import open_dataset
-    from denoisebench.leaderboard import report_model
-    from denoisebench.leaderboard.report import build_report, write_report
-    from denoisebench.leaderboard.report_model import ReportModel
-    from denoisebench.leaderboard.store import ResultsStore
+    from denoisebench.reports import model as report_model
+    from denoisebench.reports.build import build_report, write_report
+    from denoisebench.reports.model import ReportModel
+    from denoisebench.results.store import ResultsStore
 
     # every field typed and followed by its docstring
     body = next(n for n in ast.parse(inspect.getsource(report_model)).body if getattr(n, "name", "") == "ReportModel")

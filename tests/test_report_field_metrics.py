@@ -1,6 +1,6 @@
 """run-benchmark with the field's metrics: ``--metrics cvvdp,noisebase`` end to end (16×16, 3 frames).
 
-The report's flicker table carries cvvdp right after the scale-free temporal relMSE (issue 20);
+The report's flicker table carries cvvdp right after the scale-free temporal relMSE;
 the Noisebase set expands to its six metrics and is stored like any other.
 """
 

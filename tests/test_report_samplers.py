@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from denoisebench.cli import main
-from denoisebench.leaderboard import images
+from denoisebench.reports import images
 
 SIZE, FRAMES, SPP = 16, 2, 2
 
@@ -148,9 +148,9 @@ def test_cvvdp_viewing_conditions_are_stated(run):
 def test_sampler_frames_round_trip_through_the_store_and_an_old_store_reads_as_none(tmp_path):
     import sqlite3
 
-    from denoisebench.leaderboard import sampler_maps
-    from denoisebench.leaderboard.records import FrameRecord, UnitRecord
-    from denoisebench.leaderboard.store import ResultsStore
+    from denoisebench.results import sampler_maps
+    from denoisebench.results.records import FrameRecord, UnitRecord
+    from denoisebench.results.store import ResultsStore
 
     rng = np.random.default_rng(3)
     maps = [(t, rng.integers(0, 5, size=(6, 7)).astype(np.int32)) for t in range(3)]

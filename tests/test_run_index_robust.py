@@ -1,4 +1,4 @@
-"""Scores no single frame decides (issue 40 item 2): a scene's value is the trimmed mean of its frames.
+"""Scores no single frame decides: a scene's value is the trimmed mean of its frames.
 
 A blown-up frame (OIDN smearing a small bright emitter on one frame of a glossy_fireflies sequence
 gave relmse_robust 368 there against ~0.01 elsewhere, and the scene 61.6) must move its scene's lead
@@ -11,8 +11,8 @@ import math
 
 import pytest
 
-from denoisebench.leaderboard.records import FrameRow, UnitRow
-from denoisebench.leaderboard.run_index import FRAME_TRIM, RunIndex, kept_frames
+from denoisebench.analysis.run_index import FRAME_TRIM, RunIndex, kept_frames
+from denoisebench.results.records import FrameRow, UnitRow
 
 
 def _index(values: list[float], floor: float = 0.001, se: float = 1e-4) -> RunIndex:

@@ -66,9 +66,9 @@ def test_an_unknown_scene_is_one_line_bad_input(live):
 
 
 def test_the_benchmark_measures_sampler_denoiser_pairs_live(live, tmp_path):
-    from denoisebench.leaderboard.benchmark_run import run_benchmark
-    from denoisebench.leaderboard.runner import BenchmarkConfig
-    from denoisebench.leaderboard.store import ResultsStore
+    from denoisebench.benchmark.run import run_benchmark
+    from denoisebench.benchmark.runner import BenchmarkConfig
+    from denoisebench.results.store import ResultsStore
 
     data, scene, _ = live
     plugin = f"{EXAMPLE}:PixelVariance"  # a file plugin: it runs in a worker of its own
@@ -89,9 +89,9 @@ def test_the_benchmark_measures_sampler_denoiser_pairs_live(live, tmp_path):
 
 
 def test_the_benchmark_refuses_an_unknown_sampler_before_any_work(live, tmp_path):
-    from denoisebench.leaderboard.benchmark_run import run_benchmark
-    from denoisebench.leaderboard.runner import BenchmarkConfig
-    from denoisebench.leaderboard.store import ResultsStore
+    from denoisebench.benchmark.run import run_benchmark
+    from denoisebench.benchmark.runner import BenchmarkConfig
+    from denoisebench.results.store import ResultsStore
     from denoisebench.sampling.registry import UnknownSamplerError
 
     data, _, _ = live

@@ -23,8 +23,8 @@ from hostile_parts import SOURCE
 from denoisebench.cli import main
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.verify import run_files, verify_files
-from denoisebench.leaderboard.store import ResultsStore
 from denoisebench.plugins import sandbox
+from denoisebench.results.store import ResultsStore
 from denoisebench.sampling import synthetic
 from denoisebench.sampling.harness import run_sampler
 from denoisebench.sampling.isolation import IsolatedSampler, load

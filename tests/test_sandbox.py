@@ -32,9 +32,9 @@ from denoisebench.denoisers import isolation
 from denoisebench.denoisers.isolation import IsolatedDenoiser
 from denoisebench.denoisers.runner import run_sequence
 from denoisebench.denoisers.synthetic import synthetic_sequence
-from denoisebench.leaderboard.report import write_report
-from denoisebench.leaderboard.store import ResultsStore
 from denoisebench.plugins import Limits, proxy, sandbox
+from denoisebench.reports.build import write_report
+from denoisebench.results.store import ResultsStore
 
 pytestmark = pytest.mark.skipif(
     sandbox.unavailable_reason() is not None, reason=f"no sandbox here: {sandbox.unavailable_reason()}"

@@ -1,4 +1,4 @@
-"""Scores that rank right (issue 15): aggregation rules over scenes, floors through the store and
+"""Scores that rank right: aggregation rules over scenes, floors through the store and
 report, results-store migration, indistinguishable pairs, frame strips.
 
 Synthetic, no rendering: units are measured by the real runner (``measure_unit``) on in-memory
@@ -13,13 +13,15 @@ import sqlite3
 import numpy as np
 import pytest
 
+from denoisebench.analysis import aggregate as agg
+from denoisebench.analysis import summary as analysis
+from denoisebench.benchmark.runner import measure_unit
 from denoisebench.dataset.frame import Frame, Sequence
-from denoisebench.leaderboard import aggregate as agg
-from denoisebench.leaderboard import analysis, strips
-from denoisebench.leaderboard.names import NOISY
-from denoisebench.leaderboard.records import FrameRecord, UnitRecord
-from denoisebench.leaderboard.runner import measure_unit
-from denoisebench.leaderboard.store import SCHEMA_VERSION, ResultsStore
+from denoisebench.reports import strips
+from denoisebench.results import crops
+from denoisebench.results.names import NOISY
+from denoisebench.results.records import FrameRecord, UnitRecord
+from denoisebench.results.store import SCHEMA_VERSION, ResultsStore
 
 SCENES = {"dark": 0.05, "plain": 1.0, "glossy_fireflies": 300.0}  # very different brightness
 
@@ -210,21 +212,21 @@ def test_strips_cut_the_same_crop_for_every_unit_and_show_consecutive_frames(mea
     b = store.strip("run1", "blur", "plain", 1)
     assert a is not None and b is not None
     assert (a["top"], a["left"], a["side"]) == (b["top"], b["left"], b["side"])
-    assert a["crops"].shape == (strips.STRIP_FRAMES, a["side"], a["side"], 3)
+    assert a["crops"].shape == (crops.STRIP_FRAMES, a["side"], a["side"], 3)
     import io
 
     from PIL import Image
 
     png = Image.open(io.BytesIO(strips.strip_png(a["crops"], scale=2)))
-    assert png.size == (strips.STRIP_FRAMES * (2 * a["side"] + 2) - 2, 2 * a["side"])
+    assert png.size == (crops.STRIP_FRAMES * (2 * a["side"] + 2) - 2, 2 * a["side"])
     animated = Image.open(io.BytesIO(strips.strip_apng(a["crops"], scale=2)))
-    assert getattr(animated, "n_frames", 1) == strips.STRIP_FRAMES
+    assert getattr(animated, "n_frames", 1) == crops.STRIP_FRAMES
 
 
 def test_the_demo_renders_sequences_long_enough_to_flicker():
     from denoisebench.commands.demo import DEMO_FRAMES
 
-    assert DEMO_FRAMES >= 8  # issue 15: three frames gave two frame differences, two points per line
+    assert DEMO_FRAMES >= 8  # three frames gave two frame differences, two points per line
 
 
 def test_the_demo_scores_shipped_weights_on_scenes_none_of_them_trained_on():
@@ -248,11 +250,11 @@ def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
     import csv
     import json
 
+    from denoisebench.benchmark.run import run_benchmark
+    from denoisebench.benchmark.runner import BenchmarkConfig
     from denoisebench.dataset import open_dataset
     from denoisebench.dataset.synthetic import make_synthetic_dataset
-    from denoisebench.leaderboard.benchmark_run import run_benchmark
-    from denoisebench.leaderboard.report import write_report
-    from denoisebench.leaderboard.runner import BenchmarkConfig
+    from denoisebench.reports.build import write_report
 
     data = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=1, frames=4, height=16, width=16, spp=(1, 4)))
     with ResultsStore(tmp_path / "r.sqlite") as store:
@@ -286,7 +288,7 @@ def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
 
 
 def test_the_leaderboard_command_ranks_a_linear_flicker_score_per_scene_against_the_input(tmp_path):
-    from denoisebench.leaderboard.table import leaderboard
+    from denoisebench.analysis.ranking import leaderboard
 
     # the issue's temporal_l1 per scene: an arithmetic mean would rank noisy (0.34) above oidn (0.37)
     noisy = {"cornell": 0.18, "dof": 0.05, "motion_blur": 0.06, "glossy_fireflies": 1.07}
@@ -304,7 +306,7 @@ def test_the_leaderboard_command_ranks_a_linear_flicker_score_per_scene_against_
 
 
 # --------------------------------------------------------------------------------------------------
-# references that cannot resolve a score (issue 29, item 5)
+# references that cannot resolve a score (item 5)
 
 
 class _Run:
@@ -330,7 +332,7 @@ class _Run:
 
 
 def test_a_scene_is_set_apart_only_when_its_corrected_scores_cannot_rank():
-    # issue 42: a floor above a tenth of the best score no longer sets a scene apart; a still-growing
+    # a floor above a tenth of the best score no longer sets a scene apart; a still-growing
     # floor, a reference too noisy for the floor's expansion, or scores the reference cannot tell apart do
     values, floors, ses = {}, {}, {}
     scenes = (
@@ -404,11 +406,11 @@ def test_reference_states_read_the_manifest_records():
 def test_the_report_leaves_unresolved_scenes_out_of_the_summary_unless_asked(tmp_path, monkeypatch):
     import json
 
+    from denoisebench.benchmark.run import run_benchmark
+    from denoisebench.benchmark.runner import BenchmarkConfig
     from denoisebench.dataset import open_dataset
     from denoisebench.dataset.synthetic import make_synthetic_dataset
-    from denoisebench.leaderboard.benchmark_run import run_benchmark
-    from denoisebench.leaderboard.report import build_report, results_json
-    from denoisebench.leaderboard.runner import BenchmarkConfig
+    from denoisebench.reports.build import build_report, results_json
 
     data = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=2, frames=2, height=16, width=16, spp=(1,)))
     with ResultsStore(tmp_path / "r.sqlite") as store:
@@ -430,8 +432,8 @@ def test_the_report_leaves_unresolved_scenes_out_of_the_summary_unless_asked(tmp
         assert row.metrics["relmse_robust"].scenes == len(scenes)
     assert json.dumps(results_json(report)["unresolved_references"], allow_nan=False)
     # shown apart in report.md and index.html, with the reason and the spp it would need
-    from denoisebench.leaderboard.report_html import e, render_html
-    from denoisebench.leaderboard.report_markdown import md, render_markdown
+    from denoisebench.reports.html import e, render_html
+    from denoisebench.reports.markdown import md, render_markdown
 
     text = f"{scenes[0]}: its 64-spp reference's noise floor estimate was still growing"
     for page, escape in ((render_markdown(report), md), (render_html(report), e)):

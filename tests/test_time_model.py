@@ -8,10 +8,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from denoisebench.analysis import time_model as tm
+from denoisebench.benchmark import timing
 from denoisebench.dataset.frame import Frame
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard import time_model as tm
-from denoisebench.leaderboard.names import NOISY
+from denoisebench.results import timings
+from denoisebench.results.names import NOISY
 
 FIXED, PER_PIXEL = 0.05, 2e-7  # a denoiser: 50 ms per call + 0.2 s per megapixel
 P0, P1, HD = 80 * 80, 1024 * 1024, 1920 * 1080
@@ -98,7 +100,7 @@ def test_build_time_model_projects_only_when_every_denoiser_was_timed_at_a_secon
     assert not model.projected and model.time_at == (80, 80)
     assert "e" in model.notes[0] and "never scaled by pixel count" in model.notes[0]
     assert model.denoise_seconds("e", 2) == pytest.approx(0.01)
-    from denoisebench.leaderboard.formatting import time_axis_text
+    from denoisebench.reports.formatting import time_axis_text
 
     assert time_axis_text({"time_model": model}) == "Times are per frame at the dataset's 80×80, as measured."
 
@@ -108,7 +110,7 @@ def test_upscaled_frame_tiles_every_buffer_and_the_samples():
     color = rng.random((5, 7, 3), dtype=np.float32)
     samples = {"color": rng.random((2, 5, 7, 3), dtype=np.float32)}
     frame = Frame({"color": color, "depth": color[..., :1].copy()}, spp=2, samples=samples)
-    big = tm.upscaled_frame(frame, width=16, height=12)
+    big = timing.upscaled_frame(frame, width=16, height=12)
     assert big.color.shape == (12, 16, 3) and big.buffers["depth"].shape == (12, 16, 1)
     assert big.samples["color"].shape == (2, 12, 16, 3) and big.reference is None
     assert np.array_equal(big.color[11, 15], color[11 % 5, 15 % 7])
@@ -116,10 +118,10 @@ def test_upscaled_frame_tiles_every_buffer_and_the_samples():
 
 
 def test_timing_size_shrinks_to_the_budget_and_gives_up_below_four_frames():
-    assert tm.timing_size(0.001, P0, (1024, 1024), 60.0) == (1024, 1024, "")
-    width, height, note = tm.timing_size(1.0, P0, (1024, 1024), 60.0)  # 164 s proportional estimate
+    assert timing.timing_size(0.001, P0, (1024, 1024), 60.0) == (1024, 1024, "")
+    width, height, note = timing.timing_size(1.0, P0, (1024, 1024), 60.0)  # 164 s proportional estimate
     assert width * height * 1.0 / P0 <= 60.0 and width * height >= 4 * P0 and "60 s" in note
-    assert tm.timing_size(30.0, P0, (1024, 1024), 60.0) is None
+    assert timing.timing_size(30.0, P0, (1024, 1024), 60.0) is None
 
 
 def test_sizes_parse_and_bad_ones_are_one_line_errors(capsys):
@@ -135,11 +137,11 @@ def test_sizes_parse_and_bad_ones_are_one_line_errors(capsys):
 
 
 def test_timings_are_measured_once_per_run_and_kept_in_the_store(tmp_path):
+    from denoisebench.benchmark.run import run_benchmark
+    from denoisebench.benchmark.runner import BenchmarkConfig
     from denoisebench.dataset import open_dataset
     from denoisebench.dataset.synthetic import make_synthetic_dataset
-    from denoisebench.leaderboard.benchmark_run import run_benchmark
-    from denoisebench.leaderboard.runner import BenchmarkConfig
-    from denoisebench.leaderboard.store import ResultsStore
+    from denoisebench.results.store import ResultsStore
 
     dataset = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=2, frames=2, height=16, width=16, spp=(1,)))
     with ResultsStore(tmp_path / "db.sqlite") as store:
@@ -147,17 +149,17 @@ def test_timings_are_measured_once_per_run_and_kept_in_the_store(tmp_path):
             dataset, BenchmarkConfig(["identity"], [1], split="all", metrics=["relmse"]), store, progress=False
         )
         instances = {d.label: d.instance for d in plan.denoisers}
-        first = tm.measure_run_timings(store, dataset, plan, instances, (64, 48), progress=False)
+        first = timing.measure_run_timings(store, dataset, plan, instances, (64, 48), progress=False)
         assert first["denoiser:identity"]["width"] == 64 and first["denoiser:identity"]["seconds"] > 0
         assert "error" in first["render_probe"]  # a synthetic dataset has no stage to render
         assert first["machine"]["cores"] >= 1
-        again = tm.measure_run_timings(store, dataset, plan, instances, (64, 48), progress=False)
+        again = timing.measure_run_timings(store, dataset, plan, instances, (64, 48), progress=False)
         assert again == first  # not measured twice
     with ResultsStore(tmp_path / "db.sqlite", readonly=True) as store:
-        assert tm.read_timings(store, plan.run_id) == first
-        assert tm.read_timings(store, "no-such-run") == {}
+        assert timings.read_timings(store, plan.run_id) == first
+        assert timings.read_timings(store, "no-such-run") == {}
     with ResultsStore(tmp_path / "fresh.sqlite") as store:
-        assert tm.read_timings(store, plan.run_id) == {}  # no table yet: nothing, not an error
+        assert timings.read_timings(store, plan.run_id) == {}  # no table yet: nothing, not an error
 
 
 def test_time_model_is_in_the_report(tmp_path):

@@ -1,4 +1,4 @@
-"""Time verdicts that hold on a busy machine (issue 42 item 5).
+"""Time verdicts that hold on a busy machine.
 
 The same benchmark is timed twice on one small rendered dataset: on an otherwise idle machine and
 beside a CPU-bound load on every core. Every time verdict of the report (the accuracy-against-time
@@ -18,10 +18,13 @@ import time
 
 import pytest
 
-from denoisebench.leaderboard import analysis, equal_tables, report, time_model
-from denoisebench.leaderboard.benchmark_run import run_benchmark
-from denoisebench.leaderboard.runner import BenchmarkConfig
-from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.analysis import equal_tables, time_model
+from denoisebench.analysis import summary as analysis
+from denoisebench.benchmark import timing
+from denoisebench.benchmark.run import run_benchmark
+from denoisebench.benchmark.runner import BenchmarkConfig
+from denoisebench.reports import build as report
+from denoisebench.results.store import ResultsStore
 
 DENOISERS = ["cross_bilateral_fast", "nlmeans"]
 TIME_AT = (96, 96)
@@ -87,7 +90,7 @@ def _run(dataset, db, loaded: bool) -> dict[tuple, str]:
             config = BenchmarkConfig(DENOISERS, [1, 2, 4], split="all", metrics=["relmse", "flip"])
             plan = run_benchmark(dataset, config, store, progress=False)
             instances = {d.label: d.instance for d in plan.denoisers}
-            time_model.measure_run_timings(store, dataset, plan, instances, (96, 96), progress=False)
+            timing.measure_run_timings(store, dataset, plan, instances, (96, 96), progress=False)
             return _verdicts(store, plan.run_id, dataset)
     finally:
         for w in workers:

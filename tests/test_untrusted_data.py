@@ -1,4 +1,4 @@
-"""Untrusted data and outputs (issue 16, findings 4-7): sha256 verification, path confinement,
+"""Untrusted data and outputs: sha256 verification, path confinement,
 bounds, writable outputs checked first, CSV formula cells.
 
 Before: a reference scaled ×5 was scored silently under the genuine dataset's hash; a manifest
@@ -24,9 +24,9 @@ from denoisebench.dataset.exr_io import encode_exr, load_exr
 from denoisebench.dataset.manifest import load_manifest, save_manifest
 from denoisebench.dataset.synthetic import make_synthetic_dataset
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard.report import csv_cell
-from denoisebench.leaderboard.store import ResultsStore
 from denoisebench.outputs import check_writable_dir, check_writable_file
+from denoisebench.reports.build import csv_cell
+from denoisebench.results.store import ResultsStore
 
 REF = "synthetic_000/reference/frame_0000.exr"
 

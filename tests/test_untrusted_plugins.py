@@ -26,8 +26,8 @@ from denoisebench.denoisers.isolation import IsolatedDenoiser, isolated
 from denoisebench.denoisers.registry import UnknownOptionError
 from denoisebench.denoisers.runner import PUBLIC_META, run_denoisers, run_sequence, sanitize_frame
 from denoisebench.denoisers.synthetic import synthetic_sequence
-from denoisebench.leaderboard.store import ResultsStore
 from denoisebench.plugins import Limits
+from denoisebench.results.store import ResultsStore
 
 PLUGINS = textwrap.dedent(
     '''

@@ -1,4 +1,4 @@
-"""Real-world USD input (issue 17): cameras and lights on demand, UsdLux point/spot lights, texture
+"""Real-world USD input: cameras and lights on demand, UsdLux point/spot lights, texture
 channels/varname/transforms/cut-outs/packages, unreadable files, USD diagnostics, moving objects.
 
 Every stage is authored here with usd-core; the expected values come from the USD/UsdLux/
@@ -484,7 +484,7 @@ def test_unsupported_only_stage_and_usd_diagnostics(tmp_path, capfd):
     stage = new_stage(path)
     add_camera(stage)
     UsdLux.DomeLight.Define(stage, "/Dome")
-    curves = UsdGeom.NurbsCurves.Define(stage, "/Hair")  # BasisCurves render since issue 44
+    curves = UsdGeom.NurbsCurves.Define(stage, "/Hair")  # BasisCurves render: NurbsCurves stay unsupported
     curves.CreatePointsAttr([(0, 0, 0), (0, 1, 0), (1, 1, 0), (1, 2, 0)])
     curves.CreateCurveVertexCountsAttr([4])
     stage.GetRootLayer().Save()

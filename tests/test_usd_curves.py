@@ -1,4 +1,4 @@
-"""UsdGeom.BasisCurves → Mitsuba curves (issue 44): basis conversion, widths, a render against
+"""UsdGeom.BasisCurves → Mitsuba curves: basis conversion, widths, a render against
 Mitsuba's own ``bsplinecurve`` of the same control points, features on curves, the hair BSDF."""
 
 from __future__ import annotations

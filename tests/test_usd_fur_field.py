@@ -1,4 +1,4 @@
-"""The fur_field family (issue 44): curves, instances and MaterialX materials, as the translator sees them."""
+"""The fur_field family: curves, instances and MaterialX materials, as the translator sees them."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""UsdGeom.PointInstancer → Mitsuba shapegroup + instance (issue 44): what is placed, and that an
+"""UsdGeom.PointInstancer → Mitsuba shapegroup + instance: what is placed, and that an
 instanced stage renders as the same stage with its instances written out as plain prims."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""MaterialX materials (issue 44): networks in USD and ``.mtlx`` documents referenced from USD,
+"""MaterialX materials: networks in USD and ``.mtlx`` documents referenced from USD,
 translated to Mitsuba's principled BSDF. Each standard_surface / open_pbr_surface parameter moves the
 rendered image as the principled parameter it maps to moves a directly-built Mitsuba scene."""
 

@@ -1,4 +1,4 @@
-"""Verdicts that agree (issue 40 item 3): the accuracy-against-time bullets and the equal-time and
+"""Verdicts that agree: the accuracy-against-time bullets and the equal-time and
 equal-quality tables of one metric come from the same cells and the same time model, so no bullet
 contradicts its table, and a rendering spp read between rungs is stated as interpolated."""
 
@@ -9,8 +9,9 @@ from types import SimpleNamespace
 
 import pytest
 
-from denoisebench.leaderboard import analysis, equal_tables, time_model
-from denoisebench.leaderboard.names import NOISY
+from denoisebench.analysis import equal_tables, time_model
+from denoisebench.analysis import summary as analysis
+from denoisebench.results.names import NOISY
 
 RUNGS = [1, 2, 4, 8, 16]
 

@@ -22,20 +22,22 @@ import sys
 import time
 from pathlib import Path
 
+from denoisebench.analysis.time_model import parse_size
+from denoisebench.benchmark.run import run_benchmark
+from denoisebench.benchmark.runner import BenchmarkConfig
+from denoisebench.benchmark.stability import stability_table
+from denoisebench.benchmark.timing import DEFAULT_TIME_BUDGET, measure_run_timings
 from denoisebench.dataset import disk_space, open_dataset
 from denoisebench.denoisers.registry import check_denoiser_spec
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard.benchmark_run import run_benchmark
-from denoisebench.leaderboard.report import write_report
-from denoisebench.leaderboard.runner import BenchmarkConfig
-from denoisebench.leaderboard.store import ResultsStore, utc_now
-from denoisebench.leaderboard.time_model import DEFAULT_TIME_BUDGET, measure_run_timings, parse_size
 from denoisebench.metrics.robust import check_trim
 from denoisebench.outputs import check_writable_dir, check_writable_file
 from denoisebench.plugins import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT
 from denoisebench.plugins.proxy import add_arguments as add_isolation_arguments
 from denoisebench.plugins.proxy import limits_from_args
 from denoisebench.plugins.sandbox import protect
+from denoisebench.reports.build import write_report
+from denoisebench.results.store import ResultsStore, utc_now
 from denoisebench.sampling.registry import check_sampler_spec
 
 EPILOG = """examples:
@@ -283,7 +285,13 @@ def _run(args) -> int:
             return 0
 
         index = write_report(
-            store, plan.run_id, dataset, Path(args.out), instances, time_at, include_unresolved=args.include_unresolved
+            store,
+            plan.run_id,
+            dataset,
+            Path(args.out),
+            stability_table(instances) if instances else None,
+            time_at,
+            include_unresolved=args.include_unresolved,
         )
     print(f"report: {index.resolve()}")
     sys.stdout.flush()

@@ -10,7 +10,7 @@ frame strips to show flicker (three frames gave two points per line).
 Finally it benchmarks every built-in denoiser on every scene of that dataset (``--split all``: it
 is made only to be benchmarked) at every rung, times each denoiser and one render again at
 DEMO_TIME_SIZE (the report's times are projected to 1920x1080 from fixed + per-pixel costs,
-:mod:`denoisebench.leaderboard.time_model`) and writes the report (OUT/report/index.html, results
+:mod:`denoisebench.analysis.time_model`) and writes the report (OUT/report/index.html, results
 in OUT/benchmark.sqlite): the noisy input's "render more" curve over five measured rungs, the
 equal-time and equal-quality tables, and verdicts only within those rungs.
 
@@ -77,7 +77,7 @@ DEMO_TIME_SIZE = "512x512"
 DEMO_TIME_BUDGET = 10.0
 #: Reference noise floor target (relMSE of a perfect denoiser against the reference) and spp cap. A scene is
 #: resolved when its floor is <= 1/10 of the best score anyone reaches on it, now at the top rung, 16 spp
-#: (relmse_robust and temporal_relmse_robust, denoisebench.leaderboard.aggregate.unresolved_references). Measured
+#: (relmse_robust and temporal_relmse_robust, denoisebench.analysis.aggregate.unresolved_references). Measured
 #: at 1.5e-4 (64 px, 8 frames, seed 900), worst floor / best score: glass_env 0.083, motion_blur 0.066, cornell
 #: 0.055, depth_of_field 0.052, glossy_fireflies 0.031 (its references now stop at 3200-5760 spp); the former
 #: 3.5e-4, set for a top rung of 4, gives floors 2.3 times higher: cornell and depth_of_field over 1/10. With

@@ -9,9 +9,9 @@ the heading say so.
 
 from __future__ import annotations
 
-from denoisebench.leaderboard.store import ResultsStore
-from denoisebench.leaderboard.table import leaderboard
-from denoisebench.leaderboard.time_model import parse_size
+from denoisebench.analysis.ranking import leaderboard
+from denoisebench.analysis.time_model import parse_size
+from denoisebench.results.store import ResultsStore
 
 EPILOG = """examples:
   denoisebench leaderboard --db benchmark.sqlite

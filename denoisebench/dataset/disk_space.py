@@ -1,4 +1,4 @@
-"""Free space: checked before a long write, and a full disk reported in one line (issue 33).
+"""Free space: checked before a long write, and a full disk reported in one line.
 
 ``generate-dataset`` checks its output folder's filesystem before rendering anything
 (:func:`check_generate`): where even a lower bound of the dataset's size does not fit, it is exit 2

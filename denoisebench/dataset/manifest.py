@@ -29,7 +29,7 @@ Layout of the manifest (all keys sorted when saved; paths relative to the datase
       }
     }
 
-Schema versions. Version 1 (until issue 34) keeps every frame record inline in ``dataset.json``
+Schema versions. Version 1 (older datasets) keeps every frame record inline in ``dataset.json``
 and rewrote the whole file after each record: O(records) per record, quadratic in all. Version 2
 keeps the same dict minus ``renders``, which live in the SQLite index named by
 ``frame_records`` (:mod:`.frame_index`; why SQLite is said there); ``count`` is the number of

@@ -234,7 +234,7 @@ def legacy_config(config: dict) -> dict | None:
 
 
 def absolute_xml_config(request: GenerateRequest, config: dict) -> dict | None:
-    """``config`` as datasets before issue 39 spelled their --mitsuba files (the absolute path on the
+    """``config`` as older datasets spelled their --mitsuba files (the absolute path on the
     machine that made them), or None without --mitsuba files or with --define (which did not exist)."""
     if not request.xml or request.defines:
         return None

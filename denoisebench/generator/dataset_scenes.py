@@ -167,7 +167,7 @@ def user_stage_dependencies(path: Path) -> list[tuple[Path, str]]:
     layers, assets, _unresolved = UsdUtils.ComputeAllDependencies(str(path))
     quiet.TakeCoalescedDiagnostics()
     del quiet
-    # usd-core cannot open .mtlx documents: their textures are found by reading them (issue 44).
+    # usd-core cannot open .mtlx documents: their textures are found by reading them.
     assets = list(assets) + [f for a in assets if str(a).lower().endswith(".mtlx") for f in document_files(a)]
     out = []
     for layer_or_asset in [layer.realPath for layer in layers[1:]] + list(assets):

@@ -23,8 +23,8 @@ The mapping from our data to what the model sees (it needs absolute photometric 
    plain mean would darken the whole scene to make room for it); highlights above 15× the key
    clip at the display's peak.
 
-   Until issue 29 black pixels were floored at 1/1000 of the mean and counted, and a reference
-   with a black background got a key far too low. Measured on depth_of_field_900 (80 px, 8
+   Why black pixels do not count: floored at 1/1000 of the mean and counted, a reference with a
+   black background got a key far too low. Measured on depth_of_field_900 (80 px, 8
    frames, 1024-spp reference, 31 % of its pixels black; ``tests/test_metrics_cvvdp.py``
    reproduces the case): k = 24 849 instead of 3220, the median surface at 490 cd/m² instead of
    ~65, and the 1-spp outputs of cross_bilateral / rae scored −39.0 / −18.9 JOD (the demo's

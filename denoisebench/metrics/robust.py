@@ -5,7 +5,7 @@ fraction of per-pixel errors; ``temporal_relmse_robust`` is ``temporal_relmse`` 
 highest fraction of each frame pair's per-pixel errors. Both are lower-is-better, scale-free
 (they aggregate over scenes by the mean, like their raw forms), and carry reference-noise floors.
 
-Why (docs/architecture.md "Metrics"; issue 29)
+Why (docs/architecture.md "Metrics")
 -----------------------------------
 relMSE squares the error and divides by ``r² + 0.01``: one firefly of radiance 100 in a pixel
 whose reference is 0.05 contributes ``100² / 0.0125 = 8·10⁵`` to a sum that the other pixels fill

@@ -171,7 +171,7 @@ class RoundMerger:
             out[f"{name}_var"] = self.pooled_var(name).astype(np.float32)
         if self.half_spp is not None and self._even is not None:
             # the even rounds' mean: one of two independent half references (the other is the odd
-            # rounds', recovered from the full mean: leaderboard.half_reference)
+            # rounds', recovered from the full mean: metrics.half_reference)
             out["color_half"] = (self._even / ((self.rounds + 1) // 2)).astype(np.float32)
         return out
 

@@ -40,7 +40,7 @@ from denoisebench.generator.usd.textures import shader_id as _shader_id
 
 DEFAULT_GREY = (0.18, 0.18, 0.18)
 _SKIPPED_INPUTS = ("normal", "displacement", "occlusion")
-#: A hair surface (issue 44): a Shader with this ``info:id`` → Mitsuba's ``hair`` BSDF (Chiang et al. 2016),
+#: A hair surface: a Shader with this ``info:id`` → Mitsuba's ``hair`` BSDF (Chiang et al. 2016),
 #: its authored inputs passed as they are (floats; ``sigma_a`` a colour, used instead of the melanins).
 #: Connected to ``outputs:denoisebench:surface`` (our render context: other renderers keep the universal
 #: ``outputs:surface``, e.g. a UsdPreviewSurface fallback) or to the universal output itself.

@@ -1,4 +1,4 @@
-"""fur_field: USD as production assets write it (issue 44): thousands of grass curves on a textured
+"""fur_field: USD as production assets write it: thousands of grass curves on a textured
 ground, a furry critter, an instanced field of pebbles and mushrooms, MaterialX materials.
 
 * **Curves**: grass blades are cubic B-spline ``BasisCurves`` (tapered widths) under a MaterialX

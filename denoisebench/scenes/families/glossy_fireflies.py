@@ -5,7 +5,7 @@ Notes
 The fireflies of a low-spp render come from glossy reflections of small intense lights: paths
 camera → glossy metal → light, which next-event estimation with MIS samples well, and one-bounce
 chains (metal → metal or floor → light) that are rare at 1–4 spp but that a path-traced reference
-converges on. Issue 29 redesigned the family because its reference did not converge: caustic paths
+converges on. The family is built so that its reference converges; the earlier design's did not: caustic paths
 (tiny light → near-mirror sphere, roughness down to 0.05 → dark diffuse backdrop or mirror-like
 floor) are found by a path tracer only by chance, so its floor estimate did not fall with spp.
 What changed, and why (each measured with ``bench/reference_floor.py``, 64 px, 3 scenes, seeds

@@ -17,14 +17,14 @@ from __future__ import annotations
 from html import escape
 from typing import TYPE_CHECKING
 
-from denoisebench.leaderboard import formatting as fmt
-from denoisebench.leaderboard import report_notes as notes
-from denoisebench.leaderboard.images import colour_bar_png, data_uri
-from denoisebench.leaderboard.report_samplers import undersampled_lines
 from denoisebench.plugins.proxy import isolation_text
+from denoisebench.reports import formatting as fmt
+from denoisebench.reports import notes
+from denoisebench.reports.images import colour_bar_png, data_uri
+from denoisebench.reports.samplers import undersampled_lines
 
 if TYPE_CHECKING:
-    from denoisebench.leaderboard.report_model import ReportModel
+    from denoisebench.reports.model import ReportModel
 
 STYLE = """
 body{font:14px/1.45 system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:0;color:#1d1d1f;background:#fafafa}

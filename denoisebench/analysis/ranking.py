@@ -26,13 +26,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from denoisebench.analysis.summary import RunData, metric_cell, set_apart
+from denoisebench.analysis.time_model import build_time_model
 from denoisebench.dataset import open_dataset
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard.analysis import RunData, metric_cell, set_apart
-from denoisebench.leaderboard.finite import finite_mean
-from denoisebench.leaderboard.store import ResultsStore
-from denoisebench.leaderboard.time_model import build_time_model, read_timings
 from denoisebench.metrics import get_metric
+from denoisebench.results.finite import finite_mean
+from denoisebench.results.store import ResultsStore
+from denoisebench.results.timings import read_timings
 
 
 @dataclass

@@ -33,19 +33,22 @@ from pathlib import Path
 
 import numpy as np
 
+from denoisebench.analysis import aggregate as agg
+from denoisebench.analysis import equal_tables, time_model
+from denoisebench.analysis import summary as analysis
+from denoisebench.analysis.aggregate import rule_of
 from denoisebench.dataset import Dataset
 from denoisebench.dataset.atomic import atomic_write_bytes
-from denoisebench.leaderboard import aggregate as agg
-from denoisebench.leaderboard import analysis, equal_tables, figures, images, report_samplers, strips, time_model
-from denoisebench.leaderboard.aggregate import rule_of
-from denoisebench.leaderboard.names import NOISY
-from denoisebench.leaderboard.report_html import render_html
-from denoisebench.leaderboard.report_markdown import render_markdown
-from denoisebench.leaderboard.report_model import ReportModel
-from denoisebench.leaderboard.stability import stability_table
-from denoisebench.leaderboard.store import ResultsStore
 from denoisebench.metrics import relmse_map
 from denoisebench.metrics.colorvideovdp import viewing_conditions
+from denoisebench.reports import figures, images, strips
+from denoisebench.reports import samplers as report_samplers
+from denoisebench.reports.html import render_html
+from denoisebench.reports.markdown import render_markdown
+from denoisebench.reports.model import ReportModel
+from denoisebench.results.names import NOISY
+from denoisebench.results.store import ResultsStore
+from denoisebench.results.timings import read_timings
 
 
 def _clean(value):
@@ -327,22 +330,22 @@ def build_report(
     store: ResultsStore,
     run_id: str,
     dataset: Dataset,
-    denoisers: dict[str, object] | None = None,
+    stability: dict | None = None,
     time_at: tuple[int, int] | None = None,
     include_unresolved: bool = False,
 ) -> ReportModel:
     """Everything the report shows, as a ReportModel (figures as PNG/SVG, images as data URIs).
 
+    ``stability``: the hard-case table of the run's denoisers
+    (:func:`denoisebench.benchmark.stability.stability_table`; the report runs nothing itself).
     ``time_at``: the resolution of the report's time axis (default
-    :data:`.time_model.DEFAULT_TIME_AT`), projected from the run's timings (:mod:`.time_model`)."""
+    :data:`~denoisebench.analysis.time_model.DEFAULT_TIME_AT`), projected from the run's timings."""
     data = analysis.RunData(store, run_id)
     # scenes whose reference cannot resolve the headline scores: listed apart, out of the aggregates
     unresolved = analysis.set_apart(data, dataset)
     summary = analysis.summary_table(data, exclude=() if include_unresolved else agg.excluded_scenes(unresolved))
     reference = _reference_info(dataset, data.scenes)
-    model = time_model.build_time_model(
-        data, time_model.read_timings(store, run_id), time_at, _dataset_size(dataset, data.scenes)
-    )
+    model = time_model.build_time_model(data, read_timings(store, run_id), time_at, _dataset_size(dataset, data.scenes))
     lead = equal_tables.lead_metrics(data.frame_metric_names + data.sequence_metric_names)
     measured = data.frame_metric_names + data.sequence_metric_names
     # the figure: the robust relMSE first, raw relMSE beside it, FLIP; the tables: the lead metrics
@@ -397,7 +400,7 @@ def build_report(
         cvvdp_viewing=_cvvdp_viewing(dataset, data) if "cvvdp" in data.sequence_metric_names else None,
         # which scenes and frames each not-applicable metric lacks, and why
         not_applicable_detail=_not_applicable_detail(store, run_id),
-        stability=stability_table(denoisers) if denoisers else None,
+        stability=stability,
         figures=figure_files,
         palette=palette,
         frames=data.frames,
@@ -564,13 +567,13 @@ def write_report(
     run_id: str,
     dataset: Dataset,
     out_dir: str | Path,
-    denoisers: dict[str, object] | None = None,
+    stability: dict | None = None,
     time_at: tuple[int, int] | None = None,
     include_unresolved: bool = False,
 ) -> Path:
     """Write the report folder; return the path of index.html (``time_at``: see :func:`build_report`)."""
     out = Path(out_dir)
-    report = build_report(store, run_id, dataset, denoisers, time_at, include_unresolved)
+    report = build_report(store, run_id, dataset, stability, time_at, include_unresolved)
     for name, (png, svg) in report.figures.items():
         atomic_write_bytes(out / "figures" / f"{name}.png", png)
         atomic_write_bytes(out / "figures" / f"{name}.svg", svg.encode("utf-8"))

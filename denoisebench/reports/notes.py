@@ -8,11 +8,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from denoisebench.leaderboard import formatting as fmt
 from denoisebench.metrics import get_metric
+from denoisebench.reports import formatting as fmt
 
 if TYPE_CHECKING:
-    from denoisebench.leaderboard.report_model import ReportModel
+    from denoisebench.reports.model import ReportModel
 
 
 def viewing_text(report: ReportModel) -> str:

@@ -21,12 +21,12 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import replace
 
+from denoisebench.benchmark.runner import BenchmarkConfig, RunPlan, measure_group, pending_groups
 from denoisebench.dataset import Dataset, open_dataset
 from denoisebench.denoisers import isolation as isolation_mod
-from denoisebench.leaderboard.names import NOISY
-from denoisebench.leaderboard.records import UnitRecord
-from denoisebench.leaderboard.runner import BenchmarkConfig, RunPlan, measure_group, pending_groups
-from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.results.names import NOISY
+from denoisebench.results.records import UnitRecord
+from denoisebench.results.store import ResultsStore
 
 # Lazy imports: Ray (optional, 0.4 s) only when a run uses the Ray executor.
 

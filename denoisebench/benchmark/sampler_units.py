@@ -34,9 +34,9 @@ import numpy as np
 
 from denoisebench.dataset.frame import Frame
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard.names import PAIR_LABEL_SEPARATOR, PAIR_SPEC_SEPARATOR, SAMPLER_SPEC_PREFIX
-from denoisebench.leaderboard.records import UnitRecord
-from denoisebench.leaderboard.sampler_maps import frame_records
+from denoisebench.results.names import PAIR_LABEL_SEPARATOR, PAIR_SPEC_SEPARATOR, SAMPLER_SPEC_PREFIX
+from denoisebench.results.records import UnitRecord
+from denoisebench.results.sampler_maps import frame_records
 from denoisebench.sampling.isolation import IsolatedSampler, load, sampler_policy
 from denoisebench.sampling.live import LiveScene, run_live
 from denoisebench.sampling.protocol import Budget
@@ -147,7 +147,7 @@ def live_sequence(dataset, scene: str, spp: int, pair: SamplerPair, live=None, m
 
 def measure_pairs(dataset, plan, scene: str, spp: int, pairs: list[SamplerPair], instances: dict):
     """Yield the UnitRecord of every pair on ``scene`` at ``spp`` (one live render per sampler)."""
-    from denoisebench.leaderboard.runner import measure_unit  # runner imports this module: look it up late
+    from denoisebench.benchmark.runner import measure_unit  # runner imports this module: look it up late
 
     by_sampler: dict[str, list[SamplerPair]] = {}
     for pair in pairs:

@@ -5,7 +5,7 @@ runs the noisy input itself (the "just render more samples" point, label :data:`
 denoiser on it through :func:`denoisebench.denoisers.runner.run_sequence` (``reset()`` first, then
 the frames in order, every call timed, every output checked, failures contained), computes every
 metric per frame and the temporal ones per sequence, and writes the unit to the
-:class:`~denoisebench.leaderboard.store.ResultsStore` in one transaction.
+:class:`~denoisebench.results.store.ResultsStore` in one transaction.
 
 Notes
 -----
@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from denoisebench.benchmark.sampler_units import measure_pairs, plan_pairs, register_pairs
 from denoisebench.dataset import Dataset, DatasetError, layout
 from denoisebench.dataset.bounds import check_scene_record
 from denoisebench.dataset.exr_io import canonical_json
@@ -51,16 +52,6 @@ from denoisebench.denoisers.protocol import describe
 from denoisebench.denoisers.registry import DenoiserLoadError, available_denoisers
 from denoisebench.denoisers.runner import run_sequence, sanitize_array
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard.names import (
-    FLICKER_METRICS,
-    FLICKER_PREFIX,
-    NOISY,
-    REQUIRED_METRICS,
-)
-from denoisebench.leaderboard.records import FrameRecord, UnitRecord
-from denoisebench.leaderboard.sampler_units import measure_pairs, plan_pairs, register_pairs
-from denoisebench.leaderboard.store import ResultsStore
-from denoisebench.leaderboard.strips import cut
 from denoisebench.metrics import compute_metrics
 from denoisebench.metrics.cost import total_seconds
 from denoisebench.metrics.half_reference import half_reference_floor, other_half
@@ -68,6 +59,15 @@ from denoisebench.metrics.registry import default_metric_names, expand_metric_na
 from denoisebench.metrics.validation import MetricNotApplicable
 from denoisebench.plugins import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, Limits
 from denoisebench.plugins.sandbox import version as sandbox_version
+from denoisebench.results.crops import cut
+from denoisebench.results.names import (
+    FLICKER_METRICS,
+    FLICKER_PREFIX,
+    NOISY,
+    REQUIRED_METRICS,
+)
+from denoisebench.results.records import FrameRecord, UnitRecord
+from denoisebench.results.store import ResultsStore
 
 #: A unit's key: (label, scene, spp).
 UnitKey = tuple[str, str, int]
@@ -103,7 +103,7 @@ class BenchmarkConfig:
     memory_limit_mb: int | None = None  # worker resident-memory limit (None: the default)
     verify: bool = True  # check every file's sha256 before the first unit
     trim: float | None = None  # robust scores' dropped fraction (None: metrics.robust.DEFAULT_TRIM, 0.1 %)
-    samplers: list[str] = field(default_factory=list)  # live sampler × denoiser pairs (leaderboard.sampler_units)
+    samplers: list[str] = field(default_factory=list)  # live sampler × denoiser pairs (benchmark.sampler_units)
 
     def as_dict(self) -> dict:
         data = {

@@ -17,9 +17,9 @@ from dataclasses import dataclass, field, fields
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # annotations only: report.py imports these modules where it builds the model
-    from denoisebench.leaderboard.analysis import AccuracyTime, Indistinguishable, SummaryRow
-    from denoisebench.leaderboard.equal_tables import Tables
-    from denoisebench.leaderboard.time_model import TimeModel
+    from denoisebench.analysis.equal_tables import Tables
+    from denoisebench.analysis.summary import AccuracyTime, Indistinguishable, SummaryRow
+    from denoisebench.analysis.time_model import TimeModel
 
 
 @dataclass

@@ -33,9 +33,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from denoisebench.leaderboard.formatting import num
-from denoisebench.leaderboard.names import NOISY
 from denoisebench.metrics.registry import metric_names
+from denoisebench.results.finite import num
+from denoisebench.results.names import NOISY
 
 #: A time ratio within this of 1 is "about rendering's time" (the same rule as analysis.readings).
 ABOUT = 0.05

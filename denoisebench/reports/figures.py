@@ -18,8 +18,8 @@ import io
 
 import numpy as np
 
-from denoisebench.leaderboard.analysis import AccuracyTime
-from denoisebench.leaderboard.names import NOISY
+from denoisebench.analysis.summary import AccuracyTime
+from denoisebench.results.names import NOISY
 
 # Lazy imports: matplotlib only where a figure is drawn, so that a run without a report never loads it.
 

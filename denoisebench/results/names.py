@@ -14,7 +14,7 @@ REQUIRED_METRICS = ("relmse_robust", "relmse", "flip", "temporal_relmse_robust",
 
 #: Per-frame flicker: these temporal metrics of frames (t−1, t), stored as frame metrics
 #: ``flicker.<name>`` of frame t (scale-free ones: the flicker figure averages them over scenes).
-#: Runs before issue 15 stored temporal_l1 as ``flicker``.
+#: Older runs stored temporal_l1 as ``flicker``.
 FLICKER_METRICS = ("temporal_relmse_robust", "temporal_relmse", "tpsnr")
 FLICKER_PREFIX = "flicker."
 

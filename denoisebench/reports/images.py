@@ -19,6 +19,7 @@ import io
 import numpy as np
 
 from denoisebench.metrics.tonemap import tonemap
+from denoisebench.results.crops import window_size, worst_windows  # noqa: F401 (used by report code as images.*)
 
 # Lazy imports: PIL, matplotlib's colour maps and scipy only where an image is encoded, coloured or
 # filtered, so that a run without a report never loads them.
@@ -39,39 +40,6 @@ def to_png(image: np.ndarray, scale: int = 1) -> bytes:
 
 def data_uri(png: bytes, mime: str = "image/png") -> str:
     return f"data:{mime};base64,{base64.b64encode(png).decode('ascii')}"
-
-
-def window_size(height: int, width: int) -> int:
-    """Side of a worst-region window: a quarter of the short side, at least 4 pixels."""
-    return max(4, min(height, width) // 4)
-
-
-def worst_windows(error_map: np.ndarray, size: int, count: int = 2) -> list[tuple[int, int]]:
-    """(top, left) of up to ``count`` non-overlapping size×size windows with the largest mean error."""
-    from scipy.ndimage import uniform_filter
-
-    height, width = error_map.shape
-    size = min(size, height, width)
-    score = uniform_filter(np.nan_to_num(error_map.astype(np.float64), nan=0.0, posinf=0.0), size=size, mode="constant")
-    # the filter centres windows; keep only centres whose window lies inside the image
-    half = size // 2
-    valid = np.full(score.shape, -np.inf)
-    valid[half : height - (size - half) + 1, half : width - (size - half) + 1] = score[
-        half : height - (size - half) + 1, half : width - (size - half) + 1
-    ]
-    found: list[tuple[int, int]] = []
-    for _ in range(count):
-        index = int(np.argmax(valid))
-        if not np.isfinite(valid.flat[index]):
-            break
-        cy, cx = divmod(index, width)
-        top, left = cy - half, cx - half
-        found.append((top, left))
-        # forbid centres whose window would overlap this one
-        valid[
-            max(0, top - size + 1 + half) : top + size + half, max(0, left - size + 1 + half) : left + size + half
-        ] = -np.inf
-    return found
 
 
 def crop(image: np.ndarray, top: int, left: int, size: int) -> np.ndarray:

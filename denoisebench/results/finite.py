@@ -36,3 +36,10 @@ def finite_mean(values: Iterable) -> float | None:
     """Arithmetic mean of the finite ``values`` (``numpy.mean``'s summation), None when there are none."""
     kept = finite_values(values)
     return float(np.mean(kept)) if kept else None
+
+
+def num(value, digits: int = 3) -> str:
+    """``value`` to ``digits`` significant digits, "—" for None or a non-finite value."""
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "—"
+    return f"{value:.{digits}g}"

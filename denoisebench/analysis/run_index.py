@@ -28,8 +28,8 @@ from __future__ import annotations
 
 import math
 
-from denoisebench.leaderboard.finite import finite_mean, finite_values, is_finite
-from denoisebench.leaderboard.records import FrameRow, SequenceRow, UnitRow
+from denoisebench.results.finite import finite_mean, finite_values, is_finite
+from denoisebench.results.records import FrameRow, SequenceRow, UnitRow
 
 #: Share of a scene's frames dropped at each end of the sorted values (at least 3 frames): one of 8.
 FRAME_TRIM = 0.125

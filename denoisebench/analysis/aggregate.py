@@ -64,8 +64,8 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from denoisebench.leaderboard.finite import is_finite
 from denoisebench.metrics import get_metric
+from denoisebench.results.finite import is_finite
 
 # Lazy imports: scipy (0.3 s) only where a bootstrap interval is drawn.
 
@@ -348,7 +348,7 @@ def unresolved_references(
 ) -> list[Unresolved]:
     """The scenes of a run whose corrected scores cannot rank anything (module Notes).
 
-    ``data``: a :class:`denoisebench.leaderboard.analysis.RunData` (``scenes``, ``labels``, ``spp``,
+    ``data``: a :class:`denoisebench.analysis.summary.RunData` (``scenes``, ``labels``, ``spp``,
     ``per_scene(label, spp, metric)`` and the metric names); ``references``: :func:`reference_states`,
     optionally with ``noisy_share`` per scene (the reference's share of values beyond the floor's
     validity). One entry per scene and reason, floor growth first; lower-is-better scores with floors.

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import math
 
-from denoisebench.leaderboard.aggregate import rule_of
-from denoisebench.leaderboard.names import NOISY
+from denoisebench.analysis.aggregate import rule_of
 from denoisebench.metrics import get_metric
+from denoisebench.results.finite import num  # noqa: F401 (fmt.num for the report modules)
+from denoisebench.results.names import NOISY
 
 #: Metrics shown in the summary tables, in this order.
 LEAD_METRICS = (
@@ -32,14 +33,8 @@ LEAD_METRICS = (
 HIDDEN_IN_TABLES = ("grad_l1", "temporal_l1", "temporal_l1_warped")
 #: Most "not distinguishable" sentences a report lists (the rest are in results.json).
 MAX_PAIR_LINES = 12
-#: How a heading names an aggregation rule other than the mean (see leaderboard.aggregate).
+#: How a heading names an aggregation rule other than the mean (see analysis.aggregate).
 RULE_NOTE = {"geomean": "geo. mean", "relative_to_input": "× input"}
-
-
-def num(value, digits: int = 3) -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "—"
-    return f"{value:.{digits}g}"
 
 
 def cell_text(cell) -> str:

@@ -46,18 +46,18 @@ from functools import cached_property
 
 import numpy as np
 
-from denoisebench.leaderboard import aggregate as agg
-from denoisebench.leaderboard.aggregate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401 (re-exported)
-from denoisebench.leaderboard.equal_tables import spp_for
-from denoisebench.leaderboard.finite import finite_mean, is_finite
-from denoisebench.leaderboard.names import (  # noqa: F401 (ERROR_METRICS: re-exported for the report)
+from denoisebench.analysis import aggregate as agg
+from denoisebench.analysis.aggregate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401 (re-exported)
+from denoisebench.analysis.equal_tables import spp_for
+from denoisebench.analysis.run_index import RunIndex
+from denoisebench.metrics import floors
+from denoisebench.results.finite import finite_mean, is_finite
+from denoisebench.results.names import (  # noqa: F401 (ERROR_METRICS: re-exported for the report)
     ERROR_METRICS,
     FLICKER_METRICS,
     FLICKER_PREFIX,
     NOISY,
 )
-from denoisebench.leaderboard.run_index import RunIndex
-from denoisebench.metrics import floors
 
 #: Scenes a per-effect column needs (on one scene a column is that scene's score, not the effect's).
 MIN_EFFECT_SCENES = 2
@@ -595,7 +595,7 @@ def flicker_metrics(data: RunData) -> list[str]:
     stored = data.flicker_names
     names = [m for m in FLICKER_METRICS if FLICKER_PREFIX + m in stored]
     if not names and "flicker" in stored:
-        names = ["temporal_l1"]  # runs before issue 15: "flicker" was temporal_l1 (linear: not averaged in a figure)
+        names = ["temporal_l1"]  # older runs: "flicker" was temporal_l1 (linear: not averaged in a figure)
     return names
 
 

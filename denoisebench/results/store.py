@@ -59,10 +59,10 @@ from pathlib import Path
 import numpy as np
 
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard import sampler_maps
-from denoisebench.leaderboard.finite import finite_or_none
-from denoisebench.leaderboard.names import PAIR_LABEL_SEPARATOR, PAIR_SPEC_SEPARATOR, SAMPLER_SPEC_PREFIX
-from denoisebench.leaderboard.records import (
+from denoisebench.results import sampler_maps
+from denoisebench.results.finite import finite_or_none
+from denoisebench.results.names import PAIR_LABEL_SEPARATOR, PAIR_SPEC_SEPARATOR, SAMPLER_SPEC_PREFIX
+from denoisebench.results.records import (
     EntryRow,
     FrameRow,
     NotApplicableRow,

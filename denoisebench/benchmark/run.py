@@ -1,8 +1,8 @@
 """Run a benchmark: prepare the run, measure its missing units with an executor, finish it.
 
 The one entry point of a benchmark (``run-benchmark``, ``denoisebench benchmark``, tests). It sits
-above both executors, :func:`denoisebench.leaderboard.runner.run_local` and
-:func:`denoisebench.leaderboard.ray_executor.run_ray`, so that neither of them imports the other's
+above both executors, :func:`denoisebench.benchmark.runner.run_local` and
+:func:`denoisebench.benchmark.ray_executor.run_ray`, so that neither of them imports the other's
 module (the runner measures units; the Ray executor distributes the runner's groups).
 """
 
@@ -12,12 +12,12 @@ import sys
 
 from tqdm import tqdm
 
+from denoisebench.benchmark.ray_executor import run_ray
+from denoisebench.benchmark.runner import BenchmarkConfig, RunPlan, prepare_run, run_local
 from denoisebench.dataset import Dataset
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard.ray_executor import run_ray
-from denoisebench.leaderboard.records import UnitRecord
-from denoisebench.leaderboard.runner import BenchmarkConfig, RunPlan, prepare_run, run_local
-from denoisebench.leaderboard.store import ResultsStore
+from denoisebench.results.records import UnitRecord
+from denoisebench.results.store import ResultsStore
 
 #: Executors ``run_benchmark`` accepts.
 EXECUTORS = ("local", "ray")

@@ -12,13 +12,13 @@ from __future__ import annotations
 import re
 from typing import TYPE_CHECKING
 
-from denoisebench.leaderboard import formatting as fmt
-from denoisebench.leaderboard import report_notes as notes
-from denoisebench.leaderboard.report_samplers import undersampled_lines
 from denoisebench.plugins.proxy import isolation_text
+from denoisebench.reports import formatting as fmt
+from denoisebench.reports import notes
+from denoisebench.reports.samplers import undersampled_lines
 
 if TYPE_CHECKING:
-    from denoisebench.leaderboard.report_model import ReportModel
+    from denoisebench.reports.model import ReportModel
 
 _SPECIAL = re.compile(r"([\\`*_\[\]|<>#])")
 

@@ -17,7 +17,8 @@ Notes
 
 from __future__ import annotations
 
-from denoisebench.leaderboard import images, sampler_maps
+from denoisebench.reports import images
+from denoisebench.results import sampler_maps
 
 
 def sampler_section(store, run: dict) -> dict | None:

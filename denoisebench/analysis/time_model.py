@@ -43,60 +43,30 @@ Notes
   :data:`MIN_SPREAD`): the time could plausibly be that much larger. Every ratio of a denoiser's
   time to rendering's carries it (:meth:`TimeModel.ratio_bounds`: the render and the denoise parts
   each between their minimum and minimum × spread, the render part of both sides moving together)
-  and a time verdict is written only when it holds at both ends (``leaderboard.equal_tables``,
-  ``leaderboard.analysis.readings``). Measured on the README tour's dataset: the probe's fixed
+  and a time verdict is written only when it holds at both ends (``analysis.equal_tables``,
+  ``analysis.summary.readings``). Measured on the README tour's dataset: the probe's fixed
   1080p cost was 2.4 s idle and 11 s beside other jobs with one render per point; see the README.
-* **Where it is kept.** Measurements go to the run's store in a table of this module
-  (``run_timings``: run id, key, JSON value), written once per run and reused when the run resumes
-  or its report is rebuilt.
+* **Where it comes from.** :mod:`denoisebench.benchmark.timing` measures; the store keeps the
+  records (:mod:`denoisebench.results.timings`, table ``run_timings``); this module only reads them.
 """
 
 from __future__ import annotations
 
-import json
-import math
-import os
-import platform
-import sqlite3
-import sys
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from tqdm import tqdm
 
-from denoisebench.dataset.frame import Frame
-from denoisebench.denoisers.runner import run_frame
 from denoisebench.errors import UserInputError
-from denoisebench.leaderboard.finite import is_finite
-from denoisebench.leaderboard.names import NOISY
-from denoisebench.leaderboard.run_index import RunIndex
-
-# Lazy imports: torch (1 s) only where the machine's GPU is looked up, and frame_jobs' render_job
-# looked up when a render is timed (tests replace it on its module).
+from denoisebench.results.finite import is_finite
+from denoisebench.results.names import NOISY
+from denoisebench.results.timings import MIN_SPREAD, machine
 
 #: The resolution a report's time axis is for unless ``--time-at`` says otherwise.
 DEFAULT_TIME_AT = (1920, 1080)
-#: The second size each denoiser (and the render probe) is timed at unless ``--time-size`` says otherwise.
-DEFAULT_TIME_SIZE = (1024, 1024)
-#: Seconds one denoiser's timing call may be expected to take before its size is reduced.
-DEFAULT_TIME_BUDGET = 60.0
-#: Spp of the render probe (two, so that its offset and per-sample cost separate).
-PROBE_SPP = (1, 4)
-#: Timed renders per probe point after the warm-up, interleaved over the two sizes (the minimum is kept).
+#: Timed renders per probe point and timed calls per denoiser (as :mod:`denoisebench.benchmark.timing`
+#: records them; only for the sentence saying how the times were measured).
 PROBE_REPEATS = 3
-#: Timed calls per denoiser at the second size (the minimum is kept; one when a call takes over 2 s).
 TIMING_REPEATS = 3
-#: The least spread (largest / least plausible time) every measured cost carries: repeats on a shared
-#: machine never see all of its load, so no time is taken as known to better than this.
-MIN_SPREAD = 1.1
-#: The smallest timing size, as a multiple of the dataset's pixels, that still separates the costs.
-MIN_SIZE_FACTOR = 4
-
-_TABLE = (
-    "CREATE TABLE IF NOT EXISTS run_timings (run_id TEXT NOT NULL, key TEXT NOT NULL, value TEXT NOT NULL, "
-    "PRIMARY KEY (run_id, key))"
-)
 
 
 def parse_size(text: str | None, option: str) -> tuple[int, int] | None:
@@ -115,50 +85,6 @@ def parse_size(text: str | None, option: str) -> tuple[int, int] | None:
 
 def size_text(size) -> str:
     return f"{size[0]}×{size[1]}"
-
-
-def machine() -> dict:
-    """Cores, CPU and GPU (None without CUDA) of this machine, as a report states them."""
-    gpu = None
-    try:
-        import torch
-
-        if torch.cuda.is_available():
-            gpu = torch.cuda.get_device_name(0)
-    except Exception:  # noqa: BLE001 - no torch or no driver: no GPU to state
-        gpu = None
-    return {
-        "cores": os.cpu_count(),
-        "cpu": platform.processor() or platform.machine(),
-        "system": platform.system(),
-        "gpu": gpu,
-    }
-
-
-# --------------------------------------------------------------------------------------------------
-# the store's timing table
-
-
-def read_timings(store, run_id: str) -> dict[str, dict]:
-    """{key: value} of a run's timing records ({} for a store without the table)."""
-    try:
-        rows = store.conn.execute("SELECT key, value FROM run_timings WHERE run_id = ?", (run_id,)).fetchall()
-    except sqlite3.OperationalError:  # an older store, or one opened read-only before any timing
-        return {}
-    return {key: json.loads(value) for key, value in rows}
-
-
-def write_timing(store, run_id: str, key: str, value: dict) -> None:
-    with store.transaction() as conn:
-        conn.execute(_TABLE)
-        conn.execute(
-            "INSERT OR REPLACE INTO run_timings (run_id, key, value) VALUES (?, ?, ?)",
-            (run_id, key, json.dumps(value, sort_keys=True)),
-        )
-
-
-# --------------------------------------------------------------------------------------------------
-# fits
 
 
 def line_through(points) -> tuple[float, float] | None:
@@ -452,193 +378,3 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
         else:
             model.projected = True
     return model
-
-
-# --------------------------------------------------------------------------------------------------
-# measuring
-
-
-def upscaled_frame(frame, width: int, height: int):
-    """A synthetic ``width``×``height`` frame: ``frame``'s buffers (and per-sample data) tiled, then cropped.
-
-    Only for timing: the content repeats, which no denoiser's cost depends on in a way that matters
-    here (the cost of a call grows with pixels and samples, not with what they show)."""
-
-    def tile(array: np.ndarray, axes: tuple[int, int]) -> np.ndarray:
-        reps = [1] * array.ndim
-        reps[axes[0]] = math.ceil(height / array.shape[axes[0]])
-        reps[axes[1]] = math.ceil(width / array.shape[axes[1]])
-        out = np.tile(array, reps)
-        index = [slice(None)] * array.ndim
-        index[axes[0]], index[axes[1]] = slice(0, height), slice(0, width)
-        return np.ascontiguousarray(out[tuple(index)])
-
-    buffers = {name: tile(array, (0, 1)) for name, array in frame.buffers.items()}
-    samples = None if frame.samples is None else {name: tile(a, (1, 2)) for name, a in frame.samples.items()}
-    return Frame(buffers, frame.spp, frame.scene, frame.index, None, samples, dict(frame.meta))
-
-
-def timing_size(small_seconds: float, pixels0: int, requested: tuple[int, int], budget: float):
-    """(width, height, note) to time a denoiser at: ``requested``, or smaller to fit ``budget``, or None."""
-    width, height = requested
-    estimate = small_seconds * width * height / pixels0  # proportional: an upper bound when fixed ≥ 0
-    if estimate <= budget:
-        return width, height, ""
-    scale = math.sqrt(budget / estimate)
-    width, height = max(int(width * scale), 1), max(int(height * scale), 1)
-    if width * height < MIN_SIZE_FACTOR * pixels0:
-        return None
-    return width, height, f"timed at {width}×{height}, not {requested[0]}×{requested[1]}, to stay within {budget:g} s"
-
-
-def time_call(denoiser, frame, label: str, repeats: int = TIMING_REPEATS) -> tuple[float | None, str, float]:
-    """(least seconds of up to ``repeats`` calls on ``frame``, why not, spread = median / least).
-
-    One call only when it takes over 2 s (the spread is then :data:`MIN_SPREAD`); (None, why, nan) when
-    a call fails."""
-    times = []
-    for _ in range(repeats):
-        reset = getattr(denoiser, "reset", None)
-        if callable(reset):
-            reset()
-        result = run_frame(denoiser, frame, name=label, keep_output=False)
-        if callable(reset):
-            reset()
-        if result.status != "ok":
-            return None, f"timing call failed: {result.error}", math.nan
-        times.append(result.seconds)
-        if result.seconds > 2.0:
-            break
-    best = min(times)
-    spread = float(np.median(times) / best) if best > 0 and len(times) > 1 else MIN_SPREAD
-    return best, "", max(spread, MIN_SPREAD)
-
-
-def probe_render(dataset, scene: str, size: tuple[int, int], spp=PROBE_SPP, repeats: int = PROBE_REPEATS) -> dict:
-    """Renders of ``scene``'s frame 0 at the dataset's size and at ``size``, up to each of ``spp``.
-
-    Returns {"points": [[spp, seconds]] at ``size``, "small_points": the same at the dataset's size,
-    "spread": median / least over every point, "repeats"}. Seconds exclude kernel compilation, like
-    the dataset's own (the generator's timer). The first render at each size is a warm-up and is not
-    timed: at a size no dataset frame had, it traces and records the frozen passes (measured on the
-    demo's cluttered_915 at 512×512: 1.30 s to reach 1 spp against 0.43-0.44 s warm), which the
-    dataset's own frames pay once per sequence, not per frame. Then ``repeats`` rounds, each one render
-    at each size in turn (interleaved: both sizes see the same load), and each point keeps the least
-    of its renders (other processes on a shared machine only ever add time; module Notes)."""
-    from denoisebench.generator.frame_jobs import FrameJob, render_job
-
-    info = dataset.scene(scene)
-    record = info.record
-    plan = record.get("plan") or {}
-    options = {"per_sample": bool(plan.get("per_sample", False)), "rr_depth": int(plan.get("rr_depth", 5))}
-    if plan.get("max_depth_source") == "user":
-        options["max_depth"] = int(plan.get("max_depth", -1))
-    usd = dataset.path(record["usd"], "stage file")
-    small = (int(record["width"]), int(record["height"]))
-
-    def job(width: int, height: int):
-        return FrameJob(
-            scene,
-            0,
-            str(record.get("stage_sha256", scene)),
-            str(usd),
-            tuple(int(s) for s in spp),
-            None,
-            width,
-            height,
-            int(record.get("render_seed", 0)),
-            options,
-        )
-
-    jobs = {"small": job(*small), "large": job(int(size[0]), int(size[1]))}
-    for j in jobs.values():
-        render_job(j)  # warm-up: trace and record the passes at this size
-    timed: dict[str, list] = {"small": [], "large": []}
-    for _ in range(max(int(repeats), 1)):
-        for key, j in jobs.items():
-            timed[key].append([rung.seconds for rung in render_job(j).noisy])
-    spreads = []
-
-    def points(key: str) -> list[list[float]]:
-        out = []
-        for k, s in enumerate(spp):
-            seconds = [run[k] for run in timed[key]]
-            least = min(seconds)
-            if least > 0:
-                spreads.append(float(np.median(seconds)) / least)
-            out.append([int(s), least])
-        return out
-
-    return {
-        "scene": scene,
-        "width": int(size[0]),
-        "height": int(size[1]),
-        "points": points("large"),
-        "small_points": points("small"),
-        "small_pixels": small[0] * small[1],
-        "repeats": max(int(repeats), 1),
-        "spread": max(max(spreads, default=MIN_SPREAD), MIN_SPREAD),
-        "seconds": timed,
-    }
-
-
-def measure_run_timings(
-    store,
-    dataset,
-    plan,
-    instances: dict,
-    size: tuple[int, int] | None = DEFAULT_TIME_SIZE,
-    *,
-    budget: float = DEFAULT_TIME_BUDGET,
-    render_probe: bool = True,
-    progress: bool = True,
-) -> dict[str, dict]:
-    """Time every loaded denoiser (and one render) at ``size`` once per run; return the run's timings.
-
-    ``size`` None: nothing is timed (the report's times stay at the dataset's resolution)."""
-    done = read_timings(store, plan.run_id)
-    if "machine" not in done:
-        write_timing(store, plan.run_id, "machine", machine())
-    if size is None or not plan.scenes or not plan.spp:
-        return read_timings(store, plan.run_id)
-    scene, spp = plan.scenes[0], min(plan.spp)
-    info = dataset.scene(scene)
-    pixels0 = int(info.record["width"]) * int(info.record["height"])
-    frames = RunIndex(store.units(plan.run_id), store.frames(plan.run_id), [])
-    todo = [label for label in instances if f"denoiser:{label}" not in done]
-    wants_probe = render_probe and "render_probe" not in done
-    bar = tqdm(
-        total=len(todo) + wants_probe, desc="benchmark: timing at a larger size", file=sys.stderr, disable=not progress
-    )
-    if todo:
-        needs_samples = any("samples" in getattr(d, "needs", ()) for d in plan.denoisers if d.label in todo)
-        small = dataset.frame(scene, spp, 0, samples=needs_samples)
-    for label in todo:
-        measured = [
-            f.denoise_seconds for f in frames.frames_of(label) if f.spp == spp and f.denoise_seconds is not None
-        ]
-        record = {"spp": spp, "scene": scene}
-        chosen = timing_size(float(np.mean(measured)), pixels0, size, budget) if measured else None
-        if not measured:  # every unit failed (or none ran): a timing call would only fail or hang again
-            record.update(seconds=None, note="not timed at a larger size: no successful frame in the run")
-        elif chosen is None:
-            record.update(seconds=None, note=f"not timed at a larger size: over {budget:g} s even at 4× the frame")
-        else:
-            width, height, note = chosen
-            started = time.perf_counter()
-            seconds, error, spread = time_call(instances[label], upscaled_frame(small, width, height), label)
-            record.update(width=width, height=height, seconds=seconds, note=error or note)
-            if math.isfinite(spread):
-                record["spread"] = spread
-            record["wall_seconds"] = time.perf_counter() - started
-        write_timing(store, plan.run_id, f"denoiser:{label}", record)
-        bar.update(1)
-    if wants_probe:
-        try:
-            record = probe_render(dataset, scene, size)
-        except Exception as error:  # noqa: BLE001 - no renderer here, or a stage it cannot load: say so
-            record = {"error": f"render probe failed: {type(error).__name__}: {error}".splitlines()[0][:300]}
-        write_timing(store, plan.run_id, "render_probe", record)
-        bar.update(1)
-    bar.close()
-    return read_timings(store, plan.run_id)
