@@ -102,8 +102,9 @@ def _sampler_store(path) -> ResultsStore:
     """One run: noisy and ``box`` on the stored inputs, ``uniform`` alone and with ``box``, planted relMSE."""
     store = ResultsStore(path)
     store.ensure_run("run1", "hash", "/nowhere", {"denoisers": ["box"], "samplers": ["uniform"]}, {})
-    store.add_denoiser("run1", NOISY, NOISY, "input", {"color"}, False, None)
-    store.add_denoiser("run1", "box", "box", "denoiser", {"color"}, False, None)
+    plain = dict(run_id="run1", needs={"color"}, temporal=False, load_error=None)
+    store.add_denoiser(label=NOISY, spec=NOISY, kind="input", **plain)
+    store.add_denoiser(label="box", spec="box", kind="denoiser", **plain)
     box = LoadedDenoiser(label="box", spec="box", instance=object(), needs=frozenset({"color"}), temporal=False)
     register_pairs(
         store, "run1", [SamplerPair("uniform", "uniform", None), SamplerPair("uniform+box", "uniform", "box")], [box]

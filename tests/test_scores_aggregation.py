@@ -65,7 +65,15 @@ def _store_with_units(path, units, labels=(NOISY, "blur")) -> tuple[ResultsStore
     store = ResultsStore(path)
     store.ensure_run("run1", "hash", "/nowhere", {"denoisers": list(labels)}, {})
     for label in labels:
-        store.add_denoiser("run1", label, label, "input" if label == NOISY else "denoiser", {"color"}, False, None)
+        store.add_denoiser(
+            run_id="run1",
+            label=label,
+            spec=label,
+            kind="input" if label == NOISY else "denoiser",
+            needs={"color"},
+            temporal=False,
+            load_error=None,
+        )
     for unit in units:
         assert store.write_unit("run1", unit)
     return store, "run1"

@@ -500,19 +500,21 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     data_hash = dataset_hash(dataset)
     run_id = run_identity(data_hash, config)
     created = store.ensure_run(run_id, data_hash, str(dataset.root.resolve()), config.as_dict(), software_versions())
-    store.add_denoiser(run_id, NOISY, NOISY, "input", {"color"}, False, None)
+    store.add_denoiser(
+        run_id=run_id, label=NOISY, spec=NOISY, kind="input", needs={"color"}, temporal=False, load_error=None
+    )
     plan = RunPlan(run_id, scenes, spp, denoisers, spatial, temporal, resumed=not created, trim=config.trim)
     seen = plan.trained_on()
     for d in denoisers:
         store.add_denoiser(
-            run_id,
-            d.label,
-            d.spec,
-            "denoiser",
-            d.needs,
-            d.temporal,
-            d.load_error,
-            seen.get(d.label, []) if d.trained_scenes else None,
+            run_id=run_id,
+            label=d.label,
+            spec=d.spec,
+            kind="denoiser",
+            needs=d.needs,
+            temporal=d.temporal,
+            load_error=d.load_error,
+            trained_on=seen.get(d.label, []) if d.trained_scenes else None,
         )
     if pairs:
         plan.samplers = pairs

@@ -101,13 +101,13 @@ def register_pairs(store, run_id: str, pairs: list[SamplerPair], denoisers) -> N
         spec = f"{SAMPLER_SPEC_PREFIX}{pair.sampler}" + (f"{PAIR_SPEC_SEPARATOR}{denoiser.spec}" if denoiser else "")
         needs = denoiser.needs if denoiser else {"color"}
         store.add_denoiser(
-            run_id,
-            pair.label,
-            spec,
-            "sampler",
-            needs,
-            bool(denoiser and denoiser.temporal),
-            None,
+            run_id=run_id,
+            label=pair.label,
+            spec=spec,
+            kind="sampler",
+            needs=needs,
+            temporal=bool(denoiser and denoiser.temporal),
+            load_error=None,
             sampler=pair.sampler,
             denoiser_label=pair.denoiser,
         )

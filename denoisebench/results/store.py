@@ -346,6 +346,7 @@ class ResultsStore:
 
     def add_denoiser(
         self,
+        *,
         run_id: str,
         label: str,
         spec: str,
@@ -354,11 +355,10 @@ class ResultsStore:
         temporal: bool,
         load_error: str | None,
         trained_on=None,
-        *,
         sampler: str | None = None,
         denoiser_label: str | None = None,
     ) -> None:
-        """Record a label of the run.
+        """Record a label of the run (every argument is a keyword).
 
         ``trained_on``: the run's scenes the denoiser was trained on (None: it declared none);
         ``sampler``/``denoiser_label``: the label's place in the sampler dimension
