@@ -11,8 +11,7 @@ Untrusted input is checked before anything is measured: every dataset file's sha
 manifest (--no-verify skips it, and the run records that), every manifest path confined to the
 dataset folder, --out and --db writable, every --option naming a denoiser that is run and a
 keyword its constructor takes. Plugins (every denoiser that is not a built-in) run in worker
-processes of their own under --time-limit and --memory-limit (see README, "Running untrusted
-plugins").
+processes of their own under --time-limit and --memory-limit (see docs/sandbox.md).
 """
 
 from __future__ import annotations
@@ -49,6 +48,13 @@ EPILOG = """examples:
   run-benchmark --data out/dataset --trim 0.002   # robust scores drop the worst 0.2 % of pixels
   run-benchmark --data out/dataset --time-at 3840x2160 --time-size 512x512   # times for 4K frames
   run-benchmark --data out/dataset --samplers uniform,ci_stop,dual_buffer,hachisuka2008 --denoisers none,oidn
+
+documentation:
+  docs/metrics.md    --metrics, --trim, --include-unresolved: robust and corrected scores, aggregation, flicker
+  docs/time.md       --time-at, --time-size, --time-budget, --no-render-probe: accuracy against time
+  docs/samplers.md   --samplers: live adaptive samplers and their spp maps
+  docs/sandbox.md    --isolation, --time-limit, --memory-limit, --no-verify: untrusted plugins and data
+  docs/scale-out.md  --executor ray
 """
 
 

@@ -93,6 +93,9 @@ DEMO_DATASET_SEED = 915
 
 EPILOG = """example:
   denoisebench demo --out demo_out
+
+documentation:
+  docs/demo.md  what the demo renders, why those scenes, what it costs
 """
 
 

@@ -19,6 +19,10 @@ EPILOG = """examples:
   denoisebench leaderboard --metric flicker --dataset 3fa9c1    # temporal_relmse (scale-free)
   denoisebench leaderboard --sampler ci_stop                     # only ci_stop's live pairs
   denoisebench leaderboard --run 89bf6baa --split test           # one run's numbers, as its report shows them
+
+documentation:
+  docs/metrics.md   --metric: the robust and corrected scores and how they aggregate over scenes
+  docs/samplers.md  --sampler: live samplers as a dimension of a run
 """
 
 
