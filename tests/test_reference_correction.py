@@ -4,7 +4,7 @@ on the same inputs (same seed), the headline score (robust relMSE) of the noisy
 input and of OIDN, corrected against a 256-spp reference, must agree with the raw score against a
 4096-spp reference, on the four families of the issue (cornell, glossy_fireflies, depth_of_field,
 motion_blur). The rendering and scoring is ``bench/reference_correction.py``'s (its printout, at
-64 px, is in the README).
+64 px, is in docs/metrics.md).
 
 What "agree" means here, measured (bench/reference_correction.py --size 32 --spp 4 --ref-spp 256):
 the corrected score is within its 95 % interval of the truth on 6 of 16 (family, entry, metric)
