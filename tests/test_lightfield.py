@@ -1,4 +1,4 @@
-"""The ``lightfield`` denoiser (Lehtinen et al. 2011; issue 41): trajectories, SameSurface, and its error.
+"""The ``lightfield`` denoiser (Lehtinen et al. 2011): trajectories, SameSurface, and its error.
 
 Peers: the synthetic thin-lens frames of :mod:`denoisebench.denoisers.synthetic` (their circle of
 confusion is known: the fitted trajectories must match it), hand-made hit sets for the visibility

@@ -1,4 +1,4 @@
-"""Placed rounds (the renderer takes sample positions in screen, lens and time) and the ``mdas`` sampler (issue 41).
+"""Placed rounds (the renderer takes sample positions in screen, lens and time) and the ``mdas`` sampler.
 
 Peers: the renderer's own per-sample data (a placed sample at a stream sample's position sees the
 same first hit), the reference stream (uniform placed samples average to it), and a synthetic light

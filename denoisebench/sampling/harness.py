@@ -28,7 +28,7 @@ Notes
   here either way. A sampler that raises (or whose worker exits, crashes or runs over its limits)
   is recorded (``error``), with what it had rendered.
 * A sampler that renders nothing leaves zero buffers and every pixel without a sample.
-* **Placed rounds** (issue 41). Where the frame can place samples (the renderer's
+* **Placed rounds**. Where the frame can place samples (the renderer's
   ``ProgressiveFrame.render_placed``), :attr:`RoundHandle.dimensions` names what a sample position
   has beyond the film ``x, y`` (``"lens"``, ``"time"``; ``()`` for a pinhole without motion blur)
   and :meth:`RoundHandle.render_placed` renders one sample at each given position, returning the

@@ -1,4 +1,4 @@
-"""The ``mdas`` sampler: multidimensional adaptive sampling and reconstruction (issue 41).
+"""The ``mdas`` sampler: multidimensional adaptive sampling and reconstruction.
 
 Hachisuka, T., Jarosz, W., Weistroffer, R. P., Dale, K., Humphreys, G., Zwicker, M. and Jensen,
 H. W. (2008), "Multidimensional adaptive sampling and reconstruction for ray tracing", ACM

@@ -3,8 +3,7 @@
 :class:`SyntheticLightField` speaks both round interfaces of the renderer's progressive frame
 (``render_round(counts)`` and ``render_placed(film, lens, time)``, ``placement_dimensions``), on a
 radiance function of screen, lens and time whose pixel integrals are known, so that tests can
-measure a multidimensional sampler's and its reconstruction's error and bias exactly (``mdas``,
-issue 41).
+measure a multidimensional sampler's and its reconstruction's error and bias exactly (``mdas``).
 
 The scene is a defocused, moving edge over in-focus stripes (1-D in the sense of the slides'
 "1 scanline" figure, extended down the image):

@@ -1,4 +1,4 @@
-"""Samples at positions the caller chooses: film position, lens point and shutter time (issue 41).
+"""Samples at positions the caller chooses: film position, lens point and shutter time.
 
 The progressive frame's count rounds (:mod:`~denoisebench.generator.render.progressive`) let a sampler
 choose *how many* samples each pixel gets; where they land inside the pixel, on the lens and in the

@@ -25,7 +25,7 @@ Conventions:
   new sample and rows past its count are zero.
 * ``reference=True`` renders the reference stream (color, diffuse, specular only), never the noisy
   inputs' random numbers.
-* **Placed rounds** (issue 41; for multidimensional samplers such as ``mdas``): besides count rounds,
+* **Placed rounds** (for multidimensional samplers such as ``mdas``): besides count rounds,
   :meth:`ProgressiveFrame.render_placed` traces one sample at each position the caller gives, film
   ``x, y`` plus lens ``u, v`` and shutter ``t`` where the plan has them
   (:attr:`ProgressiveFrame.placement_dimensions`); :mod:`~denoisebench.generator.render.placed`
