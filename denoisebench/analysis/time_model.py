@@ -45,7 +45,7 @@ Notes
   each between their minimum and minimum × spread, the render part of both sides moving together)
   and a time verdict is written only when it holds at both ends (``analysis.equal_tables``,
   ``analysis.summary.readings``). Measured on the README tour's dataset: the probe's fixed
-  1080p cost was 2.4 s idle and 11 s beside other jobs with one render per point; see the README.
+  1080p cost was 2.4 s idle and 11 s beside other jobs with one render per point (docs/time.md).
 * **Where it comes from.** :mod:`denoisebench.benchmark.timing` measures; the store keeps the
   records (:mod:`denoisebench.results.timings`, table ``run_timings``); this module only reads them.
 """
