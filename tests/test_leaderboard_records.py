@@ -174,11 +174,11 @@ def test_a_version_4_store_reads_and_migrates_to_the_same_sampler_dimension(tmp_
     with ResultsStore(path, readonly=True) as old:
         assert old.version == 4
         assert {d.label: (d.sampler, d.denoiser_label) for d in old.denoisers("run1")} == DIMENSION
-        before = table.leaderboard(old, "relmse", 4)[3]
+        before = table.leaderboard(old, "relmse", 4).entries
     with ResultsStore(path) as migrated:
         assert migrated.version == SCHEMA_VERSION == 5
         assert {d.label: (d.sampler, d.denoiser_label) for d in migrated.denoisers("run1")} == DIMENSION
-        after = table.leaderboard(migrated, "relmse", 4)[3]
+        after = table.leaderboard(migrated, "relmse", 4).entries
     with sqlite3.connect(path) as conn:  # the migration stored the columns
         stored = dict(
             (r[0], (r[1], r[2])) for r in conn.execute("SELECT label, sampler, denoiser_label FROM run_denoisers")
@@ -188,9 +188,9 @@ def test_a_version_4_store_reads_and_migrates_to_the_same_sampler_dimension(tmp_
 
 def test_the_leaderboard_ranks_one_sampler_or_the_stored_inputs_and_groups_by_sampler(tmp_path):
     with _sampler_store(tmp_path / "r.sqlite") as store:
-        _, _, _, every = table.leaderboard(store, "relmse", 4)
-        _, _, _, uniform = table.leaderboard(store, "relmse", 4, sampler="uniform")
-        _, _, _, stored = table.leaderboard(store, "relmse", 4, sampler="")
+        every = table.leaderboard(store, "relmse", 4).entries
+        uniform = table.leaderboard(store, "relmse", 4, sampler="uniform").entries
+        stored = table.leaderboard(store, "relmse", 4, sampler="").entries
     assert [e.denoiser for e in every] == ["uniform+box", "box", "uniform", NOISY]  # planted: 0.1 < 0.2 < 0.6 < 0.8
     assert [(e.denoiser, e.sampler, e.denoiser_label) for e in uniform] == [
         ("uniform+box", "uniform", "box"),
@@ -231,7 +231,7 @@ def test_the_summary_table_and_the_leaderboard_read_the_same_per_scene_values(me
     assert set(metrics) <= set(data.frame_metric_names + data.sequence_metric_names)
     for metric in metrics:
         for spp in (1, 4):
-            _, _, _, entries = table.leaderboard(store, metric, spp)
+            entries = table.leaderboard(store, metric, spp).entries
             for e in entries:
                 cell = summary[(e.denoiser, spp)].metrics[metric]
                 assert e.value == pytest.approx(cell.value, rel=1e-12)

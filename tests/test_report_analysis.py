@@ -9,6 +9,7 @@ import pytest
 
 from denoisebench.analysis import summary as analysis
 from denoisebench.reports import images
+from denoisebench.results import crops
 from denoisebench.results.names import NOISY
 
 
@@ -92,12 +93,12 @@ def test_worst_windows_find_planted_errors_without_overlap():
     error = np.zeros((32, 40))
     error[20:24, 30:34] = 5.0  # the worst
     error[2:6, 3:7] = 2.0  # the second
-    found = images.worst_windows(error, 4, count=2)
+    found = crops.worst_windows(error, 4, count=2)
     assert found == [(20, 30), (2, 3)]
     # a window at the border stays inside the image
     edge = np.zeros((16, 16))
     edge[-1, -1] = 1.0
-    ((top, left),) = images.worst_windows(edge, 4, count=1)
+    ((top, left),) = crops.worst_windows(edge, 4, count=1)
     assert 0 <= top <= 12 and 0 <= left <= 12 and top + 4 == 16 and left + 4 == 16
 
 

@@ -307,7 +307,8 @@ def test_the_leaderboard_command_ranks_a_linear_flicker_score_per_scene_against_
             frames = [FrameRecord(i, "ok", None, 1.0, 0.1, 1.1, 0, {"relmse": 0.1}) for i in range(2)]
             units.append(UnitRecord(label, scene, 4, "ok", None, frames, {"temporal_l1": value}))
     store, _ = _store_with_units(tmp_path / "r.sqlite", units, (NOISY, "oidn"))
-    metric, spp, _, ranked = leaderboard(store, "temporal_l1", 4)
+    ranking = leaderboard(store, "temporal_l1", 4)
+    metric, spp, ranked = ranking.metric, ranking.spp, ranking.entries
     assert metric.aggregate == "relative_to_input" and spp == 4
     assert [e.denoiser for e in ranked] == ["oidn", NOISY]
     assert ranked[1].value == pytest.approx(1.0)

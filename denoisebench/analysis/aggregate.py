@@ -356,7 +356,7 @@ def unresolved_references(
     """
     measured = set(data.frame_metric_names) | set(data.sequence_metric_names)
     judged = [next((m for m in pair if m in measured), None) for pair in metrics]
-    judged = [m for m in judged if m is not None and not _higher_is_better(m)]
+    judged = [m for m in judged if m is not None and not higher_is_better(m)]
     out: list[Unresolved] = []
     for scene in data.scenes:
         state = references.get(scene) or {}
@@ -418,10 +418,6 @@ def excluded_scenes(unresolved: list[Unresolved]) -> list[str]:
 
 def higher_is_better(metric: str) -> bool:
     """The registry's direction of ``metric``; False (an error) for names it does not know."""
-    return _higher_is_better(metric)
-
-
-def _higher_is_better(metric: str) -> bool:
 
     try:
         return get_metric(metric).higher_is_better

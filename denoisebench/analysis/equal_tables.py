@@ -275,7 +275,8 @@ def build_tables(summary, model, rungs: list[int], metric: str) -> Tables:
     )
 
 
-def _pct(ratio: float) -> str:
+def ratio_text(ratio: float) -> str:
+    """A time or error ratio in words: ``"1/10"`` below a half, else ``"57 %"``."""
     return f"1/{1 / ratio:.0f}" if ratio < 0.5 else f"{100 * ratio:.0f} %"
 
 
@@ -296,7 +297,7 @@ def verdicts(tables: Tables) -> list[str]:
             f"Equal time ({tables.metric}): within the {num(r.budget_seconds)} s per frame that rendering "
             f"{r.budget_spp} spp takes ({_res(tables)}), {r.best} at {r.best_spp} spp reaches "
             f"{num(r.best_error.value)}{interval} against rendering's {num(r.render_error.value)}: "
-            f"{_pct(r.ratio)} of its error."
+            f"{ratio_text(r.ratio)} of its error."
         )
     losses = [r for r in tables.equal_time if r.best is None and r.candidates]
     if losses and not wins and not any(r.contested for r in tables.equal_time):
@@ -318,13 +319,17 @@ def verdicts(tables: Tables) -> list[str]:
         ratio, row, (spp, seconds) = best
         bound = "at most " if spp.how == "at_most" else ""
         low, high = row.ratio_bounds.get(label, (ratio, ratio))
-        spread = f"; {_pct(low)}–{_pct(high)} across the timings' spread" if _pct(low) != _pct(high) else ""
+        spread = (
+            f"; {ratio_text(low)}–{ratio_text(high)} across the timings' spread"
+            if ratio_text(low) != ratio_text(high)
+            else ""
+        )
         if high < 1 - ABOUT:
-            tail = f"{_pct(ratio)} of rendering's time{spread}"
+            tail = f"{ratio_text(ratio)} of rendering's time{spread}"
         elif low > 1 + ABOUT:
             tail = f"{ratio:.2g}× rendering's time{spread}: rendering more samples is cheaper"
         else:
-            tail = f"about rendering's time ({_pct(low)}–{_pct(high)} across the timings' spread: no saving shown)"
+            tail = f"about rendering's time ({ratio_text(low)}–{ratio_text(high)} across the timings' spread: no saving shown)"
         out.append(
             f"Equal quality ({tables.metric}): {label} reaches the error of {row.target_spp:g}-spp rendering "
             f"({num(row.target)}) in {bound}{num(seconds.value)} s per frame against {num(row.render_seconds)} s "

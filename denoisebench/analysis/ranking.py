@@ -61,12 +61,6 @@ class Ranking:
     entries: list[Entry]
     notes: list[str]
 
-    def __iter__(self):  # (metric, spp, data_hash, entries), as callers unpack it
-        return iter((self.metric, self.spp, self.data_hash, self.entries))
-
-    def __getitem__(self, index: int):
-        return (self.metric, self.spp, self.data_hash, self.entries)[index]
-
     def text(self) -> str:
         """:func:`format_leaderboard` of this ranking, its notes included."""
         return format_leaderboard(self.metric, self.spp, self.data_hash, self.entries, self.notes)

@@ -48,7 +48,7 @@ import numpy as np
 
 from denoisebench.analysis import aggregate as agg
 from denoisebench.analysis.aggregate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401 (re-exported)
-from denoisebench.analysis.equal_tables import spp_for
+from denoisebench.analysis.equal_tables import ABOUT, ratio_text, spp_for
 from denoisebench.analysis.run_index import RunIndex
 from denoisebench.metrics import floors
 from denoisebench.results.finite import finite_mean, is_finite
@@ -61,8 +61,6 @@ from denoisebench.results.names import (  # noqa: F401 (ERROR_METRICS: re-export
 
 #: Scenes a per-effect column needs (on one scene a column is that scene's score, not the effect's).
 MIN_EFFECT_SCENES = 2
-#: A time ratio within this of 1 (at both ends of its spread) is "about rendering's time": no verdict.
-ABOUT = 0.05
 #: Assumed slope of log(error) vs log(spp) when only one input spp was measured.
 DEFAULT_SLOPE = {"relmse_robust": -1.0, "relmse": -1.0, "mse": -1.0, "flip": -0.5}
 
@@ -445,10 +443,6 @@ def spp_text(spp: float) -> str:
     return f"≈ {digits}-spp (interpolated)"
 
 
-def _ratio_text(ratio: float) -> str:
-    return f"1/{1 / ratio:.0f}" if ratio < 0.5 else f"{100 * ratio:.0f} %"
-
-
 def readings(at: AccuracyTime) -> list[str]:
     """One sentence per denoiser at the spp where it saves the most time against rendering alone.
 
@@ -490,14 +484,14 @@ def readings(at: AccuracyTime) -> list[str]:
         bounds = at.model.ratio_bounds(p.denoiser, p.spp, spp_eq) if at.model is not None else None
         low, high = bounds if bounds is not None else (ratio, ratio)
         spread = ""
-        if _ratio_text(low) != _ratio_text(high):
-            spread = f", {_ratio_text(low)}–{_ratio_text(high)} across the timings' spread"
+        if ratio_text(low) != ratio_text(high):
+            spread = f", {ratio_text(low)}–{ratio_text(high)} across the timings' spread"
         # one rule with the equal-quality verdicts (equal_tables.verdicts): a saving or a loss only
         # beyond 5 % either side of rendering's time, at both ends of the timings' spread
         if high < 1 - ABOUT:
             text = (
                 f"{p.denoiser} at {p.spp} spp matches {spp_text(spp_eq)} rendering in {at.metric} "
-                f"at {_ratio_text(ratio)} of its time ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame{spread}){note}."
+                f"at {ratio_text(ratio)} of its time ({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame{spread}){note}."
             )
         elif low > 1 + ABOUT:
             text = (

@@ -59,14 +59,10 @@ import numpy as np
 from denoisebench.errors import UserInputError
 from denoisebench.results.finite import is_finite
 from denoisebench.results.names import NOISY
-from denoisebench.results.timings import MIN_SPREAD, machine
+from denoisebench.results.timings import MIN_SPREAD, PROBE_REPEATS, TIMING_REPEATS, machine
 
 #: The resolution a report's time axis is for unless ``--time-at`` says otherwise.
 DEFAULT_TIME_AT = (1920, 1080)
-#: Timed renders per probe point and timed calls per denoiser (as :mod:`denoisebench.benchmark.timing`
-#: records them; only for the sentence saying how the times were measured).
-PROBE_REPEATS = 3
-TIMING_REPEATS = 3
 
 
 def parse_size(text: str | None, option: str) -> tuple[int, int] | None:

@@ -30,7 +30,14 @@ from tqdm import tqdm
 
 from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.runner import run_frame
-from denoisebench.results.timings import MIN_SPREAD, machine, read_timings, write_timing
+from denoisebench.results.timings import (
+    MIN_SPREAD,
+    PROBE_REPEATS,
+    TIMING_REPEATS,
+    machine,
+    read_timings,
+    write_timing,
+)
 
 # Lazy imports: frame_jobs' render_job looked up when a render is timed (tests replace it on its module).
 
@@ -40,10 +47,6 @@ DEFAULT_TIME_SIZE = (1024, 1024)
 DEFAULT_TIME_BUDGET = 60.0
 #: Spp of the render probe (two, so that its offset and per-sample cost separate).
 PROBE_SPP = (1, 4)
-#: Timed renders per probe point after the warm-up, interleaved over the two sizes (the minimum is kept).
-PROBE_REPEATS = 3
-#: Timed calls per denoiser at the second size (the minimum is kept; one when a call takes over 2 s).
-TIMING_REPEATS = 3
 #: The smallest timing size, as a multiple of the dataset's pixels, that still separates the costs.
 MIN_SIZE_FACTOR = 4
 

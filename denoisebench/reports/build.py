@@ -46,6 +46,7 @@ from denoisebench.reports import samplers as report_samplers
 from denoisebench.reports.html import render_html
 from denoisebench.reports.markdown import render_markdown
 from denoisebench.reports.model import ReportModel
+from denoisebench.results.crops import window_size, worst_windows
 from denoisebench.results.names import NOISY
 from denoisebench.results.store import ResultsStore
 from denoisebench.results.timings import read_timings
@@ -154,8 +155,8 @@ def _comparisons(
         error = np.mean(
             [relmse_map(img, reference).reshape(reference.shape[:2] + (-1,)).mean(axis=-1) for img in denoised], axis=0
         )
-        size = images.window_size(*reference.shape[:2])
-        windows = images.worst_windows(error, size, count=2)
+        size = window_size(*reference.shape[:2])
+        windows = worst_windows(error, size, count=2)
         scale = images.crop_scale(size)
         full_scale = max(1, 256 // max(reference.shape[:2]))
         entries = []

@@ -19,7 +19,6 @@ import io
 import numpy as np
 
 from denoisebench.metrics.tonemap import tonemap
-from denoisebench.results.crops import window_size, worst_windows  # noqa: F401 (used by report code as images.*)
 
 # Lazy imports: PIL, matplotlib's colour maps and scipy only where an image is encoded, coloured or
 # filtered, so that a run without a report never loads them.

@@ -16,6 +16,10 @@ import sqlite3
 #: The least spread (largest / least plausible time) every measured cost carries: repeats on a shared
 #: machine never see all of its load, so no time is taken as known to better than this.
 MIN_SPREAD = 1.1
+#: Timed renders per probe point after the warm-up, interleaved over the two sizes (the minimum is kept).
+PROBE_REPEATS = 3
+#: Timed calls per denoiser at the second size (the minimum is kept; one when a call takes over 2 s).
+TIMING_REPEATS = 3
 
 _TABLE = (
     "CREATE TABLE IF NOT EXISTS run_timings (run_id TEXT NOT NULL, key TEXT NOT NULL, value TEXT NOT NULL, "

@@ -267,20 +267,7 @@ class RoundHandle:
         round_buffers = self._frame.render_round(granted32)
         self._mark = self._clock()
         seconds = float(round_buffers.seconds)
-        self._render_seconds += seconds
-        self._decision_seconds += decision
-        self.counts = self.counts + granted32
-        self.records.append(
-            RoundRecord(len(self.records), requested, int(granted.sum()), cut, seconds, decision, granted32)
-        )
-        self.final = round_buffers
-        self.cut = cut
-        if self._total is not None:
-            self.exhausted = self.spent >= self._total
-        elif cut and len(self.records) > 1:
-            self.exhausted = True
-        self.latest = _read_only(round_buffers)
-        return self.latest
+        return self._record(requested, int(granted.sum()), cut, seconds, decision, granted32, round_buffers)
 
     @property
     def dimensions(self) -> tuple[str, ...] | None:
@@ -326,12 +313,16 @@ class RoundHandle:
         round_buffers = self._frame.render_placed(film, lens, time)
         self._mark = self._clock()
         seconds = float(round_buffers.seconds)
+        return self._record(requested, int(film.shape[0]), cut, seconds, decision, granted32, round_buffers)
+
+    def _record(
+        self, requested, granted_total: int, cut: bool, seconds: float, decision: float, granted32, round_buffers
+    ):
+        """Book one rendered round (count or placed): clocks, counts, its record, the budget; the read-only buffers."""
         self._render_seconds += seconds
         self._decision_seconds += decision
         self.counts = self.counts + granted32
-        self.records.append(
-            RoundRecord(len(self.records), requested, int(film.shape[0]), cut, seconds, decision, granted32)
-        )
+        self.records.append(RoundRecord(len(self.records), requested, granted_total, cut, seconds, decision, granted32))
         self.final = round_buffers
         self.cut = cut
         if self._total is not None:

@@ -371,30 +371,13 @@ def _bounce(mi, scene, motion, poses, ctx, opts: KernelOptions, state: _PathStat
     return (state,)
 
 
-def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pixel_y):
-    """Trace one sample per lane (lane → pixel ``(pixel_x, pixel_y)``); returns a dict of Dr.Jit arrays.
+def camera_ray(mi, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pixel_y, out: dict):
+    """(film position, time, camera ray, camera pose) of one sample per lane; its random parameters go to ``out``.
 
-    The first vertex is traced here (features, lobe split, next-event estimation, the first bounce
-    and its roulette); later vertices run in a ``dr.while_loop`` over :class:`_PathState`, one
-    :func:`_bounce` per iteration.
-
-    Notes
-    -----
-    Random numbers are drawn in a fixed order: sub-pixel offset (2), then time (1, only with time
-    sampling), lens (2, only with a thin lens), then, when paths bounce, the first vertex's light
-    sample (2), BSDF sample (1 + 2) and roulette (1), then :func:`_bounce`'s per vertex. Every
-    vertex draws them on every live lane, whatever it hits and whichever buffers are asked for, so
-    the image bytes do not depend on ``second_hit`` or on the features.
-    """
-    import drjit as dr
-
+    Draws, in this order: the sub-pixel offset (2, or the pixel centre without jitter), the shutter
+    time (1, only with time sampling), the lens point (2, only with a thin lens): the start of every
+    tracer's fixed random-number order (this module's :func:`trace`, ``volpath.trace``)."""
     switches = camera.switches
-    out = {}
-    motion = None
-    if isinstance(scene, ShutterMotionScene):  # shapes that move within the shutter
-        scene, motion = scene.base, scene.moving
-
-    # ------------------------------------------------------------ camera ray
     if opts.jitter:
         offset = sampler.next_2d()
     else:
@@ -413,6 +396,33 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     else:
         lens_uv = None
     ray, pose = camera.generate_ray(film, lens_uv, time)
+    return film, time, ray, pose
+
+
+def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pixel_y):
+    """Trace one sample per lane (lane → pixel ``(pixel_x, pixel_y)``); returns a dict of Dr.Jit arrays.
+
+    The first vertex is traced here (features, lobe split, next-event estimation, the first bounce
+    and its roulette); later vertices run in a ``dr.while_loop`` over :class:`_PathState`, one
+    :func:`_bounce` per iteration.
+
+    Notes
+    -----
+    Random numbers are drawn in a fixed order: sub-pixel offset (2), then time (1, only with time
+    sampling), lens (2, only with a thin lens), then, when paths bounce, the first vertex's light
+    sample (2), BSDF sample (1 + 2) and roulette (1), then :func:`_bounce`'s per vertex. Every
+    vertex draws them on every live lane, whatever it hits and whichever buffers are asked for, so
+    the image bytes do not depend on ``second_hit`` or on the features.
+    """
+    import drjit as dr
+
+    out = {}
+    motion = None
+    if isinstance(scene, ShutterMotionScene):  # shapes that move within the shutter
+        scene, motion = scene.base, scene.moving
+
+    # ------------------------------------------------------------ camera ray
+    film, time, ray, pose = camera_ray(mi, sampler, camera, opts, pixel_x, pixel_y, out)
     # Every ray of this sample shares its time: the moving shapes' poses once.
     poses = None if motion is None else motion.at(ray.time)
 

@@ -59,6 +59,7 @@ from denoisebench.generator.render.integrator import (
     _first_vertex_bsdf,
     _mis_weight,
     _previous_point,
+    camera_ray,
 )
 from denoisebench.generator.render.media import camera_medium
 from denoisebench.generator.render.motion import ShutterMotionScene
@@ -249,26 +250,8 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
 
     if isinstance(scene, ShutterMotionScene):
         raise NotImplementedError("participating media with shapes that move within the shutter are not supported")
-    switches = camera.switches
     out = {}
-    if opts.jitter:
-        offset = sampler.next_2d()
-    else:
-        offset = mi.Point2f(0.5, 0.5)
-    film = mi.Point2f(mi.Float(pixel_x) + offset.x, mi.Float(pixel_y) + offset.y)
-    out["pixel"] = offset
-    if switches.time_sampling:
-        shutter = sampler.next_1d()
-        time = camera.sample_time(shutter)
-        out["time"] = shutter
-    else:
-        time = camera.frame_time + mi.Float(0.0) * film.x
-    if switches.thin_lens:
-        lens_uv = sampler.next_2d()
-        out["lens"] = lens_uv
-    else:
-        lens_uv = None
-    ray, pose = camera.generate_ray(film, lens_uv, time)
+    film, time, ray, pose = camera_ray(mi, sampler, camera, opts, pixel_x, pixel_y, out)
     camera_dir = mi.Vector3f(ray.d)
 
     lanes = dr.width(film.x)
