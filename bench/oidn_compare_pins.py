@@ -1,4 +1,4 @@
-"""OIDN's own comparison code on fixed frames: the pinned values of ``tests/test_metrics_oidn.py``.
+"""OIDN's own comparison code on fixed frames: the pinned values of ``tests/metrics/test_oidn.py``.
 
     OIDN_TRAINING=/path/to/oidn/training [OIDN_COMMIT=<hash>] .venv/bin/python bench/oidn_compare_pins.py
 

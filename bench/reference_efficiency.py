@@ -1,6 +1,6 @@
 """Our reference against Mitsuba's ``path`` at its defaults: agreement and efficiency, in one run.
 
-The scene is a plain user stage with no denoisebench metadata (tests/plain_stages.py: a
+The scene is a plain user stage with no denoisebench metadata (tests/support/plain_stages.py: a
 Cornell-style box with an area light, diffuse walls, a matte and a rough-metal sphere), or
 ``--usd FILE``. Both renderers see the same translated Mitsuba scene and camera, box pixel filter.
 

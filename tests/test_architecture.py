@@ -203,3 +203,31 @@ def test_only_the_results_store_speaks_sql():
         if "import sqlite3" in text or ".execute(" in text and "SELECT " in text:
             offenders.append(_module_name(path))
     assert not offenders, offenders
+
+
+def test_tests_mirror_the_package():
+    """Every test module lies under ``tests/<package>/`` for a package of denoisebench, and imports no other test module."""
+    tests = Path(__file__).resolve().parent
+    misplaced, cross = [], []
+    for path in sorted(tests.rglob("test_*.py")):
+        relative = path.relative_to(tests)
+        if relative == Path("test_architecture.py") or relative.parts[0] == "data":
+            continue
+        if not (PACKAGE / relative.parent).is_dir():
+            misplaced.append(str(relative))
+        tree = ast.parse(path.read_text())
+        for node in ast.walk(tree):
+            names = (
+                [node.module or ""]
+                if isinstance(node, ast.ImportFrom)
+                else [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else []
+            )
+            cross += [
+                f"{relative}: {name}"
+                for name in names
+                if name.split(".")[-1].startswith("test_") and (name.startswith("tests.") or "." not in name)
+            ]
+    assert not misplaced, f"test modules outside tests/<package>/: {misplaced}"
+    assert not cross, f"test modules importing test modules (move the shared part to tests/support/): {cross}"

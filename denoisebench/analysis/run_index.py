@@ -14,7 +14,7 @@ Notes
   statistics: Tukey & McLaughlin 1963; Wilcox, "Introduction to Robust Estimation and Hypothesis
   Testing", who recommends 20 %; 12.5 % drops exactly one frame of eight). One frame blown up by any
   factor moves the scene's value by at most (largest kept − smallest kept) / kept count
-  (tests/test_run_index_robust.py). Which table holds it decides, not the metric registry, so a run
+  (tests/analysis/test_run_index.py). Which table holds it decides, not the metric registry, so a run
   whose plugin metric is no longer installed reads the same. Values that are not finite are left out
   (:mod:`.finite`). :meth:`RunIndex.deciding_frames` names frames far above their scene's median.
 * **Floors.** A scene's floor is the mean of its kept frames' floors (all must have one) and its

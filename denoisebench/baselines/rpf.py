@@ -36,12 +36,12 @@ Per pass t = 0..3 with box size b (the paper's 55, 35, 17, 7 pixels; scaled down
    filters these colours; the pixel is the mean of its samples'. Every output is a convex
    combination of input samples (w_ii = 1 > 0): finite and non-negative.
 
-Deviations (each with its reason; tests/test_baselines_classic.py shows what they cost):
+Deviations (each with its reason; tests/baselines/test_classic.py shows what they cost):
     * **Sample counts are capped**: ``max_samples`` (128) for the filter, ``stat_samples`` (128)
       for the statistics, where the paper draws b²S/2 (6050 at b = 55, S = 4; the cap applies from
       b = 9 at 4 spp). Filtering is a Monte Carlo estimate of a weighted mean over the box: more
       draws lower its variance, not its expectation. Measured on synthetic 32 px frames
-      (tests/test_baselines_rpf.py): 256 statistics samples were no better than 128; 256 filter
+      (tests/baselines/test_rpf.py): 256 statistics samples were no better than 128; 256 filter
       samples were up to 20% better on a textured frame and no better on depth of field, at
       about 1.3× the time.
     * **Statistics on a coarser grid**: α, β and W^r_c are computed at every ``stride``-th pixel,
@@ -53,7 +53,7 @@ Deviations (each with its reason; tests/test_baselines_classic.py shows what the
       statistics at every pixel (slightly better: fewer, less noisy estimates), at 1/stride² of
       their cost. (The ``fast`` preset's ``min_stat_stride=3`` is 10% faster at 128 px but weakens the
       lens response slightly: rpf_card.md gives the figures.) A 3-px grid in a 3-px box is too coarse (a bounce-driven feature moved a pixel by 1% in
-      tests/test_baselines_rpf.py), hence the half-box cap on the floor.
+      tests/baselines/test_rpf.py), hence the half-box cap on the floor.
       **Straddling pixels are refined** (``refine_passes``, ``refine_samples``): a pixel whose own
       samples straddle surfaces (3σ of its own clustering features above the tolerance 0.1 in some
       channel) clusters differently from its grid point, which may see one surface only and so no

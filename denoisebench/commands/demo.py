@@ -19,7 +19,7 @@ Notes
 * **Scenes.** The per-effect table averages over the scenes that have each effect, so an effect
   needs two scenes, and two effects over the same scenes give the same column (with one scene per
   family, ``environment`` and ``motion_blur`` were both motion_blur's scene). The five scenes give
-  every effect two or three scenes of its own (tests/test_demo.py): area_lights (glossy_fireflies,
+  every effect two or three scenes of its own (tests/commands/test_demo.py): area_lights (glossy_fireflies,
   depth_of_field), depth_of_field (depth_of_field, cluttered), motion_blur (motion_blur, cluttered:
   camera whip pan and object motion), glossy (glossy_fireflies, cluttered), environment
   (motion_blur, glass_env, cluttered), textures (depth_of_field, motion_blur, cluttered).
@@ -47,7 +47,7 @@ Notes
 
 The dataset's scenes use seeds from DEMO_DATASET_SEED on, which no shipped weights were trained on
 (their model cards list their train scenes: seeds 0-1 and 100-105), so the demo scores them on
-scenes they never saw (tests/test_scores_aggregation.py checks every shipped checkpoint).
+scenes they never saw (tests/analysis/test_aggregate.py checks every shipped checkpoint).
 """
 
 from __future__ import annotations

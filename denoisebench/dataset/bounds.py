@@ -35,7 +35,7 @@ reference while the noisy rungs wait to be written):
 Dr.Jit rounds every allocation up to a power of two, and each channel of the lanes' moments is
 its own array, so device arrays are counted that way. Left out: the scene, the interpreter and
 libraries, kernels' registers, an adaptive reference's extra rounds and the EXR writer's
-buffers; tests/test_memory_estimate.py measures a small frame's peaks (``tracemalloc`` and Dr.Jit's
+buffers; tests/generator/render/test_memory_estimate.py measures a small frame's peaks (``tracemalloc`` and Dr.Jit's
 allocation watermark) at 1-2x the estimate. It is compared with ``MemAvailable``
 (``/proc/meminfo``; physical memory where that cannot be read) times the number of frames
 rendered at once.
@@ -66,7 +66,7 @@ REFERENCE_CHANNELS = 9
 SAMPLE_CHANNELS = 22
 SAMPLE_BYTES_PER_SAMPLE = SAMPLE_CHANNELS * 4
 #: Paths per render pass and lanes per pass aimed at (the feature renderer's MAX_PATHS_PER_PASS and
-#: TARGET_LANES; tests/test_memory_estimate.py checks they agree).
+#: TARGET_LANES; tests/generator/render/test_memory_estimate.py checks they agree).
 MAX_PATHS_PER_PASS = 1 << 22
 TARGET_LANES = 1 << 14
 

@@ -39,7 +39,7 @@ ColorVideoVDP as ``cvvdp`` (:mod:`.colorvideovdp`), whose JOD values are not the
 Their warm-up (the first frames of a sequence excluded) is a property of their test set; we
 score the frames given.
 
-Checked against Noisebase's own code (``noisebase`` 1.1.1, tests/test_metrics_noisebase.py): their
+Checked against Noisebase's own code (``noisebase`` 1.1.1, tests/metrics/test_noisebase.py): their
 ``Sequence.save`` PNGs equal :func:`nb_encode` exactly, and their script's ``psnr``, ``ssim``,
 ``msssim``, ``tpsnr``, ``trmae`` and their PyTorch LDR-FLIP (run on the CPU) give our values to
 2e-7 (dB, or relative for FLIP).

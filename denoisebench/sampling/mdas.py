@@ -46,7 +46,7 @@ Notes
   contrast, as in the paper.
 * **Bias.** The reconstruction is a filter: it trades variance for bias at edges, texture and
   defocus boundaries; the renderer's side is unbiased per sample (placed.py). The bias is measured
-  in tests/test_mdas.py on a synthetic defocused light field with known integral
+  in tests/sampling/test_mdas.py on a synthetic defocused light field with known integral
   (:mod:`denoisebench.sampling.synthetic_lightfield`) and stated in ``sampling/mdas_card.md``.
   Adaptive placement adds a bias of its own: a bright outlier reads as contrast, draws new samples
   around it, and those dilute it (in its pixel's mean and in the neighbourhoods that value the

@@ -37,7 +37,7 @@ Conventions:
 * Each pass configuration (kernel options, camera switches, buffers, band and sample sizes) is
   recorded once per scene with ``dr.freeze`` and replayed for later frames, whose camera and seed
   are the recording's inputs: a replay launches the kernels a fresh trace would, so bytes do not
-  depend on it (:data:`FREEZE_PASSES` turns it off; tests/test_render_frozen.py compares the two).
+  depend on it (:data:`FREEZE_PASSES` turns it off; tests/generator/render/test_frozen.py compares the two).
 * Passes hold at most :data:`MAX_PATHS_PER_PASS` paths: a frame is split into bands of rows and
   chunks of samples.
 * Lanes per pixel (``groups``: lane ``g`` takes the samples ``s ≡ g`` mod groups) depend on the image

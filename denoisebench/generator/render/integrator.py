@@ -7,7 +7,7 @@ survival probability ``min(max(throughput) * eta^2, 0.95)``; ``max_depth`` in Mi
 (1: only emitters seen directly, 2: direct lighting, ..., -1: unbounded, which Mitsuba stores as
 ``(uint32) -1`` and we express by dropping the depth test, so paths end only by Russian roulette, by
 escaping, or at zero throughput). It is therefore an unbiased estimator of
-the very image ``path`` renders at the same ``max_depth`` (tests/test_feature_renderer.py checks
+the very image ``path`` renders at the same ``max_depth`` (tests/generator/render/test_features.py checks
 this statistically).
 
 The first vertex is peeled out of the bounce loop: it is where the features are read and where the

@@ -7,7 +7,7 @@ its own, in its *object space*, and a ray meets it by being carried into that sp
 the shape's pose at the ray's time. The nearer of the main scene's hit and every moving shape's hit
 wins. Camera rays, bounce rays and shadow rays all go through :meth:`MovingShapes.ray_intersect` and
 :meth:`MovingShapes.sample_emitter_direction`, so each sample sees the geometry at its own time: the
-estimator stays unbiased for the time-averaged image (tests/test_object_motion.py checks it against
+estimator stays unbiased for the time-averaged image (tests/generator/render/test_motion.py checks it against
 the average of static sub-frame renders by Mitsuba's ``path``).
 
 Conventions and pitfalls:
@@ -37,7 +37,7 @@ Conventions and pitfalls:
   Mitsuba's own test ends them ``2 R`` beyond the shading point (``R`` the main scene's
   bounding-sphere radius, which leaves the moving shapes out), so a moving shape further out than
   that, or static geometry seen from a point on a moving shape outside the sphere, would cast no
-  shadow in next-event estimation (tests/test_object_motion_shadows.py).
+  shadow in next-event estimation (tests/generator/render/test_motion_shadows.py).
 """
 
 from __future__ import annotations

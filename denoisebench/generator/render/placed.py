@@ -21,7 +21,7 @@ numbers with another or with the count rounds' samples.
 
 Unbiasedness: a placed sample's value is an unbiased estimate of the pixel integrand (radiance, and
 each feature) *at its position*, whatever the position; the positions are the caller's business.
-Uniform positions give pixel means with the count rounds' expectation (tests/test_mdas.py checks
+Uniform positions give pixel means with the count rounds' expectation (tests/sampling/test_mdas.py checks
 both against the reference stream).
 
 Notes
@@ -166,7 +166,7 @@ def trace_placed(
         (:func:`~denoisebench.generator.render.frame._compiled_pass`, the same per-scene cache) and
         replayed for later rounds: measured on a 32 px depth-of-field frame, 0.3 s per traced round of
         2048 samples against a few hundredths replayed. :data:`FREEZE_PLACED` False traces every round
-        (the same bits: tests/test_mdas.py compares them).
+        (the same bits: tests/sampling/test_mdas.py compares them).
     """
     mi = load_mitsuba()
     from denoisebench.generator.render.frame import _compiled_pass, _device_copy
