@@ -51,7 +51,9 @@ WARM_UP = 3
 def moving_stage(folder: Path, objects: int):
     """A stage with ``objects`` shapes moving within a one-frame shutter (deterministic)."""
     rng = np.random.default_rng(7)
-    b = SceneBuilder(folder, "bench", 0, FRAMES, ("motion_blur", "area_lights", "environment"))
+    b = SceneBuilder(
+        folder, family="bench", seed=0, frames=FRAMES, effects=("motion_blur", "area_lights", "environment")
+    )
     b.mesh("Floor", geometry.grid(10.0, 10.0, 1, 1, axis="y"), b.material("Floor", diffuse=(0.6, 0.6, 0.6)))
     b.mesh("Wall", geometry.quad([(-5, 0, -3), (5, 0, -3), (5, 4, -3), (-5, 4, -3)]), b.material("Wall"))
     for i in range(objects):

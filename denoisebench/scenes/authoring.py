@@ -66,6 +66,7 @@ class SceneBuilder:
     def __init__(
         self,
         out_dir,
+        *,
         family: str,
         seed: int,
         frames: int,

@@ -46,7 +46,15 @@ class SceneFamily:
         """
         if width <= 0 or height <= 0:
             raise ValueError(f"width and height must be positive, got {width}x{height}")
-        builder = SceneBuilder(out_dir, self.name, seed, frames, self.effects, self.up_axis, self.meters_per_unit)
+        builder = SceneBuilder(
+            out_dir,
+            family=self.name,
+            seed=seed,
+            frames=frames,
+            effects=self.effects,
+            up_axis=self.up_axis,
+            meters_per_unit=self.meters_per_unit,
+        )
         builder.aspect = width / height
         self.build(builder, np.random.default_rng(int(seed)))
         return builder.save()

@@ -57,7 +57,7 @@ FRAMES = 3
 
 def moving_box_stage(tmp_path, kind: str = "rigid", shutter=(-0.5, 0.5), emissive: bool = False):
     """A box moving (``rigid``) or moving and stretching (``stretch``) over FRAMES frames under one rect light."""
-    b = SceneBuilder(tmp_path, "test", 0, FRAMES, ("motion_blur", "area_lights"))
+    b = SceneBuilder(tmp_path, family="test", seed=0, frames=FRAMES, effects=("motion_blur", "area_lights"))
     b.mesh("Floor", geometry.grid(6.0, 6.0, 1, 1, axis="y"), b.material("Floor", diffuse=(0.6, 0.6, 0.6)))
     material = b.material("Box", diffuse=(0.9, 0.2, 0.1), roughness=0.5, emissive=(4.0, 4.0, 4.0) if emissive else None)
     box = b.mesh("Box", geometry.box(size=(0.6, 0.6, 0.6)), material)

@@ -578,7 +578,7 @@ def test_a_medium_on_a_material_fills_every_gprim_bound_to_it(tmp_path):
     from denoisebench.scenes.authoring import SceneBuilder
     from denoisebench.scenes.media import author_medium
 
-    b = SceneBuilder(tmp_path, "test", 0, 1, ("specular", "transmission", "media"))
+    b = SceneBuilder(tmp_path, family="test", seed=0, frames=1, effects=("specular", "transmission", "media"))
     jade = b.material("Jade", diffuse=(1.0, 1.0, 1.0), roughness=0.0, opacity=0.0, ior=1.6)
     author_medium(jade, sigma_t=(8.0, 8.0, 8.0), albedo=(0.6, 0.9, 0.8), g=0.2)
     b.sphere("A", 0.5, jade, translate=(-1.0, 0.5, 0.0))
@@ -604,7 +604,7 @@ def test_nested_media_get_the_enclosing_medium_as_exterior_and_agree_with_volpat
     from denoisebench.scenes.authoring import SceneBuilder
     from denoisebench.scenes.media import author_medium
 
-    b = SceneBuilder(tmp_path, "test", 0, 1, ("media",))
+    b = SceneBuilder(tmp_path, family="test", seed=0, frames=1, effects=("media",))
     haze = b.material("Haze")
     b.mesh("Floor", geometry.grid(8.0, 8.0, 1, 1, axis="y"), b.material("Floor", diffuse=(0.5, 0.5, 0.5)))
     fog = b.cube("Fog", 1.0, haze, translate=(0.0, 1.0, 0.0), scale=(3.0, 2.0, 3.0))

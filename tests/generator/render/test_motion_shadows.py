@@ -32,7 +32,7 @@ SLAB_HEIGHT = 4.0  # the floor's bounding radius is sqrt(2): 2 R = 2.83 < 4 - 0.
 
 
 def moving_box_stage(tmp_path):
-    b = SceneBuilder(tmp_path, "test", 0, FRAMES, ("motion_blur", "environment"))
+    b = SceneBuilder(tmp_path, family="test", seed=0, frames=FRAMES, effects=("motion_blur", "environment"))
     b.mesh("Floor", geometry.grid(2.0, 2.0, 1, 1, axis="y"), b.material("Floor", diffuse=(0.8, 0.8, 0.8)))
     slab = b.mesh("Slab", geometry.box(size=(3.0, 0.2, 3.0)), b.material("Slab", diffuse=(0.5, 0.5, 0.5)))
     translate = UsdGeom.Xformable(slab).AddTranslateOp()
