@@ -499,7 +499,13 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
         verify_files(dataset, run_files(dataset, scenes, spp, samples=True), progress=progress)
     data_hash = dataset_hash(dataset)
     run_id = run_identity(data_hash, config)
-    created = store.ensure_run(run_id, data_hash, str(dataset.root.resolve()), config.as_dict(), software_versions())
+    created = store.ensure_run(
+        run_id,
+        dataset_hash=data_hash,
+        dataset_path=str(dataset.root.resolve()),
+        config=config.as_dict(),
+        versions=software_versions(),
+    )
     store.add_denoiser(
         run_id=run_id, label=NOISY, spec=NOISY, kind="input", needs={"color"}, temporal=False, load_error=None
     )

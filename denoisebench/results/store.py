@@ -1,23 +1,6 @@
 """The results store: one SQLite file (stdlib ``sqlite3``) that every benchmark run writes to.
 
-Tables (schema version :data:`SCHEMA_VERSION`, kept in ``schema_version``):
-
-``runs``            one row per benchmark run: dataset hash, config (JSON), software versions (JSON)
-``run_denoisers``   the labels of a run (noisy input, denoisers, sampler pairs): label, spec, needs,
-                    temporal, load error (if any), ``trained_on``: the run's scenes the denoiser
-                    declared it was trained on (JSON list), and the run's **sampler dimension**:
-                    ``sampler`` (the live sampler whose image the label scores; NULL: the dataset's
-                    stored input) and ``denoiser_label`` (the denoiser run on it; NULL: none)
-``units``           one denoiser on one sequence (scene) at one input spp: status, error, seconds
-``frames``          one row per frame of a unit: status, error, render/denoise/total seconds
-``frame_metrics``   metric values per frame (spatial, gradient, and per-frame flicker), with the
-                    reference-noise ``floor`` and ``ref_se`` of MSE-family metrics (else NULL)
-``sequence_metrics``  temporal metric values per unit (same ``floor``/``ref_se`` columns)
-``images``          the denoised last frame of each unit (zlib-compressed float32), for reports
-``strips``          a crop of the unit's first frames (:mod:`.strips`, zlib-compressed float32)
-``not_applicable``  metrics that do not apply to a frame (``frame`` ≥ 0) or to a unit's sequence
-                    (``frame`` = -1), with the reason (SSIM on frames under 11×11 px): such a
-                    metric has no value there, the frame's other metrics are kept
+Its tables, their schema versions and the migrations between them are in :mod:`.schema`.
 
 Notes
 -----
@@ -29,17 +12,8 @@ Notes
   upgrade, and the busy timeout makes the second wait instead of failing. Two processes running the
   same run compute the same unit at worst twice: the second finds the row inside its transaction
   and writes nothing (:meth:`ResultsStore.write_unit` returns False).
-* **Schema versions.** Version 2 added ``floor`` and ``ref_se`` to ``frame_metrics`` and
-  ``sequence_metrics`` and the ``strips`` table (:mod:`denoisebench.metrics.floors`). A version-1 database opened for
-  writing is migrated in place (``ALTER TABLE ... ADD COLUMN``, one transaction; its old rows get
-  NULL floors); opened read-only it is read as it is, every floor None. Version 3 added
-  ``run_denoisers.trained_on`` (migrated the same way; NULL: not declared). Version 4 added the
-  ``not_applicable`` table (created when an older database is opened for writing; read as empty
-  from an older one opened read-only). Version 5 added ``run_denoisers.sampler`` and
-  ``run_denoisers.denoiser_label``; migrating fills them in from each row's kind, label and spec
-  (:func:`sampler_dimension`, the rule :mod:`.sampler_units` labels pairs by), and an older
-  database opened read-only gets the same values from the same rule when read. A newer version
-  than this code knows is refused.
+* **Schema versions.** A database opened for writing is created or migrated to the current version
+  (:func:`.schema.create_or_migrate`); opened read-only it is read as it is (:mod:`.schema`).
 * **Rows.** Readers return typed rows (:mod:`.records`), readable by attribute or by key.
 * The WAL journal mode is a property of the database file; network file systems do not support it
   (SQLite's documentation): keep the database on a local disk.
@@ -59,9 +33,8 @@ from pathlib import Path
 import numpy as np
 
 from denoisebench.errors import UserInputError
-from denoisebench.results import sampler_maps
+from denoisebench.results import sampler_maps, schema
 from denoisebench.results.finite import finite_or_none
-from denoisebench.results.names import PAIR_LABEL_SEPARATOR, PAIR_SPEC_SEPARATOR, SAMPLER_SPEC_PREFIX
 from denoisebench.results.records import (
     EntryRow,
     FrameRow,
@@ -73,148 +46,12 @@ from denoisebench.results.records import (
     UnitRow,
 )
 
-SCHEMA_VERSION = 5
-#: Versions this code reads (older ones are migrated when opened for writing).
-READABLE_VERSIONS = (1, 2, 3, 4, 5)
 #: Seconds a writer waits for another's transaction before giving up.
 BUSY_TIMEOUT_S = 120.0
-
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL);
-CREATE TABLE IF NOT EXISTS runs (
-    run_id TEXT PRIMARY KEY,
-    dataset_hash TEXT NOT NULL,
-    dataset_path TEXT NOT NULL,
-    config TEXT NOT NULL,
-    versions TEXT NOT NULL,
-    created_at TEXT NOT NULL,
-    finished_at TEXT
-);
-CREATE TABLE IF NOT EXISTS run_denoisers (
-    run_id TEXT NOT NULL REFERENCES runs(run_id),
-    label TEXT NOT NULL,
-    spec TEXT NOT NULL,
-    kind TEXT NOT NULL,
-    needs TEXT NOT NULL,
-    temporal INTEGER NOT NULL,
-    load_error TEXT,
-    trained_on TEXT,
-    sampler TEXT,
-    denoiser_label TEXT,
-    PRIMARY KEY (run_id, label)
-);
-CREATE TABLE IF NOT EXISTS units (
-    run_id TEXT NOT NULL REFERENCES runs(run_id),
-    denoiser TEXT NOT NULL,
-    scene TEXT NOT NULL,
-    spp INTEGER NOT NULL,
-    status TEXT NOT NULL,
-    error TEXT,
-    frames INTEGER NOT NULL,
-    frames_ok INTEGER NOT NULL,
-    denoise_seconds REAL,
-    render_seconds REAL,
-    finished_at TEXT NOT NULL,
-    PRIMARY KEY (run_id, denoiser, scene, spp)
-);
-CREATE TABLE IF NOT EXISTS frames (
-    run_id TEXT NOT NULL,
-    denoiser TEXT NOT NULL,
-    scene TEXT NOT NULL,
-    spp INTEGER NOT NULL,
-    frame INTEGER NOT NULL,
-    status TEXT NOT NULL,
-    error TEXT,
-    render_seconds REAL,
-    denoise_seconds REAL,
-    total_seconds REAL,
-    sanitized INTEGER NOT NULL DEFAULT 0,
-    PRIMARY KEY (run_id, denoiser, scene, spp, frame)
-);
-CREATE TABLE IF NOT EXISTS frame_metrics (
-    run_id TEXT NOT NULL,
-    denoiser TEXT NOT NULL,
-    scene TEXT NOT NULL,
-    spp INTEGER NOT NULL,
-    frame INTEGER NOT NULL,
-    metric TEXT NOT NULL,
-    value REAL,
-    floor REAL,
-    ref_se REAL,
-    PRIMARY KEY (run_id, denoiser, scene, spp, frame, metric)
-);
-CREATE TABLE IF NOT EXISTS not_applicable (
-    run_id TEXT NOT NULL,
-    denoiser TEXT NOT NULL,
-    scene TEXT NOT NULL,
-    spp INTEGER NOT NULL,
-    frame INTEGER NOT NULL,
-    metric TEXT NOT NULL,
-    reason TEXT NOT NULL,
-    PRIMARY KEY (run_id, denoiser, scene, spp, frame, metric)
-);
-CREATE TABLE IF NOT EXISTS sequence_metrics (
-    run_id TEXT NOT NULL,
-    denoiser TEXT NOT NULL,
-    scene TEXT NOT NULL,
-    spp INTEGER NOT NULL,
-    metric TEXT NOT NULL,
-    value REAL,
-    floor REAL,
-    ref_se REAL,
-    PRIMARY KEY (run_id, denoiser, scene, spp, metric)
-);
-CREATE TABLE IF NOT EXISTS images (
-    run_id TEXT NOT NULL,
-    denoiser TEXT NOT NULL,
-    scene TEXT NOT NULL,
-    spp INTEGER NOT NULL,
-    frame INTEGER NOT NULL,
-    height INTEGER NOT NULL,
-    width INTEGER NOT NULL,
-    data BLOB NOT NULL,
-    PRIMARY KEY (run_id, denoiser, scene, spp)
-);
-CREATE TABLE IF NOT EXISTS strips (
-    run_id TEXT NOT NULL,
-    denoiser TEXT NOT NULL,
-    scene TEXT NOT NULL,
-    spp INTEGER NOT NULL,
-    first_frame INTEGER NOT NULL,
-    frames INTEGER NOT NULL,
-    top INTEGER NOT NULL,
-    left_px INTEGER NOT NULL,
-    side INTEGER NOT NULL,
-    data BLOB NOT NULL,
-    PRIMARY KEY (run_id, denoiser, scene, spp)
-);
-"""
-
-_UNIT_TABLES = ("frames", "frame_metrics", "sequence_metrics", "images", "strips", "not_applicable")
-#: The tables of a unit that exist in a database of each schema version.
-_UNIT_TABLES_OF = {1: _UNIT_TABLES[:4], 2: _UNIT_TABLES[:5], 3: _UNIT_TABLES[:5], 4: _UNIT_TABLES, 5: _UNIT_TABLES}
 
 
 def utc_now() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
-
-
-def sampler_dimension(kind: str, label: str, spec: str) -> tuple[str | None, str | None]:
-    """(sampler, denoiser_label) of a ``run_denoisers`` row from its kind, label and spec.
-
-    The rule rows written before schema version 5 are read (and migrated) by: the noisy input (kind
-    ``input``) has neither; a denoiser is its own label on the stored inputs; a ``sampler`` row's
-    spec is ``sampler SPEC`` (the sampler alone, labelled ``SPEC``) or ``sampler SPEC + DSPEC``
-    (labelled ``SPEC+DLABEL``), as :mod:`.sampler_units` writes them (:mod:`.names`).
-    """
-    if kind == "input":
-        return None, None
-    if kind != "sampler":
-        return None, label
-    sampler = spec.removeprefix(SAMPLER_SPEC_PREFIX).split(PAIR_SPEC_SEPARATOR)[0]
-    if not label.startswith(sampler + PAIR_LABEL_SEPARATOR):
-        return sampler, None
-    return sampler, label[len(sampler) + len(PAIR_LABEL_SEPARATOR) :]
 
 
 def encode_image(image: np.ndarray) -> bytes:
@@ -249,56 +86,11 @@ class ResultsStore:
     # ------------------------------------------------------------------ schema
 
     def _ensure_schema(self) -> None:
-        with self.transaction():
-            # one statement at a time: executescript() would COMMIT our transaction for us
-            for statement in filter(str.strip, _SCHEMA.split(";")):
-                self.conn.execute(statement)
-            self.conn.execute(sampler_maps.SCHEMA)  # spp maps of live sampler units (report)
-            if self.conn.execute("SELECT COUNT(*) FROM schema_version").fetchone()[0] == 0:
-                self.conn.execute("INSERT INTO schema_version (version) VALUES (?)", (SCHEMA_VERSION,))
-            version = self.conn.execute("SELECT MAX(version) FROM schema_version").fetchone()[0]
-            if version == 1:  # 1 → 2: floors (CREATE TABLE IF NOT EXISTS left the old tables as they were)
-                for table in ("frame_metrics", "sequence_metrics"):
-                    have = {row[1] for row in self.conn.execute(f"PRAGMA table_info({table})")}
-                    for column in ("floor", "ref_se"):
-                        if column not in have:
-                            self.conn.execute(f"ALTER TABLE {table} ADD COLUMN {column} REAL")
-                self.conn.execute("UPDATE schema_version SET version = 2")
-                version = 2
-            if version == 2:  # 2 → 3: the scenes a denoiser was trained on
-                have = {row[1] for row in self.conn.execute("PRAGMA table_info(run_denoisers)")}
-                if "trained_on" not in have:
-                    self.conn.execute("ALTER TABLE run_denoisers ADD COLUMN trained_on TEXT")
-                self.conn.execute("UPDATE schema_version SET version = 3")
-                version = 3
-            if version == 3:  # 3 → 4: the not_applicable table (created above)
-                self.conn.execute("UPDATE schema_version SET version = 4")
-                version = 4
-            if version == 4:  # 4 → 5: the sampler dimension, filled in from the rows' kind, label and spec
-                have = {row[1] for row in self.conn.execute("PRAGMA table_info(run_denoisers)")}
-                for column in ("sampler", "denoiser_label"):
-                    if column not in have:
-                        self.conn.execute(f"ALTER TABLE run_denoisers ADD COLUMN {column} TEXT")
-                rows = self.conn.execute("SELECT rowid, kind, label, spec FROM run_denoisers").fetchall()
-                self.conn.executemany(
-                    "UPDATE run_denoisers SET sampler = ?, denoiser_label = ? WHERE rowid = ?",
-                    [(*sampler_dimension(kind, label, spec), rowid) for rowid, kind, label, spec in rows],
-                )
-                self.conn.execute("UPDATE schema_version SET version = 5")
+        with self.transaction() as conn:
+            schema.create_or_migrate(conn)
 
     def _check_version(self) -> None:
-        try:
-            row = self.conn.execute("SELECT MAX(version) FROM schema_version").fetchone()
-        except sqlite3.OperationalError:
-            raise UserInputError(
-                f"{self.path} is not a denoisebench results database (no schema_version table)"
-            ) from None
-        if row is None or row[0] not in READABLE_VERSIONS:
-            raise UserInputError(
-                f"{self.path} has results schema version {row[0] if row else None}; "
-                f"this denoisebench reads versions {', '.join(map(str, READABLE_VERSIONS))}"
-            )
-        self.version = int(row[0])
+        self.version = schema.read_version(self.conn, self.path)
         self._floor_columns = "floor, ref_se" if self.version >= 2 else "NULL, NULL"
         self._trained_column = "trained_on" if self.version >= 3 else "NULL"
         self._sampler_columns = "sampler, denoiser_label" if self.version >= 5 else "NULL, NULL"
@@ -325,7 +117,7 @@ class ResultsStore:
 
     # ------------------------------------------------------------------ runs
 
-    def ensure_run(self, run_id: str, dataset_hash: str, dataset_path: str, config: dict, versions: dict) -> bool:
+    def ensure_run(self, run_id: str, *, dataset_hash: str, dataset_path: str, config: dict, versions: dict) -> bool:
         """Create the run row unless it exists; True when it was created (False: resuming)."""
         with self.transaction() as conn:
             exists = conn.execute("SELECT 1 FROM runs WHERE run_id = ?", (run_id,)).fetchone()
@@ -418,7 +210,7 @@ class ResultsStore:
         out = []
         for label, spec, kind, needs, temporal, load_error, trained, sampler, denoiser_label in rows:
             if self.version < 5:  # not stored yet: the rule the migration fills them in by
-                sampler, denoiser_label = sampler_dimension(kind, label, spec)
+                sampler, denoiser_label = schema.sampler_dimension(kind, label, spec)
             out.append(
                 EntryRow(
                     label,
@@ -454,7 +246,7 @@ class ResultsStore:
                 return False
             # leftovers of a unit whose transaction never committed cannot exist (atomicity), but a
             # unit row deleted by hand may have left its children: replace them
-            for table in _UNIT_TABLES_OF[self.version]:
+            for table in schema.UNIT_TABLES_OF[self.version]:
                 conn.execute(f"DELETE FROM {table} WHERE run_id = ? AND denoiser = ? AND scene = ? AND spp = ?", key)
             for f in unit.frames:
                 conn.execute(
@@ -639,7 +431,7 @@ class ResultsStore:
     def integrity_problems(self) -> list[str]:
         """SQLite's integrity check plus ours: every frame row belongs to a unit row and vice versa."""
         problems = [r[0] for r in self.conn.execute("PRAGMA integrity_check") if r[0] != "ok"]
-        tables = list(_UNIT_TABLES_OF[self.version])
+        tables = list(schema.UNIT_TABLES_OF[self.version])
         if sampler_maps.has_table(self.conn):  # spp maps of live sampler units, when the database has them
             tables.append(sampler_maps.TABLE)
         for table in tables:

@@ -21,7 +21,8 @@ from denoisebench.reports import strips
 from denoisebench.results import crops
 from denoisebench.results.names import NOISY
 from denoisebench.results.records import FrameRecord, UnitRecord
-from denoisebench.results.store import SCHEMA_VERSION, ResultsStore
+from denoisebench.results.schema import SCHEMA_VERSION
+from denoisebench.results.store import ResultsStore
 from tests.support.paths import REPO
 
 SCENES = {"dark": 0.05, "plain": 1.0, "glossy_fireflies": 300.0}  # very different brightness
@@ -64,7 +65,9 @@ def _sequence(scene: str, scale: float, spp: int, frames: int = 8, size: int = 2
 
 def _store_with_units(path, units, labels=(NOISY, "blur")) -> tuple[ResultsStore, str]:
     store = ResultsStore(path)
-    store.ensure_run("run1", "hash", "/nowhere", {"denoisers": list(labels)}, {})
+    store.ensure_run(
+        "run1", dataset_hash="hash", dataset_path="/nowhere", config={"denoisers": list(labels)}, versions={}
+    )
     for label in labels:
         store.add_denoiser(
             run_id="run1",

@@ -160,7 +160,7 @@ def test_sampler_frames_round_trip_through_the_store_and_an_old_store_reads_as_n
     unit = UnitRecord("s", "scene", 4, "ok", None, [FrameRecord(t, "ok", None, 1.0, 0.0, 1.0) for t in range(3)])
     unit.sampler_frames = frames
     with ResultsStore(tmp_path / "r.sqlite") as store:
-        store.ensure_run("run", "hash", "/data", {"denoisers": []}, {})
+        store.ensure_run("run", dataset_hash="hash", dataset_path="/data", config={"denoisers": []}, versions={})
         assert store.write_unit("run", unit)
         rows = sampler_maps.read(store, "run")
         assert store.integrity_problems() == []

@@ -26,7 +26,8 @@ from denoisebench.dataset.synthetic import make_synthetic_dataset
 from denoisebench.results.finite import finite_mean, finite_or_none, finite_values, is_finite
 from denoisebench.results.names import NOISY
 from denoisebench.results.records import EntryRow, FrameRecord, FrameRow, UnitRecord, UnitRow
-from denoisebench.results.store import SCHEMA_VERSION, ResultsStore, sampler_dimension
+from denoisebench.results.schema import SCHEMA_VERSION, sampler_dimension
+from denoisebench.results.store import ResultsStore
 
 # ----------------------------------------------------------------------------------------------- finite
 
@@ -101,7 +102,13 @@ PLANTED = {NOISY: 0.8, "box": 0.2, "uniform": 0.6, "uniform+box": 0.1}  # relMSE
 def _sampler_store(path) -> ResultsStore:
     """One run: noisy and ``box`` on the stored inputs, ``uniform`` alone and with ``box``, planted relMSE."""
     store = ResultsStore(path)
-    store.ensure_run("run1", "hash", "/nowhere", {"denoisers": ["box"], "samplers": ["uniform"]}, {})
+    store.ensure_run(
+        "run1",
+        dataset_hash="hash",
+        dataset_path="/nowhere",
+        config={"denoisers": ["box"], "samplers": ["uniform"]},
+        versions={},
+    )
     plain = dict(run_id="run1", needs={"color"}, temporal=False, load_error=None)
     store.add_denoiser(label=NOISY, spec=NOISY, kind="input", **plain)
     store.add_denoiser(label="box", spec="box", kind="denoiser", **plain)
