@@ -6,9 +6,13 @@ scene, so they all read the same number the same way.
 
 Notes
 -----
-* **Per-scene value.** A metric the run stored per sequence (temporal metrics, :mod:`.store`'s
-  ``sequence_metrics``) and not per frame has the sequence's value on a scene; any other metric the
-  **trimmed mean** over the scene's successful frames: sorted by value, ⌈:data:`FRAME_TRIM` · n⌉
+* **Per-scene value.** A metric the run stored per frame has the **trimmed mean** over the scene's
+  successful frames; a temporal metric the run also stored per consecutive pair (``flicker.<metric>``
+  on frame t, frame t against t−1: ``FLICKER_METRICS``) has the trimmed mean over those pairs, with
+  their floors, so one flickering frame cannot decide it either (a frame enters two pairs, so twice
+  as many pairs are dropped: 2 of 7 at each end for 8 frames, the mean of the middle 3); a temporal
+  metric stored per sequence only (``sequence_metrics``: temporal_l1, cvvdp, ...) has the sequence's
+  value. Frames: sorted by value, ⌈:data:`FRAME_TRIM` · n⌉
   frames dropped at each end when there are at least 3 (one of 3 to 8 frames: the median of 3, the
   mean of the middle 6 of 8), so that no single frame decides a scene (the trimmed mean of robust
   statistics: Tukey & McLaughlin 1963; Wilcox, "Introduction to Robust Estimation and Hypothesis
@@ -29,6 +33,7 @@ from __future__ import annotations
 import math
 
 from denoisebench.results.finite import finite_mean, finite_values, is_finite
+from denoisebench.results.names import FLICKER_PREFIX
 from denoisebench.results.records import FrameRow, SequenceRow, UnitRow
 
 #: Share of a scene's frames dropped at each end of the sorted values (at least 3 frames): one of 8.
@@ -38,12 +43,17 @@ DECIDING_FACTOR = 10.0
 
 
 def kept_frames(frames: list, metric: str) -> list:
-    """The frames a scene's value averages: finite ones, sorted by value, without the ⌈FRAME_TRIM·n⌉
-    lowest and highest when there are at least 3 (module Notes)."""
+    """The frames a scene's value averages: finite ones, sorted by value, without the ``k`` lowest and
+    highest: k = ⌈FRAME_TRIM·n⌉ when there are at least 3 frames; for per-pair values
+    (``flicker.<metric>``, n pairs of n + 1 frames) k = 2·⌈FRAME_TRIM·(n + 1)⌉, at most (n − 1) // 2,
+    since one frame enters two pairs (module Notes)."""
     rows = sorted((f for f in frames if is_finite(f.metrics.get(metric))), key=lambda f: f.metrics[metric])
     if len(rows) < 3:
         return rows
-    k = math.ceil(FRAME_TRIM * len(rows))
+    if metric.startswith(FLICKER_PREFIX):
+        k = min(2 * math.ceil(FRAME_TRIM * (len(rows) + 1)), (len(rows) - 1) // 2)
+    else:
+        k = math.ceil(FRAME_TRIM * len(rows))
     return rows[k : len(rows) - k]
 
 
@@ -99,17 +109,30 @@ class RunIndex:
         """True when the run holds ``metric`` per sequence only (a temporal metric)."""
         return metric in self.sequence_metric_names and metric not in self.frame_metric_names
 
+    def per_frame_name(self, metric: str) -> str | None:
+        """The name under which frame rows hold ``metric`` (itself, or ``flicker.<metric>`` for a temporal
+        metric stored per pair), or None when it is held per sequence only."""
+        if not self.is_sequence_metric(metric):
+            return metric
+        return FLICKER_PREFIX + metric if FLICKER_PREFIX + metric in self.flicker_names else None
+
     def scene_value(self, label: str, spp: int, scene: str, metric: str) -> float | None:
-        """The value of ``metric`` for ``label`` on one scene: its sequence value, or its frames' mean."""
-        if self.is_sequence_metric(metric):
+        """The value of ``metric`` for ``label`` on one scene: the trimmed mean of its frames (or pairs),
+        or its sequence value (module Notes)."""
+        name = self.per_frame_name(metric)
+        if name is None:
             values = [s.value for s in self._sequences.get((label, spp, scene, metric), [])]
         else:
-            values = [f.metrics.get(metric) for f in kept_frames(self.ok_frames(label, spp, scene), metric)]
+            values = [f.metrics.get(name) for f in kept_frames(self.ok_frames(label, spp, scene), name)]
         return finite_mean(values)
 
     def deciding_frames(self, label: str, spp: int, scene: str, metric: str) -> list[tuple[int, float, float]]:
-        """[(frame, value, scene median)] of frames whose ``metric`` is over :data:`DECIDING_FACTOR` × the
-        scene's median: the frames a plain mean would be decided by (the trimmed mean drops them)."""
+        """[(frame, value, scene median)] of frames (for a temporal metric: pairs, named by their later
+        frame) whose ``metric`` is over :data:`DECIDING_FACTOR` × the scene's median: the frames a plain
+        mean would be decided by (the trimmed mean drops them)."""
+        metric = self.per_frame_name(metric)
+        if metric is None:
+            return []
         frames = [f for f in self.ok_frames(label, spp, scene) if is_finite(f.metrics.get(metric))]
         if len(frames) < 3:
             return []
@@ -121,13 +144,14 @@ class RunIndex:
 
     def scene_floor(self, label: str, spp: int, scene: str, metric: str) -> tuple[float | None, float | None]:
         """(floor, ref_se) of a metric on one scene: frames' mean floor, se of the frames' mean."""
-        if self.is_sequence_metric(metric):
+        name = self.per_frame_name(metric)
+        if name is None:
             rows = self._sequences.get((label, spp, scene, metric), [])
             floors, ses = finite_values(r.floor for r in rows), finite_values(r.ref_se for r in rows)
         else:
-            frames = kept_frames(self.ok_frames(label, spp, scene), metric)
-            floors = finite_values(f.floors.get(metric) for f in frames)
-            ses = finite_values(f.ref_se.get(metric) for f in frames)
+            frames = kept_frames(self.ok_frames(label, spp, scene), name)
+            floors = finite_values(f.floors.get(name) for f in frames)
+            ses = finite_values(f.ref_se.get(name) for f in frames)
             if len(floors) != len(frames):
                 floors = []
             ses = ses if len(ses) == len(frames) else []

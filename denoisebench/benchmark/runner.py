@@ -337,19 +337,23 @@ def _sequence_metrics(outputs, refs, motion, names: list[str], ref_vars=None, tr
     return (*_split_results(results), skipped)
 
 
-def _flicker(outputs, refs, motion=None, trim=None) -> list[dict[str, float]]:
-    """FLICKER_METRICS of each consecutive pair: the flicker of frame t against frame t−1."""
+def _flicker(outputs, refs, motion=None, trim=None, ref_vars=None) -> list[tuple[dict, dict, dict]]:
+    """FLICKER_METRICS of each consecutive pair: (values, floors, ref_se) of frame t against frame t−1,
+    named ``flicker.<metric>``. The scene's temporal score is their trimmed mean over pairs
+    (:mod:`denoisebench.analysis.run_index`), so one pair cannot decide it; the floors correct it."""
     out = []
     for t in range(1, len(outputs)):
         pair_motion = None if motion is None else motion[t - 1 : t + 1]
+        pair_var = None if ref_vars is None else np.stack(ref_vars[t - 1 : t + 1])
         results = compute_metrics(
             np.stack(outputs[t - 1 : t + 1]),
             np.stack(refs[t - 1 : t + 1]),
             list(FLICKER_METRICS),
             motion=pair_motion,
+            ref_var=pair_var,
             trim=trim,
         )
-        out.append({FLICKER_PREFIX + name: r.value for name, r in results.items()})
+        out.append(tuple({FLICKER_PREFIX + k: v for k, v in part.items()} for part in _split_results(results)))
     return out
 
 
@@ -407,8 +411,10 @@ def measure_unit(
     )
     unit.image_frame, unit.image = frames[-1].index, outputs[-1]
     if len(outputs) > 1:
-        for record, values in zip(records[1:], _flicker(outputs, refs, motion, trim)):
+        for record, (values, floors, ses) in zip(records[1:], _flicker(outputs, refs, motion, trim, ref_vars)):
             record.metrics.update(values)
+            record.floors.update(floors)
+            record.ref_se.update(ses)
 
         first, unit.strip_window, unit.strip = cut(outputs, [f.color for f in frames], refs, motion)
         unit.strip_first = frames[first].index

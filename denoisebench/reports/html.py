@@ -205,8 +205,10 @@ def _results(report: ReportModel) -> str:
     if deciding:
         parts.append(
             "<h3>Frames that would decide a mean</h3><p class=\"note\">A scene's score is the trimmed mean of its "
-            "frames (one frame in eight dropped at each end), so these frames, far above the rest of their scene, do "
-            "not decide it.</p><ul class=\"readings\">" + "".join(f"<li>{e(x)}</li>" for x in deciding) + "</ul>"
+            "frames (one frame in eight dropped at each end; for flicker, of its frame pairs, two in seven), so these "
+            "frames (for flicker: the later frame of the pair), far above the rest of their scene, do not decide it.</p><ul class=\"readings\">"
+            + "".join(f"<li>{e(x)}</li>" for x in deciding)
+            + "</ul>"
         )
     unresolved = notes.unresolved_text(report)
     if unresolved:

@@ -83,8 +83,9 @@ def render_markdown(report: ReportModel) -> str:
             [
                 "### Frames that would decide a mean",
                 "",
-                "A scene's score is the trimmed mean of its frames (one frame in eight dropped at each end), so these "
-                "frames, far above the rest of their scene, do not decide it; look at them in the frames' EXRs.",
+                "A scene's score is the trimmed mean of its frames (one frame in eight dropped at each end; for flicker, "
+                "of its frame pairs, two in seven), so these frames (for flicker: the later frame of the pair), far "
+                "above the rest of their scene, do not decide it; look at them in the frames' EXRs.",
                 "",
             ]
             + [f"- {md(line)}" for line in deciding]

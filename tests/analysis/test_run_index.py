@@ -1,4 +1,4 @@
-"""Scores no single frame decides: a scene's value is the trimmed mean of its frames.
+"""Scores no single frame decides: a scene's value is the trimmed mean of its frames (or frame pairs).
 
 A blown-up frame (OIDN smearing a small bright emitter on one frame of a glossy_fireflies sequence
 gave relmse_robust 368 there against ~0.01 elsewhere, and the scene 61.6) must move its scene's lead
@@ -9,10 +9,15 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from denoisebench.analysis.run_index import FRAME_TRIM, RunIndex, kept_frames
-from denoisebench.results.records import FrameRow, UnitRow
+from denoisebench.benchmark.runner import measure_unit
+from denoisebench.dataset import open_dataset
+from denoisebench.dataset.synthetic import make_synthetic_dataset
+from denoisebench.results.names import FLICKER_PREFIX
+from denoisebench.results.records import FrameRow, SequenceRow, UnitRow
 
 
 def _index(values: list[float], floor: float = 0.001, se: float = 1e-4) -> RunIndex:
@@ -71,3 +76,49 @@ def test_frames_that_would_decide_a_plain_mean_are_named():
     (found,) = _index(values).deciding_frames("oidn", 16, "s", "relmse_robust")
     assert found[0] == 5 and found[1] == 368.0 and found[2] == pytest.approx(0.013, rel=0.05)
     assert _index(BASE).deciding_frames("oidn", 16, "s", "relmse_robust") == []
+
+
+class _BlowsOneFrame:
+    """The noisy input as it is, but frame ``index`` multiplied by ``factor`` (a denoiser that smears one emitter)."""
+
+    def __init__(self, index: int | None, factor: float = 1e4):
+        self.index, self.factor = index, factor
+
+    def denoise(self, frame):
+        out = np.array(frame.color, dtype=np.float32)
+        return out * self.factor if frame.index == self.index else out
+
+
+def _flicker_index(tmp_path, blown: int | None) -> RunIndex:
+    data = open_dataset(make_synthetic_dataset(tmp_path / "data", scenes=1, frames=8, spp=(4,), ref_spp=64))
+    sequence = data.sequence("synthetic_000", 4)
+    unit = measure_unit("d", _BlowsOneFrame(blown), sequence, [], ["temporal_relmse_robust"])
+    assert unit.status == "ok", unit.error
+    rows = [
+        FrameRow("d", unit.scene, 4, r.frame, r.status, r.error, None, None, None, 0, r.metrics, r.floors, r.ref_se)
+        for r in unit.frames
+    ]
+    sequences = [
+        SequenceRow("d", unit.scene, 4, m, v, unit.sequence_floors.get(m), unit.sequence_ref_se.get(m))
+        for m, v in unit.sequence_metrics.items()
+    ]
+    return RunIndex([UnitRow("d", unit.scene, 4, "ok", None, 8, 8, None, None)], rows, sequences)
+
+
+def test_one_blown_up_frame_of_eight_moves_the_flicker_score_by_a_bounded_amount(tmp_path):
+    """The temporal lead score is the trimmed mean of its consecutive pairs, which a blown frame enters
+    twice: both pairs are dropped, the pooled sequence value (kept beside it) is decided by that frame."""
+    name = "temporal_relmse_robust"
+    clean = _flicker_index(tmp_path / "clean", None)
+    blown = _flicker_index(tmp_path / "blown", 5)
+    pairs = sorted(f.metrics[FLICKER_PREFIX + name] for f in clean.ok_frames("d", 4, "synthetic_000")[1:])
+    assert len(pairs) == 7
+    before, after = (ix.scene_value("d", 4, "synthetic_000", name) for ix in (clean, blown))
+    # two of seven pairs replaced: the kept middle three move by at most the clean pairs' spread
+    assert abs(after - before) <= pairs[-1] - pairs[0], (before, after)
+    pooled = blown.sequence_rows[0].value
+    assert pooled > 100 * after  # the sequence's pooled value is what one frame decides
+    floor, se = blown.scene_floor("d", 4, "synthetic_000", name)
+    assert floor is not None and 0 < floor < after and se is not None and se > 0
+    decided = {frame for frame, _, _ in blown.deciding_frames("d", 4, "synthetic_000", name)}
+    assert decided == {5, 6}  # pairs (4, 5) and (5, 6), named by their later frame
