@@ -60,7 +60,9 @@ from denoisebench.metrics.validation import MetricNotApplicable
 from denoisebench.plugins import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, Limits
 from denoisebench.plugins.sandbox import version as sandbox_version
 from denoisebench.results.crops import cut
+from denoisebench.results.finite import is_finite
 from denoisebench.results.names import (
+    DECIDING_SCORES,
     FLICKER_METRICS,
     FLICKER_PREFIX,
     NOISY,
@@ -365,6 +367,21 @@ def _reference_variance(frame) -> np.ndarray | None:
     return np.asarray(var, dtype=np.float32)
 
 
+def kept_images(records: list[FrameRecord], outputs: list[np.ndarray]) -> dict[int, np.ndarray]:
+    """The outputs a unit keeps for reports ({frame: image}): its last frame, and for each of
+    :data:`DECIDING_SCORES` (the first alternative measured) the frame it scores worst, the one that
+    would decide a plain mean. ``records`` and ``outputs`` are the unit's frames, all successful, in order."""
+    kept = {records[-1].frame: outputs[-1]}
+    for alternatives in DECIDING_SCORES:
+        name = next((n for n in alternatives if all(is_finite(r.metrics.get(n)) for r in records)), None)
+        if name is None:
+            continue
+        worse = min if get_metric(name).higher_is_better else max
+        k = worse(range(len(records)), key=lambda i: records[i].metrics[name])
+        kept.setdefault(records[k].frame, outputs[k])
+    return kept
+
+
 def measure_unit(
     label: str, denoiser: object | None, sequence, spatial: list[str], temporal: list[str], trim: float | None = None
 ) -> UnitRecord:
@@ -409,7 +426,7 @@ def measure_unit(
     unit.sequence_metrics, unit.sequence_floors, unit.sequence_ref_se, unit.sequence_not_applicable = _sequence_metrics(
         outputs, refs, motion, temporal, ref_vars, trim
     )
-    unit.image_frame, unit.image = frames[-1].index, outputs[-1]
+    unit.images = kept_images(records, outputs)
     if len(outputs) > 1:
         for record, (values, floors, ses) in zip(records[1:], _flicker(outputs, refs, motion, trim, ref_vars)):
             record.metrics.update(values)

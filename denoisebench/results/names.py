@@ -27,3 +27,7 @@ PAIR_LABEL_SEPARATOR = "+"
 #: A pair's ``spec`` in the store: ``sampler SAMPLER_SPEC`` then, with a denoiser, `` + DENOISER_SPEC``.
 SAMPLER_SPEC_PREFIX = "sampler "
 PAIR_SPEC_SEPARATOR = " + "
+
+#: Scores whose worst frame each unit keeps an image of (beside its last frame), so that a report can
+#: show the frame that decides a lead score at every spp; the first one measured of each pair leads.
+DECIDING_SCORES = (("relmse_robust", "relmse"), ("flip",))

@@ -66,8 +66,9 @@ class UnitRecord:
     sequence_floors: dict[str, float] = field(default_factory=dict)
     sequence_ref_se: dict[str, float] = field(default_factory=dict)
     sequence_not_applicable: dict[str, str] = field(default_factory=dict)  # temporal metric → reason
-    image_frame: int | None = None
-    image: np.ndarray | None = None  # H×W×3 float32: the denoised frame ``image_frame``
+    #: frame index → H×W×3 float32 denoised frame kept for reports: the last frame and the frame each
+    #: deciding score is worst on (:data:`~denoisebench.results.names.DECIDING_SCORES`)
+    images: dict[int, np.ndarray] = field(default_factory=dict)
     strip_first: int | None = None  # first frame of the strip
     strip_window: tuple[int, int, int] | None = None  # (top, left, side) of its crop
     strip: np.ndarray | None = None  # F×side×side×3 float32 crops of consecutive outputs

@@ -17,7 +17,8 @@ Tables (schema version :data:`SCHEMA_VERSION`, kept in ``schema_version``):
 ``frame_metrics``   metric values per frame (spatial, gradient, and per-frame flicker), with the
                     reference-noise ``floor`` and ``ref_se`` of MSE-family metrics (else NULL)
 ``sequence_metrics``  temporal metric values per unit (same ``floor``/``ref_se`` columns)
-``images``          the denoised last frame of each unit (zlib-compressed float32), for reports
+``images``          denoised frames of each unit, for reports (zlib-compressed float32): its last frame and
+                    the frame each deciding score is worst on (``names.DECIDING_SCORES``)
 ``strips``          a crop of the unit's first frames (:mod:`.strips`, zlib-compressed float32)
 ``not_applicable``  metrics that do not apply to a frame (``frame`` ≥ 0) or to a unit's sequence
                     (``frame`` = -1), with the reason (SSIM on frames under 11×11 px): such a
@@ -34,8 +35,9 @@ Notes
   from an older one opened read-only). Version 5 added ``run_denoisers.sampler`` and
   ``run_denoisers.denoiser_label``; migrating fills them in from each row's kind, label and spec
   (:func:`sampler_dimension`, the rule :mod:`.sampler_units` labels pairs by), and an older
-  database opened read-only gets the same values from the same rule when read. A newer version
-  than this code knows is refused.
+  database opened read-only gets the same values from the same rule when read. Version 6 keys
+  ``images`` by frame too (several frames per unit); migrating rebuilds the table with the new key
+  and keeps every row (one per unit, its last frame). A newer version than this code knows is refused.
 """
 
 from __future__ import annotations
@@ -47,9 +49,9 @@ from denoisebench.errors import UserInputError
 from denoisebench.results import sampler_maps
 from denoisebench.results.names import PAIR_LABEL_SEPARATOR, PAIR_SPEC_SEPARATOR, SAMPLER_SPEC_PREFIX
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 #: Versions this code reads (older ones are migrated when opened for writing).
-READABLE_VERSIONS = (1, 2, 3, 4, 5)
+READABLE_VERSIONS = (1, 2, 3, 4, 5, 6)
 #: Every table of the current version (``CREATE TABLE IF NOT EXISTS``: an older database keeps its own).
 TABLES = """
 CREATE TABLE IF NOT EXISTS schema_version (version INTEGER NOT NULL);
@@ -145,7 +147,7 @@ CREATE TABLE IF NOT EXISTS images (
     height INTEGER NOT NULL,
     width INTEGER NOT NULL,
     data BLOB NOT NULL,
-    PRIMARY KEY (run_id, denoiser, scene, spp)
+    PRIMARY KEY (run_id, denoiser, scene, spp, frame)
 );
 CREATE TABLE IF NOT EXISTS strips (
     run_id TEXT NOT NULL,
@@ -164,7 +166,14 @@ CREATE TABLE IF NOT EXISTS strips (
 
 UNIT_TABLES = ("frames", "frame_metrics", "sequence_metrics", "images", "strips", "not_applicable")
 #: The tables of a unit that exist in a database of each schema version.
-UNIT_TABLES_OF = {1: UNIT_TABLES[:4], 2: UNIT_TABLES[:5], 3: UNIT_TABLES[:5], 4: UNIT_TABLES, 5: UNIT_TABLES}
+UNIT_TABLES_OF = {
+    1: UNIT_TABLES[:4],
+    2: UNIT_TABLES[:5],
+    3: UNIT_TABLES[:5],
+    4: UNIT_TABLES,
+    5: UNIT_TABLES,
+    6: UNIT_TABLES,
+}
 
 
 def sampler_dimension(kind: str, label: str, spec: str) -> tuple[str | None, str | None]:
@@ -223,6 +232,17 @@ def create_or_migrate(conn: sqlite3.Connection) -> None:
             [(*sampler_dimension(kind, label, spec), rowid) for rowid, kind, label, spec in rows],
         )
         conn.execute("UPDATE schema_version SET version = 5")
+        version = 5
+    if version == 5:  # 5 → 6: images keyed by frame too (a primary key cannot be altered: rebuild)
+        conn.execute("ALTER TABLE images RENAME TO images_v5")
+        (create,) = [s for s in TABLES.split(";") if "CREATE TABLE IF NOT EXISTS images (" in s]
+        conn.execute(create)
+        conn.execute(
+            "INSERT INTO images (run_id, denoiser, scene, spp, frame, height, width, data) "
+            "SELECT run_id, denoiser, scene, spp, frame, height, width, data FROM images_v5"
+        )
+        conn.execute("DROP TABLE images_v5")
+        conn.execute("UPDATE schema_version SET version = 6")
 
 
 def read_version(conn: sqlite3.Connection, path: Path) -> int:

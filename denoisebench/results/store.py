@@ -302,12 +302,13 @@ class ResultsStore:
                 ],
             )
             sampler_maps.write(conn, key, unit.sampler_frames)  # the table is created with the schema
-            if unit.image is not None and unit.image_frame is not None:
-                height, width = unit.image.shape[:2]
-                conn.execute(
-                    "INSERT INTO images (run_id, denoiser, scene, spp, frame, height, width, data) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                    (*key, int(unit.image_frame), height, width, encode_image(unit.image)),
-                )
+            conn.executemany(
+                "INSERT INTO images (run_id, denoiser, scene, spp, frame, height, width, data) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                [
+                    (*key, int(frame), *image.shape[:2], encode_image(image))
+                    for frame, image in sorted(unit.images.items())
+                ],
+            )
             if unit.strip is not None and unit.strip_window is not None:
                 top, left, side = unit.strip_window
                 conn.execute(
@@ -404,11 +405,24 @@ class ResultsStore:
         )
         return [SequenceRow(*r) for r in rows]
 
-    def image(self, run_id: str, denoiser: str, scene: str, spp: int) -> tuple[int, np.ndarray] | None:
-        """(frame index, H×W×3 float32) of the stored output of a unit, or None."""
-        row = self.conn.execute(
-            "SELECT frame, height, width, data FROM images WHERE run_id = ? AND denoiser = ? AND scene = ? AND spp = ?",
+    def image_frames(self, run_id: str, denoiser: str, scene: str, spp: int) -> list[int]:
+        """The frames of a unit whose output is stored (its last frame and the frames its deciding scores
+        are worst on; only the last in a database of version < 6), ascending."""
+        rows = self.conn.execute(
+            "SELECT frame FROM images WHERE run_id = ? AND denoiser = ? AND scene = ? AND spp = ? ORDER BY frame",
             (run_id, denoiser, scene, int(spp)),
+        )
+        return [int(r[0]) for r in rows]
+
+    def image(
+        self, run_id: str, denoiser: str, scene: str, spp: int, frame: int | None = None
+    ) -> tuple[int, np.ndarray] | None:
+        """(frame index, H×W×3 float32) of a unit's stored output at ``frame`` (None: its last stored
+        frame), or None when that frame was not kept."""
+        row = self.conn.execute(
+            "SELECT frame, height, width, data FROM images WHERE run_id = ? AND denoiser = ? AND scene = ? AND spp = ? "
+            + ("ORDER BY frame DESC LIMIT 1" if frame is None else "AND frame = ?"),
+            (run_id, denoiser, scene, int(spp)) + (() if frame is None else (int(frame),)),
         ).fetchone()
         if row is None:
             return None

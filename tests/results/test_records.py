@@ -183,7 +183,7 @@ def test_a_version_4_store_reads_and_migrates_to_the_same_sampler_dimension(tmp_
         assert {d.label: (d.sampler, d.denoiser_label) for d in old.denoisers("run1")} == DIMENSION
         before = table.leaderboard(old, "relmse", 4).entries
     with ResultsStore(path) as migrated:
-        assert migrated.version == SCHEMA_VERSION == 5
+        assert migrated.version == SCHEMA_VERSION
         assert {d.label: (d.sampler, d.denoiser_label) for d in migrated.denoisers("run1")} == DIMENSION
         after = table.leaderboard(migrated, "relmse", 4).entries
     with sqlite3.connect(path) as conn:  # the migration stored the columns
@@ -224,7 +224,9 @@ def measured_run(tmp_path_factory):
     root = tmp_path_factory.mktemp("records")
     data = open_dataset(make_synthetic_dataset(root / "ds", scenes=2, frames=3, height=16, width=16, spp=(1, 4)))
     store = ResultsStore(root / "r.sqlite")
-    config = BenchmarkConfig(["identity", "cross_bilateral_fast"], [1, 4], split="all", metrics=["relmse", "ssim"])
+    config = BenchmarkConfig(
+        ["identity", "cross_bilateral_fast"], [1, 4], split="all", metrics=["relmse", "ssim", "temporal_l1"]
+    )
     plan = run_benchmark(data, config, store, progress=False)
     yield store, plan.run_id
     store.close()
@@ -242,14 +244,23 @@ def test_the_summary_table_and_the_leaderboard_read_the_same_per_scene_values(me
             for e in entries:
                 cell = summary[(e.denoiser, spp)].metrics[metric]
                 assert e.value == pytest.approx(cell.value, rel=1e-12)
-    # a temporal metric's scene value is the sequence's
+    # a temporal metric stored per frame pair too has the mean of its pairs (two of three frames: no trim),
+    # one stored per sequence only the sequence's value
     scene = data.scenes[0]
-    (sequence,) = [
-        s
+    sequence = {
+        s.metric: s.value
         for s in store.sequence_metrics(run_id)
-        if (s.denoiser, s.spp, s.scene, s.metric) == ("identity", 1, scene, "tpsnr")
+        if (s.denoiser, s.spp, s.scene) == ("identity", 1, scene)
+    }
+    pairs = [
+        f.metrics["flicker.tpsnr"]
+        for f in store.frames(run_id)
+        if (f.denoiser, f.spp, f.scene) == ("identity", 1, scene) and "flicker.tpsnr" in f.metrics
     ]
-    assert data.scene_value("identity", 1, scene, "tpsnr") == sequence.value
+    assert len(pairs) == 2 and data.scene_value("identity", 1, scene, "tpsnr") == pytest.approx(sum(pairs) / 2)
+    assert data.scene_value("identity", 1, scene, "tpsnr") != pytest.approx(sequence["tpsnr"], rel=1e-9)
+    only = [m for m in sequence if "flicker." + m not in data.flicker_names]
+    assert only and all(data.scene_value("identity", 1, scene, m) == sequence[m] for m in only)
     frames = [f.metrics["ssim"] for f in store.frames(run_id) if (f.denoiser, f.spp, f.scene) == ("identity", 1, scene)]
     # a spatial one the trimmed mean of its frames (run_index.kept_frames): of three, the median
     assert len(frames) == 3 and data.scene_value("identity", 1, scene, "ssim") == pytest.approx(sorted(frames)[1])

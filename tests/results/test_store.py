@@ -14,9 +14,13 @@ import textwrap
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from denoisebench.benchmark.runner import kept_images
 from denoisebench.dataset.synthetic import make_synthetic_dataset
+from denoisebench.results.records import FrameRecord, UnitRecord
+from denoisebench.results.schema import SCHEMA_VERSION
 from denoisebench.results.store import ResultsStore
 
 FRAMES = 3
@@ -313,3 +317,59 @@ def test_scores_on_a_denoisers_own_training_scenes_are_marked_not_held_out(tmp_p
         == 0
     )
     assert "not held-out" not in capsys.readouterr().err + (tmp_path / "r2" / "report.md").read_text()
+
+
+def _unit_with_images(frames: dict[int, float]) -> UnitRecord:
+    records = [FrameRecord(f, "ok", None, 1.0, 0.1, 1.1, 0, {"relmse": v}) for f, v in frames.items()]
+    return UnitRecord("d", "s", 4, "ok", None, records)
+
+
+def test_a_unit_keeps_its_last_frame_and_the_frames_its_deciding_scores_are_worst_on(tmp_path):
+    """Frame 2 is the worst relMSE (kept beside the last frame 3), and the store gives back each kept frame."""
+    outputs = [np.full((4, 4, 3), i, np.float32) for i in range(4)]
+    unit = _unit_with_images({0: 0.1, 1: 0.2, 2: 9.0, 3: 0.15})
+    unit.images = kept_images(unit.frames, outputs)
+    assert sorted(unit.images) == [2, 3]
+    flip_decides = _unit_with_images({0: 0.1, 1: 0.2, 2: 9.0, 3: 0.15})
+    for record, value in zip(flip_decides.frames, (0.9, 0.1, 0.1, 0.1)):
+        record.metrics["flip"] = value
+    assert sorted(kept_images(flip_decides.frames, outputs)) == [0, 2, 3]
+    with ResultsStore(tmp_path / "r.sqlite") as store:
+        store.ensure_run("r", dataset_hash="h", dataset_path="/d", config={}, versions={})
+        assert store.write_unit("r", unit)
+        assert store.image_frames("r", "d", "s", 4) == [2, 3]
+        assert store.image("r", "d", "s", 4)[0] == 3  # no frame asked: the last
+        frame, image = store.image("r", "d", "s", 4, frame=2)
+        assert frame == 2 and np.array_equal(image, outputs[2])
+        assert store.image("r", "d", "s", 4, frame=1) is None
+
+
+def test_a_version_5_store_migrates_its_images_to_the_frame_key_and_keeps_them(tmp_path):
+    path = tmp_path / "old.sqlite"
+    with ResultsStore(path) as store:
+        store.ensure_run("r", dataset_hash="h", dataset_path="/d", config={}, versions={})
+        unit = _unit_with_images({0: 0.1, 1: 0.2})
+        unit.images = {1: np.ones((2, 2, 3), np.float32)}
+        assert store.write_unit("r", unit)
+    with sqlite3.connect(path) as conn:  # the version-5 table: one image per unit
+        conn.execute("ALTER TABLE images RENAME TO images_new")
+        conn.execute(
+            "CREATE TABLE images (run_id TEXT NOT NULL, denoiser TEXT NOT NULL, scene TEXT NOT NULL, spp INTEGER NOT "
+            "NULL, frame INTEGER NOT NULL, height INTEGER NOT NULL, width INTEGER NOT NULL, data BLOB NOT NULL, "
+            "PRIMARY KEY (run_id, denoiser, scene, spp))"
+        )
+        conn.execute("INSERT INTO images SELECT * FROM images_new")
+        conn.execute("DROP TABLE images_new")
+        conn.execute("UPDATE schema_version SET version = 5")
+    with ResultsStore(path, readonly=True) as old:
+        assert old.version == 5 and old.image("r", "d", "s", 4)[0] == 1
+    with ResultsStore(path) as store:
+        assert store.version == SCHEMA_VERSION == 6
+        assert store.image_frames("r", "d", "s", 4) == [1]
+        more = _unit_with_images({0: 0.3, 1: 0.2})
+        more.scene, more.images = "t", {0: np.zeros((2, 2, 3), np.float32), 1: np.ones((2, 2, 3), np.float32)}
+        assert store.write_unit("r", more)
+        assert store.image_frames("r", "d", "t", 4) == [0, 1]
+    with sqlite3.connect(path) as conn:
+        key = [r[1] for r in conn.execute("PRAGMA table_info(images)") if r[5]]
+    assert key == ["run_id", "denoiser", "scene", "spp", "frame"]
