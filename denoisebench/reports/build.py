@@ -131,61 +131,98 @@ def _reference_info(dataset: Dataset, scenes: list[str]) -> dict:
     }
 
 
+#: At most this many comparisons of frames that decide a scene's mean (beyond one per scene and spp).
+MAX_DECIDING_COMPARISONS = 12
+
+
 def _comparisons(
-    store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: int, samplers: dict | None = None
+    store: ResultsStore, data: analysis.RunData, dataset: Dataset, deciding: list[dict], samplers: dict | None = None
 ) -> list[dict]:
-    """Per scene: the noisy input, each denoiser and the reference at one frame, with worst-region crops;
-    a live sampler's entry has its ``spp_map`` of that frame (:mod:`.report_samplers`)."""
+    """Per scene and input spp: the noisy input, each denoiser and the reference at the last frame; then,
+    for each frame that would decide its scene's mean of the lead score (``deciding``, at any spp; at most
+    :data:`MAX_DECIDING_COMPARISONS`), the same at that frame, with every label whose unit kept it."""
     out = []
     for scene in data.scenes:
-        shown: list[tuple[str, np.ndarray]] = []
-        frame_index = None
-        for label in data.labels:
-            stored = store.image(data.run_id, label, scene, spp)
-            if stored is None:
-                continue
-            frame_index = stored[0] if frame_index is None else frame_index
-            if stored[0] == frame_index:
-                shown.append((label, stored[1]))
-        if frame_index is None:
+        for spp in data.spp:
+            found = _comparison(store, data, dataset, scene, spp, None, samplers)
+            if found is not None:
+                out.append(found)
+    seen: set[tuple[str, int, int]] = set()
+    for item in deciding:
+        key = (item["scene"], item["spp"], item["frame"])
+        if key in seen or len(seen) >= MAX_DECIDING_COMPARISONS:
             continue
-        frame = dataset.frame(scene, spp, frame_index, samples=False, buffers=["color"])
-        reference = frame.reference
-        denoised = [img for label, img in shown if label != NOISY] or [img for _, img in shown]
-        error = np.mean(
-            [relmse_map(img, reference).reshape(reference.shape[:2] + (-1,)).mean(axis=-1) for img in denoised], axis=0
+        seen.add(key)
+        why = (
+            f"{item['label']}'s {item['metric']} is {item['value']:.3g} on this frame, against its scene median of "
+            f"{item['median']:.3g}"
         )
-        size = window_size(*reference.shape[:2])
-        windows = worst_windows(error, size, count=2)
-        scale = images.crop_scale(size)
-        full_scale = max(1, 256 // max(reference.shape[:2]))
-        entries = []
-        for label, img in shown + [("reference", reference)]:
-            frame_error = None if label == "reference" else float(np.mean(relmse_map(img, reference)))
-            entries.append(
-                {
-                    "label": label,
-                    "kind": "input" if label == NOISY else ("reference" if label == "reference" else "denoiser"),
-                    "relmse": frame_error,
-                    "image": images.data_uri(images.to_png(img, full_scale)),
-                    "crops": [images.data_uri(images.to_png(images.crop(img, t, l, size), scale)) for t, l in windows],
-                }
-            )
-            spp_map = report_samplers.map_entry(samplers, label, scene, spp, int(frame_index), full_scale)
-            if spp_map is not None:
-                entries[-1]["spp_map"] = spp_map
-        out.append(
+        found = _comparison(store, data, dataset, *key, samplers, why=why)
+        if found is not None:
+            out.append(found)
+    return out
+
+
+def _comparison(
+    store: ResultsStore,
+    data: analysis.RunData,
+    dataset: Dataset,
+    scene: str,
+    spp: int,
+    frame_index: int | None,
+    samplers: dict | None,
+    why: str | None = None,
+) -> dict | None:
+    """One comparison at ``frame_index`` (None: the last frame, which every unit keeps), with worst-region
+    crops; a live sampler's entry has its ``spp_map`` of that frame (:mod:`.samplers`). The noisy input
+    comes from the dataset where its unit did not keep that frame."""
+    shown: list[tuple[str, np.ndarray]] = []
+    for label in data.labels:
+        stored = store.image(data.run_id, label, scene, spp, frame_index)
+        if stored is None:
+            continue
+        frame_index = stored[0] if frame_index is None else frame_index
+        if stored[0] == frame_index:
+            shown.append((label, stored[1]))
+    if frame_index is None or not any(label != NOISY for label, _ in shown):
+        return None
+    frame = dataset.frame(scene, spp, frame_index, samples=False, buffers=["color"])
+    reference = frame.reference
+    if NOISY in data.labels and all(label != NOISY for label, _ in shown):
+        shown.insert(0, (NOISY, np.nan_to_num(np.asarray(frame.color, np.float32), nan=0.0, posinf=0.0, neginf=0.0)))
+    denoised = [img for label, img in shown if label != NOISY]
+    error = np.mean(
+        [relmse_map(img, reference).reshape(reference.shape[:2] + (-1,)).mean(axis=-1) for img in denoised], axis=0
+    )
+    size = window_size(*reference.shape[:2])
+    windows = worst_windows(error, size, count=2)
+    scale = images.crop_scale(size)
+    full_scale = max(1, 256 // max(reference.shape[:2]))
+    entries = []
+    for label, img in shown + [("reference", reference)]:
+        frame_error = None if label == "reference" else float(np.mean(relmse_map(img, reference)))
+        entries.append(
             {
-                "scene": scene,
-                "spp": spp,
-                "frame": int(frame_index),
-                "width": int(reference.shape[1] * full_scale),
-                "height": int(reference.shape[0] * full_scale),
-                "windows": [{"top": t, "left": l, "size": size} for t, l in windows],
-                "entries": entries,
+                "label": label,
+                "kind": "input" if label == NOISY else ("reference" if label == "reference" else "denoiser"),
+                "relmse": frame_error,
+                "image": images.data_uri(images.to_png(img, full_scale)),
+                "crops": [images.data_uri(images.to_png(images.crop(img, t, l, size), scale)) for t, l in windows],
             }
         )
-    return out
+        spp_map = report_samplers.map_entry(samplers, label, scene, spp, int(frame_index), full_scale)
+        if spp_map is not None:
+            entries[-1]["spp_map"] = spp_map
+    return {
+        "scene": scene,
+        "spp": spp,
+        "frame": int(frame_index),
+        "why": why,
+        "width": int(reference.shape[1] * full_scale),
+        "height": int(reference.shape[0] * full_scale),
+        "windows": [{"top": t, "left": l, "size": size} for t, l in windows],
+        "entries": entries,
+    }
 
 
 #: Temporal metrics the flicker table leads with (scale-free; cvvdp is ColorVideoVDP's JOD, how visible
@@ -304,12 +341,10 @@ def _dataset_size(dataset: Dataset, scenes: list[str]) -> tuple[int, int]:
     return int(record.get("width", 0)), int(record.get("height", 0))
 
 
-def _deciding_frames(data: analysis.RunData, metric: str | None) -> list[dict]:
-    """Frames over 10× their scene's median of ``metric`` (:meth:`.run_index.RunIndex.deciding_frames`)."""
-    if metric is None or metric not in data.frame_metric_names:
-        return []
+def _deciding_frames(data: analysis.RunData, metrics: list[str]) -> list[dict]:
+    """Frames over 10× their scene's median of each lead metric (:meth:`.run_index.RunIndex.deciding_frames`)."""
     found = []
-    for label in data.labels:
+    for metric, label in ((m, label) for m in metrics if m in data.frame_metric_names for label in data.labels):
         for spp in data.spp:
             for scene in data.scenes:
                 for frame, value, median in data.deciding_frames(label, spp, scene, metric):
@@ -348,6 +383,7 @@ def build_report(
     reference = _reference_info(dataset, data.scenes)
     model = time_model.build_time_model(data, read_timings(store, run_id), time_at, _dataset_size(dataset, data.scenes))
     lead = equal_tables.lead_metrics(data.frame_metric_names + data.sequence_metric_names)
+    deciding = _deciding_frames(data, lead)
     measured = data.frame_metric_names + data.sequence_metric_names
     # the figure: the robust relMSE first, raw relMSE beside it, FLIP; the tables: the lead metrics
     shown = [m for m in analysis.ERROR_METRICS if m in measured]
@@ -394,7 +430,7 @@ def build_report(
         },
         # metrics whose preconditions the frames do not meet (SSIM under 11×11 px): frames count, reason
         not_applicable=store.not_applicable_summary(run_id),
-        comparisons=_comparisons(store, data, dataset, data.spp[0], samplers) if data.spp else [],
+        comparisons=_comparisons(store, data, dataset, deciding, samplers),
         # live samplers: per-frame spp counts, maps (on comparison entries) and pixels left without a sample
         samplers=samplers,
         # cvvdp's display, pixels per degree and each scene's exposure (None: cvvdp not measured)
@@ -406,7 +442,7 @@ def build_report(
         palette=palette,
         frames=data.frames,
         sequences=data.sequences,
-        deciding_frames=_deciding_frames(data, lead[0] if lead else None),
+        deciding_frames=deciding,
     )
 
 

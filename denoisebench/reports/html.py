@@ -341,8 +341,10 @@ def _samplers(report: ReportModel) -> str:
 
 def _comparisons(report: ReportModel) -> str:
     parts = [
-        '<p class="note">The last frame of each test sequence at the lowest input spp (temporal denoisers have seen '
-        "the frames before it), tone-mapped like the metrics. Below each image: zoomed crops of the regions where the "
+        '<p class="note">The last frame of each test sequence at each input spp (temporal denoisers have seen '
+        "the frames before it), then each frame that would decide its scene's mean of a lead score (the trimmed mean "
+        "leaves it out; the reason is under its heading), tone-mapped like the metrics. Below each image: zoomed crops "
+        "of the regions where the "
         "denoisers' mean relMSE is worst. In the compare box, pick the left image, drag the wipe or the slider, or press "
         "the button to flip between the left image and the reference.</p>"
     ]
@@ -369,7 +371,8 @@ def _comparisons(report: ReportModel) -> str:
         ref_src = comp["entries"][-1]["image"]
         parts.append(
             f'<h3>{e(comp["scene"])} \u2014 frame {comp["frame"]}, {comp["spp"]} spp</h3>'
-            f'<div class="compare" data-reference="{ref_id}">'
+            + (f'<p class="note">Decides a mean: {e(comp["why"])}.</p>' if comp.get("why") else "")
+            + f'<div class="compare" data-reference="{ref_id}">'
             f'<div class="cmp-stage" style="width:{2 * w}px;height:{2 * h}px">'
             f'<img class="cmp-base" alt="reference" src="{ref_src}"><img class="cmp-top" alt="left image" src="{ref_src}">'
             '<div class="cmp-line"></div></div>'

@@ -85,7 +85,8 @@ def render_markdown(report: ReportModel) -> str:
                 "",
                 "A scene's score is the trimmed mean of its frames (one frame in eight dropped at each end; for flicker, "
                 "of its frame pairs, two in seven), so these frames (for flicker: the later frame of the pair), far "
-                "above the rest of their scene, do not decide it; look at them in the frames' EXRs.",
+                "above the rest of their scene, do not decide it; index.html's image comparisons show each unit's worst "
+                "frame of each lead score.",
                 "",
             ]
             + [f"- {md(line)}" for line in deciding]
@@ -140,9 +141,15 @@ def render_markdown(report: ReportModel) -> str:
     lines += [
         "## Image comparisons",
         "",
-        "Open index.html for the images, zoomed crops and the interactive compare.",
+        "Open index.html for the images, zoomed crops and the interactive compare: the last frame of each scene at "
+        "each input spp, then the frames that would decide a scene's mean:",
         "",
     ]
+    lines += [
+        f"- {md(comp['scene'])}, frame {comp['frame']}, {comp['spp']} spp: {md(comp['why'])}"
+        for comp in report.comparisons
+        if comp.get("why")
+    ] + ([""] if any(comp.get("why") for comp in report.comparisons) else [])
     if report.samplers:
         lines += _samplers(report)
     lines += ["## Hard-case stability", ""]
