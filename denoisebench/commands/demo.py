@@ -88,11 +88,11 @@ def demo_denoisers() -> list[str]:
 DEMO_TIME_SIZE = "512x512"
 DEMO_TIME_BUDGET = 10.0
 #: Reference noise floor target (relMSE of a perfect denoiser against the reference) and spp cap. A scene is
-#: resolved when its floor is <= 1/10 of the best score anyone reaches on it, now at the top rung, 16 spp
+#: resolved when its floor is <= 1/10 of the best score anyone reaches on it, at the top rung, 16 spp
 #: (relmse_robust and temporal_relmse_robust, denoisebench.analysis.aggregate.unresolved_references). Measured
 #: at 1.5e-4 (64 px, 8 frames, seed 900), worst floor / best score: glass_env 0.083, motion_blur 0.066, cornell
-#: 0.055, depth_of_field 0.052, glossy_fireflies 0.031 (its references now stop at 3200-5760 spp); the former
-#: 3.5e-4, set for a top rung of 4, gives floors 2.3 times higher: cornell and depth_of_field over 1/10. With
+#: 0.055, depth_of_field 0.052, glossy_fireflies 0.031 (its references stop at 3200-5760 spp); a target of
+#: 3.5e-4, enough for a top rung of 4, gives floors 2.3 times higher: cornell and depth_of_field over 1/10. With
 #: seed 915 every demo scene is resolved: cluttered 0.09, glass_env 0.058, motion_blur 0.056, depth_of_field
 #: 0.051, glossy_fireflies < 0.02 (references 1280-12800 spp, none at the cap).
 #: The cap stops a reference whose floor keeps growing (fireflies not yet found often enough).

@@ -11,7 +11,7 @@ manifest for every scene, so a reader knows which channels exist and why.
 (the pinhole, the missing time and lens samples, the lobe split, channels that do not exist). Light
 transport is complete by default: ``max_depth = -1`` (unbounded) with Russian roulette from depth
 ``rr_depth = 5``, exactly Mitsuba's ``path`` integrator at its defaults, whatever the scene's
-effects (``indirect`` stays an effect name for per-effect breakdowns; it no longer decides depth).
+effects (``indirect`` is an effect name for per-effect breakdowns only; it does not decide depth).
 
 Transport is restricted only on purpose, and the plan says who asked (``max_depth_source``):
 

@@ -31,8 +31,8 @@ Conventions:
   (:attr:`ProgressiveFrame.placement_dimensions`); :mod:`~denoisebench.generator.render.placed`
   has the conventions. The round's samples come back in request order in ``RoundBuffers.placed``
   (name → N×C: color, diffuse, specular, the features, ``pixel``/``lens``/``time``), and they are
-  pooled into the pixels' buffers and counts. Without placed rounds nothing changes: count rounds
-  give the same bytes as before.
+  pooled into the pixels' buffers and counts. Count rounds never read placed state: a frame
+  rendered with count rounds only has the same bytes whether or not placed rounds exist.
 
 Notes:
     No Python loop runs over pixels: a round is one kernel launch per band of rows (more only past

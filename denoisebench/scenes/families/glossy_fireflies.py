@@ -20,9 +20,10 @@ What changed, and why (each measured with ``bench/reference_floor.py``, 64 px, 3
   objects, so their glossy reflections face the camera; the fill is brighter (20–30, was
   0.4–0.8), so the one-bounce chains are a smaller share of the pixels they reach.
 
-Before: floor 0.0069 / 0.027 / 0.017 at 1024 spp, not falling from 256 spp (ratio 0.68–1.06
-for 4× the samples), floor growth 1.8–2.4. After: 0.00040 / 0.0011 / 0.0011, falling 2.4–3.6×,
-growth 1.04–1.16 (below the 1.25 at which a floor counts as still growing). Direct light alone
+Measured (``bench/reference_floor.py --family glossy_fireflies --ref-spp 256,1024 --size 64 --scenes 3``):
+reference floors 0.00040 / 0.0011 / 0.0011 at 1024 spp, falling 2.4–3.6× from 256 spp, growth
+1.04–1.16 (below the 1.25 at which a floor counts as still growing); the layouts rejected above gave
+0.0069 / 0.027 / 0.017, not falling from 256 spp (ratio 0.68–1.06), growth 1.8–2.4. Direct light alone
 (``--max-depth 2``) falls exactly as 1/spp (ratio 3.9–4.0, growth 0.98–1.0): the glossy
 highlights themselves are resolved; what is left is one-bounce glossy transport.
 Still hard for denoisers (64 px, 4 frames, 1024-spp reference): at 4 spp the noisy input's robust
