@@ -275,7 +275,7 @@ def render_versions() -> dict[str, str]:
 
 def transport_note(translated, plan) -> str:
     """`` (<which integrator>)`` when a Mitsuba XML scene's own integrator restricts transport, else ""."""
-    origin = translated.scene_dict.get("transport_origin", "") if isinstance(translated.scene_dict, dict) else ""
+    origin = translated.transport_origin
     return f" ({origin})" if origin and plan.max_depth_source == "stage" else ""
 
 

@@ -51,6 +51,7 @@ import numpy as np
 
 from denoisebench.dataset import layout
 from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
+from denoisebench.generator.contract.scene_parts import MeshShape
 from denoisebench.generator.dataset_scenes import load_scene_file
 from denoisebench.generator.render.frame import render_frame, render_ladder
 from denoisebench.generator.render.progressive import RenderClock
@@ -158,7 +159,10 @@ def scene_varies_by_frame(translated) -> bool:
         return False
     if not translated.shutter_moving:
         return True
-    return any("frame_positions" in s and "shutter_motion" not in s for s in translated.scene_dict["shapes"])
+    return any(
+        isinstance(s, MeshShape) and s.frame_positions is not None and s.shutter_motion is None
+        for s in translated.shapes
+    )
 
 
 # One scene per process: jobs arrive grouped by scene, and a Mitsuba scene can be large.

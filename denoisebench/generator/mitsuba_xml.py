@@ -87,6 +87,7 @@ import numpy as np
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.contract.orbit import orbit
+from denoisebench.generator.contract.scene_parts import MitsubaXmlSource
 from denoisebench.generator.contract.translated_scene import TranslatedScene
 from denoisebench.mitsuba_runtime import load_mitsuba
 
@@ -551,10 +552,10 @@ def load_mitsuba_xml(
     ``search_paths``: more folders to find its files in (``--mitsuba-path``, Mitsuba's ``-a``);
     ``confined``: the file is a dataset's copy, whose files must lie in its folder (:func:`read_structure`).
 
-    The TranslatedScene has no shapes of its own (``scene_dict["mitsuba_xml"]`` names the file):
-    render the returned ``mi.Scene`` with its ``camera``. Its ``max_depth`` is the scene's own
-    transport restriction (module Notes), and ``scene_dict["transport_origin"]`` says which
-    integrator asked for it ("" when none did).
+    The TranslatedScene has no shape records of its own (its ``mitsuba_xml`` names the file): render
+    the returned ``mi.Scene`` with its ``camera``. Its ``max_depth`` is the scene's own transport
+    restriction (module Notes), and ``mitsuba_xml.transport_origin`` says which integrator asked for
+    it ("" when none did).
     """
 
     path = Path(path)
@@ -587,14 +588,8 @@ def load_mitsuba_xml(
     else:
         camera = camera_track(mi, scene.sensors()[0], frames, path)
     translated = TranslatedScene(
-        scene_dict={
-            "bsdfs": {},
-            "shapes": [],
-            "emitters": [],
-            "mitsuba_xml": str(path),
-            "transport_origin": structure.transport_origin,
-        },
         camera=camera,
+        mitsuba_xml=MitsubaXmlSource(path=str(path), transport_origin=structure.transport_origin),
         effects_inferred=infer_effects(mi, scene, camera),
         warnings=warnings,
         source=str(path),

@@ -8,7 +8,7 @@ any moving scene): every rung and reference layer of every frame must be the sam
 
 from __future__ import annotations
 
-import copy
+import dataclasses
 
 import numpy as np
 
@@ -57,17 +57,12 @@ def test_scenes_that_move_between_frames_only_are_still_built_per_frame(tmp_path
     assert closed.moving and not closed.shutter_moving and scene_varies_by_frame(closed)
     assert emitter.moving and scene_varies_by_frame(emitter)
     # Blurred movers plus a shape that moves between frames only (here the moving emitter's record).
-    mixed = copy.copy(blurred)
-    lamp = [s for s in emitter.scene_dict["shapes"] if "frame_positions" in s]
-    assert lamp and "shutter_motion" not in lamp[0]
-    mixed.scene_dict = {**blurred.scene_dict, "shapes": blurred.scene_dict["shapes"] + lamp}
+    lamp = [s for s in emitter.shapes if s.frame_positions is not None]
+    assert lamp and lamp[0].shutter_motion is None
+    mixed = dataclasses.replace(blurred, shapes=blurred.shapes + tuple(lamp))
     assert mixed.shutter_moving and scene_varies_by_frame(mixed)
     static = translate_stage(moving_box_stage(tmp_path / "static"))
-    static.scene_dict = {
-        **static.scene_dict,
-        "shapes": [
-            {k: v for k, v in s.items() if k not in ("frame_positions", "frame_normals", "shutter_motion")}
-            for s in static.scene_dict["shapes"]
-        ],
-    }
+    static.shapes = tuple(
+        dataclasses.replace(s, frame_positions=None, frame_normals=None, shutter_motion=None) for s in static.shapes
+    )
     assert not static.moving and not scene_varies_by_frame(static)

@@ -205,7 +205,7 @@ def test_the_scenes_own_transport_is_read_through_wrappers(tmp_path, mi, integra
         '<emitter type="constant"/><shape type="sphere"/></scene>'
     )
     translated, _ = load_mitsuba_xml(path, frames=1)
-    assert translated.max_depth == depth and origin in translated.scene_dict["transport_origin"]
+    assert translated.max_depth == depth and origin in translated.transport_origin
     assert not translated.warnings
     plan = make_render_plan(translated.effects, RenderOptions(), stage_max_depth=translated.max_depth)
     assert plan.max_depth == (depth or -1) and plan.max_depth_source == ("stage" if depth else "default")

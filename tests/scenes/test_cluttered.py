@@ -65,19 +65,19 @@ def test_effects_drawn_per_seed_are_declared_and_found(translated):
         assert scene.effects_mismatch == {}
         assert set(cluttered.ALWAYS) <= set(scene.effects) <= set(cluttered.EFFECTS)
     assert translated[HELD_OUT_BLUR].shutter_moving and not translated[TRAIN_STILL].shutter_moving
-    moving = sum("shutter_motion" in s for s in translated[TRAIN_DOF_BLUR].scene_dict["shapes"])
+    moving = sum(s.shutter_motion is not None for s in translated[TRAIN_DOF_BLUR].shapes)
     assert 1 <= moving <= cluttered.MAX_MOVING
 
 
 def test_objects_never_interpenetrate(translated):
     """Footprint circles (from the translated world vertices) are disjoint at every frame and shutter time."""
     for scene in translated.values():
-        objects = [s for s in scene.scene_dict["shapes"] if "/Object" in s["name"]]
+        objects = [s for s in scene.shapes if "/Object" in s.name]
         assert cluttered.OBJECTS[0] <= len(objects) <= cluttered.OBJECTS[1]
         for frame in range(FRAMES):
             discs = []
             for record in objects:
-                points = record["frame_positions"][frame] if "frame_positions" in record else record["positions"]
+                points = record.positions if record.frame_positions is None else record.frame_positions[frame]
                 xz = points[:, [0, 2]].astype(np.float64)
                 centre = 0.5 * (xz.min(0) + xz.max(0))
                 discs.append((centre, np.sqrt(np.max(np.sum(np.square(xz - centre), axis=1)))))
@@ -85,7 +85,7 @@ def test_objects_never_interpenetrate(translated):
             for i in range(len(discs)):
                 for j in range(i):
                     gap = np.linalg.norm(discs[i][0] - discs[j][0]) - discs[i][1] - discs[j][1]
-                    assert gap > -1e-4, (scene.seed, frame, objects[i]["name"], objects[j]["name"], gap)
+                    assert gap > -1e-4, (scene.seed, frame, objects[i].name, objects[j].name, gap)
 
 
 def test_materials_follow_sbmc_mix_with_every_lobe_present(stages):

@@ -7,9 +7,16 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from denoisebench.generator.contract.camera_track import CameraTrack
+from denoisebench.generator.contract.scene_parts import (
+    EmitterRecord,
+    InstanceGroup,
+    MeshShape,
+    MitsubaXmlSource,
+    ShapeRecord,
+)
 from denoisebench.scenes.effects import DECLARED_ONLY, validate_effects
 
-#: Pose keys per frame of a shape that moves within the shutter (``shutter_motion["times"]``).
+#: Pose keys per frame of a shape that moves within the shutter (``ShutterMotion.times``).
 SHUTTER_SUBSTEPS = 4
 
 
@@ -22,30 +29,28 @@ def shutter_keys(frames: int, shutter_open: float, shutter_close: float) -> np.n
     return lo + np.arange(count, dtype=np.float64) / SHUTTER_SUBSTEPS
 
 
-@dataclass
+@dataclass(slots=True)
 class TranslatedScene:
     """A stage made ready for Mitsuba.
 
+    Its scene content is typed records in Mitsuba world space (Y-up, meters;
+    :mod:`~denoisebench.generator.contract.scene_parts`). No sensor and no integrator: the renderer adds
+    those per frame, because the camera moves and its film, filter and sampler depend on the render plan.
+    ``render.scene.build_mitsuba_scene`` turns the records into a ``mi.Scene``.
+
     Attributes:
-        scene_dict: plain, picklable data in Mitsuba world space (Y-up, meters):
-            ``{"bsdfs": {id: Mitsuba BSDF dict}, "shapes": [record], "emitters": [Mitsuba emitter dict]}``
-            where a shape record is a triangle mesh (``kind="mesh"``, numpy positions/faces/normals/uvs)
-            or an analytic sphere, with a ``bsdf`` id and an optional area ``emitter``. No sensor and
-            no integrator: the renderer adds those per frame, because the camera moves and its film,
-            filter and sampler depend on the render plan. ``build_mitsuba_scene`` turns it into a
-            ``mi.Scene``.
-            A rigid shape that moves while the shutter is open also holds ``shutter_motion``:
-            ``{"times": K key times in frames (uniform, SHUTTER_SUBSTEPS per frame, covering every frame's
-            shutter), "to_world": K×4×4 world-from-object poses at those times, "from_record": 4×4
-            object-from-record matrix (the inverse of the pose the record's positions are baked at)}``;
-            its ``positions`` stay the first frame's, so that renderers without motion blur still work.
-            Optional ``instance_groups`` (static PointInstancer instances, usd/instancers.py):
-            ``[{"name", "shapes": [records in prototype space], "to_world": K×4×4 world-from-prototype}]``,
-            built as one Mitsuba ``shapegroup`` and K ``instance`` objects (geometry stored once).
         camera: the camera's poses over the sequence and its lens.
+        bsdfs: ``{id: Mitsuba BSDF dict}`` (plain data: texture images as arrays), the ids shapes name.
+        shapes: mesh, sphere and curves records, each with its ``bsdf`` id and optional area emitter,
+            medium, per-frame vertices and shutter motion.
+        emitters: lights that are not shapes (point, spot, directional, environment).
+        instance_groups: static PointInstancer instances (usd/instancers.py), built as one Mitsuba
+            ``shapegroup`` and K ``instance`` objects each (geometry stored once).
+        mitsuba_xml: set when the scene is a Mitsuba XML file (its shapes are Mitsuba's, not records).
         effects_declared: effects the stage's metadata declares (empty for a user's own USD).
         effects_inferred: effects read off the stage itself.
-        warnings: one line per prim or property that was skipped or approximated.
+        warnings: one line per prim or property that was skipped or approximated (the renderer adds
+            one per object Mitsuba refuses).
         source: path of the stage file, when it came from one.
         family, seed: denoisebench metadata when a scene family authored the stage.
         variants: the stage's ``/World`` customData ``denoisebench:variants`` (shape, texture and
@@ -53,10 +58,15 @@ class TranslatedScene:
             the dataset pins held-out scenes to the test split); empty when absent.
         max_depth: the stage's own path-depth restriction, ``customLayerData["denoisebench"]["maxDepth"]``
             (None when absent: full transport; see :mod:`~denoisebench.generator.contract.render_plan`).
+        materials: how each used material was translated (the manifest's ``materials``).
     """
 
-    scene_dict: dict
     camera: CameraTrack
+    bsdfs: dict[str, dict] = field(default_factory=dict)
+    shapes: tuple[ShapeRecord, ...] = ()
+    emitters: tuple[EmitterRecord, ...] = ()
+    instance_groups: tuple[InstanceGroup, ...] = ()
+    mitsuba_xml: MitsubaXmlSource | None = None
     effects_declared: tuple[str, ...] = ()
     effects_inferred: tuple[str, ...] = ()
     warnings: list[str] = field(default_factory=list)
@@ -65,30 +75,33 @@ class TranslatedScene:
     seed: int | None = None
     max_depth: int | None = None
     variants: dict = field(default_factory=dict)
-    materials: list[dict] = field(default_factory=list)  # how each used material was translated (manifest)
+    materials: list[dict] = field(default_factory=list)
 
     @property
     def moving(self) -> bool:
-        """Some shape moves between frames (its record holds ``frame_positions``: F×N×3 vertices per
-        frame, and ``frame_normals`` when it has normals); build its Mitsuba scene per frame."""
-        return any("frame_positions" in shape for shape in self.scene_dict["shapes"])
+        """Some shape moves between frames (a mesh with ``frame_positions``); build its Mitsuba scene per frame."""
+        return any(isinstance(s, MeshShape) and s.frame_positions is not None for s in self.shapes)
 
     @property
     def shutter_moving(self) -> bool:
-        """Some shape moves while the shutter is open (a record holds ``shutter_motion``): object motion blur."""
-        return any("shutter_motion" in shape for shape in self.scene_dict["shapes"])
+        """Some shape moves while the shutter is open (a mesh with ``shutter_motion``): object motion blur."""
+        return any(isinstance(s, MeshShape) and s.shutter_motion is not None for s in self.shapes)
+
+    @property
+    def transport_origin(self) -> str:
+        """Which integrator of a Mitsuba XML scene restricts transport ("" for a stage, or when none does)."""
+        return self.mitsuba_xml.transport_origin if self.mitsuba_xml is not None else ""
 
     def summary(self) -> dict:
         """What was translated, for ``scenes check`` and the manifest: shape counts by kind, instances,
         and each material's translation (kind, surface, document, fallbacks)."""
         kinds: dict[str, int] = {}
-        for shape in self.scene_dict.get("shapes", []):
-            kinds[shape["kind"]] = kinds.get(shape["kind"], 0) + 1
-        groups = self.scene_dict.get("instance_groups", [])
+        for shape in self.shapes:
+            kinds[shape.kind] = kinds.get(shape.kind, 0) + 1
         return {
             "shapes": kinds,
-            "instances": int(sum(len(g["to_world"]) for g in groups)),
-            "instance_prototypes": len(groups),
+            "instances": int(sum(len(g.to_world) for g in self.instance_groups)),
+            "instance_prototypes": len(self.instance_groups),
             "materials": list(self.materials),
         }
 

@@ -298,10 +298,10 @@ class RenderedFrame:
     spp: int
 
 
-def load_scene(scene_dict: dict):
-    """Load a Mitsuba scene from a dict (no sensor needed: rays are ours)."""
+def load_scene(mitsuba_dict: dict):
+    """Load a Mitsuba scene from an ``mi.load_dict`` dictionary (no sensor needed: rays are ours)."""
     mi = load_mitsuba()
-    return mi.load_dict(scene_dict)
+    return mi.load_dict(mitsuba_dict)
 
 
 def stream_key(seed: int, frame: int, stream: int) -> tuple[int, int]:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from denoisebench.errors import UserInputError
+from denoisebench.generator.contract.scene_parts import MediumRecord, MeshShape, ShapeRecord, SphereShape
 from denoisebench.generator.render.motion import ShutterMotionScene
 
 
@@ -50,21 +51,21 @@ def camera_medium(scene):
     return sensors[0].get_medium() if sensors else None
 
 
-def medium_dict(mi, medium: dict) -> dict:
+def medium_dict(mi, medium: MediumRecord) -> dict:
     """The ``mi.load_dict`` dictionary of a translated medium record (generator/usd/media.py documents it)."""
-    phase = {"type": "hg", "g": medium["g"]} if medium["g"] != 0.0 else {"type": "isotropic"}
-    sigma = np.asarray(medium["sigma_t"], dtype=np.float64)
-    if medium["type"] == "homogeneous":
+    phase = {"type": "hg", "g": medium.g} if medium.g != 0.0 else {"type": "isotropic"}
+    sigma = np.asarray(medium.sigma_t, dtype=np.float64)
+    if medium.kind == "homogeneous":
         peak = float(sigma.max())
         unit = (sigma / peak).tolist() if peak > 0 else [0.0, 0.0, 0.0]
         return {
             "type": "homogeneous",
             "sigma_t": {"type": "rgb", "value": unit},
             "scale": peak,
-            "albedo": {"type": "rgb", "value": list(medium["albedo"])},
+            "albedo": {"type": "rgb", "value": list(medium.albedo)},
             "phase": phase,
         }
-    density = np.asarray(medium["density"], dtype=np.float32)
+    density = np.asarray(medium.density, dtype=np.float32)
     if np.allclose(sigma, sigma[0]):
         data = density[..., None] * np.float32(sigma[0])
     else:
@@ -74,22 +75,22 @@ def medium_dict(mi, medium: dict) -> dict:
         "sigma_t": {
             "type": "gridvolume",
             "data": mi.TensorXf(np.ascontiguousarray(data, dtype=np.float32)),
-            "to_world": mi.ScalarTransform4f(np.asarray(medium["grid_to_world"], dtype=np.float64).tolist()),
+            "to_world": mi.ScalarTransform4f(np.asarray(medium.grid_to_world, dtype=np.float64).tolist()),
         },
-        "albedo": {"type": "rgb", "value": list(medium["albedo"])},
+        "albedo": {"type": "rgb", "value": list(medium.albedo)},
         "scale": 1.0,
         "phase": phase,
     }
 
 
-def _inside_sphere(point: np.ndarray, record: dict) -> bool:
-    return float(np.linalg.norm(point - np.asarray(record["center"], dtype=np.float64))) < float(record["radius"])
+def _inside_sphere(point: np.ndarray, record: SphereShape) -> bool:
+    return float(np.linalg.norm(point - np.asarray(record.center, dtype=np.float64))) < float(record.radius)
 
 
-def _inside_mesh(point: np.ndarray, record: dict) -> bool:
+def _inside_mesh(point: np.ndarray, record: MeshShape) -> bool:
     """Ray parity (Möller-Trumbore over every triangle) along a direction no axis-aligned mesh shares."""
-    positions = np.asarray(record["positions"], dtype=np.float64)
-    faces = np.asarray(record["faces"], dtype=np.int64).reshape(-1, 3)
+    positions = np.asarray(record.positions, dtype=np.float64)
+    faces = np.asarray(record.faces, dtype=np.int64).reshape(-1, 3)
     v0, v1, v2 = positions[faces[:, 0]], positions[faces[:, 1]], positions[faces[:, 2]]
     d = np.array([0.5773, 0.5774, 0.5775]) / np.linalg.norm([0.5773, 0.5774, 0.5775])
     e1, e2 = v1 - v0, v2 - v0
@@ -106,20 +107,20 @@ def _inside_mesh(point: np.ndarray, record: dict) -> bool:
     return bool(np.count_nonzero(hits) % 2)
 
 
-def _surface_point(record: dict) -> np.ndarray:
-    if record.get("kind") == "sphere":
-        return np.asarray(record["center"], dtype=np.float64) + np.array([0.0, float(record["radius"]), 0.0])
-    return np.asarray(record["positions"], dtype=np.float64)[0]
+def _surface_point(record: MeshShape | SphereShape) -> np.ndarray:
+    if isinstance(record, SphereShape):
+        return np.asarray(record.center, dtype=np.float64) + np.array([0.0, float(record.radius), 0.0])
+    return np.asarray(record.positions, dtype=np.float64)[0]
 
 
-def _box_volume(record: dict) -> float:
-    if record.get("kind") == "sphere":
-        return (2.0 * float(record["radius"])) ** 3
-    positions = np.asarray(record["positions"], dtype=np.float64)
+def _box_volume(record: MeshShape | SphereShape) -> float:
+    if isinstance(record, SphereShape):
+        return (2.0 * float(record.radius)) ** 3
+    positions = np.asarray(record.positions, dtype=np.float64)
     return float(np.prod(positions.max(0) - positions.min(0)))
 
 
-def enclosing_media(records: list[dict]) -> dict[int, int]:
+def enclosing_media(records: tuple[ShapeRecord, ...]) -> dict[int, int]:
     """Nested media: for each shape record with a ``medium``, the index of the innermost other medium
     record whose (closed) shape contains it (absent: it sits in no medium).
 
@@ -127,7 +128,7 @@ def enclosing_media(records: list[dict]) -> dict[int, int]:
     ray leaving smoke inside fog is in the fog again. Containment is tested at a point of the inner
     boundary's surface (spheres: analytically; meshes: ray parity).
     """
-    boundaries = [i for i, r in enumerate(records) if "medium" in r and (r.get("kind") == "sphere" or "positions" in r)]
+    boundaries = [i for i, r in enumerate(records) if r.medium is not None and isinstance(r, (SphereShape, MeshShape))]
     out = {}
     for i in boundaries:
         point = _surface_point(records[i])
@@ -137,7 +138,7 @@ def enclosing_media(records: list[dict]) -> dict[int, int]:
             if j != i
             and (
                 _inside_sphere(point, records[j])
-                if records[j].get("kind") == "sphere"
+                if isinstance(records[j], SphereShape)
                 else _inside_mesh(point, records[j])
             )
         ]

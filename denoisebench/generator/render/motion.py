@@ -1,8 +1,8 @@
 """Object motion blur: rigid shapes that move *during* the shutter, intersected at each ray's own time.
 
 Mitsuba 3.9 has no animated shape transforms, so moving shapes are kept out of the main scene: each
-moving shape (one per shape record that has ``shutter_motion``, see
-:class:`~denoisebench.generator.contract.translated_scene.TranslatedScene`) lives in a Mitsuba scene of
+moving shape (one per mesh record with a ``shutter_motion``, see
+:class:`~denoisebench.generator.contract.scene_parts.ShutterMotion`) lives in a Mitsuba scene of
 its own, in its *object space*, and a ray meets it by being carried into that space with the inverse of
 the shape's pose at the ray's time. The nearer of the main scene's hit and every moving shape's hit
 wins. Camera rays, bounce rays and shadow rays all go through :meth:`MovingShapes.ray_intersect` and
@@ -42,10 +42,11 @@ Conventions and pitfalls:
 
 from __future__ import annotations
 
-import copy
+from dataclasses import replace
 
 import numpy as np
 
+from denoisebench.generator.contract.scene_parts import MeshShape, ShutterMotion
 from denoisebench.generator.contract.translated_scene import SHUTTER_SUBSTEPS as SUBSTEPS
 
 # Lazy imports: Dr.Jit is imported inside the functions, after mitsuba_runtime has picked
@@ -126,13 +127,13 @@ def _key_and_weight(times: np.ndarray, tau):
     return k, u - k
 
 
-def pose_matrices(motion: dict, tau) -> np.ndarray:
-    """World-from-object 4×4 pose(s) of a ``shutter_motion`` record at time(s) ``tau`` (frames).
+def pose_matrices(motion: ShutterMotion, tau) -> np.ndarray:
+    """World-from-object 4×4 pose(s) of a shape's shutter motion at time(s) ``tau`` (frames).
 
     The host twin of the kernel's interpolation (:class:`MovingShapes`), for sub-frame renders and tests."""
-    parts = decompose(motion["to_world"])
+    parts = decompose(motion.to_world)
     taus = np.atleast_1d(np.asarray(tau, dtype=np.float64))
-    k, w = _key_and_weight(np.asarray(motion["times"]), taus)
+    k, w = _key_and_weight(np.asarray(motion.times), taus)
     wa, wb = _slerp_weights(parts["theta"][k], w)
     out = np.zeros((len(taus), 4, 4))
     for i in range(len(taus)):
@@ -154,16 +155,23 @@ def _apply_normals(matrix: np.ndarray, normals: np.ndarray) -> np.ndarray:
     return out / np.maximum(np.linalg.norm(out, axis=1, keepdims=True), 1e-20)
 
 
-def object_space(record: dict) -> dict:
-    """A ``shutter_motion`` record's mesh in object space (float32 positions and normals)."""
-    from_record = np.asarray(record["shutter_motion"]["from_record"], dtype=np.float64)
-    out = dict(record)
-    out["positions"] = _apply(from_record, record["positions"].astype(np.float64)).astype(np.float32)
-    if "normals" in record:
-        out["normals"] = _apply_normals(from_record, record["normals"].astype(np.float64)).astype(np.float32)
-    for key in ("frame_positions", "frame_normals", "shutter_motion"):
-        out.pop(key, None)
-    return out
+def _moved(record: MeshShape, matrix: np.ndarray) -> MeshShape:
+    """``record`` with its positions and normals carried by ``matrix``, its motion dropped (a static mesh)."""
+    return replace(
+        record,
+        positions=_apply(matrix, record.positions.astype(np.float64)).astype(np.float32),
+        normals=None
+        if record.normals is None
+        else _apply_normals(matrix, record.normals.astype(np.float64)).astype(np.float32),
+        frame_positions=None,
+        frame_normals=None,
+        shutter_motion=None,
+    )
+
+
+def object_space(record: MeshShape) -> MeshShape:
+    """A shutter-moving mesh in object space (float32 positions and normals), without its motion."""
+    return _moved(record, np.asarray(record.shutter_motion.from_record, dtype=np.float64))
 
 
 def translated_at(translated, tau: float):
@@ -171,20 +179,12 @@ def translated_at(translated, tau: float):
 
     Its Mitsuba scene (``build_mitsuba_scene``) is the static sub-frame whose average over the
     shutter the blurred frame converges to; moving shapes lose ``frame_positions`` too."""
-    out = copy.copy(translated)
     shapes = []
-    for record in translated.scene_dict["shapes"]:
-        if "shutter_motion" in record:
-            local = object_space(record)
-            pose = pose_matrices(record["shutter_motion"], float(tau))
-            local["positions"] = _apply(pose, local["positions"].astype(np.float64)).astype(np.float32)
-            if "normals" in local:
-                local["normals"] = _apply_normals(pose, local["normals"].astype(np.float64)).astype(np.float32)
-            record = local
+    for record in translated.shapes:
+        if isinstance(record, MeshShape) and record.shutter_motion is not None:
+            record = _moved(object_space(record), pose_matrices(record.shutter_motion, float(tau)))
         shapes.append(record)
-    out.scene_dict = {**translated.scene_dict, "shapes": shapes}
-    out.warnings = list(translated.warnings)
-    return out
+    return replace(translated, shapes=tuple(shapes), warnings=list(translated.warnings))
 
 
 # ----------------------------------------------------------------------------------------- device side
@@ -192,7 +192,7 @@ def translated_at(translated, tau: float):
 GROUP = 32
 
 
-def plan_layout(bounds: list[tuple], motions: list[dict]) -> tuple[list[list[int]], np.ndarray, np.ndarray]:
+def plan_layout(bounds: list[tuple], motions: list[ShutterMotion]) -> tuple[list[list[int]], np.ndarray, np.ndarray]:
     """Slots of the moving shapes in their layout scenes: ``(groups, offsets, reach)``.
 
     Each shape's object-space mesh is moved so that its bounding sphere's centre sits at ``offsets[j]``
@@ -201,7 +201,7 @@ def plan_layout(bounds: list[tuple], motions: list[dict]) -> tuple[list[list[int
     the centre in object space: the radius times (largest / smallest stretch over the keys)."""
     reach = np.zeros(len(bounds))
     for j, ((_, radius), motion) in enumerate(zip(bounds, motions)):
-        values = [np.linalg.svd(m[:3, :3], compute_uv=False) for m in np.asarray(motion["to_world"])]
+        values = [np.linalg.svd(m[:3, :3], compute_uv=False) for m in np.asarray(motion.to_world)]
         ratio = max(v.max() for v in values) / max(min(v.min() for v in values), 1e-12)
         reach[j] = radius * ratio * (1.0 + 1e-3) + 1e-4
     groups = [list(range(g, min(g + GROUP, len(bounds)))) for g in range(0, len(bounds), GROUP)]
@@ -250,19 +250,19 @@ class MovingShapes:
         "time0_opaque": object,
     }
 
-    def __init__(self, mi, layouts: list, groups: list, motions: list[dict], bounds: list[tuple], offsets):
+    def __init__(self, mi, layouts: list, groups: list, motions: list[ShutterMotion], bounds: list[tuple], offsets):
         import drjit as dr
 
         self.mi, self.dr = mi, dr
         self.layouts, self.groups = layouts, groups
-        times = np.asarray(motions[0]["times"], dtype=np.float64)
+        times = np.asarray(motions[0].times, dtype=np.float64)
         for motion in motions:
-            if len(motion["times"]) != len(times) or not np.allclose(motion["times"], times):
+            if len(motion.times) != len(times) or not np.allclose(motion.times, times):
                 raise ValueError("moving shapes must share one key schedule (shutter_keys)")
         self.count = len(times)
         self.shapes_count = len(motions)
         self.time0 = float(times[0])
-        parts = [decompose(m["to_world"]) for m in motions]
+        parts = [decompose(m.to_world) for m in motions]
         self.rigid = all(np.allclose(p["stretch"], np.eye(3), atol=1e-6) for p in parts)
 
         def table(kind, rows):

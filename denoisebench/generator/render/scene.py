@@ -1,4 +1,4 @@
-"""Build Mitsuba objects from a :class:`TranslatedScene`'s plain data.
+"""Build Mitsuba objects from a :class:`TranslatedScene`'s typed records.
 
 Triangle meshes are made with ``mi.Mesh`` and filled through ``mi.traverse`` (no temporary PLY
 files); BSDFs are loaded once each and shared by every shape that uses them.
@@ -10,7 +10,7 @@ ones for static meshes and at frame 0). The feature integrator interpolates it a
 to reproject the point the surface occupied in the previous frame (object motion vectors).
 Analytic spheres never move (moving spheres are tessellated), so they need no attribute.
 
-Media: a shape record with ``medium`` (generator/usd/media.py) gets that medium as its interior, and a
+Media: a shape record with a ``medium`` (generator/usd/media.py) gets that medium as its interior, and a
 ``null`` BSDF when no material is bound to it (an invisible boundary: fog, smoke); one inside another
 medium's boundary gets that medium as its exterior (:func:`~denoisebench.generator.render.media.enclosing_media`).
 
@@ -31,10 +31,25 @@ previews and by the tests that compare our renderer with Mitsuba's ``path`` inte
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.camera_track import CameraTrack
+from denoisebench.generator.contract.scene_parts import (
+    AreaEmitter,
+    ConstantEmitter,
+    CurvesShape,
+    DirectionalEmitter,
+    EmitterRecord,
+    EnvmapEmitter,
+    InstanceGroup,
+    MeshShape,
+    PointEmitter,
+    SphereShape,
+    SpotEmitter,
+)
 from denoisebench.generator.contract.translated_scene import TranslatedScene
 from denoisebench.generator.render.media import enclosing_media, medium_dict
 from denoisebench.generator.render.motion import MovingShapes, ShutterMotionScene, object_space, plan_layout
@@ -62,15 +77,15 @@ def _mitsuba_values(mi, value):
     return value
 
 
-def _emitter_object(mi, record: dict):
-    return mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": list(record["radiance"])}})
+def _emitter_object(mi, record: AreaEmitter):
+    return mi.load_dict({"type": "area", "radiance": {"type": "rgb", "value": list(record.radiance)}})
 
 
 #: Mesh attribute with each vertex's world position in the previous frame (moving scenes only).
 PREVIOUS_POSITION = "vertex_prev_position"
 
 
-def _build_mesh(mi, record: dict, bsdf, emitter, frame: int | None = None, medium=None, exterior=None):
+def _build_mesh(mi, record: MeshShape, bsdf, emitter, frame: int | None = None, medium=None, exterior=None):
     props = mi.Properties()
     if bsdf is not None:
         props["bsdf"] = bsdf
@@ -80,91 +95,91 @@ def _build_mesh(mi, record: dict, bsdf, emitter, frame: int | None = None, mediu
         props["exterior"] = exterior
     if emitter is not None:
         props["emitter"] = emitter
-    positions, faces = record["positions"], record["faces"]
-    normals = record.get("normals")
+    positions, faces = record.positions, record.faces
+    normals = record.normals
     previous = None
     if frame is not None:
         previous = positions
-        if "frame_positions" in record:
-            frames = record["frame_positions"]
+        if record.frame_positions is not None:
+            frames = record.frame_positions
             positions, previous = frames[frame], frames[max(frame - 1, 0)]
-            if "frame_normals" in record:
-                normals = record["frame_normals"][frame]
+            if record.frame_normals is not None:
+                normals = record.frame_normals[frame]
     mesh = mi.Mesh(
-        record["name"],
+        record.name,
         len(positions),
         len(faces),
         props,
-        has_vertex_normals="normals" in record,
-        has_vertex_texcoords="uvs" in record,
+        has_vertex_normals=record.normals is not None,
+        has_vertex_texcoords=record.uvs is not None,
     )
     params = mi.traverse(mesh)
     params["vertex_positions"] = mi.Float(positions.reshape(-1))
     params["faces"] = mi.UInt32(faces.reshape(-1))
     if normals is not None:
         params["vertex_normals"] = mi.Float(np.asarray(normals, dtype=np.float32).reshape(-1))
-    if "uvs" in record:
-        params["vertex_texcoords"] = mi.Float(record["uvs"].reshape(-1))
+    if record.uvs is not None:
+        params["vertex_texcoords"] = mi.Float(record.uvs.reshape(-1))
     params.update()
     if previous is not None:
         mesh.add_attribute(PREVIOUS_POSITION, 3, np.asarray(previous, dtype=np.float32).reshape(-1).tolist())
     return mesh
 
 
-def _build_curves(mi, record: dict, bsdf):
+def _build_curves(mi, record: CurvesShape, bsdf):
     """A curves record (usd/curves.py) → Mitsuba ``bsplinecurve``/``linearcurve``, loaded from the text
     file Mitsuba 3.9 reads (``x y z radius`` per control point, a blank line between curves)."""
     import os
     import tempfile
 
     blocks, start = [], 0
-    for count in record["counts"]:
-        block = record["points"][start : start + int(count)]
+    for count in record.counts:
+        block = record.points[start : start + int(count)]
         start += int(count)
         blocks.append("\n".join(" ".join(f"{v:.9g}" for v in row) for row in block))
     handle, name = tempfile.mkstemp(prefix="denoisebench-curves-", suffix=".txt")
     try:
         with os.fdopen(handle, "w") as stream:
             stream.write("\n\n".join(blocks) + "\n")
-        kind = "linearcurve" if record["basis"] == "linear" else "bsplinecurve"
+        kind = "linearcurve" if record.basis == "linear" else "bsplinecurve"
         return mi.load_dict({"type": kind, "filename": name, "bsdf": bsdf})
     finally:
         os.unlink(name)
 
 
-def _emitter_dict(mi, record: dict) -> dict:
-    kind = record["type"]
-    if kind == "point":
+def _emitter_dict(mi, record: EmitterRecord) -> dict:
+    """The ``mi.load_dict`` dictionary of an emitter record."""
+    if isinstance(record, PointEmitter):
         return {
             "type": "point",
-            "position": record["position"],
-            "intensity": {"type": "rgb", "value": record["intensity"]},
+            "position": list(record.position),
+            "intensity": {"type": "rgb", "value": list(record.intensity)},
         }
-    if kind == "spot":
+    if isinstance(record, SpotEmitter):
         return {
             "type": "spot",
-            "to_world": _transform(mi, record["to_world"]),
-            "cutoff_angle": record["cutoff_angle"],
-            "beam_width": record["beam_width"],
-            "intensity": {"type": "rgb", "value": record["intensity"]},
+            "to_world": _transform(mi, record.to_world),
+            "cutoff_angle": record.cutoff_angle,
+            "beam_width": record.beam_width,
+            "intensity": {"type": "rgb", "value": list(record.intensity)},
         }
-    if kind == "directional":
+    if isinstance(record, DirectionalEmitter):
         return {
             "type": "directional",
-            "direction": record["direction"],
-            "irradiance": {"type": "rgb", "value": record["irradiance"]},
+            "direction": list(record.direction),
+            "irradiance": {"type": "rgb", "value": list(record.irradiance)},
         }
-    if kind == "envmap":
+    if isinstance(record, EnvmapEmitter):
         rotation = np.eye(4)
-        rotation[:3, :3] = np.asarray(record["rotation"])
-        data = np.asarray(record["data"], dtype=np.float32)
+        rotation[:3, :3] = np.asarray(record.rotation)
+        data = np.asarray(record.data, dtype=np.float32)
         if data.ndim != 3 or data.shape[2] != 3 or data.shape[0] < 1 or data.shape[1] < 1:
             raise ValueError(f"environment image of shape {data.shape}")  # mi.Bitmap segfaults on an empty one
         image = mi.Bitmap(np.ascontiguousarray(data), mi.Bitmap.PixelFormat.RGB)
-        return {"type": "envmap", "bitmap": image, "scale": record["scale"], "to_world": _transform(mi, rotation)}
-    if kind == "constant":
-        return {"type": "constant", "radiance": {"type": "rgb", "value": record["radiance"]}}
-    raise ValueError(f"unknown emitter record type {kind!r}")
+        return {"type": "envmap", "bitmap": image, "scale": record.scale, "to_world": _transform(mi, rotation)}
+    if isinstance(record, ConstantEmitter):
+        return {"type": "constant", "radiance": {"type": "rgb", "value": list(record.radiance)}}
+    raise ValueError(f"unknown emitter record {type(record).__name__}")
 
 
 def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: bool = False) -> dict:
@@ -174,14 +189,13 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
     within the shutter are returned apart, under ``moving_<index>`` keys, as ``((record in object
     space, BSDF), shutter_motion record, (bounding-sphere centre, radius) in object space)``."""
     mi = load_mitsuba()
-    data = translated.scene_dict
 
     def skipped(line: str) -> None:
         if line not in translated.warnings:
             translated.warnings.append(line)
 
     bsdfs = {}
-    for key, value in data["bsdfs"].items():
+    for key, value in translated.bsdfs.items():
         try:
             bsdfs[key] = mi.load_dict(_mitsuba_values(mi, value))
         except Exception as error:  # a material Mitsuba refuses: grey, never a crash
@@ -191,11 +205,12 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
     moving = translated.moving
     out: dict = {"type": "scene"}
     # Participating media, one Mitsuba object each, shared as one boundary's interior and another's exterior
-    media = {i: mi.load_dict(medium_dict(mi, r["medium"])) for i, r in enumerate(data["shapes"]) if "medium" in r}
-    outer = enclosing_media(data["shapes"]) if media else {}
-    for index, record in enumerate(data["shapes"]):
-        emitter = _emitter_object(mi, record["emitter"]) if "emitter" in record else None
-        bsdf = bsdfs.get(record.get("bsdf")) if record.get("bsdf") else None
+    shapes = translated.shapes
+    media = {i: mi.load_dict(medium_dict(mi, r.medium)) for i, r in enumerate(shapes) if r.medium is not None}
+    outer = enclosing_media(shapes) if media else {}
+    for index, record in enumerate(shapes):
+        emitter = _emitter_object(mi, record.emitter) if record.emitter is not None else None
+        bsdf = bsdfs.get(record.bsdf) if record.bsdf else None
         if bsdf is None:
             # Lights' own geometry: black, so it only emits (and blocks light, as a real fixture does).
             black = black or mi.load_dict({"type": "diffuse", "reflectance": {"type": "rgb", "value": [0, 0, 0]}})
@@ -203,24 +218,25 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
         key = f"shape_{index:04d}"
         medium = media.get(index)  # a medium boundary (generator/usd/media.py): its interior, null unless a material
         exterior = media.get(outer.get(index))  # nested in another medium: that one outside it
+        moves_in_shutter = shutter_motion and isinstance(record, MeshShape) and record.shutter_motion is not None
         if medium is not None:
-            if record["medium"]["null_boundary"]:
+            if record.medium.null_boundary:
                 bsdf = mi.load_dict({"type": "null"})
-            if shutter_motion and "shutter_motion" in record:
-                raise UserInputError(f"{record['name']}: a medium boundary moving within the shutter is not supported")
-        if shutter_motion and "shutter_motion" in record:
+            if moves_in_shutter:
+                raise UserInputError(f"{record.name}: a medium boundary moving within the shutter is not supported")
+        if moves_in_shutter:
             local = object_space(record)
-            points = local["positions"].astype(np.float64)
+            points = local.positions.astype(np.float64)
             centre = 0.5 * (points.min(0) + points.max(0))
             radius = float(np.sqrt(np.max(np.sum(np.square(points - centre), axis=1))))
-            out[f"moving_{index:04d}"] = ((local, bsdf), record["shutter_motion"], (centre, radius))
-        elif record["kind"] == "curves":
+            out[f"moving_{index:04d}"] = ((local, bsdf), record.shutter_motion, (centre, radius))
+        elif isinstance(record, CurvesShape):
             try:
                 out[key] = _build_curves(mi, record, bsdf)
             except Exception as error:
-                skipped(f"{record['name']}: Mitsuba cannot build these curves ({_short(error)}); skipped")
-        elif record["kind"] == "sphere":
-            shape = {"type": "sphere", "center": record["center"], "radius": record["radius"], "bsdf": bsdf}
+                skipped(f"{record.name}: Mitsuba cannot build these curves ({_short(error)}); skipped")
+        elif isinstance(record, SphereShape):
+            shape = {"type": "sphere", "center": list(record.center), "radius": record.radius, "bsdf": bsdf}
             if emitter is not None:
                 shape["emitter"] = emitter
             if medium is not None:
@@ -232,16 +248,16 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
             try:
                 out[key] = _build_mesh(mi, record, bsdf, emitter, frame if moving else None, medium, exterior)
             except Exception as error:  # a prim that breaks Mitsuba is skipped with its warning
-                skipped(f"{record['name']}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
-    groups = data.get("instance_groups", [])
-    merge = sum(len(group["to_world"]) for group in groups) > INSTANCE_LIMIT
+                skipped(f"{record.name}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
+    groups = translated.instance_groups
+    merge = sum(len(group.to_world) for group in groups) > INSTANCE_LIMIT
     for index, group in enumerate(groups):
         (_add_merged if merge else _add_instances)(mi, out, index, group, bsdfs, skipped)
-    for index, record in enumerate(data["emitters"]):
+    for index, record in enumerate(translated.emitters):
         try:
             out[f"emitter_{index:03d}"] = mi.load_dict(_emitter_dict(mi, record))
         except Exception as error:
-            skipped(f"{record.get('prim', 'light')}: Mitsuba cannot build this light ({_short(error)}); skipped")
+            skipped(f"{record.prim or 'light'}: Mitsuba cannot build this light ({_short(error)}); skipped")
     return out
 
 
@@ -254,70 +270,71 @@ def scene_objects(translated: TranslatedScene, frame: int = 0, shutter_motion: b
 INSTANCE_LIMIT = 64
 
 
-def _add_merged(mi, out: dict, index: int, group: dict, bsdfs: dict, skipped) -> None:
+def _add_merged(mi, out: dict, index: int, group: InstanceGroup, bsdfs: dict, skipped) -> None:
     """An instance group as one merged mesh per prototype mesh (and one sphere per instance)."""
-    poses = np.asarray(group["to_world"], dtype=np.float64)
+    poses = np.asarray(group.to_world, dtype=np.float64)
     linear, offset = poses[:, :3, :3], poses[:, :3, 3]
-    for j, record in enumerate(group["shapes"]):
-        bsdf = bsdfs.get(record.get("bsdf")) or mi.load_dict({"type": "diffuse"})
+    for j, record in enumerate(group.shapes):
+        bsdf = bsdfs.get(record.bsdf) or mi.load_dict({"type": "diffuse"})
         key = f"instance_{index:03d}_{j:04d}"
-        if record["kind"] == "sphere":
-            centre = np.einsum("kij,j->ki", linear, np.asarray(record["center"], dtype=np.float64)) + offset
+        if isinstance(record, SphereShape):
+            centre = np.einsum("kij,j->ki", linear, np.asarray(record.center, dtype=np.float64)) + offset
             scale = np.cbrt(np.abs(np.linalg.det(linear)))
             for k in range(len(poses)):
                 out[f"{key}_{k:07d}"] = {
                     "type": "sphere",
                     "center": centre[k].tolist(),
-                    "radius": float(record["radius"] * scale[k]),
+                    "radius": float(record.radius * scale[k]),
                     "bsdf": bsdf,
                 }
             continue
-        if record["kind"] != "mesh":
+        if not isinstance(record, MeshShape):
             continue
-        points = record["positions"].astype(np.float64)
+        points = record.positions.astype(np.float64)
         positions = np.einsum("kij,nj->kni", linear, points) + offset[:, None, :]
-        faces = record["faces"].astype(np.int64)
+        faces = record.faces.astype(np.int64)
         flipped = np.linalg.det(linear) < 0
         faces_all = np.where(flipped[:, None, None], faces[None][:, :, [0, 2, 1]], faces[None])
         faces_all = faces_all + (np.arange(len(poses)) * len(points))[:, None, None]
-        merged = {
-            "name": f"{group['name']}/{record['name']}",
-            "positions": positions.reshape(-1, 3).astype(np.float32),
-            "faces": faces_all.reshape(-1, 3).astype(np.uint32),
-        }
-        if "normals" in record:
+        normals = None
+        if record.normals is not None:
             inverse_t = np.linalg.inv(linear).transpose(0, 2, 1)
-            normals = np.einsum("kij,nj->kni", inverse_t, record["normals"].astype(np.float64))
+            normals = np.einsum("kij,nj->kni", inverse_t, record.normals.astype(np.float64))
             normals /= np.maximum(np.linalg.norm(normals, axis=-1, keepdims=True), 1e-20)
-            merged["normals"] = normals.reshape(-1, 3).astype(np.float32)
-        if "uvs" in record:
-            merged["uvs"] = np.tile(record["uvs"], (len(poses), 1))
+            normals = normals.reshape(-1, 3).astype(np.float32)
+        merged = MeshShape(
+            name=f"{group.name}/{record.name}",
+            positions=positions.reshape(-1, 3).astype(np.float32),
+            faces=faces_all.reshape(-1, 3).astype(np.uint32),
+            normals=normals,
+            uvs=None if record.uvs is None else np.tile(record.uvs, (len(poses), 1)),
+        )
         try:
             out[key] = _build_mesh(mi, merged, bsdf, None)
         except Exception as error:
-            skipped(f"{record['name']}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
+            skipped(f"{record.name}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
 
 
-def _add_instances(mi, out: dict, index: int, group: dict, bsdfs: dict, skipped) -> None:
-    """An instance group (``scene_dict["instance_groups"]``): its shapes once, as a Mitsuba
-    ``shapegroup``, and one ``instance`` per ``to_world`` matrix (static; no emitters inside)."""
+def _add_instances(mi, out: dict, index: int, group: InstanceGroup, bsdfs: dict, skipped) -> None:
+    """An instance group: its shapes once, as a Mitsuba ``shapegroup``, and one ``instance`` per
+    ``to_world`` matrix (static; no emitters inside)."""
     members: dict = {"type": "shapegroup"}
-    for j, record in enumerate(group["shapes"]):
-        bsdf = bsdfs.get(record.get("bsdf")) or mi.load_dict({"type": "diffuse"})
+    for j, record in enumerate(group.shapes):
+        bsdf = bsdfs.get(record.bsdf) or mi.load_dict({"type": "diffuse"})
         try:
-            if record["kind"] == "sphere":
+            if isinstance(record, SphereShape):
                 members[f"shape_{j:04d}"] = mi.load_dict(
-                    {"type": "sphere", "center": record["center"], "radius": record["radius"], "bsdf": bsdf}
+                    {"type": "sphere", "center": list(record.center), "radius": record.radius, "bsdf": bsdf}
                 )
             else:
                 members[f"shape_{j:04d}"] = _build_mesh(mi, record, bsdf, None)
         except Exception as error:
-            skipped(f"{record['name']}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
+            skipped(f"{record.name}: Mitsuba cannot build this mesh ({_short(error)}); skipped")
     if len(members) == 1:
         return
     # Mitsuba 3.9's instance takes its shapegroup by reference to a sibling (an object fails: "Couldn't find key").
     out[f"group_{index:03d}"] = members
-    for k, matrix in enumerate(group["to_world"]):
+    for k, matrix in enumerate(group.to_world):
         out[f"instance_{index:03d}_{k:07d}"] = {
             "type": "instance",
             "shapegroup": {"type": "ref", "id": f"group_{index:03d}"},
@@ -389,7 +406,7 @@ def build_mitsuba_scene(
             layout = {"type": "scene"}
             for j in members:
                 local, bsdf = moving[j][0]
-                shifted = dict(local, positions=(local["positions"] + (offsets[j] - bounds[j][0])).astype(np.float32))
+                shifted = replace(local, positions=(local.positions + (offsets[j] - bounds[j][0])).astype(np.float32))
                 layout[f"moving_{j:04d}"] = _build_mesh(mi, shifted, bsdf, None)
             layouts.append(mi.load_dict(layout))
         return ShutterMotionScene(base, MovingShapes(mi, layouts, groups, motions, bounds, offsets))

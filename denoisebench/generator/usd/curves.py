@@ -15,8 +15,9 @@ What a curves prim means here (USD's BasisCurves schema):
   the default.
 * Time-sampled points or transforms: the first frame's pose (warning): curves do not move.
 
-The record: ``{"kind": "curves", "name", "basis": "bspline" | "linear", "points": M×4 float32
-(x, y, z, radius), "counts": control points per curve (int64)}``. The renderer writes Mitsuba's
+The record: a :class:`~denoisebench.generator.contract.scene_parts.CurvesShape` (``basis``
+``"bspline"`` or ``"linear"``, ``points`` M×4 float32 (x, y, z, radius), ``counts`` control points per
+curve, int64). The renderer writes Mitsuba's
 curve text file (one ``x y z r`` line per point, a blank line between curves) and loads it
 (render/scene.py).
 
@@ -29,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from denoisebench.generator.contract.scene_parts import CurvesShape
 from denoisebench.generator.usd.stage import check_finite
 
 # Lazy imports: pxr, inside the functions that use it (generator/usd/__init__.py says why).
@@ -107,7 +109,7 @@ def _cubic_segments(points: np.ndarray, basis: str, wrap: str) -> list[np.ndarra
     return [matrix @ points[s : s + 4] for s in starts]
 
 
-def read_curves(prim, to_world: np.ndarray, warnings: list[str], time: float = 0.0) -> dict | None:
+def read_curves(prim, to_world: np.ndarray, warnings: list[str], time: float = 0.0) -> CurvesShape | None:
     """A BasisCurves prim → a curves record (see the module docstring), or None (warning)."""
     from pxr import UsdGeom
 
@@ -153,10 +155,9 @@ def read_curves(prim, to_world: np.ndarray, warnings: list[str], time: float = 0
         warnings.append(f"{path}: no curve has enough points for its basis; skipped")
         return None
     runs = [np.concatenate([r[:, :3], np.maximum(r[:, 3:], 1e-7)], axis=1) for r in runs]  # radius stays positive
-    return {
-        "kind": "curves",
-        "name": path,
-        "basis": "linear" if kind == "linear" else "bspline",
-        "points": np.ascontiguousarray(np.concatenate(runs), dtype=np.float32),
-        "counts": np.array([len(r) for r in runs], dtype=np.int64),
-    }
+    return CurvesShape(
+        name=path,
+        basis="linear" if kind == "linear" else "bspline",
+        points=np.ascontiguousarray(np.concatenate(runs), dtype=np.float32),
+        counts=np.array([len(r) for r in runs], dtype=np.int64),
+    )

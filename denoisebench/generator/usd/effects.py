@@ -5,13 +5,14 @@ Thresholds: ``specular`` for metals or dielectrics with roughness < 0.05 (a near
 opacity < 1; ``textures`` for any bitmap in use; ``area_lights`` for Rect/Disk/Sphere lights and
 emissive geometry; ``environment`` for a Dome light; ``depth_of_field`` for a lens aperture;
 ``motion_blur`` for an open shutter on an animated camera or with a shape that moves within it
-(a record with ``shutter_motion``: object motion blur); ``media`` for a gprim that bounds a
+(a mesh with ``shutter_motion``: object motion blur); ``media`` for a gprim that bounds a
 participating medium (generator/usd/media.py). ``indirect`` (multi-bounce transport
 matters) cannot be read off a stage reliably; it is only ever declared.
 """
 
 from __future__ import annotations
 
+from denoisebench.generator.contract.scene_parts import ConstantEmitter, EnvmapEmitter, MeshShape
 from denoisebench.scenes.effects import validate_effects
 
 SPECULAR_ROUGHNESS = 0.05
@@ -23,7 +24,8 @@ def infer_effects(camera, materials, light_kinds, shapes, emitters) -> tuple[str
     found = set()
     if camera.has_depth_of_field:
         found.add("depth_of_field")
-    if camera.has_open_shutter and (camera.is_animated or any("shutter_motion" in shape for shape in shapes)):
+    shutter_moving = any(isinstance(s, MeshShape) and s.shutter_motion is not None for s in shapes)
+    if camera.has_open_shutter and (camera.is_animated or shutter_moving):
         found.add("motion_blur")
     for material in materials:
         non_diffuse = material.metallic > METALLIC_THRESHOLD or material.opacity < 1.0
@@ -37,10 +39,10 @@ def infer_effects(camera, materials, light_kinds, shapes, emitters) -> tuple[str
             found.add("textures")
         if material.emission is not None:
             found.add("area_lights")
-    if any(shape.get("light") in ("RectLight", "DiskLight", "SphereLight") for shape in shapes):
+    if any(shape.light in ("RectLight", "DiskLight", "SphereLight") for shape in shapes):
         found.add("area_lights")
-    if any(emitter["type"] in ("envmap", "constant") for emitter in emitters) or "DomeLight" in light_kinds:
+    if any(isinstance(e, (EnvmapEmitter, ConstantEmitter)) for e in emitters) or "DomeLight" in light_kinds:
         found.add("environment")
-    if any("medium" in shape for shape in shapes):
+    if any(shape.medium is not None for shape in shapes):
         found.add("media")
     return validate_effects(found)

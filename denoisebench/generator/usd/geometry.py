@@ -22,6 +22,7 @@ import math
 import numpy as np
 
 from denoisebench.errors import UserInputError
+from denoisebench.generator.contract.scene_parts import MeshShape, ShapeRecord, SphereShape
 from denoisebench.generator.usd.stage import check_finite, to_numpy
 
 # Lazy imports: pxr, inside the functions that use it (generator/usd/__init__.py says why).
@@ -38,19 +39,15 @@ def _transform_normals(matrix: np.ndarray, normals: np.ndarray) -> np.ndarray:
     return out / np.maximum(length, 1e-20)
 
 
-def mesh_entry(name, positions, triangles, normals=None, uvs=None) -> dict:
+def mesh_entry(name, positions, triangles, normals=None, uvs=None) -> MeshShape:
     """A neutral triangle-mesh record: float32 N×3 positions, uint32 M×3 faces, optional attributes."""
-    entry = {
-        "kind": "mesh",
-        "name": name,
-        "positions": np.ascontiguousarray(positions, dtype=np.float32),
-        "faces": np.ascontiguousarray(triangles, dtype=np.uint32),
-    }
-    if normals is not None:
-        entry["normals"] = np.ascontiguousarray(normals, dtype=np.float32)
-    if uvs is not None:
-        entry["uvs"] = np.ascontiguousarray(uvs, dtype=np.float32)
-    return entry
+    return MeshShape(
+        name=name,
+        positions=np.ascontiguousarray(positions, dtype=np.float32),
+        faces=np.ascontiguousarray(triangles, dtype=np.uint32),
+        normals=None if normals is None else np.ascontiguousarray(normals, dtype=np.float32),
+        uvs=None if uvs is None else np.ascontiguousarray(uvs, dtype=np.float32),
+    )
 
 
 def triangulate(counts: np.ndarray, indices: np.ndarray, path: str, warnings: list[str]):
@@ -119,7 +116,7 @@ def _per_corner(values, interpolation, corner_point, corner_face, corner_index, 
 
 def read_mesh(
     prim, to_world: np.ndarray, warnings: list[str], uv_name: str | None = None, time: float = 0.0
-) -> tuple[dict, np.ndarray] | None:
+) -> tuple[MeshShape, np.ndarray] | None:
     """A UsdGeom.Mesh → (mesh record, source face id per triangle), or None when nothing is left.
 
     ``uv_name``: the primvar holding texture coordinates (the material's primvar reader
@@ -207,7 +204,7 @@ def read_mesh(
     return entry, face_of
 
 
-def subset_records(prim, entry: dict, triangle_faces: np.ndarray):
+def subset_records(prim, entry: MeshShape, triangle_faces: np.ndarray):
     """Split a mesh record by its ``materialBind`` GeomSubsets → list of (record, subset prim or None)."""
     from pxr import UsdShade
 
@@ -221,23 +218,21 @@ def subset_records(prim, entry: dict, triangle_faces: np.ndarray):
         mask = np.isin(triangle_faces, faces) & ~assigned
         assigned |= mask
         if mask.any():
-            out.append(
-                (_select_triangles(entry, mask, f"{entry['name']}/{subset.GetPrim().GetName()}"), subset.GetPrim())
-            )
+            out.append((_select_triangles(entry, mask, f"{entry.name}/{subset.GetPrim().GetName()}"), subset.GetPrim()))
     if (~assigned).any():
-        out.append((_select_triangles(entry, ~assigned, entry["name"]), None))
+        out.append((_select_triangles(entry, ~assigned, entry.name), None))
     return out
 
 
-def _select_triangles(entry: dict, mask: np.ndarray, name: str) -> dict:
-    faces = entry["faces"][mask]
+def _select_triangles(entry: MeshShape, mask: np.ndarray, name: str) -> MeshShape:
+    faces = entry.faces[mask]
     used, remap = np.unique(faces, return_inverse=True)
     return mesh_entry(
         name,
-        entry["positions"][used],
+        entry.positions[used],
         remap.reshape(-1, 3),
-        entry["normals"][used] if "normals" in entry else None,
-        entry["uvs"][used] if "uvs" in entry else None,
+        entry.normals[used] if entry.normals is not None else None,
+        entry.uvs[used] if entry.uvs is not None else None,
     )
 
 
@@ -340,7 +335,7 @@ def tessellate_plane(width: float, length: float, axis: str):
     return positions, np.array([[0, 1, 2], [0, 2, 3]]), normals, uvs
 
 
-def read_primitive(prim, to_world: np.ndarray, warnings: list[str], analytic: bool = True) -> dict | None:
+def read_primitive(prim, to_world: np.ndarray, warnings: list[str], analytic: bool = True) -> ShapeRecord | None:
     """A UsdGeom Sphere/Cube/Cylinder/Cone/Plane → a mesh or analytic sphere record (or None).
 
     ``analytic=False`` tessellates a sphere even where an analytic one would do (moving spheres)."""
@@ -363,12 +358,7 @@ def read_primitive(prim, to_world: np.ndarray, warnings: list[str], analytic: bo
         if analytic and np.allclose(scale, scale[0], rtol=1e-6):
             rotation = to_world[:3, :3] / scale[0]
             if np.linalg.det(rotation) > 0:
-                return {
-                    "kind": "sphere",
-                    "name": path,
-                    "center": to_world[:3, 3].tolist(),
-                    "radius": radius * float(scale[0]),
-                }
+                return SphereShape(name=path, center=tuple(to_world[:3, 3].tolist()), radius=radius * float(scale[0]))
         positions, faces, normals, uvs = tessellate_sphere(radius)
     elif prim.IsA(UsdGeom.Cube):
         positions, faces, normals, uvs = tessellate_cube(float(attr(UsdGeom.Cube(prim).GetSizeAttr, "size")))
@@ -433,10 +423,10 @@ def local_to_world(prim, time: float = 0.0) -> np.ndarray:
     return matrix
 
 
-def area_of(entry: dict) -> float:
+def area_of(entry: MeshShape | SphereShape) -> float:
     """Surface area of a record (for emitter checks)."""
-    if entry["kind"] == "sphere":
-        return 4.0 * math.pi * entry["radius"] ** 2
-    p = entry["positions"].astype(np.float64)
-    f = entry["faces"]
+    if isinstance(entry, SphereShape):
+        return 4.0 * math.pi * entry.radius**2
+    p = entry.positions.astype(np.float64)
+    f = entry.faces
     return float(0.5 * np.linalg.norm(np.cross(p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]), axis=1).sum())

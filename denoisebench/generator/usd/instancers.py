@@ -8,9 +8,9 @@ What an instancer means here (USD's PointInstancer schema):
   ``ComputeInstanceTransformsAtTime`` composes them. ``invisibleIds`` and inactive ids
   (``ComputeMaskAtTime``) drop instances. Each prototype's gprims are read relative to its root
   (nested PointInstancers and lights inside prototypes are skipped with a warning).
-* **Static instancers** become one *instance group* per used prototype:
-  ``{"name", "shapes": [records in prototype space], "to_world": K×4×4}`` in the scene dict's
-  ``instance_groups`` (see :class:`~denoisebench.generator.contract.translated_scene.TranslatedScene`);
+* **Static instancers** become one *instance group* per used prototype: its records in prototype
+  space and K×4×4 poses, an :class:`~denoisebench.generator.contract.scene_parts.InstanceGroup` of the
+  translated scene's ``instance_groups``;
   the renderer loads each group's shapes once (a Mitsuba ``shapegroup``) and places ``K``
   ``instance`` objects, so that 10 000 instances cost their geometry's memory once.
   Emissive prototype shapes cannot live in a Mitsuba shapegroup: they are written out per instance.
@@ -30,8 +30,11 @@ What an instancer means here (USD's PointInstancer schema):
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
+from denoisebench.generator.contract.scene_parts import MeshShape, ShapeRecord, ShutterMotion, SphereShape
 from denoisebench.generator.contract.translated_scene import shutter_keys
 from denoisebench.generator.usd import geometry
 from denoisebench.generator.usd.stage import check_finite
@@ -133,8 +136,9 @@ def read_instancer(prim, to_mitsuba, frames, camera, warnings: list[str], gprim_
     """A PointInstancer → (plain (record, material) parts to add as shapes, instance groups).
 
     ``gprim_parts(prim, to_space, time, analytic)``: the translator's reader of one gprim (records
-    baked with ``to_space @ local_to_world(prim)``). Groups: ``{"name", "parts": [(record,
-    material)], "to_world": K×4×4 float64}`` (the translator turns parts into bsdf-bound shapes)."""
+    baked with ``to_space @ local_to_world(prim)``). Groups: ``(name, [(record, material)], K×4×4
+    float64 poses)``; the translator binds the parts' materials and makes each group an
+    :class:`~denoisebench.generator.contract.scene_parts.InstanceGroup`."""
     from pxr import UsdGeom
 
     instancer = UsdGeom.PointInstancer(prim)
@@ -155,7 +159,7 @@ def read_instancer(prim, to_mitsuba, frames, camera, warnings: list[str], gprim_
     base = to_mitsuba @ geometry.local_to_world(prim, frames[0])
     animated = (len(frames) > 1 or camera.has_open_shutter) and is_animated(instancer)
     plain: list = []
-    groups: list[dict] = []
+    groups: list[tuple] = []
     for proto_index, root in enumerate(roots):
         chosen = np.flatnonzero((indices == proto_index) & mask)
         if not len(chosen):
@@ -173,7 +177,7 @@ def read_instancer(prim, to_mitsuba, frames, camera, warnings: list[str], gprim_
             continue
         poses = base[None] @ matrices[chosen]
         scales = np.linalg.norm(poses[:, :3, :3], axis=1)
-        if any(r["kind"] == "sphere" for r, _ in parts) and not np.allclose(scales, scales[:, :1], rtol=1e-6):
+        if any(isinstance(r, SphereShape) for r, _ in parts) and not np.allclose(scales, scales[:, :1], rtol=1e-6):
             # A non-uniformly scaled analytic sphere is an ellipsoid: tessellate it once, in the group.
             parts, _ = _prototype_parts(root, frames[0], False, gprim_parts, warnings)
         kept = [(r, m) for r, m in parts if m.emission is None]
@@ -181,28 +185,30 @@ def read_instancer(prim, to_mitsuba, frames, camera, warnings: list[str], gprim_
             if material.emission is not None:  # emitters cannot be instanced in Mitsuba: one shape per instance
                 plain.extend((_placed(record, pose, f"{path}/{k}"), material) for k, pose in zip(chosen, poses))
         if kept:
-            groups.append({"name": f"{path}:{root.GetPath()}", "parts": kept, "to_world": poses})
+            groups.append((f"{path}:{root.GetPath()}", kept, poses))
     return plain, groups
 
 
-def _placed(record: dict, pose: np.ndarray, prefix: str) -> dict:
+def _placed(record: ShapeRecord, pose: np.ndarray, prefix: str) -> MeshShape | SphereShape:
     """A copy of a prototype-space record moved to ``pose`` (spheres: tessellated when not uniform)."""
-    if record["kind"] == "sphere":
+    if isinstance(record, SphereShape):
         scale = np.linalg.norm(pose[:3, :3], axis=0)
         if np.allclose(scale, scale[0], rtol=1e-6):
-            center = pose[:3, :3] @ np.asarray(record["center"]) + pose[:3, 3]
-            return dict(
-                record, name=f"{prefix}{record['name']}", center=center.tolist(), radius=record["radius"] * scale[0]
+            center = pose[:3, :3] @ np.asarray(record.center) + pose[:3, 3]
+            return replace(
+                record, name=f"{prefix}{record.name}", center=tuple(center.tolist()), radius=record.radius * scale[0]
             )
-        positions, faces, normals = geometry.tessellate_sphere(record["radius"])
-        record = geometry.mesh_entry(record["name"], positions + np.asarray(record["center"]), faces, normals)
-    out = dict(record, name=f"{prefix}{record['name']}")
-    out["positions"] = geometry._transform_points(pose, record["positions"].astype(np.float64)).astype(np.float32)
-    if "normals" in record:
-        out["normals"] = geometry._transform_normals(pose, record["normals"].astype(np.float64)).astype(np.float32)
-    if np.linalg.det(pose[:3, :3]) < 0:
-        out["faces"] = np.ascontiguousarray(record["faces"][:, [0, 2, 1]])
-    return out
+        positions, faces, normals, _ = geometry.tessellate_sphere(record.radius)
+        record = geometry.mesh_entry(record.name, positions + np.asarray(record.center), faces, normals)
+    return replace(
+        record,
+        name=f"{prefix}{record.name}",
+        positions=geometry._transform_points(pose, record.positions.astype(np.float64)).astype(np.float32),
+        normals=None
+        if record.normals is None
+        else geometry._transform_normals(pose, record.normals.astype(np.float64)).astype(np.float32),
+        faces=np.ascontiguousarray(record.faces[:, [0, 2, 1]]) if np.linalg.det(pose[:3, :3]) < 0 else record.faces,
+    )
 
 
 def _written_out(instancer, root, proto_index, chosen, to_mitsuba, frames, camera, gprim_parts, warnings):
@@ -222,7 +228,7 @@ def _written_out(instancer, root, proto_index, chosen, to_mitsuba, frames, camer
         warnings.append(f"{root.GetPath()}: prototype topology changes over time; first frame used")
         parts_per_frame = parts_per_frame[:1] * len(frames)
     rigid = all(
-        all(np.array_equal(a[0]["positions"], b[0]["positions"]) for a, b in zip(parts_per_frame[0], frame_parts))
+        all(np.array_equal(a[0].positions, b[0].positions) for a, b in zip(parts_per_frame[0], frame_parts))
         for frame_parts in parts_per_frame
     )
     keys = shutter_keys(len(frames), camera.shutter_open, camera.shutter_close) if camera.has_open_shutter else None
@@ -244,16 +250,16 @@ def _written_out(instancer, root, proto_index, chosen, to_mitsuba, frames, camer
                 for f in range(len(frames))
             ]
             placed = frames_records[0]
-            placed["frame_positions"] = np.stack([r["positions"] for r in frames_records])
-            if "normals" in placed:
-                placed["frame_normals"] = np.stack([r["normals"] for r in frames_records])
+            motion = None
             if key_poses is not None and material.emission is None:
                 first = per_frame[0][slot]
                 if abs(np.linalg.det(first[:3, :3])) > 1e-12:
-                    placed["shutter_motion"] = {
-                        "times": keys,
-                        "to_world": key_poses[slot],
-                        "from_record": np.linalg.inv(first),
-                    }
+                    motion = ShutterMotion(times=keys, to_world=key_poses[slot], from_record=np.linalg.inv(first))
+            placed = replace(
+                placed,
+                frame_positions=np.stack([r.positions for r in frames_records]),
+                frame_normals=None if placed.normals is None else np.stack([r.normals for r in frames_records]),
+                shutter_motion=motion,
+            )
             out.append((placed, material))
     return out

@@ -30,9 +30,21 @@ the color by ``UsdLux.BlackbodyTemperatureAsRgb(colorTemperature)``.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
+from denoisebench.generator.contract.scene_parts import (
+    AreaEmitter,
+    ConstantEmitter,
+    DirectionalEmitter,
+    EmitterRecord,
+    EnvmapEmitter,
+    MeshShape,
+    PointEmitter,
+    SphereShape,
+    SpotEmitter,
+)
 from denoisebench.generator.usd.geometry import area_of, mesh_entry, tessellate_plane
 from denoisebench.generator.usd.stage import check_finite
 from denoisebench.generator.usd.textures import read_environment
@@ -74,7 +86,9 @@ def light_radiance(prim, path: str, warnings: list[str]) -> np.ndarray:
     return np.clip(color, 0.0, None) * intensity * 2.0**exposure
 
 
-def read_light(prim, to_world: np.ndarray, warnings: list[str]) -> tuple[list[dict], list[dict]]:
+def read_light(
+    prim, to_world: np.ndarray, warnings: list[str]
+) -> tuple[list[MeshShape | SphereShape], list[EmitterRecord]]:
     """One UsdLux light → (shape records with an emitter, emitter records)."""
     path = str(prim.GetPath())
     kind = prim.GetTypeName()
@@ -95,9 +109,7 @@ def read_light(prim, to_world: np.ndarray, warnings: list[str]) -> tuple[list[di
             warnings.append(f"{path}: {kind} has zero area; skipped (it would emit nothing)")
             return [], []
         value = radiance / area if normalize else radiance
-        entry["emitter"] = {"type": "area", "radiance": value.tolist()}
-        entry["light"] = kind
-        return [entry], []
+        return [replace(entry, emitter=AreaEmitter(radiance=tuple(value.tolist())), light=str(kind))], []
 
     shaped = prim.HasAPI(UsdLux.ShapingAPI) or prim.GetAttribute("inputs:shaping:cone:angle").HasAuthoredValue()
     if shaped and kind != "SphereLight":
@@ -137,7 +149,7 @@ def read_light(prim, to_world: np.ndarray, warnings: list[str]) -> tuple[list[di
             return [], [_point_or_spot(prim, light, to_world, intensity, shaped, path, warnings)]
         if shaped:
             warnings.append(f"{path}: light shaping (cone) on an area SphereLight does not map to Mitsuba; ignored")
-        entry = {"kind": "sphere", "name": path, "center": to_world[:3, 3].tolist(), "radius": world_radius}
+        entry = SphereShape(name=path, center=tuple(to_world[:3, 3].tolist()), radius=world_radius)
         return emissive(entry, 4 * math.pi * world_radius**2)
     if kind == "DistantLight":
         angle = float(_input(light, "angle", path, 0.53))
@@ -146,7 +158,7 @@ def read_light(prim, to_world: np.ndarray, warnings: list[str]) -> tuple[list[di
         direction = to_world[:3, :3] @ np.array([0.0, 0.0, -1.0])
         direction /= max(np.linalg.norm(direction), 1e-20)
         return [], [
-            {"type": "directional", "direction": direction.tolist(), "irradiance": radiance.tolist(), "prim": path}
+            DirectionalEmitter(prim=path, direction=tuple(direction.tolist()), irradiance=tuple(radiance.tolist()))
         ]
     # DomeLight
     texture = _input(light, "texture:file", path)
@@ -159,22 +171,14 @@ def read_light(prim, to_world: np.ndarray, warnings: list[str]) -> tuple[list[di
                 warnings.append(
                     f"{path}: DomeLight color tint with a texture is not supported; its luminance scale is used"
                 )
-            return [], [
-                {
-                    "type": "envmap",
-                    "data": image,
-                    "scale": float(radiance.max()),
-                    "rotation": rotation.tolist(),
-                    "prim": path,
-                }
-            ]
-    return [], [{"type": "constant", "radiance": radiance.tolist(), "prim": path}]
+            return [], [EnvmapEmitter(prim=path, data=image, scale=float(radiance.max()), rotation=rotation)]
+    return [], [ConstantEmitter(prim=path, radiance=tuple(radiance.tolist()))]
 
 
-def _point_or_spot(prim, light, to_world, intensity, shaped, path, warnings) -> dict:
+def _point_or_spot(prim, light, to_world, intensity, shaped, path, warnings) -> PointEmitter | SpotEmitter:
     """A Mitsuba ``point`` or (ShapingAPI cone) ``spot`` emitter record at the light's origin."""
     position = to_world[:3, 3]
-    record = {"type": "point", "position": position.tolist(), "intensity": intensity.tolist(), "prim": path}
+    record = PointEmitter(prim=path, position=tuple(position.tolist()), intensity=tuple(intensity.tolist()))
     if not shaped:
         return record
     angle = float(_input(light, "shaping:cone:angle", path, 90.0))
@@ -187,8 +191,7 @@ def _point_or_spot(prim, light, to_world, intensity, shaped, path, warnings) -> 
         return record
     if angle <= 0.0:
         warnings.append(f"{path}: shaping:cone:angle {angle:g}; the light emits nothing; skipped")
-        record["intensity"] = [0.0, 0.0, 0.0]
-        return record
+        return replace(record, intensity=(0.0, 0.0, 0.0))
     # Mitsuba's spot shines along its local +Z; a UsdLux light along −Z. Orthonormal frame, no scale.
     forward = to_world[:3, :3] @ np.array([0.0, 0.0, -1.0])
     forward /= max(np.linalg.norm(forward), 1e-20)
@@ -198,11 +201,10 @@ def _point_or_spot(prim, light, to_world, intensity, shaped, path, warnings) -> 
     up = np.cross(forward, right)
     frame = np.eye(4)
     frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = right, up, forward, position
-    return {
-        "type": "spot",
-        "to_world": frame.tolist(),
-        "intensity": intensity.tolist(),
-        "prim": path,
-        "cutoff_angle": angle,
-        "beam_width": angle * min(1.0 - softness, 0.999),
-    }  # equal angles: 1/0 in Mitsuba
+    return SpotEmitter(
+        prim=path,
+        to_world=frame,
+        intensity=tuple(intensity.tolist()),
+        cutoff_angle=angle,
+        beam_width=angle * min(1.0 - softness, 0.999),  # equal angles: 1/0 in Mitsuba
+    )

@@ -32,9 +32,12 @@ grid whose size does not match its dims) are one-line errors, never a crash.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from denoisebench.errors import UserInputError
+from denoisebench.generator.contract.scene_parts import MediumRecord
 
 PREFIX = "denoisebench:medium:"
 TYPES = ("homogeneous", "heterogeneous")
@@ -55,7 +58,7 @@ def _triple(value, what: str, path: str) -> list[float]:
     return out
 
 
-def read_medium(prim, to_mitsuba: np.ndarray, local_to_world: np.ndarray, source=None) -> dict | None:
+def read_medium(prim, to_mitsuba: np.ndarray, local_to_world: np.ndarray, source=None) -> MediumRecord | None:
     """The medium record of gprim ``prim`` (None without ``denoisebench:medium:type``); module docstring.
 
     ``to_mitsuba``: stage → Mitsuba world (its scale converts the extinction per stage unit to per
@@ -84,13 +87,13 @@ def read_medium(prim, to_mitsuba: np.ndarray, local_to_world: np.ndarray, source
     g = float(_get(holder, "g", 0.0))
     if not -1.0 < g < 1.0:
         raise UserInputError(f"{path}: {PREFIX}g must lie in (-1, 1)")
-    record = {
-        "type": kind,
-        "sigma_t": [s / max(meters, 1e-30) for s in sigma_t],
-        "albedo": albedo,
-        "g": g,
-        "null_boundary": boundary == "null",
-    }
+    record = MediumRecord(
+        kind=kind,
+        sigma_t=tuple(s / max(meters, 1e-30) for s in sigma_t),
+        albedo=tuple(albedo),
+        g=g,
+        null_boundary=boundary == "null",
+    )
     if kind == "heterogeneous":
         dims = _get(holder, "densityDims")
         values = _get(holder, "density")
@@ -104,12 +107,15 @@ def read_medium(prim, to_mitsuba: np.ndarray, local_to_world: np.ndarray, source
             )
         if not np.all(np.isfinite(density)) or density.min() < 0:
             raise UserInputError(f"{path}: {PREFIX}density must be finite and >= 0")
-        record["density"] = density.reshape(nz, ny, nx)
         low, high = _local_extent(prim)
         grid = np.eye(4)
         grid[:3, :3] = np.diag(np.maximum(high - low, 1e-9))
         grid[:3, 3] = low
-        record["grid_to_world"] = np.asarray(local_to_world, dtype=np.float64) @ grid
+        record = replace(
+            record,
+            density=density.reshape(nz, ny, nx),
+            grid_to_world=np.asarray(local_to_world, dtype=np.float64) @ grid,
+        )
     return record
 
 
@@ -131,18 +137,17 @@ def _local_extent(prim) -> tuple[np.ndarray, np.ndarray]:
     return low, high
 
 
-def attach_media(prim, parts: list, to_mitsuba: np.ndarray, local_to_world: np.ndarray) -> None:
-    """Give every part record of ``prim`` its medium (``record["medium"]``) when it is a medium boundary:
-    its own ``denoisebench:medium:*`` attributes, else its bound material's."""
+def attach_media(prim, parts: list, to_mitsuba: np.ndarray, local_to_world: np.ndarray) -> list:
+    """``parts`` (``[(record, material)]`` of ``prim``) with each record given its ``medium`` when ``prim`` is a
+    medium boundary: its own ``denoisebench:medium:*`` attributes, else its bound material's."""
     medium = read_medium(prim, to_mitsuba, local_to_world)
     if medium is None:
         material = _bound_material_prim(prim)
         if material is not None and _get(material, "type") is not None:
             medium = read_medium(prim, to_mitsuba, local_to_world, source=material)
     if medium is None:
-        return
-    for record, _ in parts:
-        record["medium"] = medium
+        return parts
+    return [(replace(record, medium=medium), material) for record, material in parts]
 
 
 def refuse_volume(prim) -> None:

@@ -21,12 +21,23 @@ from __future__ import annotations
 
 import os
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.render_plan import STAGE_MAX_DEPTH_KEY, check_max_depth
+from denoisebench.generator.contract.scene_parts import (
+    AreaEmitter,
+    CurvesShape,
+    EmitterRecord,
+    InstanceGroup,
+    MeshShape,
+    ShapeRecord,
+    ShutterMotion,
+    SphereShape,
+)
 from denoisebench.generator.contract.translated_scene import TranslatedScene, shutter_keys
 from denoisebench.generator.usd import curves, geometry, instancers
 from denoisebench.generator.usd.additions import add_auto_camera, add_default_lights, stage_has_light
@@ -131,22 +142,22 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
     materials: dict = {}
     bsdfs: dict[str, dict] = {}
     bsdf_ids: dict[int, str] = {}
-    shapes: list[dict] = []
-    emitters: list[dict] = []
+    shapes: list[ShapeRecord] = []
+    emitters: list[EmitterRecord] = []
     used_materials = []
     light_kinds: list[str] = []
 
-    instance_groups: list[dict] = []
+    instance_groups: list[InstanceGroup] = []
 
-    def bind(record: dict, material, into: list | None = None) -> None:
+    def bind(record: ShapeRecord, material, into: list | None = None) -> None:
         key = id(material)
         if key not in bsdf_ids:
             bsdf_ids[key] = f"bsdf_{len(bsdf_ids):03d}"
             bsdfs[bsdf_ids[key]] = material.bsdf
             used_materials.append(material)
-        record["bsdf"] = bsdf_ids[key]
+        record = replace(record, bsdf=bsdf_ids[key])
         if material.emission is not None:
-            record["emitter"] = {"type": "area", "radiance": list(material.emission)}
+            record = replace(record, emitter=AreaEmitter(radiance=tuple(material.emission)))
         (shapes if into is None else into).append(record)
 
     iterator = iter(Usd.PrimRange(stage.GetPseudoRoot(), Usd.TraverseInstanceProxies(Usd.PrimDefaultPredicate)))
@@ -167,9 +178,7 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
             if len(frames) > 1 and geometry.is_transform_animated(prim):
                 warnings.append(f"{path}: animated light; rendered at its first-frame pose")
             new_shapes, new_emitters = read_light(prim, to_mitsuba @ geometry.local_to_world(prim, frames[0]), warnings)
-            for record in new_shapes:
-                record["bsdf"] = None
-                shapes.append(record)
+            shapes.extend(new_shapes)  # no bsdf: a light's own geometry renders black
             emitters.extend(new_emitters)
             continue
         if prim.IsA(UsdGeom.PointInstancer):
@@ -184,11 +193,11 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
             )
             for record, material in plain:
                 bind(record, material)
-            for group in groups:
-                records: list[dict] = []
-                for record, material in group["parts"]:
+            for name, group_parts, poses in groups:
+                records: list[ShapeRecord] = []
+                for record, material in group_parts:
                     bind(record, material, into=records)
-                instance_groups.append({"name": group["name"], "shapes": records, "to_world": group["to_world"]})
+                instance_groups.append(InstanceGroup(name=name, shapes=tuple(records), to_world=poses))
             continue
         if prim.IsA(UsdGeom.BasisCurves):
             if len(frames) > 1 and (
@@ -212,23 +221,23 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
             parts = _gprim_parts(prim, to_mitsuba, frames[0], warnings, materials, analytic=not moving)
             if moving and parts:
                 # parts is already the first frame's (analytic=False when moving)
-                _attach_frames(
+                parts = _attach_frames(
                     prim,
                     parts,
                     [parts] + [_gprim_parts(prim, to_mitsuba, t, [], materials, analytic=False) for t in frames[1:]],
                     warnings,
                 )
                 if camera.has_open_shutter and not geometry.are_points_animated(prim):
-                    _attach_shutter_motion(prim, parts, to_mitsuba, frames, camera, warnings)
-            attach_media(prim, parts, to_mitsuba, to_mitsuba @ geometry.local_to_world(prim, frames[0]))
+                    parts = _attach_shutter_motion(prim, parts, to_mitsuba, frames, camera, warnings)
+            parts = attach_media(prim, parts, to_mitsuba, to_mitsuba @ geometry.local_to_world(prim, frames[0]))
             for record, material in parts:
                 bind(record, material)
             continue
         if type_name not in _STRUCTURAL:
             warnings.append(f"{path}: prim type {type_name} is not supported; skipped")
 
-    lit = any("emitter" in s for s in shapes) or bool(emitters)
-    if strict and not any(s.get("bsdf") for s in shapes) and not instance_groups:
+    lit = any(s.emitter is not None for s in shapes) or bool(emitters)
+    if strict and not any(s.bsdf for s in shapes) and not instance_groups:
         # Mitsuba cannot trace a scene without shapes (and lights alone show nothing but a sky).
         skipped = sorted({w.split(": prim type ")[1].split(" ")[0] for w in warnings if ": prim type " in w})
         detail = f" (unsupported: {', '.join(skipped)})" if skipped else ""
@@ -254,13 +263,11 @@ def translate_stage(stage, camera_path: str | None = None, source: str = "", str
         except ValueError as error:
             raise UserInputError(f"{source or 'stage'}: {error}") from None
     return TranslatedScene(
-        scene_dict={
-            "bsdfs": bsdfs,
-            "shapes": shapes,
-            "emitters": emitters,
-            **({"instance_groups": instance_groups} if instance_groups else {}),
-        },
         camera=camera,
+        bsdfs=bsdfs,
+        shapes=tuple(shapes),
+        emitters=tuple(emitters),
+        instance_groups=tuple(instance_groups),
         effects_declared=declared,
         effects_inferred=inferred,
         warnings=warnings,
@@ -310,33 +317,37 @@ def _gprim_parts(prim, to_mitsuba, time: float, warnings: list[str], materials: 
     return [] if record is None else [(record, bound_material(prim, materials, warnings))]
 
 
-def _attach_frames(prim, parts, per_frame, warnings: list[str]) -> None:
-    """Give each part of a moving gprim its vertices at every frame (``frame_positions``/``frame_normals``).
+def _attach_frames(prim, parts, per_frame, warnings: list[str]) -> list:
+    """``parts`` of a moving gprim, each record given its vertices at every frame (``frame_positions``,
+    ``frame_normals``).
 
     Needs the same triangles at every frame; a changing topology keeps the first frame's pose (warning)."""
     path = str(prim.GetPath())
     if any(len(frame_parts) != len(parts) for frame_parts in per_frame):
         warnings.append(f"{path}: topology changes over time; rendered at its first-frame pose")
-        return
+        return parts
     for index, (record, _) in enumerate(parts):
         records = [frame_parts[index][0] for frame_parts in per_frame]
         if any(
-            r["kind"] != "mesh"
-            or r["positions"].shape != record["positions"].shape
-            or not np.array_equal(r["faces"], record["faces"])
+            not isinstance(r, MeshShape)
+            or r.positions.shape != record.positions.shape
+            or not np.array_equal(r.faces, record.faces)
             for r in records
         ):
             warnings.append(f"{path}: topology changes over time; rendered at its first-frame pose")
-            return
-    for index, (record, _) in enumerate(parts):
+            return parts
+    out = []
+    for index, (record, material) in enumerate(parts):
         records = [frame_parts[index][0] for frame_parts in per_frame]
-        record["frame_positions"] = np.stack([r["positions"] for r in records])
-        if "normals" in record:
-            record["frame_normals"] = np.stack([r["normals"] for r in records])
+        normals = None if record.normals is None else np.stack([r.normals for r in records])
+        out.append(
+            (replace(record, frame_positions=np.stack([r.positions for r in records]), frame_normals=normals), material)
+        )
+    return out
 
 
-def _attach_shutter_motion(prim, parts, to_mitsuba, frames, camera, warnings: list[str]) -> None:
-    """Give each part of a rigidly moving gprim its poses within the shutter (``shutter_motion``).
+def _attach_shutter_motion(prim, parts, to_mitsuba, frames, camera, warnings: list[str]) -> list:
+    """``parts`` of a rigidly moving gprim, each given its poses within the shutter (``shutter_motion``).
 
     Keys every 1/SHUTTER_SUBSTEPS frame over all frames' shutters (time code = first frame + key time);
     emissive parts are refused (no moving emitters: they keep each frame's pose, one warning)."""
@@ -345,44 +356,47 @@ def _attach_shutter_motion(prim, parts, to_mitsuba, frames, camera, warnings: li
     first = to_mitsuba @ geometry.local_to_world(prim, frames[0])
     if abs(np.linalg.det(first[:3, :3])) < 1e-12 or not np.all(np.isfinite(poses)):
         warnings.append(f"{prim.GetPath()}: degenerate transform; no motion blur within the shutter")
-        return
-    from_record = np.linalg.inv(first)
+        return parts
+    motion = ShutterMotion(times=times, to_world=poses, from_record=np.linalg.inv(first))
+    out = []
     for record, material in parts:
-        if material.emission is not None or "emitter" in record:
+        if material.emission is not None or record.emitter is not None:
             warnings.append(
                 f"{prim.GetPath()}: emissive geometry moving within the shutter is not supported; "
                 "rendered at each frame's pose (no motion blur on it)"
             )
+            out.append((record, material))
             continue
-        record["shutter_motion"] = {"times": times, "to_world": poses, "from_record": from_record}
+        out.append((replace(record, shutter_motion=motion), material))
+    return out
 
 
 def scene_bounds(translated: TranslatedScene) -> tuple[np.ndarray, np.ndarray]:
     """Axis-aligned bounds of the translated geometry (for previews and sanity checks)."""
     lows, highs = [], []
-    for shape in translated.scene_dict["shapes"]:
-        if shape["kind"] == "sphere":
-            center = np.asarray(shape["center"])
-            lows.append(center - shape["radius"])
-            highs.append(center + shape["radius"])
-        elif shape["kind"] == "curves":
-            lows.append((shape["points"][:, :3] - shape["points"][:, 3:]).min(0))
-            highs.append((shape["points"][:, :3] + shape["points"][:, 3:]).max(0))
+    for shape in translated.shapes:
+        if isinstance(shape, SphereShape):
+            center = np.asarray(shape.center)
+            lows.append(center - shape.radius)
+            highs.append(center + shape.radius)
+        elif isinstance(shape, CurvesShape):
+            lows.append((shape.points[:, :3] - shape.points[:, 3:]).min(0))
+            highs.append((shape.points[:, :3] + shape.points[:, 3:]).max(0))
         else:
-            lows.append(shape["positions"].min(0))
-            highs.append(shape["positions"].max(0))
-    for group in translated.scene_dict.get("instance_groups", []):
-        for shape in group["shapes"]:
-            if shape["kind"] == "sphere":
-                corners = np.asarray(shape["center"]) + shape["radius"] * np.array(
+            lows.append(shape.positions.min(0))
+            highs.append(shape.positions.max(0))
+    for group in translated.instance_groups:
+        for shape in group.shapes:
+            if isinstance(shape, SphereShape):
+                corners = np.asarray(shape.center) + shape.radius * np.array(
                     [[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]
                 )
             else:
-                low, high = shape["positions"].min(0), shape["positions"].max(0)
+                low, high = shape.positions.min(0), shape.positions.max(0)
                 corners = np.array(
                     [[a, b, c] for a in (low[0], high[0]) for b in (low[1], high[1]) for c in (low[2], high[2])]
                 )
-            placed = np.einsum("kij,nj->kni", group["to_world"][:, :3, :3], corners) + group["to_world"][:, None, :3, 3]
+            placed = np.einsum("kij,nj->kni", group.to_world[:, :3, :3], corners) + group.to_world[:, None, :3, 3]
             lows.append(placed.reshape(-1, 3).min(0))
             highs.append(placed.reshape(-1, 3).max(0))
     if not lows:

@@ -375,13 +375,13 @@ def test_usd_medium_encoding_translates_and_bad_values_are_one_line_errors(tmp_p
     path = _medium_stage(tmp_path, kind="heterogeneous", sigma_t=(2, 2, 2), density=density, g=0.3)
     translated = translate_usd(path)
     assert "media" in translated.effects_inferred
-    (record,) = [s for s in translated.scene_dict["shapes"] if "medium" in s]
-    medium = record["medium"]
-    assert medium["type"] == "heterogeneous" and medium["null_boundary"] and medium["g"] == pytest.approx(0.3)
-    np.testing.assert_allclose(medium["density"], density, atol=1e-5)
+    (record,) = [s for s in translated.shapes if s.medium is not None]
+    medium = record.medium
+    assert medium.kind == "heterogeneous" and medium.null_boundary and medium.g == pytest.approx(0.3)
+    np.testing.assert_allclose(medium.density, density, atol=1e-5)
     # the grid spans the cube's extent [-1, 1]^3
-    np.testing.assert_allclose(medium["grid_to_world"] @ [0, 0, 0, 1], [-1, -1, -1, 1])
-    np.testing.assert_allclose(medium["grid_to_world"] @ [1, 1, 1, 1], [1, 1, 1, 1])
+    np.testing.assert_allclose(medium.grid_to_world @ [0, 0, 0, 1], [-1, -1, -1, 1])
+    np.testing.assert_allclose(medium.grid_to_world @ [1, 1, 1, 1], [1, 1, 1, 1])
     for bad, message in (
         (dict(kind="plasma"), "plasma"),
         (dict(albedo=(1.5, 0.5, 0.5)), "albedo"),
@@ -469,9 +469,9 @@ def test_fog_smoke_has_held_out_variants(tmp_path):
     held = pools.index("held_out")
     translated = translate_usd(get_family("fog_smoke").author(tmp_path / "held", seed=held, frames=1))
     assert translated.variants == {"pool": "held_out", **HELD_OUT}
-    media = [s["medium"] for s in translated.scene_dict["shapes"] if "medium" in s]
-    (fog,) = [m for m in media if m["type"] == "homogeneous" and m["null_boundary"]]
-    assert fog["g"] < 0  # back-scattering fog: held out
+    media = [s.medium for s in translated.shapes if s.medium is not None]
+    (fog,) = [m for m in media if m.kind == "homogeneous" and m.null_boundary]
+    assert fog.g < 0  # back-scattering fog: held out
     train = pools.index("train")
     translated = translate_usd(get_family("fog_smoke").author(tmp_path / "train", seed=train, frames=1))
     assert translated.variants == {"pool": "train", **TRAIN}
@@ -542,19 +542,18 @@ def test_motion_vectors_follow_moving_objects_in_media_scenes(tmp_path):
     """A moving-objects frame with a fog ball out of view: the volumetric tracer's motion vectors (pixel
     centres) equal the surface tracer's on the same scene without it (a first hit on a moving mesh
     reprojects where its point was)."""
-    import copy
+    import dataclasses
 
+    from denoisebench.generator.contract.scene_parts import MediumRecord, SphereShape
     from denoisebench.generator.render.scene import build_mitsuba_scene
     from denoisebench.generator.usd.translate import translate_usd
     from denoisebench.scenes import get_family
 
     translated = translate_usd(get_family("moving_objects").author(tmp_path, seed=1, frames=3, width=SIZE, height=SIZE))
     assert translated.moving and not translated.shutter_moving
-    foggy = copy.copy(translated)
-    foggy.scene_dict = dict(translated.scene_dict)
-    fog = {"type": "homogeneous", "sigma_t": [1.0] * 3, "albedo": [0.8] * 3, "g": 0.0, "null_boundary": True}
-    far = {"kind": "sphere", "name": "FarFog", "center": [0.0, -500.0, 0.0], "radius": 1.0, "medium": fog}
-    foggy.scene_dict["shapes"] = [*translated.scene_dict["shapes"], far]
+    fog = MediumRecord(kind="homogeneous", sigma_t=(1.0,) * 3, albedo=(0.8,) * 3, g=0.0, null_boundary=True)
+    far = SphereShape(name="FarFog", center=(0.0, -500.0, 0.0), radius=1.0, medium=fog)
+    foggy = dataclasses.replace(translated, shapes=(*translated.shapes, far))
     plan = make_render_plan(translated.effects)
     frames = {}
     for name, source in (("surface", translated), ("media", foggy)):
@@ -587,12 +586,10 @@ def test_a_medium_on_a_material_fills_every_gprim_bound_to_it(tmp_path):
     b.dome_light("Sky", intensity=1.0)
     b.camera(np.stack([np.eye(4)]), focal_length_mm=35.0, clipping=(0.1, 100.0))
     translated = translate_usd(b.save())
-    media = {
-        s["name"].rsplit("/", 1)[-1]: s.get("medium") for s in translated.scene_dict["shapes"] if s["kind"] == "sphere"
-    }
+    media = {s.name.rsplit("/", 1)[-1]: s.medium for s in translated.shapes if s.kind == "sphere"}
     assert media["Plain"] is None and "media" in translated.effects_inferred
     for name in ("A", "B"):
-        assert media[name]["albedo"] == pytest.approx([0.6, 0.9, 0.8]) and not media[name]["null_boundary"]
+        assert media[name].albedo == pytest.approx([0.6, 0.9, 0.8]) and not media[name].null_boundary
 
 
 def test_nested_media_get_the_enclosing_medium_as_exterior_and_agree_with_volpath(mi, tmp_path):
@@ -614,10 +611,10 @@ def test_nested_media_get_the_enclosing_medium_as_exterior_and_agree_with_volpat
     b.sphere_light("Lamp", 0.3, intensity=40.0, translate=(2.5, 3.0, 2.0))
     b.camera(camera_paths.dolly((0.0, 1.2, 5.0), (0.0, 1.2, 5.0), (0.0, 1.0, 0.0), 1), focal_length_mm=35.0)
     translated = translate_usd(b.save())
-    shapes = translated.scene_dict["shapes"]
+    shapes = translated.shapes
     outer = enclosing_media(shapes)
     (inner,) = outer  # the smoke sits in the fog; the fog in nothing
-    assert shapes[inner]["name"].endswith("Smoke") and shapes[outer[inner]]["name"].endswith("Fog")
+    assert shapes[inner].name.endswith("Smoke") and shapes[outer[inner]].name.endswith("Fog")
     scene = build_mitsuba_scene(translated)
     (nested,) = [s for s in scene.shapes() if s.exterior_medium() is not None]  # the smoke ball
     fog_medium = next(

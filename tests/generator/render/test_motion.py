@@ -52,7 +52,7 @@ def test_host_pose_matches_usd_between_frames(tmp_path):
     for kind in ("rigid", "stretch"):
         stage = moving_box_stage(tmp_path / kind, kind)
         translated = translate_stage(stage)
-        motion = next(s["shutter_motion"] for s in translated.scene_dict["shapes"] if "shutter_motion" in s)
+        motion = next(s.shutter_motion for s in translated.shapes if s.shutter_motion is not None)
         prim = stage.GetPrimAtPath("/World/Geometry/Box")
         to_mitsuba = stage_to_mitsuba_matrix(stage)
         for tau in (0.1, 0.55, 1.3, 1.99):
@@ -90,10 +90,10 @@ def test_moving_emitter_is_refused_with_a_warning(tmp_path):
 
 def test_sub_frame_copy_leaves_the_original_alone(tmp_path):
     translated = translate_stage(moving_box_stage(tmp_path))
-    before = [s["positions"].copy() for s in translated.scene_dict["shapes"]]
+    before = [s.positions.copy() for s in translated.shapes]
     frozen = translated_at(translated, 1.25)
     assert not frozen.shutter_moving
-    for shape, positions in zip(translated.scene_dict["shapes"], before):
-        np.testing.assert_array_equal(shape["positions"], positions)
-    moved = [s for s, o in zip(frozen.scene_dict["shapes"], before) if not np.array_equal(s["positions"], o)]
+    for shape, positions in zip(translated.shapes, before):
+        np.testing.assert_array_equal(shape.positions, positions)
+    moved = [s for s, o in zip(frozen.shapes, before) if not np.array_equal(s.positions, o)]
     assert len(moved) == 1

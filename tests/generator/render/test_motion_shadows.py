@@ -12,7 +12,7 @@ still met it), after it 0.96; the image without the slab scores 24.
 
 from __future__ import annotations
 
-import copy
+import dataclasses
 
 import numpy as np
 from pxr import Gf, UsdGeom
@@ -58,11 +58,7 @@ def test_moving_occluder_beyond_twice_the_scene_radius_shadows_the_sky(tmp_path)
     z = block_z_scores(ours.buffers["color"], ours.buffers["color_var"], subs)
     assert np.abs(z).max() < 4.5 and np.mean(z**2) < 1.8, (np.abs(z).max(), np.mean(z**2))
     # Control: the image without the slab's shadow (what the 2 R shadow rays rendered) is rejected.
-    bare = copy.copy(translated)
-    bare.scene_dict = {
-        **translated.scene_dict,
-        "shapes": [r for r in translated.scene_dict["shapes"] if "shutter_motion" not in r],
-    }
+    bare = dataclasses.replace(translated, shapes=tuple(r for r in translated.shapes if r.shutter_motion is None))
     unshadowed = build_mitsuba_scene(bare, sensor_dict(translated.camera, 1, SIZE, SIZE, 256, seed=7), {"type": "path"})
     unshadowed = np.asarray(mi.render(unshadowed, spp=256, seed=7))[..., :3]
     z_bare = block_z_scores(unshadowed, ours.buffers["color_var"], subs)

@@ -252,9 +252,7 @@ def test_plain_box_without_metadata_matches_mitsuba_path_and_a_cut_does_not(mi, 
 def test_every_light_kind_stage_matches_mitsuba_path(mi, tmp_path):
     translated = translate_usd(author_every_light(tmp_path / "lights.usda"))
     assert translated.effects_declared == () and not translated.warnings, translated.warnings
-    kinds = {e["type"] for e in translated.scene_dict["emitters"]} | {
-        s["emitter"]["type"] for s in translated.scene_dict["shapes"] if s.get("emitter")
-    }
+    kinds = {e.kind for e in translated.emitters} | {"area" for s in translated.shapes if s.emitter is not None}
     assert {"area", "point", "spot", "directional", "constant"} <= kinds, kinds
     assert {"textures", "glossy", "specular", "transmission"} <= set(translated.effects)
     plan = make_render_plan(translated.effects)

@@ -19,6 +19,7 @@ from PIL import Image
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade, UsdUtils
 
 from denoisebench.errors import UserInputError
+from denoisebench.generator.contract.scene_parts import EnvmapEmitter, MeshShape, PointEmitter, SpotEmitter
 from denoisebench.generator.usd.translate import translate_usd
 
 
@@ -178,11 +179,11 @@ def test_default_light_is_required_for_an_unlit_stage_and_lights_it(tmp_path):
     with pytest.raises(UserInputError, match="--default-light"):
         translate_usd(path, strict=True)
     translated = translate_usd(path, default_light=True, strict=True)
-    kinds = sorted(e["type"] for e in translated.scene_dict["emitters"])
+    kinds = sorted(e.kind for e in translated.emitters)
     assert kinds == ["constant", "directional"]
     # A lit stage keeps its own lights.
     lit = lit_box_stage(tmp_path / "lit.usda")
-    assert [e["type"] for e in translate_usd(lit, default_light=True).scene_dict["emitters"]] == ["constant"]
+    assert [e.kind for e in translate_usd(lit, default_light=True).emitters] == ["constant"]
 
 
 def test_generate_writes_the_auto_camera_and_lights_into_the_copied_stage(tmp_path):
@@ -195,7 +196,7 @@ def test_generate_writes_the_auto_camera_and_lights_into_the_copied_stage(tmp_pa
     assert files == ("scene.usda",)
     copied = translate_usd(tmp_path / "out" / "scene.usda", strict=True)  # no options needed any more
     np.testing.assert_allclose(copied.camera.poses, checked.camera.poses, atol=1e-9)
-    assert len(copied.scene_dict["emitters"]) == 2
+    assert len(copied.emitters) == 2
     assert Usd.Stage.Open(str(path)).GetPrimAtPath("/DenoisebenchAutoCamera").IsValid() is False  # source untouched
 
     # --camera PATH is recorded in the copy's metadata.
@@ -234,12 +235,12 @@ def test_treat_as_point_and_zero_radius_sphere_lights_are_point_lights(tmp_path)
         UsdLux.SphereLight(Usd.Stage.CreateInMemory().DefinePrim("/x", "SphereLight")).GetTreatAsPointAttr().GetName()
         == "treatAsPoint"
     )
-    emitters = {e["prim"]: e for e in _light_stage(tmp_path / "p.usda", configure).scene_dict["emitters"]}
-    assert emitters["/A"]["type"] == "point" and emitters["/B"]["type"] == "point"
-    np.testing.assert_allclose(emitters["/A"]["position"], [1, 2, 3])
+    emitters = {e.prim: e for e in _light_stage(tmp_path / "p.usda", configure).emitters}
+    assert isinstance(emitters["/A"], PointEmitter) and isinstance(emitters["/B"], PointEmitter)
+    np.testing.assert_allclose(emitters["/A"].position, [1, 2, 3])
     # Power of the sphere: I = π r² L (not normalized); radius 0: I = L / 4 (the normalized form).
-    np.testing.assert_allclose(emitters["/A"]["intensity"], [8.0 * math.pi * 0.01] * 3, rtol=1e-6)
-    np.testing.assert_allclose(emitters["/B"]["intensity"], [3.0] * 3, rtol=1e-6)
+    np.testing.assert_allclose(emitters["/A"].intensity, [8.0 * math.pi * 0.01] * 3, rtol=1e-6)
+    np.testing.assert_allclose(emitters["/B"].intensity, [3.0] * 3, rtol=1e-6)
 
 
 @pytest.mark.slow
@@ -263,9 +264,9 @@ def test_shaping_cone_becomes_a_spot_and_lights_only_inside_its_cone(tmp_path):
     shaping.CreateShapingFocusAttr(2.0)
     stage.GetRootLayer().Save()
     translated = translate_usd(path)
-    (spot,) = translated.scene_dict["emitters"]
-    assert spot["type"] == "spot" and spot["cutoff_angle"] == pytest.approx(30.0)
-    assert spot["beam_width"] == pytest.approx(15.0)
+    (spot,) = translated.emitters
+    assert isinstance(spot, SpotEmitter) and spot.cutoff_angle == pytest.approx(30.0)
+    assert spot.beam_width == pytest.approx(15.0)
     assert any("shaping:focus" in w for w in translated.warnings)
     assert floor
     plan = make_render_plan(translated.effects, RenderOptions(max_depth=2))
@@ -342,20 +343,20 @@ def test_packed_channels_varname_and_fallback_on_unreadable_textures(tmp_path):
     bind(quad, textured_material(stage, "/Looks/Cmyk", cmyk, {"diffuseColor": ("rgb", Sdf.ValueTypeNames.Color3f)}))
     stage.GetRootLayer().Save()
     translated = translate_usd(path)
-    records = {r["name"]: r for r in translated.scene_dict["shapes"]}
-    bsdfs = translated.scene_dict["bsdfs"]
-    orm = bsdfs[records["/Quad"]["bsdf"]]["bsdf"]
+    records = {r.name: r for r in translated.shapes}
+    bsdfs = translated.bsdfs
+    orm = bsdfs[records["/Quad"].bsdf]["bsdf"]
     np.testing.assert_allclose(orm["roughness"]["data"], 128 / 255, rtol=1e-6)
     np.testing.assert_allclose(orm["metallic"]["data"], 204 / 255, rtol=1e-6)
     assert orm["roughness"]["data"].shape == (4, 4, 1) and orm["roughness"]["raw"]
-    np.testing.assert_allclose(records["/Quad"]["uvs"][:, 0], [0, 2, 2, 0])  # st0, not st
+    np.testing.assert_allclose(records["/Quad"].uvs[:, 0], [0, 2, 2, 0])  # st0, not st
     for name in ("/Corrupt", "/Missing"):
-        base = bsdfs[records[name]["bsdf"]]["bsdf"]["base_color"]
+        base = bsdfs[records[name].bsdf]["bsdf"]["base_color"]
         assert base == {"type": "rgb", "value": pytest.approx([0.1, 0.2, 0.3])}  # the input's own value
         assert sum(f"/Looks/{name[1:]}/Texture" in w for w in translated.warnings) == 1
     # A CMYK JPEG (Mitsuba's reader: "Unsupported number of components"): a warning, the default grey.
     assert sum("/Looks/Cmyk/Texture" in w and "cannot be read" in w for w in translated.warnings) == 1
-    assert bsdfs[records["/Cmyk"]["bsdf"]]["bsdf"]["base_color"]["type"] == "rgb"
+    assert bsdfs[records["/Cmyk"].bsdf]["bsdf"]["base_color"]["type"] == "rgb"
     from denoisebench.generator.render.scene import build_mitsuba_scene
 
     build_mitsuba_scene(translated)
@@ -432,9 +433,7 @@ def test_transform2d_shifts_the_texture_and_alpha_cutouts_open_holes(tmp_path):
     )
     stage.GetRootLayer().Save()
     translated = translate_usd(path)
-    cut_bsdf = translated.scene_dict["bsdfs"][
-        [r for r in translated.scene_dict["shapes"] if r["name"] == "/Cut"][0]["bsdf"]
-    ]
+    cut_bsdf = translated.bsdfs[[r for r in translated.shapes if r.name == "/Cut"][0].bsdf]
     assert cut_bsdf["type"] == "mask" and set(np.unique(cut_bsdf["opacity"]["data"])) == {0.0, 1.0}
     buffers = _albedo(translated)
     color, position = buffers["color"], buffers["position"]
@@ -466,7 +465,7 @@ def test_textures_inside_a_usdz_package_are_read_through_the_resolver(tmp_path):
     (folder / "checker.png").unlink()  # only the package has it now
 
     def base_color(translated):
-        (bsdf,) = translated.scene_dict["bsdfs"].values()
+        (bsdf,) = translated.bsdfs.values()
         return bsdf["bsdf"]["base_color"]["data"]
 
     data = base_color(translate_usd(package, strict=True))
@@ -562,12 +561,12 @@ def moving_box_stage(path: Path, frames=3, shift=0.25, turn=8.0):
 def test_time_sampled_transforms_move_geometry_per_frame(tmp_path):
     translated = translate_usd(moving_box_stage(tmp_path / "m.usda"))
     assert translated.moving
-    records = {r["name"]: r for r in translated.scene_dict["shapes"]}
+    records = {r.name: r for r in translated.shapes}
     box, ball, wall = records["/Box"], records["/Ball"], records["/Wall"]
-    assert "frame_positions" not in wall and ball["kind"] == "mesh"  # a moving sphere is tessellated
-    centers = box["frame_positions"].mean(axis=1)
+    assert wall.frame_positions is None and isinstance(ball, MeshShape)  # a moving sphere is tessellated
+    centers = box.frame_positions.mean(axis=1)
     np.testing.assert_allclose(np.diff(centers[:, 0]), 0.25, atol=1e-5)
-    np.testing.assert_allclose(ball["frame_positions"].mean(axis=1)[:, 1], [0.8, 0.7, 0.6], atol=1e-5)
+    np.testing.assert_allclose(ball.frame_positions.mean(axis=1)[:, 1], [0.8, 0.7, 0.6], atol=1e-5)
     assert not any("first-frame pose" in w for w in translated.warnings)
 
 
@@ -610,8 +609,8 @@ def test_time_sampled_points_deform_the_mesh(tmp_path):
     for frame in range(3):
         points.Set([(-1, -1, 0), (1, -1, 0.3 * frame), (1, 1, 0.3 * frame), (-1, 1, 0)], frame)
     stage.GetRootLayer().Save()
-    (flag,) = translate_usd(path).scene_dict["shapes"]
-    np.testing.assert_allclose(flag["frame_positions"][:, 1, 2], [0.0, 0.3, 0.6], atol=1e-6)
+    (flag,) = translate_usd(path).shapes
+    np.testing.assert_allclose(flag.frame_positions[:, 1, 2], [0.0, 0.3, 0.6], atol=1e-6)
 
 
 def test_generate_refuses_a_bare_stage_naming_the_options(tmp_path):
@@ -627,21 +626,15 @@ def test_what_mitsuba_refuses_is_skipped_with_a_warning_never_a_crash(tmp_path):
     from denoisebench.generator.render.scene import build_mitsuba_scene
 
     translated = translate_usd(lit_box_stage(tmp_path / "s.usda"))
-    (key,) = translated.scene_dict["bsdfs"]
-    translated.scene_dict["bsdfs"][key] = {"type": "no_such_bsdf_plugin"}
-    translated.scene_dict["emitters"].append(
-        {
-            "type": "envmap",
-            "data": np.zeros((0, 0, 3), np.float32),
-            "scale": 1.0,
-            "rotation": np.eye(3).tolist(),
-            "prim": "/BrokenDome",
-        }
+    (key,) = translated.bsdfs
+    translated.bsdfs[key] = {"type": "no_such_bsdf_plugin"}
+    translated.emitters += (
+        EnvmapEmitter(prim="/BrokenDome", data=np.zeros((0, 0, 3), np.float32), scale=1.0, rotation=np.eye(3)),
     )
     scene = build_mitsuba_scene(translated)
     assert len(scene.shapes()) == 1 and len(scene.emitters()) == 1
     assert any(w.startswith(f"{key}: Mitsuba refuses the material") for w in translated.warnings)
     assert any(w.startswith("/BrokenDome: Mitsuba cannot build this light") for w in translated.warnings)
-    translated.scene_dict["shapes"].clear()
+    translated.shapes = ()
     with pytest.raises(UserInputError, match="nothing renderable"):
         build_mitsuba_scene(translated)

@@ -78,22 +78,22 @@ def _stage(path, basis="bspline", kind="cubic", wrap="nonperiodic", hair=False):
 def test_bspline_curves_keep_their_control_points_and_radii(tmp_path):
     path, points, radius = _stage(tmp_path / "bspline.usda")
     translated = translate_usd(path)
-    (record,) = translated.scene_dict["shapes"]
-    assert record["kind"] == "curves" and record["basis"] == "bspline"
-    assert list(record["counts"]) == [5, 5, 5]
-    assert np.allclose(record["points"][:, :3], points, atol=1e-6)
-    assert np.allclose(record["points"][:, 3], radius)
+    (record,) = translated.shapes
+    assert record.kind == "curves" and record.basis == "bspline"
+    assert list(record.counts) == [5, 5, 5]
+    assert np.allclose(record.points[:, :3], points, atol=1e-6)
+    assert np.allclose(record.points[:, 3], radius)
     assert not [w for w in translated.warnings if "not supported" in w]
 
 
 def test_other_bases_wraps_and_linear(tmp_path):
     bezier = translate_usd(_stage(tmp_path / "bezier.usda", basis="bezier")[0])
-    (record,) = bezier.scene_dict["shapes"]
-    assert list(record["counts"]) == [4, 4, 4]  # 5 points with vstep 3: one segment per strand
+    (record,) = bezier.shapes
+    assert list(record.counts) == [4, 4, 4]  # 5 points with vstep 3: one segment per strand
     catmull = translate_usd(_stage(tmp_path / "catmull.usda", basis="catmullRom", wrap="pinned")[0])
-    assert list(catmull.scene_dict["shapes"][0]["counts"]) == [4] * 12  # 7 points after phantoms: 4 segments
+    assert list(catmull.shapes[0].counts) == [4] * 12  # 7 points after phantoms: 4 segments
     linear = translate_usd(_stage(tmp_path / "linear.usda", kind="linear")[0])
-    assert linear.scene_dict["shapes"][0]["basis"] == "linear"
+    assert linear.shapes[0].basis == "linear"
 
 
 def _mitsuba_curve_scene(mi, translated, points, radius, spp, integrator):
@@ -175,7 +175,7 @@ def test_hair_material_becomes_mitsubas_hair_bsdf(tmp_path):
 
     mi = load_mitsuba()
     translated = translate_usd(_stage(tmp_path / "fur.usda", hair=True)[0])
-    (bsdf,) = translated.scene_dict["bsdfs"].values()
+    (bsdf,) = translated.bsdfs.values()
     assert bsdf == {"type": "hair", "eumelanin": pytest.approx(0.8), "longitudinal_roughness": pytest.approx(0.25)}
     assert translated.materials[0]["kind"] == "denoisebench hair"
     image = np.array(
@@ -192,9 +192,9 @@ def test_blender_bezier_curve_export(tmp_path):
     """Blender 4.5's export: two Bézier curves (7 and 10 points), widths 'varying' (one per segment end)."""
     translated = translate_usd(Path(HDMITSUBA) / "shapes" / "curve.usda", default_light=True)
     assert not [w for w in translated.warnings if "curve" in w], translated.warnings
-    (record,) = translated.scene_dict["shapes"]
-    assert list(record["counts"]) == [4] * 5  # 2 + 3 segments, each its own B-spline
-    assert np.allclose(record["points"][:, 3], 0.05)
+    (record,) = translated.shapes
+    assert list(record.counts) == [4] * 5  # 2 + 3 segments, each its own B-spline
+    assert np.allclose(record.points[:, 3], 0.05)
 
 
 HAIR_MTLX = """<?xml version="1.0"?>
@@ -237,7 +237,7 @@ def test_materialx_chiang_hair_becomes_mitsubas_hair_bsdf(tmp_path):
     curves.GetRelationship("material:binding").SetTargets(["/World/Mtlx/M_Hair"])
     stage.GetRootLayer().Save()
     translated = translate_usd(path)
-    (bsdf,) = translated.scene_dict["bsdfs"].values()
+    (bsdf,) = translated.bsdfs.values()
     factor = 5.969 - 0.215 * 0.4 + 2.532 * 0.4**2 - 10.73 * 0.4**3 + 5.574 * 0.4**4 + 0.245 * 0.4**5
     sigma = np.square(np.log([0.5, 0.3, 0.1]) / factor)
     assert bsdf["type"] == "hair" and bsdf["eta"] == pytest.approx(1.55)

@@ -109,14 +109,14 @@ def author_flattened(path):
 
 def test_instances_are_grouped_masked_and_prototypes_not_rendered_in_place(tmp_path):
     translated = translate_usd(author_instanced(tmp_path / "instanced.usda"))
-    groups = translated.scene_dict["instance_groups"]
-    assert [len(g["to_world"]) for g in groups] == [2, 2]  # 3 cubes minus one invisible id, 2 spheres
-    assert all(len(g["shapes"]) == 1 for g in groups)
-    assert translated.scene_dict["shapes"] == []  # prototypes only where the instancer puts them
+    groups = translated.instance_groups
+    assert [len(g.to_world) for g in groups] == [2, 2]  # 3 cubes minus one invisible id, 2 spheres
+    assert all(len(g.shapes) == 1 for g in groups)
+    assert translated.shapes == ()  # prototypes only where the instancer puts them
     assert not [w for w in translated.warnings if "PointInstancer" in w]
     # The cube's instance 2 sits at x = 0.6 (its prototype's own 0.05 offset is inside the group's shape).
-    assert np.allclose(groups[0]["to_world"][1][:3, 3], [0.6, 0.0, 0.0], atol=1e-6)
-    assert np.allclose(groups[0]["shapes"][0]["positions"][:, 1].mean(), 0.05, atol=1e-6)
+    assert np.allclose(groups[0].to_world[1][:3, 3], [0.6, 0.0, 0.0], atol=1e-6)
+    assert np.allclose(groups[0].shapes[0].positions[:, 1].mean(), 0.05, atol=1e-6)
 
 
 @pytest.mark.parametrize("merged", [False, True], ids=["instances", "merged"])
@@ -145,12 +145,12 @@ def test_instanced_stage_renders_as_the_flattened_stage(tmp_path, monkeypatch, m
 
 def test_animated_instancer_is_written_out_with_per_frame_positions(tmp_path):
     translated = translate_usd(author_instanced(tmp_path / "moving.usda", animated=True))
-    assert "instance_groups" not in translated.scene_dict
-    shapes = translated.scene_dict["shapes"]
+    assert translated.instance_groups == ()
+    shapes = translated.shapes
     assert len(shapes) == 4
     assert translated.moving
     for shape in shapes:
-        frames = shape["frame_positions"]
+        frames = shape.frame_positions
         assert frames.shape[0] == 2
         assert np.allclose(frames[1] - frames[0], [0.1, 0.0, 0.0], atol=1e-5)
 
@@ -170,9 +170,9 @@ def test_animated_instancer_moves_within_the_shutter_and_has_motion_vectors(tmp_
     stage.GetRootLayer().Save()
     translated = translate_usd(path)
     assert translated.shutter_moving and "motion_blur" in translated.effects_inferred
-    for shape in translated.scene_dict["shapes"]:
-        motion = shape["shutter_motion"]
-        shift = motion["to_world"][-1][:3, 3] - motion["to_world"][0][:3, 3]
+    for shape in translated.shapes:
+        motion = shape.shutter_motion
+        shift = motion.to_world[-1][:3, 3] - motion.to_world[0][:3, 3]
         assert np.allclose(shift, [0.1, 0.0, 0.0], atol=1e-5)  # keys span frame 0 to frame 1 (held at the ends)
     plan = make_render_plan(translated.effects)
     scene = build_mitsuba_scene(translated, frame=1)
@@ -222,10 +222,10 @@ def test_velocities_move_instances_between_and_within_frames(tmp_path):
     camera.CreateShutterCloseAttr(0.5)
     stage.GetRootLayer().Save()
     translated = translate_usd(path)
-    shapes = translated.scene_dict["shapes"]
-    assert "instance_groups" not in translated.scene_dict and len(shapes) == 4
+    shapes = translated.shapes
+    assert translated.instance_groups == () and len(shapes) == 4
     for shape in shapes:
-        assert np.allclose(shape["frame_positions"][1] - shape["frame_positions"][0], [0.1, 0.0, 0.0], atol=1e-5)
-        motion = shape["shutter_motion"]
-        half = int(np.flatnonzero(np.isclose(motion["times"], 0.5))[0])
-        assert np.allclose(motion["to_world"][half][:3, 3] - motion["to_world"][0][:3, 3], [0.05, 0, 0], atol=1e-5)
+        assert np.allclose(shape.frame_positions[1] - shape.frame_positions[0], [0.1, 0.0, 0.0], atol=1e-5)
+        motion = shape.shutter_motion
+        half = int(np.flatnonzero(np.isclose(motion.times, 0.5))[0])
+        assert np.allclose(motion.to_world[half][:3, 3] - motion.to_world[0][:3, 3], [0.05, 0, 0], atol=1e-5)

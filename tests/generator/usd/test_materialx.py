@@ -4,7 +4,7 @@ rendered image as the principled parameter it maps to moves a directly-built Mit
 
 from __future__ import annotations
 
-import copy
+import dataclasses
 import os
 from pathlib import Path
 
@@ -71,8 +71,7 @@ def _render(translated, bsdfs=None):
 
     mi = load_mitsuba()
     if bsdfs is not None:
-        translated = copy.copy(translated)
-        translated.scene_dict = dict(translated.scene_dict, bsdfs=bsdfs)
+        translated = dataclasses.replace(translated, bsdfs=bsdfs)
     sensor = sensor_dict(translated.camera, 0, SIZE, SIZE, SPP, seed=7)
     return np.array(mi.render(build_mitsuba_scene(translated, sensor, {"type": "path"})), dtype=np.float64)
 
@@ -155,7 +154,7 @@ def default_image(tmp_path_factory):
     _usd_network(stage, "standard_surface", {})
     stage.GetRootLayer().Save()
     translated = translate_usd(path)
-    (bsdf,) = translated.scene_dict["bsdfs"].values()
+    (bsdf,) = translated.bsdfs.values()
     assert bsdf == _principled(base_color=_rgb(0.8, 0.8, 0.8), roughness=0.2, metallic=0.0, eta=1.5)
     return _render(translated)
 
@@ -169,7 +168,7 @@ def test_each_parameter_moves_the_image_as_mitsubas_principled(tmp_path, case, d
     stage.GetRootLayer().Save()
     translated = translate_usd(path)
     assert not [w for w in translated.warnings if "MaterialX" in w or "not supported" in w], translated.warnings
-    (key,) = translated.scene_dict["bsdfs"]
+    (key,) = translated.bsdfs
     ours = _render(translated)
     direct = _render(translated, {key: expected})
     # The translation is the directly-built principled BSDF: same sampler seed, same image.
@@ -184,7 +183,7 @@ def test_emission_becomes_an_area_emitter(tmp_path):
     _usd_network(stage, "standard_surface", {"emission": ("float", 2.0), "emission_color": ("color3f", (1, 0.5, 0))})
     stage.GetRootLayer().Save()
     translated = translate_usd(path)
-    emitters = [s["emitter"]["radiance"] for s in translated.scene_dict["shapes"] if "emitter" in s]
+    emitters = [s.emitter.radiance for s in translated.shapes if s.emitter is not None]
     assert emitters and np.allclose(emitters[0], [2.0, 1.0, 0.0])
     assert "area_lights" in translated.effects_inferred
 
@@ -264,7 +263,7 @@ def test_mtlx_document_referenced_from_usd(tmp_path):
     # The untranslated node is named once, with what its consumer fell back to.
     (noise,) = [w for w in translated.warnings if "noise2d" in w]
     assert "wobble" in noise and "metalness uses value 0.25" in noise
-    (bsdf,) = translated.scene_dict["bsdfs"].values()
+    (bsdf,) = translated.bsdfs.values()
     normalmap = bsdf["bsdf"]
     assert normalmap["type"] == "normalmap"
     assert np.allclose(normalmap["normalmap"]["data"][0, 0], [128 / 255, 128 / 255, 1.0], atol=1e-6)
@@ -287,7 +286,7 @@ def test_mtlx_document_referenced_from_usd(tmp_path):
     files = copy_user_stage(path, tmp_path / "out" / "scene")
     assert {"m.mtlx", "tex/albedo.png", "tex/rough.png", "tex/normal.png"} <= set(files)
     copied = translate_usd(tmp_path / "out" / "scene" / files[0])
-    (bsdf,) = copied.scene_dict["bsdfs"].values()
+    (bsdf,) = copied.bsdfs.values()
     assert bsdf["bsdf"]["type"] == "normalmap" and copied.materials[0]["kind"] == "MaterialX document"
 
 
@@ -298,9 +297,9 @@ CHESS = os.environ.get("OPENCHESSSET")
 def test_open_chess_set_pieces_have_their_materialx_materials():
     translated = translate_usd(CHESS, auto_camera=True, default_light=True, frames=1)
     assert not [w for w in translated.warnings if "Could not open" in w or "PointInstancer" in w], translated.warnings
-    groups = translated.scene_dict["instance_groups"]
-    pawns = sum(len(g["to_world"]) for g in groups)
-    pieces = [s for s in translated.scene_dict["shapes"] if "Chessboard" not in s["name"]]
+    groups = translated.instance_groups
+    pawns = sum(len(g.to_world) for g in groups)
+    pieces = [s for s in translated.shapes if "Chessboard" not in s.name]
     assert pawns == 16 and len(pieces) == 16  # 32 pieces: two instanced rows of pawns and 16 plain pieces
     assert len(translated.materials) == 15
     assert all(m["kind"] == "MaterialX document" for m in translated.materials)

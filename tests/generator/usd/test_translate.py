@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from denoisebench.errors import UserInputError
+from denoisebench.generator.contract.scene_parts import ConstantEmitter, DirectionalEmitter, SphereShape
 from denoisebench.generator.render.scene import build_mitsuba_scene, sensor_dict
 from denoisebench.generator.usd.translate import scene_bounds, translate_stage, translate_usd
 from denoisebench.mitsuba_runtime import load_mitsuba
@@ -27,27 +28,27 @@ def yup():
 
 
 def _records(translated, name_part):
-    return [s for s in translated.scene_dict["shapes"] if name_part in s["name"]]
+    return [s for s in translated.shapes if name_part in s.name]
 
 
 def test_zup_centimeters_become_yup_meters(zup):
     ball = _records(zup, "/World/Geo/Ball")[0]
     # Authored at z = 50 cm with radius 50 cm in a Z-up stage: center (0, 0.5, 0) m, radius 0.5 m.
-    assert ball["kind"] == "sphere"
-    np.testing.assert_allclose(ball["center"], [0.0, 0.5, 0.0], atol=1e-9)
-    assert ball["radius"] == pytest.approx(0.5)
+    assert isinstance(ball, SphereShape)
+    np.testing.assert_allclose(ball.center, [0.0, 0.5, 0.0], atol=1e-9)
+    assert ball.radius == pytest.approx(0.5)
     ground = _records(zup, "/World/Geo/Ground")
-    positions = np.concatenate([r["positions"] for r in ground])
+    positions = np.concatenate([r.positions for r in ground])
     np.testing.assert_allclose(positions[:, 1], 0.0, atol=1e-6)  # ground plane z=0 → y=0
     np.testing.assert_allclose(np.abs(positions[:, [0, 2]]).max(), 2.0, rtol=1e-6)
     # Z-up +Y (away from the camera) becomes Mitsuba -Z.
     box = _records(zup, "/World/Geo/Box")[0]
-    center = box["positions"].mean(0)
+    center = box.positions.mean(0)
     np.testing.assert_allclose(center, [-1.2, 0.2, -0.6], atol=1e-6)
     # The post is a Z-axis cylinder 1.2 m tall standing on the ground.
     post = _records(zup, "/World/Geo/Post")[0]
-    assert post["positions"][:, 1].min() == pytest.approx(0.0, abs=1e-6)
-    assert post["positions"][:, 1].max() == pytest.approx(1.2, abs=1e-6)
+    assert post.positions[:, 1].min() == pytest.approx(0.0, abs=1e-6)
+    assert post.positions[:, 1].max() == pytest.approx(1.2, abs=1e-6)
 
 
 def test_animated_camera_over_the_stage_time_range(zup):
@@ -67,17 +68,17 @@ def test_animated_camera_over_the_stage_time_range(zup):
 def test_geom_subsets_split_materials_and_keep_every_triangle(zup):
     parts = _records(zup, "/World/Geo/Ground")
     assert len(parts) == 2
-    assert sum(len(p["faces"]) for p in parts) == 4  # two quads
-    assert len({p["bsdf"] for p in parts}) == 2
-    bsdfs = zup.scene_dict["bsdfs"]
-    kinds = sorted(bsdfs[p["bsdf"]]["bsdf"]["base_color"]["type"] for p in parts)
+    assert sum(len(p.faces) for p in parts) == 4  # two quads
+    assert len({p.bsdf for p in parts}) == 2
+    bsdfs = zup.bsdfs
+    kinds = sorted(bsdfs[p.bsdf]["bsdf"]["base_color"]["type"] for p in parts)
     assert kinds == ["bitmap", "rgb"]  # the checker subset is textured, the gold one is not
 
 
 def test_texture_resolves_beside_the_stage(zup):
     bitmaps = [
         b["bsdf"]["base_color"]
-        for b in zup.scene_dict["bsdfs"].values()
+        for b in zup.bsdfs.values()
         if b.get("bsdf", {}).get("base_color", {}).get("type") == "bitmap"
     ]
     assert len(bitmaps) == 1
@@ -92,36 +93,36 @@ def test_texture_resolves_beside_the_stage(zup):
 
 def test_face_varying_normals_and_uvs_unrolled(zup):
     part = _records(zup, "/World/Geo/Ground")[0]
-    assert part["positions"].shape == (6, 3) and part["normals"].shape == (6, 3) and part["uvs"].shape == (6, 2)
-    np.testing.assert_allclose(part["normals"], np.tile([0, 1, 0], (6, 1)), atol=1e-6)  # +Z up → +Y
-    assert set(np.round(part["uvs"].ravel(), 6)) <= {0.0, 1.0}
+    assert part.positions.shape == (6, 3) and part.normals.shape == (6, 3) and part.uvs.shape == (6, 2)
+    np.testing.assert_allclose(part.normals, np.tile([0, 1, 0], (6, 1)), atol=1e-6)  # +Z up → +Y
+    assert set(np.round(part.uvs.ravel(), 6)) <= {0.0, 1.0}
 
 
 def test_lights_radiance_and_kinds(zup, yup):
     bulb = _records(zup, "/World/Lights/Bulb")[0]
-    np.testing.assert_allclose(bulb["emitter"]["radiance"], np.array([1, 0.9, 0.8]) * 50 * 2.0, rtol=1e-6)
-    assert bulb["radius"] == pytest.approx(0.1)
+    np.testing.assert_allclose(bulb.emitter.radiance, np.array([1, 0.9, 0.8]) * 50 * 2.0, rtol=1e-6)
+    assert bulb.radius == pytest.approx(0.1)
     disk = _records(zup, "/World/Lights/Fill")[0]
     area = (
         0.5
         * np.linalg.norm(
             np.cross(
-                disk["positions"][disk["faces"][:, 1]] - disk["positions"][disk["faces"][:, 0]],
-                disk["positions"][disk["faces"][:, 2]] - disk["positions"][disk["faces"][:, 0]],
+                disk.positions[disk.faces[:, 1]] - disk.positions[disk.faces[:, 0]],
+                disk.positions[disk.faces[:, 2]] - disk.positions[disk.faces[:, 0]],
             ),
             axis=1,
         ).sum()
     )
     assert area == pytest.approx(math.pi * 0.2**2, rel=0.01)
-    sun = [e for e in zup.scene_dict["emitters"] if e["type"] == "directional"][0]
-    assert np.linalg.norm(sun["direction"]) == pytest.approx(1.0)
-    np.testing.assert_allclose(sun["irradiance"], [2, 2, 2])
-    sky = [e for e in yup.scene_dict["emitters"] if e["type"] == "constant"][0]
-    np.testing.assert_allclose(sky["radiance"], [0.3, 0.35, 0.5], rtol=1e-6)
+    sun = [e for e in zup.emitters if isinstance(e, DirectionalEmitter)][0]
+    assert np.linalg.norm(sun.direction) == pytest.approx(1.0)
+    np.testing.assert_allclose(sun.irradiance, [2, 2, 2])
+    sky = [e for e in yup.emitters if isinstance(e, ConstantEmitter)][0]
+    np.testing.assert_allclose(sky.radiance, [0.3, 0.35, 0.5], rtol=1e-6)
     softbox = _records(yup, "/World/Softbox")[0]
     normal = np.cross(
-        softbox["positions"][softbox["faces"][0, 1]] - softbox["positions"][softbox["faces"][0, 0]],
-        softbox["positions"][softbox["faces"][0, 2]] - softbox["positions"][softbox["faces"][0, 0]],
+        softbox.positions[softbox.faces[0, 1]] - softbox.positions[softbox.faces[0, 0]],
+        softbox.positions[softbox.faces[0, 2]] - softbox.positions[softbox.faces[0, 0]],
     )
     assert normal[1] < 0  # rotated -90° about X: emits downward
 
@@ -302,7 +303,7 @@ def test_unsupported_prims_and_degenerate_input_warn_once_each():
     assert "/World/Flat: RectLight has zero area; skipped (it would emit nothing)" in warnings
     assert len(warnings) == 4
     sliver = _records(translated, "/World/Sliver")[0]
-    assert sliver["faces"].shape == (1, 3)  # the valid triangle is kept
+    assert sliver.faces.shape == (1, 3)  # the valid triangle is kept
     assert not _records(translated, "/World/Flat")
 
 
