@@ -1,5 +1,8 @@
 """Random Parameter Filtering (Sen & Darabi 2012, "On filtering the noise from the random parameters
 in Monte Carlo rendering"), vectorised: numpy histograms for the statistics, torch for the filter.
+The per-sample table and its neighbourhoods (steps 1-2) live in :mod:`~denoisebench.baselines.rpf_samples`,
+the statistics (steps 3-5) in :mod:`~denoisebench.baselines.rpf_statistics`; this module is the filter
+(step 6), the passes that drive them, the safeguards and the denoiser.
 
 Per pass t = 0..3 with box size b (the paper's 55, 35, 17, 7 pixels; scaled down for images under
 128 px, see :func:`scaled_boxes`), for every pixel P with its S samples:
@@ -107,24 +110,26 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from denoisebench.baselines.rpf_samples import (
+    CLUSTER_TOLERANCE,
+    PATTERNS,
+    SampleLayout,
+    draw,
+    pattern_pool,
+    sample_table,
+)
+from denoisebench.baselines.rpf_statistics import pass_statistics
 from denoisebench.baselines.threads import available_threads
 from denoisebench.dataset.frame import Frame
-from denoisebench.denoisers.lens_sampling import square_to_disk_concentric
 from denoisebench.denoisers.protocol import DenoiserBase
 
 # Lazy imports: scipy (0.3 s) is imported inside the functions that need it, so that the
 # registry can list RPF without loading it.
 
 DEFAULT_FEATURES = ("position", "normal", "albedo", "position2", "normal2")
-CLUSTER_FEATURES = ("normal", "albedo")
 PAPER_BOXES = (55, 35, 17, 7)  # at the paper's image size
 PAPER_SIZE = 128  # boxes keep their paper size from 128 px up: the noise per pixel does not shrink with the image
-RANDOM_PARAMETERS = ("lens", "time", "medium", "light", "bounce")
-#: the path's own random numbers (else: the variance heuristic); ``medium``: its first free flight in a medium
-PATH_RANDOM_PARAMETERS = ("medium", "light", "bounce")
 SIGMA8_SQUARED = 0.02  # the paper's σ² at 8 spp; σ² = 8 σ_8² / S
-CLUSTER_TOLERANCE = 0.1
-_EPS = 1e-10
 _STAT_CELLS = 500_000  # gathered samples × channels of one statistics chunk: bounds memory (one-hot codes: × bins)
 _FILTER_PAIRS = 400_000  # sample pairs (own × gathered) of one filter chunk
 
@@ -159,292 +164,9 @@ def _workers() -> int:
     return available_threads()
 
 
-def _mirror(index: np.ndarray, size: int) -> np.ndarray:
-    index = np.abs(index)
-    index = np.where(index >= size, 2 * size - 2 - index, index)
-    return np.clip(index, 0, size - 1)
-
-
-def one_hot_codes(quantised: torch.Tensor, mask: torch.Tensor, bins: int) -> torch.Tensor:
-    """n×M×(D·bins) float32: each sample's bin of every channel as a one-hot block per channel, all
-    zero for samples outside ``mask`` (the cluster). Built once per neighbourhood batch; the joint
-    histograms of any two column blocks are then one batched matmul of slices of it (0/1 squared is
-    itself, so the mask on both sides counts each sample once)."""
-    n, m, d = quantised.shape
-    offsets = torch.arange(d, dtype=torch.int64) * bins
-    codes = torch.zeros((n, m, d * bins), dtype=torch.float32)
-    weight = mask.to(torch.float32).unsqueeze(-1).expand(n, m, d)
-    return codes.scatter_(2, quantised.long() + offsets, weight)
-
-
-def _code_block(codes: torch.Tensor, columns: Sequence[int], bins: int) -> torch.Tensor:
-    columns = list(columns)
-    if columns == list(range(columns[0], columns[0] + len(columns))):  # a view, no copy
-        return codes[:, :, columns[0] * bins : (columns[-1] + 1) * bins]
-    picks = torch.tensor([c * bins + j for c in columns for j in range(bins)], dtype=torch.int64)
-    return codes.index_select(2, picks)
-
-
-def mutual_information_codes(
-    codes_a: torch.Tensor, codes_b: torch.Tensor, total: torch.Tensor, bins: int
-) -> torch.Tensor:
-    """n×A×B MI (nats) from one-hot blocks (n×M×(A·bins), n×M×(B·bins), see :func:`one_hot_codes`)
-    and the cluster sizes ``total`` (n, float32, ≥ 1); see :func:`mutual_information`."""
-    n = codes_a.shape[0]
-    na, nb = codes_a.shape[2] // bins, codes_b.shape[2] // bins
-    if na == 0 or nb == 0:  # e.g. colour-only data: no feature channels
-        return torch.zeros((n, na, nb), dtype=torch.float32)
-    joint = torch.bmm(codes_a.transpose(1, 2), codes_b).view(n, na, bins, nb, bins)
-    count_a = joint[:, :, :, 0, :].sum(-1)  # every sample has one bin of each channel
-    count_b = joint[:, 0].sum(1)
-
-    # Miller–Madow entropy log N − Σ c log c / N + (K − 1)/2N (K: non-empty cells) is
-    # log N − (Σ g(c) + ½)/N with g(c) = c log c − ½ for c ≥ 1 and g(0) = 0: the counts are whole
-    # numbers ≤ N, so g is one table look-up per cell instead of xlogy plus a separate count of the
-    # non-empty cells (10-20% less CPU for the whole filter on rendered 128 px frames, A/B interleaved)
-    size = int(total.max()) + 1 if total.numel() else 1
-    whole = torch.arange(size, dtype=torch.float32)
-    table = torch.xlogy(whole, whole) - 0.5
-    table[0] = 0.0
-
-    def entropy(counts: torch.Tensor, dims: tuple[int, ...]):
-        shape = (n,) + (1,) * (counts.dim() - 1 - len(dims))
-        g = torch.take(table, counts.to(torch.int64)).sum(dims)
-        return total.log().view(shape) - (g + 0.5) / total.view(shape)
-
-    h_a = entropy(count_a, (2,))  # n×A
-    h_b = entropy(count_b, (2,))  # n×B
-    h_ab = entropy(joint, (2, 4))  # n×A×B
-    return (h_a.unsqueeze(2) + h_b.unsqueeze(1) - h_ab).clamp_(min=0.0)
-
-
-def mutual_information(
-    quantised: torch.Tensor, mask: torch.Tensor, bins: int, a: Sequence[int], b: Sequence[int]
-) -> torch.Tensor:
-    """n×A×B: MI (nats) between channel a[i] and channel b[j] in each of n neighbourhoods.
-
-    ``quantised`` (n×M×D integers in [0, bins)) holds each neighbourhood's samples, ``mask`` (n×M
-    bool) which of them count (the cluster). Every joint histogram of the A×B channel pairs comes out
-    of one batched matmul of one-hot codes (n×(A·bins)×(B·bins) counts); entropies are
-    H = log N − Σ c log c / N. Histogram MI from ~100 samples is biased upwards by about
-    (K_a − 1)(K_b − 1)/2N nats, so the Miller–Madow correction (K − 1)/2N is added to each of the
-    three entropies (K: non-empty bins); without it two independent channels would look dependent.
-    """
-    codes = one_hot_codes(quantised, mask, bins)
-    total = mask.sum(1).clamp_min(1).to(torch.float32)  # n
-    return mutual_information_codes(_code_block(codes, a, bins), _code_block(codes, b, bins), total, bins)
-
-
-@dataclass
-class _Layout:
-    """Column ranges of the per-sample table."""
-
-    color: slice
-    features: slice
-    feature_groups: dict[str, slice]
-    cluster: slice  # columns of the clustering features (empty: no clustering)
-    position: slice
-    random: slice
-    random_groups: dict[str, slice]
-
-    @property
-    def path_randoms(self) -> bool:
-        return any(name in self.random_groups for name in PATH_RANDOM_PARAMETERS)
-
-
-def _sample_table(samples: Mapping[str, np.ndarray], features: Sequence[str]) -> tuple[np.ndarray, _Layout]:
-    """S×H×W×D float32: colour, features, screen position, random parameters (see :class:`_Layout`)."""
-    color = np.maximum(np.asarray(samples["color"], np.float32), 0.0)
-    s, h, w, _ = color.shape
-    parts = [color]
-    groups: dict[str, slice] = {}
-    column = 3
-    ordered = [f for f in CLUSTER_FEATURES if f in features] + [f for f in features if f not in CLUSTER_FEATURES]
-    for name in ordered:
-        if name in samples:
-            array = np.asarray(samples[name], np.float32)
-            parts.append(array)
-            groups[name] = slice(column, column + array.shape[-1])
-            column += array.shape[-1]
-    feature_slice = slice(3, column)
-    cluster_stop = max([groups[name].stop for name in CLUSTER_FEATURES if name in groups], default=3)
-    cluster = slice(3, cluster_stop)  # the clustering features lead the feature columns
-    ys, xs = np.meshgrid(np.arange(h, dtype=np.float32), np.arange(w, dtype=np.float32), indexing="ij")
-    offset = np.asarray(samples["pixel"], np.float32) if "pixel" in samples else np.full((s, h, w, 2), 0.5, np.float32)
-    parts.append(np.stack([xs, ys], axis=-1)[None] + offset)
-    position = slice(column, column + 2)
-    column += 2
-    random_groups: dict[str, slice] = {}
-    for name in RANDOM_PARAMETERS:
-        if name in samples:
-            array = np.asarray(samples[name], np.float32)
-            if name == "lens":  # the point on the lens, on which a defocused hit depends linearly
-                array = square_to_disk_concentric(array).astype(np.float32)
-            parts.append(array)
-            random_groups[name] = slice(column, column + array.shape[-1])
-            column += array.shape[-1]
-    layout = _Layout(slice(0, 3), feature_slice, groups, cluster, position, slice(position.stop, column), random_groups)
-    table = np.concatenate(parts, axis=-1)
-    # features can hold huge values (1e6 positions) or NaN: keep squares finite in float32
-    np.nan_to_num(table, copy=False, nan=0.0, posinf=1e15, neginf=-1e15)
-    np.clip(table, -1e15, 1e15, out=table)
-    return np.ascontiguousarray(table), layout
-
-
-def _columns(block: slice) -> list[int]:
-    return list(range(block.start, block.stop))
-
-
-_PATTERNS = 256  # offset patterns drawn per pass and stage; each pixel uses one at random
-
-
-def _pattern_pool(rng: np.random.Generator, spp: int, box: int, total: int, height: int, width: int):
-    """(dy, dx, sample) offsets, each P×(total − S) ints: Gaussian (σ = b/4) pixel offsets inside the
-    box, never (0, 0), and a uniform sample index; ``None`` when there is nothing to draw."""
-    radius = box // 2
-    extra = total - spp
-    if extra <= 0 or radius == 0 or height * width == 1:
-        return None
-    dy, dx = np.clip(np.rint(rng.normal(0.0, box / 4.0, (2, _PATTERNS, extra))), -radius, radius).astype(np.int64)
-    zero = (dy == 0) & (dx == 0)
-    step = np.where(rng.random(zero.shape) < 0.5, -1, 1)
-    if width > 1:
-        dx = np.where(zero, step, dx)
-    else:
-        dy = np.where(zero, step, dy)
-    return dy, dx, rng.integers(0, spp, (_PATTERNS, extra))
-
-
-def _mirror_table(size: int, reach: int) -> np.ndarray:
-    """Index i + reach → the mirrored coordinate of i, for i in [−reach, size − 1 + reach]."""
-    return _mirror(np.arange(-reach, size + reach), size)
-
-
-def _draw(
-    rng: np.random.Generator | None,
-    pool,
-    ys: np.ndarray,
-    xs: np.ndarray,
-    spp: int,
-    height: int,
-    width: int,
-    pick: np.ndarray | None = None,
-) -> np.ndarray:
-    """n×M flat sample indices ((s·H + y)·W + x): P's own S samples first, then the draws of a
-    pattern of ``pool`` picked at random per pixel (or given: ``pick``, n pattern numbers), mirrored
-    at the border, never P itself."""
-    own = (np.arange(spp)[None, :] * height + ys[:, None]) * width + xs[:, None]
-    if pool is None:
-        return own
-    dy, dx, ds = pool
-    if pick is None:
-        pick = rng.integers(0, dy.shape[0], ys.size)
-    # mirroring by table look-up (one gather per axis instead of abs/where/clip on every draw)
-    reach_y, reach_x = int(np.abs(dy).max()), int(np.abs(dx).max())
-    row = _mirror_table(height, reach_y) * width
-    column = _mirror_table(width, reach_x)
-    here = ys * width + xs
-    drawn = row[(ys + reach_y)[:, None] + dy[pick]]
-    drawn += column[(xs + reach_x)[:, None] + dx[pick]]
-    # a mirror back onto P (at the border): step to an adjacent pixel instead
-    same = drawn == here[:, None]
-    if same.any():
-        if width > 1:
-            step = np.where(xs > 0, here - 1, here + 1)
-        else:
-            step = np.where(ys > 0, here - width, here + width)
-        drawn = np.where(same, step[:, None], drawn)
-    drawn += ds[pick] * (height * width)
-    return np.concatenate([own, drawn], axis=1)
-
-
-def _cluster_mask(gathered: np.ndarray, spp: int, cluster: slice) -> np.ndarray:
-    """n×M bool: the paper's clustering (|f − m_P| ≤ max(3σ_P, 0.1) for every clustering feature)."""
-    n, m = gathered.shape[:2]
-    if cluster.stop <= cluster.start:
-        return np.ones((n, m), dtype=bool)
-    f = gathered[:, :, cluster]
-    own = f[:, :spp]
-    mean = own.mean(1, keepdims=True)
-    limit = np.maximum(3.0 * own.std(1, keepdims=True), CLUSTER_TOLERANCE)
-    inside = (np.abs(f - mean) <= limit).all(-1)
-    inside[:, :spp] = True
-    return inside
-
-
-def _normalise(gathered: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """Channels minus their mean over the cluster, over its standard deviation (constant → 0)."""
-    w = mask[:, :, None].astype(np.float32)
-    count = np.maximum(w.sum(1, keepdims=True), 1.0)
-    mean = (gathered * w).sum(1, keepdims=True) / count
-    centred = gathered - mean
-    std = np.sqrt((centred * centred * w).sum(1, keepdims=True) / count)
-    inv = np.where(std > 1e-12 + 1e-6 * np.abs(mean), 1.0 / np.maximum(std, 1e-30), 0.0).astype(np.float32)
-    return centred * inv
-
-
-def _statistics(
-    flat: np.ndarray,
-    layout: _Layout,
-    ys: np.ndarray,
-    xs: np.ndarray,
-    shape,
-    pool,
-    pass_index: int,
-    bins: int,
-    rng: np.random.Generator,
-):
-    """α (n×3), β (n×F), W^r_c (n), per-feature-channel W^r (n×F), kept share (n) at pixels (ys, xs)."""
-    spp, height, width = shape
-    index = _draw(rng, pool, ys, xs, spp, height, width)
-    gathered = flat[index]  # n×M×D
-    mask = _cluster_mask(gathered, spp, layout.cluster)
-    normal = _normalise(gathered, mask)
-    quantised = np.clip(np.floor((normal + 3.0) * (bins / 6.0)), 0, bins - 1).astype(np.uint8)
-    color_cols = _columns(layout.color)
-    # the table's columns are colour, features, screen position, random parameters: the blocks below
-    # are contiguous views of one one-hot table (colour against colour is never needed)
-    assert layout.color.stop == layout.features.start and layout.position.stop == layout.random.start
-    with torch.no_grad():
-        mask_t = torch.from_numpy(mask)
-        codes = one_hot_codes(torch.from_numpy(quantised), mask_t, bins)
-        total = mask_t.sum(1).clamp_min(1).to(torch.float32)
-        x_block = codes[:, :, : layout.features.stop * bins]
-        pr_block = codes[:, :, layout.position.start * bins : layout.random.stop * bins]
-        mi_x = mutual_information_codes(x_block, pr_block, total, bins).double().numpy()  # n×X×(2 + R)
-        mi_f = (
-            mutual_information_codes(
-                codes[:, :, layout.features.start * bins : layout.features.stop * bins],
-                codes[:, :, : layout.color.stop * bins],
-                total,
-                bins,
-            )
-            .double()
-            .numpy()
-        )
-    d_r = mi_x[:, :, 2:].sum(2)
-    d_p = mi_x[:, :, :2].sum(2)
-    d_cf = mi_f.sum(2)  # n×F: features against the colour channels
-    w_r = d_r / (d_r + d_p + _EPS)
-    d_rc, d_pc, d_fc = d_r[:, :3].sum(1), d_p[:, :3].sum(1), d_cf.sum(1)
-    w_rc = d_rc / (d_rc + d_pc + _EPS)
-    if not layout.path_randoms and spp > 1:
-        # no path random numbers in the data: the within-pixel share of the colour's variance
-        own = normal[:, :spp][:, :, color_cols]
-        within = np.clip(own.var(axis=1), 0.0, 1.0)
-        w_r[:, :3] = 1.0 - (1.0 - w_r[:, :3]) * (1.0 - within)
-        w_rc = 1.0 - (1.0 - w_rc) * (1.0 - within.mean(1))
-    growth = 1.0 + 0.1 * pass_index
-    alpha = np.maximum(1.0 - 2.0 * growth * w_r[:, :3], 0.0)
-    w_cf = d_cf / (d_rc + d_pc + d_fc + _EPS)[:, None]
-    beta = w_cf * np.maximum(1.0 - growth * w_r[:, 3:], 0.0)
-    kept = mask[:, spp:].mean(1) if mask.shape[1] > spp else np.ones(ys.size)
-    return alpha, beta, w_rc, w_r[:, 3:], kept
-
-
 def _filter(
     flat_t: torch.Tensor,
-    layout: _Layout,
+    layout: SampleLayout,
     ys: np.ndarray,
     xs: np.ndarray,
     shape,
@@ -462,7 +184,7 @@ def _filter(
     square Σ k o² + Σ k g² − 2 Σ k o g does not cancel (world positions can be large).
     """
     spp, height, width = shape
-    index = torch.from_numpy(_draw(None, pool, ys, xs, spp, height, width, pick=pick))
+    index = torch.from_numpy(draw(None, pool, ys, xs, spp, height, width, pick=pick))
     n, m = index.shape
     gathered = torch.index_select(flat_t, 0, index.view(-1)).view(n, m, -1)  # colour, features, screen position
     d = gathered.shape[-1]
@@ -616,7 +338,7 @@ def rpf_filter(
     samples: Mapping[str, np.ndarray], settings: RPFSettings = RPFSettings()
 ) -> tuple[np.ndarray, RPFWeights]:
     """Filter per-sample data (name → S×H×W×C, needs ``color``); returns (H×W×3 float32, weights)."""
-    table, layout = _sample_table(samples, settings.features)
+    table, layout = sample_table(samples, settings.features)
     spp, height, width, dims = table.shape
     if settings.firefly_factor is not None and height * width > 1:
         table[..., layout.color] = cap_spikes(table[..., layout.color], settings.firefly_factor)
@@ -644,11 +366,11 @@ def rpf_filter(
             chunks = [gy[i : i + rows_per_chunk] for i in range(0, gy.size, rows_per_chunk)]
             seeds = np.random.SeedSequence([settings.seed, t, 2]).spawn(len(chunks))
 
-            stat_pool = _pattern_pool(np.random.default_rng([settings.seed, t, 0]), spp, box, stat_total, height, width)
+            stat_pool = pattern_pool(np.random.default_rng([settings.seed, t, 0]), spp, box, stat_total, height, width)
 
             def stats(k: int):
                 ys, xs = np.meshgrid(chunks[k], gx, indexing="ij")
-                return _statistics(
+                return pass_statistics(
                     flat,
                     layout,
                     ys.ravel(),
@@ -674,7 +396,7 @@ def rpf_filter(
                 refine_pool = (
                     stat_pool
                     if refine_total == stat_total
-                    else _pattern_pool(
+                    else pattern_pool(
                         np.random.default_rng([settings.seed, t, 5]), spp, box, refine_total, height, width
                     )
                 )
@@ -684,7 +406,7 @@ def rpf_filter(
 
                 def refine(k: int):
                     ys, xs = np.divmod(pieces[k], width)
-                    return _statistics(
+                    return pass_statistics(
                         flat,
                         layout,
                         ys,
@@ -708,7 +430,7 @@ def rpf_filter(
             scale[:, layout.features] = beta * shrink[:, None]
             filter_total = min(paper, max(settings.max_samples, spp))
             rows = max(1, _FILTER_PAIRS // max(1, width * spp * filter_total))
-            filter_pool = _pattern_pool(
+            filter_pool = pattern_pool(
                 np.random.default_rng([settings.seed, t, 1]), spp, box, filter_total, height, width
             )
             columns = np.r_[0 : layout.features.stop, layout.position.start : layout.position.stop]
@@ -716,7 +438,7 @@ def rpf_filter(
             scale_t = torch.from_numpy(scale)
             new_color = np.empty((spp, height, width, 3), np.float32)
             # one pattern per pixel, drawn for the whole image: the bytes do not depend on the chunking
-            picks = np.random.default_rng([settings.seed, t, 3]).integers(0, _PATTERNS, height * width)
+            picks = np.random.default_rng([settings.seed, t, 3]).integers(0, PATTERNS, height * width)
 
             def run_filter(k: int) -> None:
                 y0 = k * rows

@@ -11,15 +11,16 @@ import torch
 from scipy.stats import gamma
 
 from denoisebench.baselines import rpf as rpf_module
+from denoisebench.baselines import rpf_samples
 from denoisebench.baselines.rpf import (
     RandomParameterFilter,
     RPFSettings,
     cap_spikes,
     limit_change,
-    mutual_information,
     rpf_filter,
     scaled_boxes,
 )
+from denoisebench.baselines.rpf_statistics import mutual_information
 from denoisebench.denoisers.registry import load_denoiser
 from denoisebench.denoisers.runner import run_frame
 from denoisebench.denoisers.synthetic import synthetic_frame
@@ -115,9 +116,9 @@ def test_rpf_constant_colour_stays_constant():
 def test_rpf_never_draws_the_pixel_itself():
     rng = np.random.default_rng(0)
     for height, width in ((9, 11), (1, 7), (7, 1)):
-        pool = rpf_module._pattern_pool(rng, 4, 5, 60, height, width)
+        pool = rpf_samples.pattern_pool(rng, 4, 5, 60, height, width)
         ys, xs = (a.ravel() for a in np.meshgrid(np.arange(height), np.arange(width), indexing="ij"))
-        index = rpf_module._draw(rng, pool, ys, xs, 4, height, width)
+        index = rpf_samples.draw(rng, pool, ys, xs, 4, height, width)
         pixel = index % (height * width)
         assert np.array_equal(pixel[:, :4], np.broadcast_to((ys * width + xs)[:, None], (ys.size, 4)))
         assert not np.any(pixel[:, 4:] == (ys * width + xs)[:, None])
