@@ -231,3 +231,70 @@ def test_tests_mirror_the_package():
             ]
     assert not misplaced, f"test modules outside tests/<package>/: {misplaced}"
     assert not cross, f"test modules importing test modules (move the shared part to tests/support/): {cross}"
+
+
+#: The benchmark side's typed packages: records read by attribute, no dict shims.
+TYPED_PACKAGES = ("results", "analysis", "reports")
+#: Methods that make a record answer like a dict (``row["key"]``, ``row.get(key)``, ``key in row``).
+DICT_METHODS = {"__getitem__", "get", "keys", "__contains__"}
+
+
+def test_typed_records_have_no_dict_shims():
+    """No class in ``results/``, ``analysis/`` or ``reports/`` answers by key: the store's rows, the
+    analyses' results and the report model are read by attribute (``row.status``), and results.json is
+    written from their attributes."""
+    bad = []
+    for package in TYPED_PACKAGES:
+        for path in sorted((PACKAGE / package).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if not isinstance(node, ast.ClassDef):
+                    continue
+                shims = sorted(
+                    f.name
+                    for f in node.body
+                    if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef)) and f.name in DICT_METHODS
+                )
+                bases = {b.id for b in node.bases if isinstance(b, ast.Name)}
+                if shims or node.name == "ByKey" or "ByKey" in bases:
+                    bad.append(f"{path.relative_to(PACKAGE.parent)}: {node.name} {shims or 'ByKey'}")
+    assert not bad, "dict shims on typed records (read them by attribute instead):\n" + "\n".join(bad)
+
+
+#: Annotations that say nothing of what they hold.
+UNTYPED = {"dict", "list", "tuple", "set", "Any", "object", "Dict", "List", "Tuple"}
+
+
+def _bare_names(annotation: ast.expr) -> list[str]:
+    """Names in ``annotation`` used bare (``dict``, not ``dict[str, int]``): the parts it leaves untyped."""
+    subscripted = {id(n.value) for n in ast.walk(annotation) if isinstance(n, ast.Subscript)}
+    found = []
+    for n in ast.walk(annotation):
+        name = n.id if isinstance(n, ast.Name) else n.attr if isinstance(n, ast.Attribute) else None
+        if name in UNTYPED and id(n) not in subscripted:
+            found.append(name)
+    return found
+
+
+def test_the_report_model_is_typed_to_its_parts():
+    """Every field of the report model and of its parts (``reports/model.py``) says what it holds: no bare
+    ``dict``/``list``/``Any`` and no ``list[dict]``; a part of the report is a dataclass of its own."""
+    tree = ast.parse((PACKAGE / "reports" / "model.py").read_text())
+    bad, classes = [], [n for n in tree.body if isinstance(n, ast.ClassDef)]
+    assert any(c.name == "ReportModel" for c in classes)
+    for cls in classes:
+        for node in cls.body:
+            if isinstance(node, ast.AnnAssign):
+                bare = _bare_names(node.annotation)
+                if bare:
+                    bad.append(f"{cls.name}.{ast.unparse(node.target)}: {ast.unparse(node.annotation)}")
+    assert not bad, "untyped fields in reports/model.py:\n" + "\n".join(bad)
+
+
+def test_the_untyped_annotation_check_catches_what_it_should():
+    def bare(text: str) -> list[str]:
+        return _bare_names(ast.parse(text, mode="eval").body)
+
+    assert bare("dict") == ["dict"] and bare("list[dict]") == ["dict"] and bare("dict[str, dict] | None")
+    assert bare("list") and bare("Any") and bare("typing.Any") and bare("tuple")
+    assert not bare("dict[str, list[int]]") and not bare("list[FrameRow]") and not bare("tuple[bytes, str]")
+    assert not bare("dict[tuple[str, str, int], tuple[int, np.ndarray]] | None")

@@ -37,7 +37,7 @@ from denoisebench.metrics.registry import metric_names
 from denoisebench.results.finite import num
 from denoisebench.results.names import NOISY
 
-#: A time ratio within this of 1 is "about rendering's time" (the same rule as analysis.readings).
+#: A time ratio within this of 1 is "about rendering's time" (the same rule as accuracy.readings).
 ABOUT = 0.05
 #: Multiples of the top rung the equal-quality table adds as (extrapolated) targets.
 EXTRA_TARGETS = (4, 16)

@@ -44,7 +44,7 @@ Notes
   time to rendering's carries it (:meth:`TimeModel.ratio_bounds`: the render and the denoise parts
   each between their minimum and minimum × spread, the render part of both sides moving together)
   and a time verdict is written only when it holds at both ends (``analysis.equal_tables``,
-  ``analysis.summary.readings``). Measured on the README tour's dataset: the probe's fixed
+  ``analysis.accuracy.readings``). Measured on the README tour's dataset: the probe's fixed
   1080p cost was 2.4 s idle and 11 s beside other jobs with one render per point (docs/time.md).
 * **Where it comes from.** :mod:`denoisebench.benchmark.timing` measures; the store keeps the
   records (:mod:`denoisebench.results.timings`, table ``run_timings``); this module only reads them.
@@ -307,7 +307,7 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
     width0, height0 = dataset_size
     pixels0 = int(width0 * height0)
     requested = tuple(time_at or DEFAULT_TIME_AT)
-    render_points = [(f["spp"], f["render_seconds"]) for f in data.frames if f["denoiser"] == NOISY]
+    render_points = [(f.spp, f.render_seconds) for f in data.frames_of(NOISY)]
     fitted = line_through(render_points)
     render = None
     if fitted is not None:
@@ -345,7 +345,7 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
             continue
         small = {}
         for spp in data.spp:
-            values = [f["denoise_seconds"] for f in data.ok_frames(label, spp) if f["denoise_seconds"] is not None]
+            values = [f.denoise_seconds for f in data.ok_frames(label, spp) if f.denoise_seconds is not None]
             if values:
                 small[int(spp)] = float(np.median(values))  # a loaded moment adds to a few calls, not to all
         if not small:

@@ -265,7 +265,7 @@ def _run(args) -> int:
         raise
     with store:
         units = store.units(plan.run_id)
-        failed = [u for u in units if u["status"] != "ok"]
+        failed = [u for u in units if u.status != "ok"]
         print(
             f"run {plan.run_id} ({'resumed' if plan.resumed else 'new'}): {len(units)} units in {args.db}, "
             f"{len(failed)} failed, {time.perf_counter() - started:.1f} s"

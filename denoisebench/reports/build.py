@@ -1,8 +1,8 @@
 """Write a run's report folder: index.html, report.md, results.json, results.csv, figures/.
 
 :func:`build_report` gathers everything (plain data, images as data URIs) from the results store
-and the dataset into a :class:`~.report_model.ReportModel`; :mod:`.report_html` and
-:mod:`.report_markdown` render it; this module writes the files.
+and the dataset into a :class:`~.model.ReportModel`; :mod:`.html` and :mod:`.markdown` render it;
+this module writes the files (results.json from the model's typed parts: :func:`results_json`).
 
 Notes
 -----
@@ -29,12 +29,13 @@ import csv
 import io
 import json
 import math
+from dataclasses import fields, is_dataclass
 from pathlib import Path
 
 import numpy as np
 
+from denoisebench.analysis import accuracy, equal_tables, time_model
 from denoisebench.analysis import aggregate as agg
-from denoisebench.analysis import equal_tables, time_model
 from denoisebench.analysis import summary as analysis
 from denoisebench.analysis.aggregate import rule_of
 from denoisebench.dataset import Dataset
@@ -45,7 +46,26 @@ from denoisebench.reports import figures, images, strips
 from denoisebench.reports import samplers as report_samplers
 from denoisebench.reports.html import render_html
 from denoisebench.reports.markdown import render_markdown
-from denoisebench.reports.model import ReportModel
+from denoisebench.reports.model import (
+    Comparison,
+    ComparisonEntry,
+    CropWindow,
+    CvvdpViewing,
+    DecidingFrame,
+    Failure,
+    FlickerSection,
+    NotApplicableDetail,
+    ReferenceInfo,
+    ReportModel,
+    SamplerSection,
+    SceneStrip,
+    SceneViewing,
+    StabilityCase,
+    StripEntry,
+    StripWindow,
+    UnresolvedReferences,
+    ViewingDisplay,
+)
 from denoisebench.results.crops import window_size, worst_windows
 from denoisebench.results.names import NOISY
 from denoisebench.results.store import ResultsStore
@@ -53,9 +73,12 @@ from denoisebench.results.timings import read_timings
 
 
 def _clean(value):
-    """JSON-safe: NaN/Inf → None, numpy scalars → Python, store rows (``as_dict``) → dicts."""
+    """JSON-safe: NaN/Inf → None, numpy scalars → Python, a typed part → a dict (its ``as_dict``, else its
+    fields in order)."""
     if callable(getattr(value, "as_dict", None)):
         return _clean(value.as_dict())
+    if is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _clean(getattr(value, f.name)) for f in fields(value)}
     if isinstance(value, dict):
         return {str(k): _clean(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -88,7 +111,7 @@ def _transport(plan: dict) -> str:
     return f"max_depth {depth} ({who})"
 
 
-def _reference_info(dataset: Dataset, scenes: list[str]) -> dict:
+def _reference_info(dataset: Dataset, scenes: list[str]) -> ReferenceInfo:
     """Reference seconds and spp, the light transport of every scene's plan (``transport``: one line,
     naming restricted scenes), and the adaptive references' spp used and worst floor reached."""
     seconds, spps, used, floors, restricted = [], set(), [], [], {}
@@ -120,15 +143,20 @@ def _reference_info(dataset: Dataset, scenes: list[str]) -> dict:
             words += f", noise floor \u2264 {max(floors):.2g}"
     else:
         words = f"{spp} spp"
-    return {
-        "seconds": float(np.mean(seconds)) if seconds else None,
-        "spp": spp,
-        "transport": line,
-        "restricted": restricted,
-        "description": f"{words}, {line}",
-        "spp_used": [min(used), max(used)] if used else None,
-        "floor_max": max(floors) if floors else None,
-    }
+    return ReferenceInfo(
+        seconds=float(np.mean(seconds)) if seconds else None,
+        spp=spp,
+        transport=line,
+        restricted=restricted,
+        description=f"{words}, {line}",
+        spp_used=[min(used), max(used)] if used else None,
+        floor_max=max(floors) if floors else None,
+    )
+
+
+def _kind(label: str) -> str:
+    """``input`` (the noisy input), ``reference`` or ``denoiser``: how an image's tile is styled."""
+    return "input" if label == NOISY else ("reference" if label == "reference" else "denoiser")
 
 
 #: At most this many comparisons of frames that decide a scene's mean (beyond one per scene and spp).
@@ -136,8 +164,12 @@ MAX_DECIDING_COMPARISONS = 12
 
 
 def _comparisons(
-    store: ResultsStore, data: analysis.RunData, dataset: Dataset, deciding: list[dict], samplers: dict | None = None
-) -> list[dict]:
+    store: ResultsStore,
+    data: analysis.RunData,
+    dataset: Dataset,
+    deciding: list[DecidingFrame],
+    samplers: SamplerSection | None = None,
+) -> list[Comparison]:
     """Per scene and input spp: the noisy input, each denoiser and the reference at the last frame; then,
     for each frame that would decide its scene's mean of the lead score (``deciding``, at any spp; at most
     :data:`MAX_DECIDING_COMPARISONS`), the same at that frame, with every label whose unit kept it."""
@@ -149,14 +181,11 @@ def _comparisons(
                 out.append(found)
     seen: set[tuple[str, int, int]] = set()
     for item in deciding:
-        key = (item["scene"], item["spp"], item["frame"])
+        key = (item.scene, item.spp, item.frame)
         if key in seen or len(seen) >= MAX_DECIDING_COMPARISONS:
             continue
         seen.add(key)
-        why = (
-            f"{item['label']}'s {item['metric']} is {item['value']:.3g} on this frame, against its scene median of "
-            f"{item['median']:.3g}"
-        )
+        why = f"{item.label}'s {item.metric} is {item.value:.3g} on this frame, against its scene median of {item.median:.3g}"
         found = _comparison(store, data, dataset, *key, samplers, why=why)
         if found is not None:
             out.append(found)
@@ -170,9 +199,9 @@ def _comparison(
     scene: str,
     spp: int,
     frame_index: int | None,
-    samplers: dict | None,
+    samplers: SamplerSection | None,
     why: str | None = None,
-) -> dict | None:
+) -> Comparison | None:
     """One comparison at ``frame_index`` (None: the last frame, which every unit keeps), with worst-region
     crops; a live sampler's entry has its ``spp_map`` of that frame (:mod:`.samplers`). The noisy input
     comes from the dataset where its unit did not keep that frame."""
@@ -198,31 +227,27 @@ def _comparison(
     windows = worst_windows(error, size, count=2)
     scale = images.crop_scale(size)
     full_scale = max(1, 256 // max(reference.shape[:2]))
-    entries = []
-    for label, img in shown + [("reference", reference)]:
-        frame_error = None if label == "reference" else float(np.mean(relmse_map(img, reference)))
-        entries.append(
-            {
-                "label": label,
-                "kind": "input" if label == NOISY else ("reference" if label == "reference" else "denoiser"),
-                "relmse": frame_error,
-                "image": images.data_uri(images.to_png(img, full_scale)),
-                "crops": [images.data_uri(images.to_png(images.crop(img, t, l, size), scale)) for t, l in windows],
-            }
+    entries = [
+        ComparisonEntry(
+            label=label,
+            kind=_kind(label),
+            relmse=None if label == "reference" else float(np.mean(relmse_map(img, reference))),
+            image=images.data_uri(images.to_png(img, full_scale)),
+            crops=[images.data_uri(images.to_png(images.crop(img, t, l, size), scale)) for t, l in windows],
+            spp_map=report_samplers.map_entry(samplers, label, scene, spp, int(frame_index), full_scale),
         )
-        spp_map = report_samplers.map_entry(samplers, label, scene, spp, int(frame_index), full_scale)
-        if spp_map is not None:
-            entries[-1]["spp_map"] = spp_map
-    return {
-        "scene": scene,
-        "spp": spp,
-        "frame": int(frame_index),
-        "why": why,
-        "width": int(reference.shape[1] * full_scale),
-        "height": int(reference.shape[0] * full_scale),
-        "windows": [{"top": t, "left": l, "size": size} for t, l in windows],
-        "entries": entries,
-    }
+        for label, img in shown + [("reference", reference)]
+    ]
+    return Comparison(
+        scene=scene,
+        spp=spp,
+        frame=int(frame_index),
+        why=why,
+        width=int(reference.shape[1] * full_scale),
+        height=int(reference.shape[0] * full_scale),
+        windows=[CropWindow(t, l, size) for t, l in windows],
+        entries=entries,
+    )
 
 
 #: Temporal metrics the flicker table leads with (scale-free; cvvdp is ColorVideoVDP's JOD, how visible
@@ -238,8 +263,8 @@ def temporal_metric_order(names: list[str]) -> list[str]:
     return lead + [m for m in rest if rule_of(m) == "mean"] + [m for m in rest if rule_of(m) != "mean"]
 
 
-def _flicker(data: analysis.RunData) -> dict:
-    """{spp: [...], metrics: [...], series: {metric: {spp: {label: [per-frame means]}}}}."""
+def _flicker(data: analysis.RunData) -> FlickerSection:
+    """The spp, the flicker metrics with a series, and {metric: {spp: {label: [per-frame means]}}}."""
     metrics = analysis.flicker_metrics(data)
     series: dict[str, dict[int, dict]] = {}
     for metric in metrics:
@@ -247,10 +272,10 @@ def _flicker(data: analysis.RunData) -> dict:
             found = analysis.flicker_series(data, spp, metric)
             if found:
                 series.setdefault(metric, {})[spp] = found
-    return {"spp": list(data.spp), "metrics": [m for m in metrics if m in series], "series": series}
+    return FlickerSection(list(data.spp), [m for m in metrics if m in series], series)
 
 
-def _strips(store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: int) -> list[dict]:
+def _strips(store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: int) -> list[SceneStrip]:
     """Per scene: the noisy input's, each denoiser's and the reference's strip of one crop at ``spp``."""
     out = []
     for scene in data.scenes:
@@ -259,49 +284,48 @@ def _strips(store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: 
         if not found:
             continue
         first = found[0][1]
-        top, left, side, count = first["top"], first["left"], first["side"], len(first["crops"])
+        top, left, side, count = first.top, first.left, first.side, len(first.crops)
         same = [
             (label, st)
             for label, st in found
-            if (st["top"], st["left"], st["side"], st["first_frame"]) == (top, left, side, first["first_frame"])
+            if (st.top, st.left, st.side, st.first_frame) == (top, left, side, first.first_frame)
         ]
         refs = np.stack(
             [
-                dataset.frame(scene, spp, first["first_frame"] + i, samples=False, buffers=["color"]).reference[
+                dataset.frame(scene, spp, first.first_frame + i, samples=False, buffers=["color"]).reference[
                     top : top + side, left : left + side
                 ]
                 for i in range(count)
             ]
         )
         scale = max(1, 96 // side)
-        entries = []
-        for label, crops in [(label, st["crops"]) for label, st in same] + [("reference", refs)]:
-            entries.append(
-                {
-                    "label": label,
-                    "kind": "input" if label == NOISY else ("reference" if label == "reference" else "denoiser"),
-                    "strip": images.data_uri(strips.strip_png(crops, scale)),
-                    "animation": images.data_uri(strips.strip_apng(crops, scale)),
-                }
+        entries = [
+            StripEntry(
+                label=label,
+                kind=_kind(label),
+                strip=images.data_uri(strips.strip_png(crops, scale)),
+                animation=images.data_uri(strips.strip_apng(crops, scale)),
             )
+            for label, crops in [(label, st.crops) for label, st in same] + [("reference", refs)]
+        ]
         out.append(
-            {
-                "scene": scene,
-                "spp": spp,
-                "first_frame": first["first_frame"],
-                "frames": count,
-                "window": {"top": top, "left": left, "side": side},
-                "entries": entries,
-            }
+            SceneStrip(
+                scene=scene,
+                spp=spp,
+                first_frame=first.first_frame,
+                frames=count,
+                window=StripWindow(top, left, side),
+                entries=entries,
+            )
         )
     return out
 
 
-def _cvvdp_viewing(dataset: Dataset, data: analysis.RunData) -> dict:
+def _cvvdp_viewing(dataset: Dataset, data: analysis.RunData) -> CvvdpViewing:
     """cvvdp's viewing conditions (:func:`denoisebench.metrics.colorvideovdp.viewing_conditions`): the
     display once, and per scene the frame's visual angle and the exposure from its reference sequence
     (the one cvvdp set for every denoiser of that scene)."""
-    display = viewing_conditions()
+    display = ViewingDisplay(**viewing_conditions())
     scenes = {}
     spp = data.spp[0] if data.spp else None
     for scene in data.scenes:
@@ -310,28 +334,32 @@ def _cvvdp_viewing(dataset: Dataset, data: analysis.RunData) -> dict:
         count = dataset.scene(scene).frame_count
         refs = [dataset.frame(scene, spp, i, samples=False, buffers=["color"]).reference for i in range(count)]
         found = viewing_conditions(np.stack(refs))
-        keys = ("frame_px", "field_deg", "exposure", "key", "lit_fraction", "clipped_fraction", "text")
-        scenes[scene] = {k: found[k] for k in keys}
-    return {"display": display, "scenes": scenes}
+        scenes[scene] = SceneViewing(
+            frame_px=found["frame_px"],
+            field_deg=found["field_deg"],
+            exposure=found["exposure"],
+            key=found["key"],
+            lit_fraction=found["lit_fraction"],
+            clipped_fraction=found["clipped_fraction"],
+            text=found["text"],
+        )
+    return CvvdpViewing(display, scenes)
 
 
-def _not_applicable_detail(store: ResultsStore, run_id: str) -> list[dict]:
+def _not_applicable_detail(store: ResultsStore, run_id: str) -> list[NotApplicableDetail]:
     """Per metric that did not apply somewhere: the scenes, the frames and sequences concerned, the reasons."""
-    by_metric: dict[str, dict] = {}
+    rows: dict[str, list] = {}
     for row in store.not_applicable(run_id):
-        entry = by_metric.setdefault(row["metric"], {"scenes": set(), "frames": 0, "sequences": 0, "reasons": set()})
-        entry["scenes"].add(row["scene"])
-        entry["sequences" if row["frame"] < 0 else "frames"] += 1
-        entry["reasons"].add(row["reason"])
+        rows.setdefault(row.metric, []).append(row)
     return [
-        {
-            "metric": metric,
-            "scenes": sorted(e["scenes"]),
-            "frames": e["frames"],
-            "sequences": e["sequences"],
-            "reasons": sorted(e["reasons"]),
-        }
-        for metric, e in sorted(by_metric.items())
+        NotApplicableDetail(
+            metric=metric,
+            scenes=sorted({r.scene for r in found}),
+            frames=sum(r.frame >= 0 for r in found),
+            sequences=sum(r.frame < 0 for r in found),
+            reasons=sorted({r.reason for r in found}),
+        )
+        for metric, found in sorted(rows.items())
     ]
 
 
@@ -341,32 +369,32 @@ def _dataset_size(dataset: Dataset, scenes: list[str]) -> tuple[int, int]:
     return int(record.get("width", 0)), int(record.get("height", 0))
 
 
-def _deciding_frames(data: analysis.RunData, metrics: list[str]) -> list[dict]:
+def _deciding_frames(data: analysis.RunData, metrics: list[str]) -> list[DecidingFrame]:
     """Frames over 10× their scene's median of each lead metric (:meth:`.run_index.RunIndex.deciding_frames`)."""
     found = []
     for metric, label in ((m, label) for m in metrics if m in data.frame_metric_names for label in data.labels):
         for spp in data.spp:
             for scene in data.scenes:
                 for frame, value, median in data.deciding_frames(label, spp, scene, metric):
-                    found.append(
-                        {
-                            "label": label,
-                            "spp": spp,
-                            "scene": scene,
-                            "frame": frame,
-                            "metric": metric,
-                            "value": value,
-                            "median": median,
-                        }
-                    )
+                    found.append(DecidingFrame(label, spp, scene, frame, metric, value, median))
     return found
+
+
+def _stability(table: dict[str, list[dict]] | None) -> dict[str, list[StabilityCase]] | None:
+    """The hard-case table (:func:`denoisebench.benchmark.stability.stability_table`'s plain rows), typed."""
+    if table is None:
+        return None
+    return {
+        label: [StabilityCase(r["case"], r["status"], r["detail"], r.get("seconds")) for r in rows]
+        for label, rows in table.items()
+    }
 
 
 def build_report(
     store: ResultsStore,
     run_id: str,
     dataset: Dataset,
-    stability: dict | None = None,
+    stability: dict[str, list[dict]] | None = None,
     time_at: tuple[int, int] | None = None,
     include_unresolved: bool = False,
 ) -> ReportModel:
@@ -387,25 +415,26 @@ def build_report(
     measured = data.frame_metric_names + data.sequence_metric_names
     # the figure: the robust relMSE first, raw relMSE beside it, FLIP; the tables: the lead metrics
     shown = [m for m in analysis.ERROR_METRICS if m in measured]
-    panels = [analysis.accuracy_time(data, summary, metric, reference, model) for metric in shown]
+    panels = [
+        accuracy.accuracy_time(
+            data, summary, metric, reference_seconds=reference.seconds, reference_spp=reference.spp, model=model
+        )
+        for metric in shown
+    ]
     tables = [equal_tables.build_tables(summary, model, data.spp, metric) for metric in lead]
     palette = figures.colors(data.labels)
     figure_files = {}
     if any(p.points for p in panels):
         figure_files["accuracy_time"] = figures.accuracy_time_figure(panels, palette)
     flicker = _flicker(data)
-    if flicker["series"]:
-        figure_files["flicker"] = figures.flicker_figure(flicker["series"], palette)
+    if flicker.series:
+        figure_files["flicker"] = figures.flicker_figure(flicker.series, palette)
     scene_effects = _scene_effects(dataset, data.scenes)
     samplers = report_samplers.sampler_section(store, data.run)
-    failures = [
-        {"denoiser": u["denoiser"], "scene": u["scene"], "spp": u["spp"], "error": u["error"]}
-        for u in data.units
-        if u["status"] != "ok"
-    ]
+    failures = [Failure(u.denoiser, u.scene, u.spp, u.error) for u in data.unit_rows if u.status != "ok"]
     return ReportModel(
         run=data.run,
-        denoisers=data.denoisers,
+        denoisers=data.entries,
         scenes=data.scenes,
         spp=data.spp,
         scene_effects=scene_effects,
@@ -414,7 +443,7 @@ def build_report(
         sequence_metrics=data.sequence_metric_names,
         summary=summary,
         accuracy=panels,
-        readings={p.metric: analysis.readings(p) for p in panels},
+        readings={p.metric: accuracy.readings(p) for p in panels},
         time_model=model,
         equal_tables=tables,
         verdicts=[v for t in tables for v in equal_tables.verdicts(t)],
@@ -424,10 +453,7 @@ def build_report(
         indistinguishable=analysis.indistinguishable_pairs(data, summary),
         strips=_strips(store, data, dataset, data.spp[0]) if data.spp else [],
         failures=failures,
-        unresolved_references={
-            "included": include_unresolved,
-            "scenes": [u.as_dict() for u in unresolved],
-        },
+        unresolved_references=UnresolvedReferences(include_unresolved, unresolved),
         # metrics whose preconditions the frames do not meet (SSIM under 11×11 px): frames count, reason
         not_applicable=store.not_applicable_summary(run_id),
         comparisons=_comparisons(store, data, dataset, deciding, samplers),
@@ -437,11 +463,11 @@ def build_report(
         cvvdp_viewing=_cvvdp_viewing(dataset, data) if "cvvdp" in data.sequence_metric_names else None,
         # which scenes and frames each not-applicable metric lacks, and why
         not_applicable_detail=_not_applicable_detail(store, run_id),
-        stability=stability,
+        stability=_stability(stability),
         figures=figure_files,
         palette=palette,
-        frames=data.frames,
-        sequences=data.sequences,
+        frames=data.frame_rows,
+        sequences=data.sequence_rows,
         deciding_frames=deciding,
     )
 
@@ -538,8 +564,8 @@ def csv_cell(value):
 def results_csv(report: ReportModel) -> str:
     """One row per frame: ids, status, seconds, then every frame metric, the floor and corrected value
     (``<metric>_floor``, ``<metric>_corrected``) of those that have a floor, and the per-frame flicker."""
-    flicker = sorted({m for f in report.frames for m in f["metrics"] if m.startswith("flicker")})
-    floored = [m for m in report.frame_metrics if any(m in f.get("floors", {}) for f in report.frames)]
+    flicker = sorted({m for f in report.frames for m in f.metrics if m.startswith("flicker")})
+    floored = [m for m in report.frame_metrics if any(m in f.floors for f in report.frames)]
     metrics = report.frame_metrics + flicker
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
@@ -561,23 +587,23 @@ def results_csv(report: ReportModel) -> str:
         ]
     )
     for f in report.frames:
-        values = [f["metrics"].get(m) for m in metrics]
+        values = [f.metrics.get(m) for m in metrics]
         for m in floored:
-            value, floor = f["metrics"].get(m), f.get("floors", {}).get(m)
+            value, floor = f.metrics.get(m), f.floors.get(m)
             values += [floor, None if value is None or floor is None else value - floor]
         writer.writerow(
             [
-                report.run["run_id"],
-                csv_cell(f["denoiser"]),
-                csv_cell(f["scene"]),
-                f["spp"],
-                f["frame"],
-                f["status"],
-                csv_cell(f["error"] or ""),
-                f["render_seconds"],
-                f["denoise_seconds"],
-                f["total_seconds"],
-                f["sanitized"],
+                report.run.run_id,
+                csv_cell(f.denoiser),
+                csv_cell(f.scene),
+                f.spp,
+                f.frame,
+                f.status,
+                csv_cell(f.error or ""),
+                f.render_seconds,
+                f.denoise_seconds,
+                f.total_seconds,
+                f.sanitized,
                 *("" if v is None else repr(float(v)) for v in values),
             ]
         )
@@ -590,10 +616,10 @@ def spp_map_files(report: ReportModel) -> dict[str, bytes]:
     ``figures/spp_maps/colour_bar.png``; {} without maps."""
     files = {}
     for n, comp in enumerate(report.comparisons):
-        for k, entry in enumerate(comp["entries"]):
-            if "spp_map" in entry:
-                files[f"figures/spp_maps/{n}_{k}.png"] = entry["spp_map"]["png"]
-                files[f"figures/spp_maps/{n}_{k}_image.png"] = base64.b64decode(entry["image"].split(",", 1)[1])
+        for k, entry in enumerate(comp.entries):
+            if entry.spp_map is not None:
+                files[f"figures/spp_maps/{n}_{k}.png"] = entry.spp_map.png
+                files[f"figures/spp_maps/{n}_{k}_image.png"] = base64.b64decode(entry.image.split(",", 1)[1])
     if files:
         files["figures/spp_maps/colour_bar.png"] = images.colour_bar_png()
     return files
@@ -604,7 +630,7 @@ def write_report(
     run_id: str,
     dataset: Dataset,
     out_dir: str | Path,
-    stability: dict | None = None,
+    stability: dict[str, list[dict]] | None = None,
     time_at: tuple[int, int] | None = None,
     include_unresolved: bool = False,
 ) -> Path:

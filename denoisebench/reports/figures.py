@@ -18,7 +18,7 @@ import io
 
 import numpy as np
 
-from denoisebench.analysis.summary import AccuracyTime
+from denoisebench.analysis.accuracy import AccuracyTime
 from denoisebench.results.names import NOISY
 
 # Lazy imports: matplotlib only where a figure is drawn, so that a run without a report never loads it.

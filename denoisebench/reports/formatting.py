@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import math
+from typing import TYPE_CHECKING
 
 from denoisebench.analysis.aggregate import rule_of
 from denoisebench.metrics import get_metric
 from denoisebench.results.finite import num  # noqa: F401 (fmt.num for the report modules)
 from denoisebench.results.names import NOISY
+
+if TYPE_CHECKING:
+    from denoisebench.reports.model import ReportModel, StabilityCase
 
 #: Metrics shown in the summary tables, in this order.
 LEAD_METRICS = (
@@ -75,16 +79,14 @@ def _metric_columns(rows, metrics: list[str]) -> tuple[list[str], list]:
     return header, makers
 
 
-def summary_rows(report: dict, spp: int) -> tuple[list[str], list[list[str]]]:
+def summary_rows(report: ReportModel, spp: int) -> tuple[list[str], list[list[str]]]:
     """(header, rows) of the summary table at ``spp``: noisy first, then by the lead metric
     (LEAD_METRICS' first that the run has: the robust relMSE, else relMSE)."""
     # the tables show the lead metrics; results.json/results.csv hold every one
     metrics = [
-        m
-        for m in LEAD_METRICS
-        if m in report["frame_metrics"] + report["sequence_metrics"] and m not in HIDDEN_IN_TABLES
+        m for m in LEAD_METRICS if m in report.frame_metrics + report.sequence_metrics and m not in HIDDEN_IN_TABLES
     ]
-    rows = [r for r in report["summary"] if r.spp == spp]
+    rows = [r for r in report.summary if r.spp == spp]
     headings, makers = _metric_columns(rows, metrics)
     header = ["denoiser", *headings, "denoise s/frame", "total s/frame", "frames"]
     lead = next((m for m in metrics if m in ("relmse_robust", "relmse")), "relmse")
@@ -99,11 +101,11 @@ def summary_rows(report: dict, spp: int) -> tuple[list[str], list[list[str]]]:
     return header, body
 
 
-def flicker_rows(report: dict, spp: int) -> tuple[list[str], list[list[str]]]:
+def flicker_rows(report: ReportModel, spp: int) -> tuple[list[str], list[list[str]]]:
     """(header, rows) of the flicker table at ``spp``: every temporal metric of the run, scale-free first
-    (report["temporal_metrics"]), each aggregated by its rule; noisy first, then by the lead metric."""
-    metrics = report.get("temporal_metrics") or report["sequence_metrics"]
-    rows = [r for r in report["summary"] if r.spp == spp]
+    (``report.temporal_metrics``), each aggregated by its rule; noisy first, then by the lead metric."""
+    metrics = report.temporal_metrics or report.sequence_metrics
+    rows = [r for r in report.summary if r.spp == spp]
     headings, makers = _metric_columns(rows, metrics)
     lead = metrics[0] if metrics else None
     sign = -1.0 if lead == "tpsnr" else 1.0
@@ -115,23 +117,23 @@ def flicker_rows(report: dict, spp: int) -> tuple[list[str], list[list[str]]]:
     return ["denoiser", *headings], [[r.denoiser, *(make(r) for make in makers)] for r in sorted(rows, key=key)]
 
 
-def not_held_out_lines(report: dict) -> list[str]:
+def not_held_out_lines(report: ReportModel) -> list[str]:
     """One sentence per denoiser that was trained on some of the run's scenes (store ``trained_on``)."""
     lines = []
-    for d in report.get("denoisers", []):
-        scenes = d.get("trained_on") or []
+    for d in report.denoisers:
+        scenes = d.trained_on
         if scenes:
             lines.append(
-                f"{d['label']} was trained on {len(scenes)} of the {len(report['scenes'])} scene(s) scored here "
+                f"{d.label} was trained on {len(scenes)} of the {len(report.scenes)} scene(s) scored here "
                 f"({', '.join(scenes)}): its scores are not held-out there and flatter it."
             )
     return lines
 
 
-def indistinguishable_lines(report: dict) -> list[str]:
+def indistinguishable_lines(report: ReportModel) -> list[str]:
     """One sentence per pair of denoisers the reference cannot tell apart (analysis.indistinguishable_pairs)."""
     lines = []
-    for p in report.get("indistinguishable", []):
+    for p in report.indistinguishable:
         scale = "" if rule_of(p.metric) == "mean" else " in log ratio"
         lines.append(
             f"{p.spp} spp, {p.metric}: {p.a} and {p.b} are not distinguishable at this reference quality "
@@ -144,13 +146,13 @@ def indistinguishable_lines(report: dict) -> list[str]:
     return lines
 
 
-def effect_rows(report: dict) -> tuple[list[str], list[list[str]], dict[str, str]]:
+def effect_rows(report: ReportModel) -> tuple[list[str], list[list[str]], dict[str, str]]:
     """(header, rows, worst effect per denoiser) of the per-effect breakdown, values in % of input error."""
-    effects = report["effects"]
-    names = effects["effects"]
+    effects = report.effects
+    names = effects.effects
     header = ["denoiser", "overall", *names]
     rows, worst = [], {}
-    for label, values in effects["table"].items():
+    for label, values in effects.table.items():
         present = {e: values.get(e) for e in names if values.get(e) is not None}
         if len(present) >= 2:  # "suffers most" compares columns: one column has nothing to compare
             worst[label] = max(present, key=present.get)
@@ -160,19 +162,17 @@ def effect_rows(report: dict) -> tuple[list[str], list[list[str]], dict[str, str
     return header, rows, worst
 
 
-def stability_rows(table: dict[str, list[dict]]) -> tuple[list[str], list[list[str]]]:
+def stability_rows(table: dict[str, list[StabilityCase]]) -> tuple[list[str], list[list[str]]]:
     """(header, rows) of the hard-case table: one column per case, ``ok`` or ``FAILED: detail``."""
-    cases = sorted({row["case"] for rows in table.values() for row in rows})
+    cases = sorted({row.case for rows in table.values() for row in rows})
     rows = []
     for label, results in table.items():
-        by_case = {r["case"]: r for r in results}
+        by_case = {r.case: r for r in results}
         rows.append(
             [
                 label,
                 *(
-                    ("ok" if by_case[c]["status"] == "ok" else f"FAILED: {by_case[c].get('detail', '')}")
-                    if c in by_case
-                    else "—"
+                    ("ok" if by_case[c].status == "ok" else f"FAILED: {by_case[c].detail}") if c in by_case else "—"
                     for c in cases
                 ),
             ]
@@ -197,9 +197,9 @@ def _estimate(e, digits: int = 3) -> str:
     return text + (" (extrapolated)" if e.how == "extrapolated" else "")
 
 
-def time_axis_text(report: dict) -> str:
+def time_axis_text(report: ReportModel) -> str:
     """One sentence: the resolution the report's times are for, and whether they are projected."""
-    model = report["time_model"]
+    model = report.time_model
     width, height = model.time_at
     w0, h0 = model.dataset_size
     if not model.projected:
@@ -215,15 +215,15 @@ def time_axis_text(report: dict) -> str:
     )
 
 
-def machine_text(report: dict) -> str:
-    m = report["time_model"].machine or {}
+def machine_text(report: ReportModel) -> str:
+    m = report.time_model.machine or {}
     gpu = m.get("gpu") or "none"
     return f"Machine: {m.get('cores', '?')} cores ({m.get('cpu') or '?'}, {m.get('system') or '?'}), GPU {gpu}."
 
 
-def time_model_rows(report: dict) -> tuple[list[str], list[list[str]]]:
+def time_model_rows(report: ReportModel) -> tuple[list[str], list[list[str]]]:
     """(header, rows): rendering's and each denoiser's fixed and per-pixel cost, and the time at the axis' size."""
-    model = report["time_model"]
+    model = report.time_model
     width, height = model.time_at
     header = ["", "fixed s (per call/frame)", "s per megapixel", f"s per frame at {width}×{height}", "measured how"]
     rows = []

@@ -24,7 +24,7 @@ from denoisebench.reports.images import colour_bar_png, data_uri
 from denoisebench.reports.samplers import undersampled_lines
 
 if TYPE_CHECKING:
-    from denoisebench.reports.model import ReportModel
+    from denoisebench.reports.model import ComparisonEntry, ReportModel, SppMap
 
 STYLE = """
 body{font:14px/1.45 system-ui,-apple-system,Segoe UI,Roboto,sans-serif;margin:0;color:#1d1d1f;background:#fafafa}
@@ -229,19 +229,19 @@ def _results(report: ReportModel) -> str:
 
 
 def _effects(report: ReportModel) -> str:
-    notes = "".join(f"<li>{e(n)}</li>" for n in report.effects.get("notes", []))
+    notes = "".join(f"<li>{e(n)}</li>" for n in report.effects.notes)
     notes = f'<ul class="readings">{notes}</ul>' if notes else ""
-    if not report.effects["effects"]:
+    if not report.effects.effects:
         return notes or '<p class="note">The scenes declare no effects.</p>'
     header, rows, worst = fmt.effect_rows(report)
-    names = ["overall", *report.effects["effects"]]
+    names = ["overall", *report.effects.effects]
     labels = [r[0] for r in rows]
 
     def worst_cell(i, j):
         return "worst" if j >= 2 and worst.get(labels[i]) == names[j - 1] else ""
 
     note = (
-        f'<p class="note">Share of the noisy input\'s {e(report.effects["metric"])} left after denoising: geometric mean '
+        f'<p class="note">Share of the noisy input\'s {e(report.effects.metric)} left after denoising: geometric mean '
         "over the scenes that exercise each effect and over spp (lower is better). Highlighted: the effect that costs "
         "each denoiser most.</p>"
     )
@@ -258,23 +258,23 @@ def _strip_section(report: ReportModel) -> str:
         "have.</p>"
     ]
     for strip in report.strips:
-        w = strip["window"]
+        w = strip.window
         parts.append(
-            f'<h3>{e(strip["scene"])} \u2014 frames {strip["first_frame"]}\u2013{strip["first_frame"] + strip["frames"] - 1}, '
-            f'{strip["spp"]} spp, crop at ({w["left"]}, {w["top"]}), {w["side"]} px</h3>'
+            f"<h3>{e(strip.scene)} \u2014 frames {strip.first_frame}\u2013{strip.first_frame + strip.frames - 1}, "
+            f"{strip.spp} spp, crop at ({w.left}, {w.top}), {w.side} px</h3>"
         )
         rows = "".join(
-            f'<div class="tile {e(entry["kind"])}" style="display:flex;gap:8px;align-items:center;text-align:left">'
-            f'<img alt="animated crop of {e(entry["label"])}" src="{entry["animation"]}">'
-            f'<img alt="frames of {e(entry["label"])}" src="{entry["strip"]}"><div>{e(entry["label"])}</div></div>'
-            for entry in strip["entries"]
+            f'<div class="tile {e(entry.kind)}" style="display:flex;gap:8px;align-items:center;text-align:left">'
+            f'<img alt="animated crop of {e(entry.label)}" src="{entry.animation}">'
+            f'<img alt="frames of {e(entry.label)}" src="{entry.strip}"><div>{e(entry.label)}</div></div>'
+            for entry in strip.entries
         )
         parts.append(f'<div style="display:flex;flex-direction:column;gap:4px">{rows}</div>')
     return "".join(parts)
 
 
 def _flicker(report: ReportModel) -> str:
-    if not report.flicker["series"]:
+    if not report.flicker.series:
         return '<p class="note">Sequences of one frame: no flicker to measure.</p>' + _strip_section(report)
     parts = [
         _figure(report, "flicker", "flicker per frame, one panel per input spp"),
@@ -301,30 +301,23 @@ def _viewing(report: ReportModel) -> str:
     )
 
 
-def _tile(entry: dict, element_id: str) -> str:
-    crops = "".join(f'<img alt="crop of {e(entry["label"])}" src="{c}">' for c in entry["crops"])
-    caption = e(entry["label"]) + (
-        f"<br>relMSE {fmt.num(entry['relmse'])}" if entry["relmse"] is not None else "<br>&nbsp;"
-    )
+def _tile(entry: ComparisonEntry, element_id: str) -> str:
+    crops = "".join(f'<img alt="crop of {e(entry.label)}" src="{c}">' for c in entry.crops)
+    caption = e(entry.label) + (f"<br>relMSE {fmt.num(entry.relmse)}" if entry.relmse is not None else "<br>&nbsp;")
     return (
-        f'<div class="tile {e(entry["kind"])}"><img id="{element_id}" alt="{e(entry["label"])}" src="{entry["image"]}">'
+        f'<div class="tile {e(entry.kind)}"><img id="{element_id}" alt="{e(entry.label)}" src="{entry.image}">'
         f'<div class="crops">{crops}</div><div>{caption}</div></div>'
     )
 
 
-def _spp_tile(entry: dict) -> str:
-    """The spp map of a sampler's entry, beside its image: the map, its numbers and the colour bar."""
-    m = entry["spp_map"]
+def _spp_tile(entry: ComparisonEntry, m: SppMap) -> str:
+    """The spp map ``m`` of a sampler's entry, beside its image: the map, its numbers and the colour bar."""
     return (
-        f'<div class="tile sppmap"><img alt="spp map of {e(entry["label"])}" src="{m["image"]}">'
+        f'<div class="tile sppmap"><img alt="spp map of {e(entry.label)}" src="{m.image}">'
         f'<div class="bar"><span>0</span><img alt="colour bar" src="{data_uri(colour_bar_png())}">'
-        f"<span>{m['top']} spp</span></div>"
-        f"<div>{e(entry['label'])}: spp map<br>mean {m['mean']:.3g}, {m['min']}\u2013{m['max']} spp"
-        + (
-            f', <span class="error">{m["pixels_without_samples"]} px &lt; 1 spp</span>'
-            if m["pixels_without_samples"]
-            else ""
-        )
+        f"<span>{m.top} spp</span></div>"
+        f"<div>{e(entry.label)}: spp map<br>mean {m.mean:.3g}, {m.min}\u2013{m.max} spp"
+        + (f', <span class="error">{m.pixels_without_samples} px &lt; 1 spp</span>' if m.pixels_without_samples else "")
         + "</div></div>"
     )
 
@@ -349,29 +342,29 @@ def _comparisons(report: ReportModel) -> str:
         "the button to flip between the left image and the reference.</p>"
     ]
     for n, comp in enumerate(report.comparisons):
-        ids = [f"img-{n}-{i}" for i in range(len(comp["entries"]))]
+        ids = [f"img-{n}-{i}" for i in range(len(comp.entries))]
         tiles = "".join(
-            _tile(entry, ids[i]) + (_spp_tile(entry) if "spp_map" in entry else "")
-            for i, entry in enumerate(comp["entries"])
+            _tile(entry, ids[i]) + (_spp_tile(entry, entry.spp_map) if entry.spp_map is not None else "")
+            for i, entry in enumerate(comp.entries)
         )
-        choices = [(ids[i], entry) for i, entry in enumerate(comp["entries"]) if entry["kind"] != "reference"]
+        choices = [(ids[i], entry) for i, entry in enumerate(comp.entries) if entry.kind != "reference"]
         ref_id = ids[-1]
         # open on the denoiser closest to the reference in this frame
         scored = [
-            (entry["relmse"], k)
+            (entry.relmse, k)
             for k, (_, entry) in enumerate(choices)
-            if entry["kind"] == "denoiser" and entry["relmse"] is not None
+            if entry.kind == "denoiser" and entry.relmse is not None
         ]
         default = min(scored)[1] if scored else 0
         options = "".join(
-            f'<option value="{i}"{" selected" if k == default else ""}>{e(entry["label"])}</option>'
+            f'<option value="{i}"{" selected" if k == default else ""}>{e(entry.label)}</option>'
             for k, (i, entry) in enumerate(choices)
         )
-        w, h = comp["width"], comp["height"]
-        ref_src = comp["entries"][-1]["image"]
+        w, h = comp.width, comp.height
+        ref_src = comp.entries[-1].image
         parts.append(
-            f'<h3>{e(comp["scene"])} \u2014 frame {comp["frame"]}, {comp["spp"]} spp</h3>'
-            + (f'<p class="note">Decides a mean: {e(comp["why"])}.</p>' if comp.get("why") else "")
+            f"<h3>{e(comp.scene)} \u2014 frame {comp.frame}, {comp.spp} spp</h3>"
+            + (f'<p class="note">Decides a mean: {e(comp.why)}.</p>' if comp.why else "")
             + f'<div class="compare" data-reference="{ref_id}">'
             f'<div class="cmp-stage" style="width:{2 * w}px;height:{2 * h}px">'
             f'<img class="cmp-base" alt="reference" src="{ref_src}"><img class="cmp-top" alt="left image" src="{ref_src}">'
@@ -403,25 +396,25 @@ def _failures(report: ReportModel) -> str:
         parts.append(
             _table(
                 ["denoiser", "scene", "spp", "error"],
-                [[f["denoiser"], f["scene"], str(f["spp"]), f["error"] or ""] for f in report.failures],
+                [[f.denoiser, f.scene, str(f.spp), f.error or ""] for f in report.failures],
             )
         )
     for d in report.denoisers:
-        if d["load_error"]:
-            parts.append(f'<p class="error">{e(d["spec"])} was not run: {e(d["load_error"])}</p>')
+        if d.load_error:
+            parts.append(f'<p class="error">{e(d.spec)} was not run: {e(d.load_error)}</p>')
     return "".join(parts) or '<p class="note">Every denoiser ran on every sequence.</p>'
 
 
 def render_html(report: ReportModel) -> str:
     run = report.run
     meta = (
-        f"run {e(run['run_id'])} \u00b7 dataset {e(run['dataset_hash'][:12])} ({e(run['dataset_path'])}) \u00b7 split "
-        f"{e(run['config'].get('split'))} \u00b7 {len(report.scenes)} scene(s) \u00b7 input spp "
-        f"{e(', '.join(map(str, report.spp)))} \u00b7 reference {e(report.reference.get('description', str(report.reference['spp']) + ' spp'))} \u00b7 started "
-        f"{e(run['created_at'])}, finished {e(run['finished_at'] or 'not yet (partial results)')}"
-        f" \u00b7 {e(isolation_text(run['config'], run['versions']))}"
+        f"run {e(run.run_id)} \u00b7 dataset {e(run.dataset_hash[:12])} ({e(run.dataset_path)}) \u00b7 split "
+        f"{e(run.config.get('split'))} \u00b7 {len(report.scenes)} scene(s) \u00b7 input spp "
+        f"{e(', '.join(map(str, report.spp)))} \u00b7 reference {e(report.reference.description)} \u00b7 started "
+        f"{e(run.created_at)}, finished {e(run.finished_at or 'not yet (partial results)')}"
+        f" \u00b7 {e(isolation_text(run.config, run.versions))}"
     )
-    versions = ", ".join(f"{k} {v}" for k, v in sorted(run["versions"].items()))
+    versions = ", ".join(f"{k} {v}" for k, v in sorted(run.versions.items()))
     sections = [
         ("accuracy", "Accuracy against time", _accuracy(report)),
         ("equal", "Equal time and equal quality", _equal_tables(report)),
@@ -438,7 +431,7 @@ def render_html(report: ReportModel) -> str:
     return (
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
         "<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
-        f"<title>denoisebench report {e(run['run_id'])}</title><style>{STYLE}</style></head>"
+        f"<title>denoisebench report {e(run.run_id)}</title><style>{STYLE}</style></head>"
         f"<body><main><h1>denoisebench report</h1><p class=\"meta\">{meta}</p><nav>{nav}</nav>{body}"
         f"<p class=\"meta\">software: {e(versions)}</p></main><script>{SCRIPT}</script></body></html>\n"
     )

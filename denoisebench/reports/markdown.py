@@ -18,7 +18,7 @@ from denoisebench.reports import notes
 from denoisebench.reports.samplers import undersampled_lines
 
 if TYPE_CHECKING:
-    from denoisebench.reports.model import ReportModel
+    from denoisebench.reports.model import ReportModel, StabilityCase
 
 _SPECIAL = re.compile(r"([\\`*_\[\]|<>#])")
 
@@ -38,11 +38,11 @@ def render_markdown(report: ReportModel) -> str:
     lines = [
         "# denoisebench report",
         "",
-        f"Run `{run['run_id']}` on dataset `{run['dataset_hash'][:12]}` ({md(run['dataset_path'])}), split "
-        f"{md(run['config'].get('split'))}: {len(report.scenes)} scene(s), input spp {', '.join(map(str, report.spp))}, "
-        f"reference {report.reference.get('description', str(report.reference['spp']) + ' spp')}. Started {run['created_at']}, finished {run['finished_at'] or 'not yet (partial)'}.",
+        f"Run `{run.run_id}` on dataset `{run.dataset_hash[:12]}` ({md(run.dataset_path)}), split "
+        f"{md(run.config.get('split'))}: {len(report.scenes)} scene(s), input spp {', '.join(map(str, report.spp))}, "
+        f"reference {report.reference.description}. Started {run.created_at}, finished {run.finished_at or 'not yet (partial)'}.",
         "",
-        md(isolation_text(run["config"], run["versions"])),
+        md(isolation_text(run.config, run.versions)),
         "",
         "## Accuracy against time",
         "",
@@ -108,18 +108,18 @@ def render_markdown(report: ReportModel) -> str:
     lines += [
         "## Per-effect breakdown",
         "",
-        f"Share of the noisy input's {report.effects['metric']} left after denoising (geometric mean over the scenes "
+        f"Share of the noisy input's {report.effects.metric} left after denoising (geometric mean over the scenes "
         "with the effect and over spp; lower is better).",
         "",
     ]
-    if report.effects["effects"]:
+    if report.effects.effects:
         lines += _table(header, rows)
         lines += [f"- {md(label)} suffers most from **{md(effect)}**" for label, effect in worst.items()] + [""]
-    elif not report.effects.get("too_few"):
+    elif not report.effects.too_few:
         lines += ["The scenes declare no effects.", ""]
-    lines += [f"- {md(note)}" for note in report.effects.get("notes", [])] + [""]
+    lines += [f"- {md(note)}" for note in report.effects.notes] + [""]
     lines += ["## Temporal flicker", ""]
-    if report.flicker["series"]:
+    if report.flicker.series:
         lines += [
             "![flicker per frame](figures/flicker.png)",
             "",
@@ -146,10 +146,10 @@ def render_markdown(report: ReportModel) -> str:
         "",
     ]
     lines += [
-        f"- {md(comp['scene'])}, frame {comp['frame']}, {comp['spp']} spp: {md(comp['why'])}"
+        f"- {md(comp.scene)}, frame {comp.frame}, {comp.spp} spp: {md(comp.why)}"
         for comp in report.comparisons
-        if comp.get("why")
-    ] + ([""] if any(comp.get("why") for comp in report.comparisons) else [])
+        if comp.why
+    ] + ([""] if any(comp.why for comp in report.comparisons) else [])
     if report.samplers:
         lines += _samplers(report)
     lines += ["## Hard-case stability", ""]
@@ -157,12 +157,12 @@ def render_markdown(report: ReportModel) -> str:
     if report.failures:
         lines += ["## Failures", ""] + _table(
             ["denoiser", "scene", "spp", "error"],
-            [[f["denoiser"], f["scene"], str(f["spp"]), f["error"] or ""] for f in report.failures],
+            [[f.denoiser, f.scene, str(f.spp), f.error or ""] for f in report.failures],
         )
-    not_loaded = [d for d in report.denoisers if d["load_error"]]
+    not_loaded = [d for d in report.denoisers if d.load_error]
     if not_loaded:
-        lines += ["## Not run", ""] + [f"- {md(d['spec'])}: {md(d['load_error'])}" for d in not_loaded] + [""]
-    versions = ", ".join(f"{k} {v}" for k, v in sorted(run["versions"].items()))
+        lines += ["## Not run", ""] + [f"- {md(d.spec)}: {md(d.load_error)}" for d in not_loaded] + [""]
+    versions = ", ".join(f"{k} {v}" for k, v in sorted(run.versions.items()))
     lines += ["## Software", "", md(versions), ""]
     return "\n".join(lines)
 
@@ -205,24 +205,24 @@ def _samplers(report: ReportModel) -> list[str]:
         "",
     ]
     for n, comp in enumerate(report.comparisons):
-        mapped = [(k, entry) for k, entry in enumerate(comp["entries"]) if "spp_map" in entry]
+        mapped = [(k, entry) for k, entry in enumerate(comp.entries) if entry.spp_map is not None]
         if not mapped:
             continue
-        lines += [f"### {md(comp['scene'])}, frame {comp['frame']}, {comp['spp']} spp", ""]
+        lines += [f"### {md(comp.scene)}, frame {comp.frame}, {comp.spp} spp", ""]
         header = ["sampler", "image", "spp map", "mean spp", "min–max spp", "pixels < 1 spp", "scale"]
         lines += ["| " + " | ".join(md(h) for h in header) + " |", "|" + "---|" * len(header)]
         for k, entry in mapped:
-            m = entry["spp_map"]
+            m = entry.spp_map
             lines.append(
-                f"| {md(entry['label'])} | ![{md(entry['label'])}](figures/spp_maps/{n}_{k}_image.png) "
-                f"| ![spp map of {md(entry['label'])}](figures/spp_maps/{n}_{k}.png) | {m['mean']:.3g} | "
-                f"{m['min']}–{m['max']} | {m['pixels_without_samples']} | 0–{m['top']} spp |"
+                f"| {md(entry.label)} | ![{md(entry.label)}](figures/spp_maps/{n}_{k}_image.png) "
+                f"| ![spp map of {md(entry.label)}](figures/spp_maps/{n}_{k}.png) | {m.mean:.3g} | "
+                f"{m.min}–{m.max} | {m.pixels_without_samples} | 0–{m.top} spp |"
             )
         lines.append("")
     return lines
 
 
-def _stability(table) -> list[str]:
+def _stability(table: dict[str, list[StabilityCase]] | None) -> list[str]:
     if table is None:
         return ["The hard-case suite (denoisebench.denoisers.hard_cases) is not available in this installation.", ""]
     return _table(*fmt.stability_rows(table))

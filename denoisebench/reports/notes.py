@@ -1,7 +1,7 @@
 """Text both renderers share for the report's conditions: cvvdp's viewing, metrics that did not apply, samplers.
 
-Each function takes the report model (:func:`.report.build_report`) and returns sentences or
-(header, rows) for :mod:`.report_markdown` and :mod:`.report_html`, which escape them.
+Each function takes the report model (:func:`.build.build_report`) and returns sentences or
+(header, rows) for :mod:`.markdown` and :mod:`.html`, which escape them.
 """
 
 from __future__ import annotations
@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING
 
 from denoisebench.metrics import get_metric
 from denoisebench.reports import formatting as fmt
+from denoisebench.reports.samplers import frame_groups
 
 if TYPE_CHECKING:
     from denoisebench.reports.model import ReportModel
@@ -17,13 +18,13 @@ if TYPE_CHECKING:
 
 def viewing_text(report: ReportModel) -> str:
     """cvvdp's display in one sentence: model, size, peak, ambient light, pixels per degree, fps, exposure rule."""
-    d = report.cvvdp_viewing["display"]
-    width, height = d["resolution"]
+    d = report.cvvdp_viewing.display
+    width, height = d.resolution
     return (
-        f"cvvdp models the viewer of display {d['display']}: {width}×{height} px, peak {d['peak_cd_m2']:.0f} cd/m², "
-        f"black {d['black_cd_m2']:.3g} cd/m², {d['ambient_lux']:.0f} lux ambient, {d['ppd']:.1f} pixels per degree, "
-        f"{d['fps']:.0f} fps. Exposure (cd/m² per unit radiance), one per scene from its reference: the "
-        f"log-average luminance of the reference's lit pixels is shown at {d['target_key_cd_m2']:.0f} cd/m²; "
+        f"cvvdp models the viewer of display {d.display}: {width}×{height} px, peak {d.peak_cd_m2:.0f} cd/m², "
+        f"black {d.black_cd_m2:.3g} cd/m², {d.ambient_lux:.0f} lux ambient, {d.ppd:.1f} pixels per degree, "
+        f"{d.fps:.0f} fps. Exposure (cd/m² per unit radiance), one per scene from its reference: the "
+        f"log-average luminance of the reference's lit pixels is shown at {d.target_key_cd_m2:.0f} cd/m²; "
         "every denoiser of a scene gets the same exposure."
     )
 
@@ -32,16 +33,16 @@ def viewing_rows(report: ReportModel) -> tuple[list[str], list[list[str]]]:
     """Per scene: frame size, the visual angle it spans, exposure, lit and clipped share of the reference."""
     header = ["scene", "frame px", "field of view", "exposure (cd/m² per unit)", "lit pixels", "clipped at peak"]
     rows = []
-    for scene, v in report.cvvdp_viewing["scenes"].items():
-        w, h = v["frame_px"]
+    for scene, v in report.cvvdp_viewing.scenes.items():
+        w, h = v.frame_px
         rows.append(
             [
                 scene,
                 f"{w}×{h}",
-                f"{v['field_deg'][0]:.2f}°×{v['field_deg'][1]:.2f}°",
-                fmt.num(v["exposure"]),
-                f"{100 * v['lit_fraction']:.0f} %",
-                f"{100 * v['clipped_fraction']:.1f} %",
+                f"{v.field_deg[0]:.2f}°×{v.field_deg[1]:.2f}°",
+                fmt.num(v.exposure),
+                f"{100 * v.lit_fraction:.0f} %",
+                f"{100 * v.clipped_fraction:.1f} %",
             ]
         )
     return header, rows
@@ -50,27 +51,27 @@ def viewing_rows(report: ReportModel) -> tuple[list[str], list[list[str]]]:
 def not_applicable_lines(report: ReportModel) -> list[str]:
     """One sentence per metric that had no value somewhere: where (scenes, frames, sequences) and why."""
     lines = []
-    for item in report.not_applicable_detail or []:
+    for item in report.not_applicable_detail:
         where = []
-        if item["frames"]:
-            where.append(f"{item['frames']} frame(s)")
-        if item["sequences"]:
-            where.append(f"{item['sequences']} sequence(s)")
+        if item.frames:
+            where.append(f"{item.frames} frame(s)")
+        if item.sequences:
+            where.append(f"{item.sequences} sequence(s)")
         lines.append(
-            f"{item['metric']}: no value on {' and '.join(where)} of scene(s) {', '.join(item['scenes'])} "
-            f"(all labels counted): {'; '.join(item['reasons'])}"
+            f"{item.metric}: no value on {' and '.join(where)} of scene(s) {', '.join(item.scenes)} "
+            f"(all labels counted): {'; '.join(item.reasons)}"
         )
     return lines
 
 
 def unresolved_text(report: ReportModel) -> str | None:
     """The heading sentence of the scenes whose reference cannot resolve a score (None: there are none)."""
-    unresolved = report.unresolved_references or {}
-    if not unresolved.get("scenes"):
+    unresolved = report.unresolved_references
+    if not unresolved.scenes:
         return None
     where = (
         "They are included in the aggregates above (--include-unresolved)."
-        if unresolved.get("included")
+        if unresolved.included
         else "They are left out of the aggregates above and of the verdicts (run-benchmark --include-unresolved "
         "puts them back); their rows stay in results.json and results.csv."
     )
@@ -82,7 +83,7 @@ def unresolved_text(report: ReportModel) -> str | None:
 
 def unresolved_lines(report: ReportModel) -> list[str]:
     """One sentence per unresolved scene and reason, with the reference spp it would need."""
-    return [item["sentence"] for item in (report.unresolved_references or {}).get("scenes", [])]
+    return [item.sentence() for item in report.unresolved_references.scenes]
 
 
 def sampler_scale_text() -> str:
@@ -107,21 +108,18 @@ def sampler_rows(report: ReportModel) -> tuple[list[str], list[list[str]]]:
         "frames with pixels < 1 spp",
         "pixels < 1 spp",
     ]
-    groups: dict[tuple, list[dict]] = {}
-    for f in report.samplers["frames"]:
-        groups.setdefault((f["sampler"], f["scene"], f["spp"]), []).append(f)
     rows = []
-    for (sampler, scene, spp), group in groups.items():
+    for (sampler, scene, spp), group in frame_groups(report.samplers.frames).items():
         rows.append(
             [
                 sampler,
                 scene,
                 str(spp),
                 str(len(group)),
-                f"{sum(f['mean_spp'] for f in group) / len(group):.3g}",
-                str(max(f["max_spp"] for f in group)),
-                str(sum(f["pixels_without_samples"] > 0 for f in group)),
-                str(sum(f["pixels_without_samples"] for f in group)),
+                f"{sum(f.mean_spp for f in group) / len(group):.3g}",
+                str(max(f.max_spp for f in group)),
+                str(sum(f.pixels_without_samples > 0 for f in group)),
+                str(sum(f.pixels_without_samples for f in group)),
             ]
         )
     return header, rows
@@ -168,10 +166,10 @@ def _has_closed_floor(metric: str) -> bool:
 
 def deciding_frame_lines(report: ReportModel) -> list[str]:
     """One sentence per frame that would decide its scene's plain mean of the lead score (at most 12)."""
-    items = report.deciding_frames or []
+    items = report.deciding_frames
     lines = [
-        f"{d['label']} at {d['spp']} spp on {d['scene']}, frame {d['frame']}: {d['metric']} {d['value']:.3g} against "
-        f"the scene's median {d['median']:.3g}"
+        f"{d.label} at {d.spp} spp on {d.scene}, frame {d.frame}: {d.metric} {d.value:.3g} against "
+        f"the scene's median {d.median:.3g}"
         for d in items[:12]
     ]
     if len(items) > 12:

@@ -10,15 +10,14 @@ Read (what :class:`~.store.ResultsStore` returns, one class per table):
 
 * :class:`RunRow`, :class:`EntryRow` (a run's labels: the noisy input, its denoisers, its sampler
   pairs), :class:`UnitRow`, :class:`FrameRow`, :class:`SequenceRow`, :class:`NotApplicableRow`,
-  :class:`StripRow`.
+  :class:`StripRow`, and :class:`NotApplicableCount` (a metric's not-applicable rows counted).
 
 Notes
 -----
-* **Read by attribute or by key.** A row is a frozen dataclass (``row.status``); it also answers
-  ``row["status"]`` and ``row.get("floors")`` (:class:`ByKey`), so code written against rows as
-  dicts keeps working, and :meth:`ByKey.as_dict` gives the plain dict results.json writes (its keys
-  and their order are the table's reading order; the sampler dimension of :class:`EntryRow` is an
-  attribute only, so reports made before it existed keep their bytes).
+* **Read by attribute.** A row is a frozen dataclass (``row.status``), with no key access;
+  :meth:`Row.as_dict` gives the plain dict results.json writes (its keys and their order are the
+  table's reading order; the sampler dimension of :class:`EntryRow` is left out, so reports made
+  before it existed keep their bytes).
 * **The sampler dimension.** A label of a run is the noisy input (``sampler`` and
   ``denoiser_label`` None), a denoiser on the dataset's stored inputs (``sampler`` None), a sampler's
   live image alone (``denoiser_label`` None) or a sampler × denoiser pair (both set).
@@ -89,24 +88,13 @@ class UnitRecord:
 # read
 
 
-class ByKey:
-    """Key access to a row dataclass: ``row[key]``, ``row.get(key)``, ``key in row``, :meth:`as_dict`.
+class Row:
+    """Base of the rows read back: :meth:`as_dict`, the row as results.json writes it (module Notes).
 
-    ``_attributes_only``: fields left out of :meth:`as_dict` (still readable by key)."""
+    ``_attributes_only``: fields left out of :meth:`as_dict`."""
 
     __slots__ = ()
     _attributes_only: ClassVar[tuple[str, ...]] = ()
-
-    def __getitem__(self, key: str):
-        if key not in self.__dataclass_fields__:
-            raise KeyError(key)
-        return getattr(self, key)
-
-    def __contains__(self, key: str) -> bool:
-        return key in self.__dataclass_fields__
-
-    def get(self, key: str, default=None):
-        return getattr(self, key) if key in self.__dataclass_fields__ else default
 
     def as_dict(self) -> dict:
         """The row as a plain dict (shallow: a frame's ``metrics`` dict is the row's own)."""
@@ -114,7 +102,7 @@ class ByKey:
 
 
 @dataclass(frozen=True, slots=True)
-class RunRow(ByKey):
+class RunRow(Row):
     """One benchmark run: its identity, what it measured (``config``) and with which software."""
 
     run_id: str
@@ -127,7 +115,7 @@ class RunRow(ByKey):
 
 
 @dataclass(frozen=True, slots=True)
-class EntryRow(ByKey):
+class EntryRow(Row):
     """One label of a run (a row of ``run_denoisers``): the noisy input, a denoiser or a sampler pair.
 
     ``sampler``: the live sampler whose image the label scores (None: the dataset's stored input);
@@ -148,7 +136,7 @@ class EntryRow(ByKey):
 
 
 @dataclass(frozen=True, slots=True)
-class UnitRow(ByKey):
+class UnitRow(Row):
     """One unit: a label on one scene's sequence at one spp (seconds summed over its frames)."""
 
     denoiser: str
@@ -163,7 +151,7 @@ class UnitRow(ByKey):
 
 
 @dataclass(frozen=True, slots=True)
-class FrameRow(ByKey):
+class FrameRow(Row):
     """One frame of a unit with its metric values, and the floors/ref_se of the metrics that have them."""
 
     denoiser: str
@@ -182,7 +170,7 @@ class FrameRow(ByKey):
 
 
 @dataclass(frozen=True, slots=True)
-class SequenceRow(ByKey):
+class SequenceRow(Row):
     """One temporal metric of one unit (``floor``/``ref_se`` None without)."""
 
     denoiser: str
@@ -195,7 +183,7 @@ class SequenceRow(ByKey):
 
 
 @dataclass(frozen=True, slots=True)
-class NotApplicableRow(ByKey):
+class NotApplicableRow(Row):
     """A metric that did not apply to a frame (``frame`` ≥ 0) or to a unit's sequence (``frame`` = -1)."""
 
     denoiser: str
@@ -207,7 +195,7 @@ class NotApplicableRow(ByKey):
 
 
 @dataclass(frozen=True, slots=True)
-class StripRow(ByKey):
+class StripRow(Row):
     """A unit's strip: the crop window and its F×side×side×3 float32 crops of consecutive frames."""
 
     first_frame: int
@@ -215,3 +203,11 @@ class StripRow(ByKey):
     left: int
     side: int
     crops: np.ndarray
+
+
+@dataclass(frozen=True, slots=True)
+class NotApplicableCount(Row):
+    """One metric's not-applicable rows of a run: how many frames or sequences (``count``), and one reason."""
+
+    count: int
+    reason: str

@@ -70,6 +70,23 @@ class SamplerFrame:
     spp: np.ndarray | None = field(default=None, repr=False)
 
 
+@dataclass(frozen=True, slots=True)
+class SamplerMapRow:
+    """One live-rendered frame as the store reads it back: the unit's label (``denoiser``), scene,
+    spp and frame, the frame's counts (:class:`SamplerFrame`) and ``spp_map`` (H×W int32, or None: kept
+    for the unit's image frame only)."""
+
+    denoiser: str
+    scene: str
+    spp: int
+    frame: int
+    samples: int
+    mean_spp: float
+    max_spp: int
+    pixels_without_samples: int
+    spp_map: np.ndarray | None = field(default=None, repr=False)
+
+
 def frame_records(maps: list[tuple[int, np.ndarray]]) -> list[SamplerFrame]:
     """SamplerFrame of every (frame index, spp map); the last frame (the unit's image) keeps its map."""
     out = []
@@ -113,9 +130,9 @@ def has_table(conn) -> bool:
     )
 
 
-def read(store, run_id: str) -> list[dict]:
-    """Every sampler frame of ``run_id``: denoiser (the pair's label), scene, spp, frame, counts and ``spp``
-    (H×W int32 or None), ordered by label, scene, spp, frame; [] when the store has no such table."""
+def read(store, run_id: str) -> list[SamplerMapRow]:
+    """Every sampler frame of ``run_id`` (:class:`SamplerMapRow`), ordered by label, scene, spp, frame;
+    [] when the store has no such table."""
     if not has_table(store.conn):
         return []
     rows = store.conn.execute(
@@ -129,16 +146,6 @@ def read(store, run_id: str) -> list[dict]:
         if blob is not None:
             counts = np.frombuffer(zlib.decompress(blob), dtype="<i4").reshape(height, width).astype(np.int32)
         out.append(
-            {
-                "denoiser": label,
-                "scene": scene,
-                "spp": int(spp),
-                "frame": int(frame),
-                "samples": int(samples),
-                "mean_spp": float(mean),
-                "max_spp": int(top),
-                "pixels_without_samples": int(empty),
-                "spp_map": counts,
-            }
+            SamplerMapRow(label, scene, int(spp), int(frame), int(samples), float(mean), int(top), int(empty), counts)
         )
     return out

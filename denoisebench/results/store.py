@@ -14,7 +14,7 @@ Notes
   and writes nothing (:meth:`ResultsStore.write_unit` returns False).
 * **Schema versions.** A database opened for writing is created or migrated to the current version
   (:func:`.schema.create_or_migrate`); opened read-only it is read as it is (:mod:`.schema`).
-* **Rows.** Readers return typed rows (:mod:`.records`), readable by attribute or by key.
+* **Rows.** Readers return typed rows (:mod:`.records`), read by attribute.
 * The WAL journal mode is a property of the database file; network file systems do not support it
   (SQLite's documentation): keep the database on a local disk.
 """
@@ -38,6 +38,7 @@ from denoisebench.results.finite import finite_or_none
 from denoisebench.results.records import (
     EntryRow,
     FrameRow,
+    NotApplicableCount,
     NotApplicableRow,
     RunRow,
     SequenceRow,
@@ -386,7 +387,7 @@ class ResultsStore:
         )
         return [NotApplicableRow(*r) for r in rows]
 
-    def not_applicable_summary(self, run_id: str) -> dict[str, dict]:
+    def not_applicable_summary(self, run_id: str) -> dict[str, NotApplicableCount]:
         """Per metric: how many frames (or sequences, frame -1) it did not apply to, and one reason."""
         if self.version < 4:
             return {}
@@ -394,7 +395,7 @@ class ResultsStore:
             "SELECT metric, COUNT(*), MIN(reason) FROM not_applicable WHERE run_id = ? GROUP BY metric ORDER BY metric",
             (run_id,),
         )
-        return {metric: {"count": int(count), "reason": reason} for metric, count, reason in rows}
+        return {metric: NotApplicableCount(int(count), reason) for metric, count, reason in rows}
 
     def sequence_metrics(self, run_id: str) -> list[SequenceRow]:
         """Temporal metric rows: denoiser, scene, spp, metric, value, floor, ref_se (None without)."""

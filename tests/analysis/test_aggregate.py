@@ -130,9 +130,9 @@ def test_floors_and_corrected_values_travel_through_the_store(measured):
         )
     assert row.metrics["hfen"].floor is None  # not an MSE-family score
     frames = store.frames("run1")
-    assert all("relmse" in f["floors"] and "relmse" in f["ref_se"] for f in frames if f["status"] == "ok")
-    seq = [s for s in store.sequence_metrics("run1") if s["metric"] == "temporal_relmse"]
-    assert seq and all(s["floor"] > 0 and s["ref_se"] > 0 for s in seq)
+    assert all("relmse" in f.floors and "relmse" in f.ref_se for f in frames if f.status == "ok")
+    seq = [s for s in store.sequence_metrics("run1") if s.metric == "temporal_relmse"]
+    assert seq and all(s.floor > 0 and s.ref_se > 0 for s in seq)
 
 
 def test_a_bright_scene_no_longer_decides_a_linear_score():
@@ -202,15 +202,15 @@ def test_a_version_1_database_stays_readable_and_is_migrated_when_written(tmp_pa
     with ResultsStore(path, readonly=True) as old:
         assert old.version == 1
         ((frame, *_),) = [old.frames("run1")[:1]]
-        assert frame["metrics"]["relmse"] == 0.5 and frame["floors"] == {}
+        assert frame.metrics["relmse"] == 0.5 and frame.floors == {}
         assert old.strip("run1", NOISY, "s1", 1) is None and old.integrity_problems() == []
-        assert all(d["trained_on"] == [] for d in old.denoisers("run1"))
+        assert all(d.trained_on == [] for d in old.denoisers("run1"))
     with ResultsStore(path) as migrated:
         assert migrated.version == SCHEMA_VERSION == 5  # 4: the not_applicable table; 5: the sampler dimension
-        assert [d["trained_on"] for d in migrated.denoisers("run1")] == [[]] * len(migrated.denoisers("run1"))
-        assert migrated.frames("run1")[0]["floors"] == {}  # old rows: no floor
+        assert [d.trained_on for d in migrated.denoisers("run1")] == [[]] * len(migrated.denoisers("run1"))
+        assert migrated.frames("run1")[0].floors == {}  # old rows: no floor
         assert migrated.write_unit("run1", _unit("x", "s1", 0.1, 0.002))
-        assert [f["floors"] for f in migrated.frames("run1") if f["denoiser"] == "x"][0] == {"relmse": 0.001}
+        assert [f.floors for f in migrated.frames("run1") if f.denoiser == "x"][0] == {"relmse": 0.001}
         assert migrated.integrity_problems() == []
     with sqlite3.connect(path) as conn:
         conn.execute("UPDATE schema_version SET version = 6")
@@ -223,15 +223,15 @@ def test_strips_cut_the_same_crop_for_every_unit_and_show_consecutive_frames(mea
     a = store.strip("run1", NOISY, "plain", 1)
     b = store.strip("run1", "blur", "plain", 1)
     assert a is not None and b is not None
-    assert (a["top"], a["left"], a["side"]) == (b["top"], b["left"], b["side"])
-    assert a["crops"].shape == (crops.STRIP_FRAMES, a["side"], a["side"], 3)
+    assert (a.top, a.left, a.side) == (b.top, b.left, b.side)
+    assert a.crops.shape == (crops.STRIP_FRAMES, a.side, a.side, 3)
     import io
 
     from PIL import Image
 
-    png = Image.open(io.BytesIO(strips.strip_png(a["crops"], scale=2)))
-    assert png.size == (crops.STRIP_FRAMES * (2 * a["side"] + 2) - 2, 2 * a["side"])
-    animated = Image.open(io.BytesIO(strips.strip_apng(a["crops"], scale=2)))
+    png = Image.open(io.BytesIO(strips.strip_png(a.crops, scale=2)))
+    assert png.size == (crops.STRIP_FRAMES * (2 * a.side + 2) - 2, 2 * a.side)
+    animated = Image.open(io.BytesIO(strips.strip_apng(a.crops, scale=2)))
     assert getattr(animated, "n_frames", 1) == crops.STRIP_FRAMES
 
 
@@ -435,12 +435,12 @@ def test_the_report_leaves_unresolved_scenes_out_of_the_summary_unless_asked(tmp
         monkeypatch.setattr(agg, "reference_states", lambda records: states)
         report = build_report(store, plan.run_id, data)
         kept = build_report(store, plan.run_id, data, include_unresolved=True)
-    listed = report["unresolved_references"]["scenes"]
-    assert scenes[0] in {u["scene"] for u in listed} and not report["unresolved_references"]["included"]
-    excluded = {u["scene"] for u in listed}
-    for row in report["summary"]:
+    listed = report.unresolved_references.scenes
+    assert scenes[0] in {u.scene for u in listed} and not report.unresolved_references.included
+    excluded = {u.scene for u in listed}
+    for row in report.summary:
         assert row.metrics["relmse_robust"].scenes == len(scenes) - len(excluded)
-    for row in kept["summary"]:
+    for row in kept.summary:
         assert row.metrics["relmse_robust"].scenes == len(scenes)
     assert json.dumps(results_json(report)["unresolved_references"], allow_nan=False)
     # shown apart in report.md and index.html, with the reason and the spp it would need

@@ -5,6 +5,8 @@ measured in bench/, never in unit tests)."""
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -66,17 +68,19 @@ class _Data:
     def __init__(self, frames, labels, spp):
         self.frames, self.labels, self.spp = frames, labels, spp
 
+    def frames_of(self, label):
+        return [f for f in self.frames if f.denoiser == label]
+
     def ok_frames(self, label, spp):
-        return [f for f in self.frames if f["denoiser"] == label and f["spp"] == spp]
+        return [f for f in self.frames_of(label) if f.spp == spp]
 
 
 def _frames():
     out = []
     for spp in (1, 2, 4):
         render = 0.3 + 0.002 * spp
-        out += [{"denoiser": NOISY, "spp": spp, "render_seconds": render, "denoise_seconds": 0.0}] * 2
-        out += [{"denoiser": "d", "spp": spp, "render_seconds": render, "denoise_seconds": _law(P0)}] * 2
-        out += [{"denoiser": "e", "spp": spp, "render_seconds": render, "denoise_seconds": 0.01}] * 2
+        for label, denoise in ((NOISY, 0.0), ("d", _law(P0)), ("e", 0.01)):
+            out += [SimpleNamespace(denoiser=label, spp=spp, render_seconds=render, denoise_seconds=denoise)] * 2
     return out
 
 
@@ -102,7 +106,9 @@ def test_build_time_model_projects_only_when_every_denoiser_was_timed_at_a_secon
     assert model.denoise_seconds("e", 2) == pytest.approx(0.01)
     from denoisebench.reports.formatting import time_axis_text
 
-    assert time_axis_text({"time_model": model}) == "Times are per frame at the dataset's 80×80, as measured."
+    assert (
+        time_axis_text(SimpleNamespace(time_model=model)) == "Times are per frame at the dataset's 80×80, as measured."
+    )
 
 
 def test_upscaled_frame_tiles_every_buffer_and_the_samples():

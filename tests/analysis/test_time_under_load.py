@@ -18,8 +18,7 @@ import time
 
 import pytest
 
-from denoisebench.analysis import equal_tables, time_model
-from denoisebench.analysis import summary as analysis
+from denoisebench.analysis import accuracy, equal_tables, time_model
 from denoisebench.benchmark import timing
 from denoisebench.benchmark.run import run_benchmark
 from denoisebench.benchmark.runner import BenchmarkConfig
@@ -126,14 +125,14 @@ def test_a_verdict_whose_bounds_straddle_one_is_withheld():
     model = time_model.TimeModel((10, 10), 100, (10, 10), render)
     model.denoisers["d"] = time_model.DenoiserCost("d", 100, {1: 3.0}, spread=1.3)
     points = [
-        analysis.Point("noisy", 1, 1.0, 0.4),
-        analysis.Point("noisy", 4, 4.0, 0.1),
-        analysis.Point("d", 1, 4.0, 0.1),
+        accuracy.Point("noisy", 1, 1.0, 0.4),
+        accuracy.Point("noisy", 4, 4.0, 0.1),
+        accuracy.Point("d", 1, 4.0, 0.1),
     ]
-    fit = analysis.NoisyFit(0.0, -1.0, 1.0, [1, 4], False)
-    at = analysis.AccuracyTime("relmse", points, fit, None, None, [], model=model)
+    fit = accuracy.NoisyFit(0.0, -1.0, 1.0, [1, 4], False)
+    at = accuracy.AccuracyTime("relmse", points, fit, None, None, [], model=model)
     at.noisy_curve = {1: 0.4, 4: 0.1}
-    sentence = next(s for s in analysis.readings(at) if s.startswith("d at 1 spp"))
+    sentence = next(s for s in accuracy.readings(at) if s.startswith("d at 1 spp"))
     assert "no time verdict" in sentence and "cheaper" not in sentence
     tables = equal_tables.Tables("relmse", (10, 10), False, [], [], ["d"])
     row = equal_tables.EqualQualityRow(0.1, 4.0, 4.0, "measured")

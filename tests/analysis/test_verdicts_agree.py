@@ -9,7 +9,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from denoisebench.analysis import equal_tables, time_model
+from denoisebench.analysis import accuracy, equal_tables, time_model
 from denoisebench.analysis import summary as analysis
 from denoisebench.results.names import NOISY
 
@@ -31,7 +31,7 @@ def _case(denoise_seconds: float, errors: dict[int, float]):
     model.denoisers["d"] = time_model.DenoiserCost("d", 100, {s: denoise_seconds for s in errors})
     frames = [SimpleNamespace(spp=s, render_seconds=model.render_seconds(s)) for s in RUNGS]
     data = SimpleNamespace(frames_of=lambda label: frames if label == NOISY else [])
-    at = analysis.accuracy_time(data, rows, "relmse", {}, model)
+    at = accuracy.accuracy_time(data, rows, "relmse", model=model)
     return at, equal_tables.build_tables(rows, model, RUNGS, "relmse"), model
 
 
@@ -39,7 +39,7 @@ def _case(denoise_seconds: float, errors: dict[int, float]):
 def test_no_bullet_contradicts_the_equal_time_table(denoise_seconds):
     at, tables, model = _case(denoise_seconds, {1: 0.8 / 3.0, 2: 0.8 / 5.2})
     claims = 0
-    for text in analysis.readings(at):
+    for text in accuracy.readings(at):
         found = re.match(r"d at (\d+) spp matches (?:≈ )?([\d.,]+)-spp.*? at (.+?) of its time \(", text)
         if not found:
             continue
@@ -57,14 +57,14 @@ def test_no_bullet_contradicts_the_equal_time_table(denoise_seconds):
     assert claims or denoise_seconds > 1.0  # a cheap denoiser that matches 3-5 spp saves time: a claim to check
     for verdict in equal_tables.verdicts(tables):
         if verdict.startswith("Equal time") and "rendering alone has the lowest error" in verdict:
-            assert not any("of its time (" in t and t.startswith("d at") for t in analysis.readings(at)), verdict
+            assert not any("of its time (" in t and t.startswith("d at") for t in accuracy.readings(at)), verdict
 
 
 def test_a_fractional_rendering_spp_is_stated_as_interpolated():
     at, _, _ = _case(0.05, {1: 0.8 / 3.0})
-    (sentence,) = [t for t in analysis.readings(at) if t.startswith("d at 1 spp")]
+    (sentence,) = [t for t in accuracy.readings(at) if t.startswith("d at 1 spp")]
     assert "≈ 3-spp (interpolated)" in sentence or "3-spp rendering" in sentence
     at, _, _ = _case(0.05, {1: 0.8 / 2.4})
-    (sentence,) = [t for t in analysis.readings(at) if t.startswith("d at 1 spp")]
+    (sentence,) = [t for t in accuracy.readings(at) if t.startswith("d at 1 spp")]
     assert "≈ 2.4-spp (interpolated)" in sentence, sentence
-    assert analysis.spp_text(16.0) == "16-spp" and analysis.spp_text(2.43) == "≈ 2.4-spp (interpolated)"
+    assert accuracy.spp_text(16.0) == "16-spp" and accuracy.spp_text(2.43) == "≈ 2.4-spp (interpolated)"

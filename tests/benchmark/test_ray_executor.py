@@ -41,11 +41,11 @@ PLUGIN = textwrap.dedent(
 
 
 def _scores(store: ResultsStore, run_id: str) -> tuple[dict, dict]:
-    units = {(u["denoiser"], u["scene"], u["spp"]): u["status"] for u in store.units(run_id)}
+    units = {(u.denoiser, u.scene, u.spp): u.status for u in store.units(run_id)}
     values = {
-        (f["denoiser"], f["scene"], f["spp"], f["frame"], name): value
+        (f.denoiser, f.scene, f.spp, f.frame, name): value
         for f in store.frames(run_id)
-        for name, value in f["metrics"].items()
+        for name, value in f.metrics.items()
     }
     return units, values
 

@@ -376,7 +376,7 @@ def test_adaptive_reference_stops_at_target_or_names_capped_frames(tmp_path, cap
     from denoisebench.reports.build import _reference_info
 
     loose = open_dataset(tmp_path / "loose")
-    described = _reference_info(loose, loose.scenes)["description"]  # the report's reference line
+    described = _reference_info(loose, loose.scenes).description  # the report's reference line
     assert (
         described.startswith(f"adaptive {MIN_ROUNDS * round_spp} spp (cap 64), noise floor")
         and "full transport" in described

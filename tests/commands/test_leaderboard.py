@@ -26,10 +26,10 @@ def db(tmp_path_factory):
         )
         expected = {}
         for run in store.runs():
-            for f in store.frames(run["run_id"]):
-                if f["spp"] == 1:  # the report's corrected score: relmse less its reference-noise floor
-                    corrected = f["metrics"]["relmse"] - f["floors"]["relmse"]
-                    expected.setdefault((run["run_id"], f["denoiser"]), []).append(corrected)
+            for f in store.frames(run.run_id):
+                if f.spp == 1:  # the report's corrected score: relmse less its reference-noise floor
+                    corrected = f.metrics["relmse"] - f.floors["relmse"]
+                    expected.setdefault((run.run_id, f.denoiser), []).append(corrected)
     return path, {key: float(np.mean(v)) for key, v in expected.items()}
 
 

@@ -99,7 +99,7 @@ def test_scaled_reference_is_refused_before_the_first_unit_and_no_verify_is_reco
     assert _bench(dataset, db, "--no-verify") == 0
     with ResultsStore(db, readonly=True) as store:
         (run,) = store.runs()
-        assert run["config"]["verify"] is False
+        assert run.config["verify"] is False
 
 
 def test_corrupt_exr_is_found_up_front(dataset, tmp_path, capsys):

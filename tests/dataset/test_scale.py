@@ -199,20 +199,20 @@ def test_a_metric_that_cannot_apply_is_recorded_as_such_and_the_frame_keeps_its_
     config = BenchmarkConfig(denoisers=["identity"], spp=[1], split="all", metrics=["relmse", "ssim", "psnr"])
     with ResultsStore(tmp_path / "b.sqlite") as store:
         plan = run_benchmark(open_dataset(out), config, store, progress=False)
-        assert {u["status"] for u in store.units(plan.run_id)} == {"ok"}  # before: every unit failed
+        assert {u.status for u in store.units(plan.run_id)} == {"ok"}  # before: every unit failed
         frames = store.frames(plan.run_id)
         assert len(frames) == 2 * 2  # noisy and identity, two frames each
         for row in frames:
-            assert {"relmse", "psnr", "flip"} <= set(row["metrics"]) and "ssim" not in row["metrics"]
+            assert {"relmse", "psnr", "flip"} <= set(row.metrics) and "ssim" not in row.metrics
         rows = store.not_applicable(plan.run_id)
-        assert {(r["denoiser"], r["frame"], r["metric"]) for r in rows} == {
+        assert {(r.denoiser, r.frame, r.metric) for r in rows} == {
             (label, t, "ssim") for label in ("noisy", "identity") for t in (0, 1)
         }
-        assert all("at least 11×11" in r["reason"] and "8×8" in r["reason"] for r in rows)
-        assert store.not_applicable_summary(plan.run_id)["ssim"]["count"] == 4
+        assert all("at least 11×11" in r.reason and "8×8" in r.reason for r in rows)
+        assert store.not_applicable_summary(plan.run_id)["ssim"].count == 4
     # at 16×16 SSIM applies: nothing is recorded as not applicable, SSIM has values
     big = make_synthetic_dataset(tmp_path / "big", scenes=1, frames=2, height=16, width=16, spp=(1,), ref_spp=4)
     with ResultsStore(tmp_path / "c.sqlite") as store:
         plan = run_benchmark(open_dataset(big), config, store, progress=False)
         assert store.not_applicable(plan.run_id) == []
-        assert all(0.0 < row["metrics"]["ssim"] <= 1.0 for row in store.frames(plan.run_id))
+        assert all(0.0 < row.metrics["ssim"] <= 1.0 for row in store.frames(plan.run_id))

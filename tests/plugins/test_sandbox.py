@@ -33,6 +33,7 @@ from denoisebench.denoisers.runner import run_sequence
 from denoisebench.denoisers.synthetic import synthetic_sequence
 from denoisebench.plugins import Limits, proxy, sandbox
 from denoisebench.reports.build import write_report
+from denoisebench.results.records import FrameRow
 from denoisebench.results.store import ResultsStore
 from tests.support.hostile_parts import SOURCE
 
@@ -236,12 +237,12 @@ def _benchmark_argv(setting, db: Path, out: Path, plugins: tuple[str, ...], extr
     return argv
 
 
-def _frames(db: Path) -> dict[str, list[dict]]:
+def _frames(db: Path) -> dict[str, list[FrameRow]]:
     with ResultsStore(db, readonly=True) as store:
         (run,) = store.runs()
-        out: dict[str, list[dict]] = {}
-        for frame in store.frames(run["run_id"]):
-            out.setdefault(frame["denoiser"], []).append(frame)
+        out: dict[str, list[FrameRow]] = {}
+        for frame in store.frames(run.run_id):
+            out.setdefault(frame.denoiser, []).append(frame)
         return out
 
 
@@ -254,13 +255,13 @@ def test_hostile_plugins_are_contained_and_the_rest_of_the_run_is_bit_identical(
     done = subprocess.run(command, cwd=setting["dataset"], env=env, capture_output=True, text=True, timeout=240)
     assert done.returncode == 0, done.stderr[-3000:]
     frames = _frames(db)
-    reasons = {name: {f["error"] or "" for f in rows} for name, rows in frames.items()}
+    reasons = {name: {f.error or "" for f in rows} for name, rows in frames.items()}
     # each attacker: failed with its reason, or contained (lingerer: its grandchild died with the worker)
     assert all(r.startswith("raised RuntimeError: contained: no reference") for r in reasons["snoop"]), reasons
     assert all("contained: reference: " in r for r in reasons["vandal"]), reasons["vandal"]
     assert all("new file: " in r and "store: " in r for r in reasons["vandal"])
     assert all("contained: connect refused" in r for r in reasons["caller"]), reasons["caller"]
-    assert {f["status"] for f in frames["lingerer"]} == {"ok"}
+    assert {f.status for f in frames["lingerer"]} == {"ok"}
     assert all("process limit" in r or "BlockingIOError" in r for r in reasons["fork_bomb"]), reasons["fork_bomb"]
     assert all("No space left" in r or "File too large" in r for r in reasons["filler"]), reasons["filler"]
     assert not setting["accepted"], "a sandboxed plugin reached the host's 127.0.0.1"
@@ -275,8 +276,8 @@ def test_hostile_plugins_are_contained_and_the_rest_of_the_run_is_bit_identical(
     # report's hard-case section would run every attacker once more, which tells nothing new)
     with ResultsStore(db, readonly=True) as store:
         (run,) = store.runs()
-        assert run["versions"]["bubblewrap"] == sandbox.version().split()[-1]
-        write_report(store, run["run_id"], dataset, out)
+        assert run.versions["bubblewrap"] == sandbox.version().split()[-1]
+        write_report(store, run.run_id, dataset, out)
     assert "plugins (every non-built-in) ran sandboxed (bubblewrap" in (out / "report.md").read_text()
     assert "ran sandboxed (bubblewrap" in (out / "index.html").read_text()
     # every other denoiser: bit for bit what a run without the attackers scores
@@ -285,8 +286,8 @@ def test_hostile_plugins_are_contained_and_the_rest_of_the_run_is_bit_identical(
     assert cli.main(["benchmark", *argv]) == 0
     clean = _frames(clean_db)
     for name in ("noisy", "identity", "honest"):
-        assert [f["metrics"] for f in frames[name]] == [f["metrics"] for f in clean[name]], name
-        assert {f["status"] for f in frames[name]} == {"ok"}
+        assert [f.metrics for f in frames[name]] == [f.metrics for f in clean[name]], name
+        assert {f.status for f in frames[name]} == {"ok"}
 
 
 def test_in_a_plain_worker_the_attacks_succeed(setting, tmp_path, monkeypatch):
@@ -427,10 +428,10 @@ def test_untrusted_plugin_is_refused_where_no_sandbox_starts(setting, tmp_path, 
         assert cli.main(["benchmark", *argv, "--isolation", "process"]) == 0
         with ResultsStore(tmp_path / "r.sqlite", readonly=True) as store:
             (run,) = store.runs()
-            assert run["config"]["isolation"] == "process"
+            assert run.config["isolation"] == "process"
         with ResultsStore(tmp_path / "r.sqlite", readonly=True) as store:
             (run,) = store.runs()
-            write_report(store, run["run_id"], open_dataset(setting["dataset"]), tmp_path / "out")
+            write_report(store, run.run_id, open_dataset(setting["dataset"]), tmp_path / "out")
         assert "not sandboxed (--isolation process)" in (tmp_path / "out" / "report.md").read_text()
     finally:
         sandbox.unavailable_reason.cache_clear()

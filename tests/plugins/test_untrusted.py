@@ -240,8 +240,8 @@ def _frames_by_denoiser(db: Path) -> dict:
     with ResultsStore(db, readonly=True) as store:
         (run,) = store.runs()
         out: dict = {}
-        for f in store.frames(run["run_id"]):
-            out.setdefault(f["denoiser"], []).append(f)
+        for f in store.frames(run.run_id):
+            out.setdefault(f.denoiser, []).append(f)
         return out
 
 
@@ -275,15 +275,15 @@ def test_benchmark_survives_every_misbehaving_plugin_and_a_rerun_completes(datas
     assert cli.main(argv) == 0
     assert time.monotonic() - started < 120
     frames = _frames_by_denoiser(db)
-    reasons = {name: frames[name][0]["error"] or "" for name in frames}
+    reasons = {name: frames[name][0].error or "" for name in frames}
     assert "SystemExit: 3" in reasons["exits"] and "status 3" in reasons["hard_exit"]
     assert "SIGSEGV" in reasons["segfault"] and "time limit" in reasons["sleeps"] and "memory limit" in reasons["hog"]
     for name in ("identity", "mutator", "peek", "=HYPERLINK(\"http://x\")"):
-        assert all(f["status"] == "ok" for f in frames[name]), (name, reasons[name])
+        assert all(f.status == "ok" for f in frames[name]), (name, reasons[name])
     # the honest plugin after the mutator scores exactly what the noisy input scores
-    noisy = [f["metrics"]["relmse"] for f in frames["noisy"]]
-    assert [f["metrics"]["relmse"] for f in frames["=HYPERLINK(\"http://x\")"]] == pytest.approx(noisy, rel=1e-6)
-    assert [f["metrics"]["relmse"] for f in frames["peek"]] == pytest.approx(noisy, rel=1e-6)
+    noisy = [f.metrics["relmse"] for f in frames["noisy"]]
+    assert [f.metrics["relmse"] for f in frames["=HYPERLINK(\"http://x\")"]] == pytest.approx(noisy, rel=1e-6)
+    assert [f.metrics["relmse"] for f in frames["peek"]] == pytest.approx(noisy, rel=1e-6)
     # finding 7: the plugin's name reaches results.csv neutralised
     rows = list(csv.reader(io.StringIO((out / "results.csv").read_text())))
     names = {row[1] for row in rows[1:]}

@@ -51,16 +51,16 @@ def run(tmp_path_factory):
 
 def test_every_spp_has_a_comparison_and_each_deciding_frame_one_of_its_own(run):
     root, report = run
-    last = [c for c in report.comparisons if not c["why"]]
-    assert sorted(c["spp"] for c in last) == [1, 4] and {c["frame"] for c in last} == {7}
-    deciding = [c for c in report.comparisons if c["why"]]
-    assert sorted(c["spp"] for c in deciding) == [1, 4], [c["why"] for c in deciding]
+    last = [c for c in report.comparisons if not c.why]
+    assert sorted(c.spp for c in last) == [1, 4] and {c.frame for c in last} == {7}
+    deciding = [c for c in report.comparisons if c.why]
+    assert sorted(c.spp for c in deciding) == [1, 4], [c.why for c in deciding]
     for comp in deciding:
-        assert comp["frame"] == BLOWN and "Blows" in comp["why"] and "relmse_robust" in comp["why"]
-        kinds = [e["kind"] for e in comp["entries"]]
+        assert comp.frame == BLOWN and "Blows" in comp.why and "relmse_robust" in comp.why
+        kinds = [e.kind for e in comp.entries]
         assert kinds[0] == "input" and kinds[-1] == "reference" and "denoiser" in kinds
-        blown = [e for e in comp["entries"] if "Blows" in e["label"]]
-        assert blown and blown[0]["relmse"] > 100  # the frame shown is the blown one
+        blown = [e for e in comp.entries if "Blows" in e.label]
+        assert blown and blown[0].relmse > 100  # the frame shown is the blown one
     # the trimmed mean leaves the blown frame out: the plugin scores about like the input it returns
     # (one more of the input's own frames is kept in place of the blown one)
     rows = {(r.denoiser, r.spp): r for r in report.summary}

@@ -168,9 +168,9 @@ def test_sampler_frames_round_trip_through_the_store_and_an_old_store_reads_as_n
         store.conn.execute("DELETE FROM units")
         store.conn.commit()
         assert f"3 row(s) of {sampler_maps.TABLE} without a unit" in store.integrity_problems()
-    assert [r["frame"] for r in rows] == [0, 1, 2] and [r["samples"] for r in rows] == [int(m.sum()) for _, m in maps]
-    np.testing.assert_array_equal(rows[2]["spp_map"], maps[2][1])
-    assert rows[0]["spp_map"] is None and rows[2]["max_spp"] == int(maps[2][1].max())
+    assert [r.frame for r in rows] == [0, 1, 2] and [r.samples for r in rows] == [int(m.sum()) for _, m in maps]
+    np.testing.assert_array_equal(rows[2].spp_map, maps[2][1])
+    assert rows[0].spp_map is None and rows[2].max_spp == int(maps[2][1].max())
     # a database written before the table existed, opened read-only, has no sampler frames
     conn = sqlite3.connect(tmp_path / "r.sqlite")
     conn.execute(f"DROP TABLE {sampler_maps.TABLE}")

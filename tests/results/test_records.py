@@ -126,16 +126,17 @@ def _sampler_store(path) -> ResultsStore:
 DIMENSION = {NOISY: (None, None), "box": (None, "box"), "uniform": ("uniform", None), "uniform+box": ("uniform", "box")}
 
 
-def test_the_store_returns_typed_rows_that_read_by_key_as_the_dicts_did(tmp_path):
+def test_the_store_returns_typed_rows_read_by_attribute_and_written_to_json_with_the_dicts_keys(tmp_path):
     with _sampler_store(tmp_path / "r.sqlite") as store:
         frames, units, entries = store.frames("run1"), store.units("run1"), store.denoisers("run1")
         run = store.run("run1")
     assert all(isinstance(f, FrameRow) for f in frames) and all(isinstance(u, UnitRow) for u in units)
     assert all(isinstance(d, EntryRow) for d in entries) and run.config["samplers"] == ["uniform"]
     f = frames[0]
-    assert f["metrics"] is f.metrics and f.get("floors") == {} and f.get("nope", 7) == 7 and "status" in f
-    with pytest.raises(KeyError):
-        f["nope"]
+    assert f.floors == {} and f.as_dict()["metrics"] is f.metrics
+    with pytest.raises(TypeError):  # no key access: a row is read by attribute
+        f["metrics"]
+    assert not hasattr(f, "get")
     assert list(f.as_dict()) == [
         "denoiser", "scene", "spp", "frame", "status", "error", "render_seconds", "denoise_seconds",
         "total_seconds", "sanitized", "metrics", "floors", "ref_se",
@@ -146,8 +147,8 @@ def test_the_store_returns_typed_rows_that_read_by_key_as_the_dicts_did(tmp_path
     with ResultsStore(tmp_path / "r.sqlite", readonly=True) as store:
         data = analysis.RunData(store, "run1")
     assert {label: (data.entry(label).sampler, data.entry(label).denoiser_label) for label in data.labels} == DIMENSION
-    assert data.entry("nope") is None and data.denoisers == [d.as_dict() for d in entries]
-    assert data.frames == [f.as_dict() for f in frames] and data.run == run.as_dict()
+    assert data.entry("nope") is None and data.entries == entries
+    assert data.frame_rows == frames and data.run == run
 
 
 # ----------------------------------------------------------------------------------------------- samplers

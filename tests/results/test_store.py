@@ -93,8 +93,8 @@ def _counts(db: Path) -> dict:
         runs = store.runs()
         return {
             "problems": problems,
-            "runs": {r["run_id"]: (len(store.units(r["run_id"])), len(store.frames(r["run_id"]))) for r in runs},
-            "finished": {r["run_id"]: r["finished_at"] is not None for r in runs},
+            "runs": {r.run_id: (len(store.units(r.run_id)), len(store.frames(r.run_id))) for r in runs},
+            "finished": {r.run_id: r.finished_at is not None for r in runs},
             "metric_rows": store.conn.execute("SELECT COUNT(*) FROM frame_metrics").fetchone()[0],
         }
 
@@ -168,11 +168,11 @@ def test_failing_denoiser_is_recorded_and_the_run_goes_on(dataset, plugins, tmp_
     assert "broken failed" in result.stderr and "kaboom" in result.stderr
     with ResultsStore(db, readonly=True) as store:
         (run,) = store.runs()
-        units = {u["denoiser"]: u for u in store.units(run["run_id"])}
-        assert units["broken"]["status"] == "failed" and "RuntimeError: kaboom" in units["broken"]["error"]
-        assert units["identity"]["status"] == "ok" and units["noisy"]["status"] == "ok"
-        frames = [f for f in store.frames(run["run_id"]) if f["denoiser"] == "broken"]
-        assert len(frames) == FRAMES and all(f["status"] == "failed" and not f["metrics"] for f in frames)
+        units = {u.denoiser: u for u in store.units(run.run_id)}
+        assert units["broken"].status == "failed" and "RuntimeError: kaboom" in units["broken"].error
+        assert units["identity"].status == "ok" and units["noisy"].status == "ok"
+        frames = [f for f in store.frames(run.run_id) if f.denoiser == "broken"]
+        assert len(frames) == FRAMES and all(f.status == "failed" and not f.metrics for f in frames)
 
 
 def test_missing_reference_is_a_clear_error_naming_the_frame(tmp_path):
@@ -206,7 +206,7 @@ def test_split_all_scores_every_scene_of_the_dataset(dataset, tmp_path):
         )
         assert result.returncode == 0, result.stderr
     with ResultsStore(db, readonly=True) as store:
-        scenes = {run["config"]["split"]: {u["scene"] for u in store.units(run["run_id"])} for run in store.runs()}
+        scenes = {run.config["split"]: {u.scene for u in store.units(run.run_id)} for run in store.runs()}
     assert len(scenes["all"]) == 4 and len(scenes["test"]) == 1 and scenes["test"] < scenes["all"]
 
 
@@ -284,7 +284,7 @@ def test_scores_on_a_denoisers_own_training_scenes_are_marked_not_held_out(tmp_p
     assert "warning: identity" not in err
     with ResultsStore(db, readonly=True) as store:
         (run,) = store.runs()
-        declared = {d["label"]: d["trained_on"] for d in store.denoisers(run["run_id"])}
+        declared = {d.label: d.trained_on for d in store.denoisers(run.run_id)}
     assert declared["dpcn"] == sorted(train_scenes) and declared["memoriser"] == [test_scene]
     assert declared["identity"] == [] and declared["noisy"] == []
     html, md = (

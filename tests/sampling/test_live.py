@@ -72,16 +72,16 @@ def test_the_benchmark_measures_sampler_denoiser_pairs_live(live, tmp_path):
     config = BenchmarkConfig(["identity"], [4], split="all", metrics=["relmse"], samplers=samplers, verify=False)
     with ResultsStore(tmp_path / "r.sqlite") as store:
         plan = run_benchmark(data, config, store, progress=False)
-        units = {u["denoiser"]: u for u in store.units(plan.run_id)}
-        kinds = {d["label"]: d["kind"] for d in store.denoisers(plan.run_id)}
-        frames = {f["denoiser"]: f for f in store.frames(plan.run_id)}
+        units = {u.denoiser: u for u in store.units(plan.run_id)}
+        kinds = {d.label: d.kind for d in store.denoisers(plan.run_id)}
+        frames = {f.denoiser: f for f in store.frames(plan.run_id)}
     pairs = {"uniform", "uniform+identity", "hachisuka2008", "hachisuka2008+identity", plugin, f"{plugin}+identity"}
     assert set(units) == {"noisy", "identity"} | pairs and config.as_dict()["samplers"] == samplers
-    assert all(units[label]["status"] == "ok" for label in units) and {kinds[p] for p in pairs} == {"sampler"}
+    assert all(units[label].status == "ok" for label in units) and {kinds[p] for p in pairs} == {"sampler"}
     # identity returns its input: a pair with it scores as the sampler alone; the live image is not the stored one
-    assert frames["uniform+identity"]["metrics"]["relmse"] == pytest.approx(frames["uniform"]["metrics"]["relmse"])
-    assert frames["uniform"]["metrics"]["relmse"] != pytest.approx(frames["noisy"]["metrics"]["relmse"], rel=1e-6)
-    assert frames["hachisuka2008"]["render_seconds"] > 0
+    assert frames["uniform+identity"].metrics["relmse"] == pytest.approx(frames["uniform"].metrics["relmse"])
+    assert frames["uniform"].metrics["relmse"] != pytest.approx(frames["noisy"].metrics["relmse"], rel=1e-6)
+    assert frames["hachisuka2008"].render_seconds > 0
 
 
 def test_the_benchmark_refuses_an_unknown_sampler_before_any_work(live, tmp_path):

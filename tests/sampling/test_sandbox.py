@@ -158,11 +158,11 @@ def test_run_benchmark_contains_hostile_samplers_and_scores_the_others(setting):
     assert done.returncode == 0, done.stderr[-3000:]
     with ResultsStore(db, readonly=True) as store:
         (run,) = store.runs()
-        units = {u["denoiser"]: u for u in store.units(run["run_id"])}
-    assert units["uniform"]["status"] == "ok" and units["uniform+identity"]["status"] == "ok"
+        units = {u.denoiser: u for u in store.units(run.run_id)}
+    assert units["uniform"].status == "ok" and units["uniform+identity"].status == "ok"
     snoop, vandal = (units[s] for s in samplers[1:])
-    assert snoop["status"] == "failed" and "contained: no reference in reach" in snoop["error"], snoop["error"]
-    assert vandal["status"] == "failed" and "contained: reference: " in vandal["error"], vandal["error"]
+    assert snoop.status == "failed" and "contained: no reference in reach" in snoop.error, snoop.error
+    assert vandal.status == "failed" and "contained: reference: " in vandal.error, vandal.error
     assert _digest(setting["reference"]) == before and not (dataset / "planted.txt").exists()
     data = open_dataset(dataset)
     verify_files(data, run_files(data, list(data.scenes), [4]), progress=False)
