@@ -34,7 +34,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from pxr import Gf, UsdGeom  # noqa: E402
 
 from denoisebench.generator.contract.render_plan import make_render_plan  # noqa: E402
-from denoisebench.generator.render import frame as feature_renderer  # noqa: E402
+from denoisebench.generator.render import passes as render_passes  # noqa: E402
 from denoisebench.generator.render.frame import render_frame  # noqa: E402
 from denoisebench.generator.render.scene import build_mitsuba_scene  # noqa: E402
 from denoisebench.generator.usd.translate import translate_stage  # noqa: E402
@@ -74,7 +74,7 @@ def moving_stage(folder: Path, objects: int):
 
 
 def _time(scene, translated, plan, size, spp, freeze: bool) -> float:
-    feature_renderer.FREEZE_PASSES = freeze
+    render_passes.FREEZE_PASSES = freeze
     start = time.perf_counter()
     render_frame(scene, translated.camera, 1, plan, width=size, height=size, spp=spp, seed=1)
     return time.perf_counter() - start
@@ -110,7 +110,7 @@ def main(argv=None) -> int:
             for _ in range(WARM_UP):
                 _time(scene, translated, plan, args.size, args.spp, freeze)
             times[name].append(_time(scene, translated, plan, args.size, args.spp, freeze))
-    feature_renderer.FREEZE_PASSES = True
+    render_passes.FREEZE_PASSES = True
     print(
         f"{args.objects} moving objects, {args.size}x{args.size}, {args.spp} spp, {args.repeats} repeats (median, min)"
     )

@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from denoisebench.generator.contract.camera_track import CameraTrack  # noqa: E402
 from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan  # noqa: E402
-from denoisebench.generator.render import frame as feature_renderer  # noqa: E402
+from denoisebench.generator.render import passes as render_passes  # noqa: E402
 from denoisebench.generator.render.frame import load_scene, render_frame  # noqa: E402
 from denoisebench.mitsuba_runtime import load_mitsuba  # noqa: E402
 
@@ -79,7 +79,7 @@ def main(argv=None) -> int:
     parser.add_argument("--target-lanes", type=int, default=None, help="render_frame's target_lanes")
     parser.add_argument("--no-freeze", action="store_true", help="trace our passes afresh every frame")
     args = parser.parse_args(argv)
-    feature_renderer.FREEZE_PASSES = not args.no_freeze
+    render_passes.FREEZE_PASSES = not args.no_freeze
 
     mi = load_mitsuba()
     import drjit as dr
@@ -155,7 +155,7 @@ def main(argv=None) -> int:
     print(
         f"scene={args.scene} {size}x{size} spp={spp} max_depth={args.max_depth} repeats={args.repeats} "
         f"threads={dr.thread_count()} target_lanes={extra.get('target_lanes', 'default')} "
-        f"frozen={feature_renderer.FREEZE_PASSES}"
+        f"frozen={render_passes.FREEZE_PASSES}"
     )
     medians = {name: statistics.median(t) for name, t in times.items()}
     for name, t in times.items():

@@ -25,7 +25,7 @@ Conventions:
 * ``reference=True``: color, diffuse and specular with their variances only (no features), from an
   independent random stream.
 * Seeds and sample order: sample ``s`` of pixel ``p`` draws its random numbers from its own PCG32
-  stream, seeded from ``(key, p, s)`` (:func:`~denoisebench.generator.render.integrator.sample_stream`)
+  stream, seeded from ``(key, p, s)`` (:func:`~denoisebench.generator.render.moments.sample_stream`)
   where the key is a 64-bit hash (BLAKE2b) of ``(seed, frame, stream)`` (:func:`stream_key`; stream 0
   for noisy, 1 for reference renders). A pixel's samples are therefore one progressive stream:
   a k-spp render is the mean of the first k samples of any longer render with the same seed, and
@@ -37,7 +37,8 @@ Conventions:
 * Each pass configuration (kernel options, camera switches, buffers, band and sample sizes) is
   recorded once per scene with ``dr.freeze`` and replayed for later frames, whose camera and seed
   are the recording's inputs: a replay launches the kernels a fresh trace would, so bytes do not
-  depend on it (:data:`FREEZE_PASSES` turns it off; tests/generator/render/test_frozen.py compares the two).
+  depend on it (:mod:`~denoisebench.generator.render.passes`, whose ``FREEZE_PASSES`` turns it off;
+  tests/generator/render/test_frozen.py compares the two).
 * Passes hold at most :data:`MAX_PATHS_PER_PASS` paths: a frame is split into bands of rows and
   chunks of samples.
 * Lanes per pixel (``groups``: lane ``g`` takes the samples ``s ≡ g`` mod groups) depend on the image
@@ -47,7 +48,6 @@ Conventions:
 
 from __future__ import annotations
 
-import gc
 import hashlib
 import struct
 import time as _time
@@ -59,20 +59,24 @@ import numpy as np
 from denoisebench.dataset.frame import BUFFER_CHANNELS
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.contract.render_plan import RenderPlan
-from denoisebench.generator.render.camera import CameraSwitches, DrCamera, camera_setup, camera_switches, camera_values
-from denoisebench.generator.render.integrator import (
+from denoisebench.generator.render.camera import camera_setup, camera_switches, camera_values
+from denoisebench.generator.render.media import scene_has_media
+from denoisebench.generator.render.moments import moment_layout
+from denoisebench.generator.render.passes import (
+    MergeConfig,
+    PassConfig,
+    compiled_pass,
+    device_copy,
+    lane_groups,
+    merge_pass,
+)
+from denoisebench.generator.render.tracing import (
     NULL_SKIPS,
     KernelOptions,
-    _channel_type,
-    moment_layout,
-    pixel_moments,
-    render_moments,
-    sample_stream,
     scene_has_delta_only_bsdf,
     scene_has_null_bsdf,
     scene_has_object_motion,
 )
-from denoisebench.generator.render.media import scene_has_media
 from denoisebench.mitsuba_runtime import load_mitsuba
 
 #: Most paths traced by one kernel launch (bounds per-sample memory and the length of one launch).
@@ -98,196 +102,6 @@ NOISY_STREAM = 0
 REFERENCE_STREAM = 1
 
 
-@dataclass(frozen=True)
-class _PassConfig:
-    """Everything that shapes one pass's kernels (hashable); the numbers that vary per frame are not here."""
-
-    opts: KernelOptions
-    switches: CameraSwitches
-    stat_channels: tuple  # (name, channels) of the per-pixel statistics, in output order
-    sample_channels: tuple  # (name, channels) of per-sample data, () without
-    band: int  # rows of the pass
-    width: int
-    count: int  # most samples a pixel gets in the pass: rows of the per-sample arrays (0 without them)
-    groups: int  # lanes per pixel
-    uniform: bool  # every pixel's sample range is the same: its range is in params, not per-pixel arrays
-    fresh: bool  # the first pass of a stream: moments start at zero (made inside, not an input)
-
-
-def _render_pass(scene, params, ranges: tuple, state, camera_values: dict, config: _PassConfig):
-    """Trace samples ``start[p] .. end[p]`` of every pixel ``p`` of rows ``row0 .. row0 + band``.
-
-    ``params`` is a UInt32 array ``[key0, key1, row0, start, end]`` (the frame's stream key, the
-    band's first row and, when ``config.uniform``, every pixel's sample range); otherwise ``ranges``
-    is ``(starts, ends)``, UInt32 per pixel of the band (row-major). ``state`` holds the lanes'
-    moments so far (name → (mean, m2), one entry per lane; ``None`` when ``config.fresh``: the first
-    pass starts from zeros made inside, so that single-pass renders have no state inputs at all). Returns ``(state, packed, targets)``: the lanes' moments after
-    the pass, the per-pixel moments packed as :func:`moment_layout` says (all samples so far), and
-    the per-sample arrays (name → flat Float, row ``(s - starts[p]) * pixels + p``) or ``None``.
-    Dr.Jit arrays, evaluated.
-    """
-    mi = load_mitsuba()
-    import drjit as dr
-
-    band, width, groups = config.band, config.width, config.groups
-    stat_channels = dict(config.stat_channels)
-    pixels = band * width
-    lanes = pixels * groups
-    cam = DrCamera(mi, config.switches, camera_values)
-    # Pixel-major lanes (lane = pixel * groups + group): a pixel's lanes are one contiguous block.
-    # Sizes enter as opaque values: as literals, every image size and spp would compile anew.
-    groups_o, pixels_o, width_o = (dr.opaque(mi.UInt32, v) for v in (groups, pixels, width))
-    # Scalars come in one array read at fixed positions: separate opaque scalars of equal value may
-    # share a variable in one call and not in the next, and a frozen function's input layout
-    # includes such aliasing (seen as recordings anew on every few replays).
-    key0, key1, row0, start, end = (dr.gather(mi.UInt32, params, k) for k in range(5))
-    if config.fresh:
-        state = {
-            k: (dr.zeros(_channel_type(mi, c), lanes), dr.zeros(_channel_type(mi, c), lanes))
-            for k, c in stat_channels.items()
-        }
-    lane = dr.arange(mi.UInt32, lanes)
-    pixel = lane // groups_o
-    group = lane - pixel * groups_o
-    px = pixel % width_o
-    py = pixel // width_o + row0
-    if not config.uniform:
-        start, end = (dr.gather(mi.UInt32, r, pixel) for r in ranges)
-    first = start + (group + groups_o - start % groups_o) % groups_o  # the lane's first sample >= start
-    image_pixel = py * width_o + px  # bands cover whole rows: the pixel's index in the image
-    targets = None
-    if config.sample_channels:
-        targets = {k: (dr.zeros(mi.Float, config.count * pixels * c), c) for k, c in config.sample_channels}
-    state = render_moments(
-        mi,
-        scene,
-        lambda s: sample_stream(mi, (key0, key1), image_pixel, s),
-        cam,
-        config.opts,
-        px,
-        py,
-        first,
-        end,
-        groups_o,
-        state,
-        stat_channels,
-        targets,
-        lambda s: (s - start) * pixels_o + pixel,  # the pixel's sample within the pass, then pixel
-    )
-    if groups > 1:
-        dr.eval(state, targets)  # one kernel traces everything; the merge gathers from its results
-    samples_so_far = end if config.uniform else ranges[1]  # per pixel (the lanes' `end` is per lane)
-    packed, _ = pixel_moments(mi, state, stat_channels, groups, samples_so_far)
-    targets = None if targets is None else {k: target for k, (target, _) in targets.items()}
-    # One lane per pixel: tracing and packing are a single kernel. Several: the merge kernel.
-    dr.eval(state, packed, targets)
-    return state, packed, targets
-
-
-@dataclass(frozen=True)
-class _MergeConfig:
-    """What shapes a :func:`_merge_pass` (hashable)."""
-
-    stat_channels: tuple
-    band: int
-    width: int
-    groups: int
-
-
-def _merge_pass(scene, params, state, config: _MergeConfig):
-    """The per-pixel moments of ``state`` (a band's lanes) counted as ``params[0]`` samples per pixel, packed.
-
-    Right where every lane holds at most one sample (a fresh stream of at most ``groups`` samples):
-    lane ``g`` then holds sample ``g`` and the merge weighs lanes ``g >= params[0]`` by 0, so the
-    result is the bits a stream of ``params[0]`` samples packs (:meth:`FrameStream.prefix_buffers`).
-    ``scene`` is unused (the compiled-pass cache is per scene).
-    """
-    mi = load_mitsuba()
-    import drjit as dr
-
-    total = dr.gather(mi.UInt32, params, 0)
-    packed, _ = pixel_moments(mi, state, dict(config.stat_channels), config.groups, total)
-    dr.eval(packed)
-    return packed
-
-
-#: Record passes with ``dr.freeze`` and replay them (False: trace every pass afresh; same bits).
-FREEZE_PASSES = True
-#: Passes compiled with ``dr.freeze`` for the most recent scene, one per :class:`_PassConfig`, oldest first.
-_COMPILED: dict = {}
-_COMPILED_SCENE: list = [None]  # the scene they were recorded with (a strong reference: see below)
-#: Most pass configurations kept compiled at once (each holds its recorded kernels).
-MAX_COMPILED_PASSES = 8
-
-
-def _compiled_pass(scene, config, function=_render_pass):
-    """The frozen (``dr.freeze``) ``function`` (:func:`_render_pass`, or :func:`_merge_pass` for a
-    :class:`_MergeConfig`) for ``scene`` and ``config``.
-
-    Notes:
-        Tracing the Python integrator costs ~10-20 ms per pass and assembling its ~6000-op
-        kernel a few more, which on a 64x64 16-spp frame was a sixth of the time; a frozen function
-        records the kernel launches once and replays them for later frames, whose camera and seed
-        arrive as Dr.Jit inputs. A replay launches the very kernels a fresh trace would (the tests
-        compare the two bit for bit).
-
-        One frozen function per configuration: a single one that alternated between two (noisy and
-        reference frames) re-recorded on every call. Every input array is a fresh Dr.Jit allocation
-        (:func:`_device_copy`): inputs that map NumPy memory made replays record anew at random. Image sizes are in the configuration because
-        sizes taken with ``dr.width`` inside become constants of the recording.
-
-        Recordings are only reused for the scene object they were made with (its BSDF and shape
-        code is inlined in the kernels): a different scene drops them all. The module keeps that
-        scene alive, so that no new scene can ever reuse its ``id``; one scene at most.
-    """
-    import drjit as dr
-
-    if not FREEZE_PASSES:
-        return function
-    if _COMPILED_SCENE[0] is not scene:
-        _COMPILED.clear()
-        _COMPILED_SCENE[0] = scene
-    compiled = _COMPILED.pop(config, None)
-    if compiled is None:
-        compiled = _FreezeOrTrace(dr.freeze(function, warn_after=2), function)
-        while len(_COMPILED) >= MAX_COMPILED_PASSES:
-            _COMPILED.pop(next(iter(_COMPILED)))
-    _COMPILED[config] = compiled  # most recently used last
-    return compiled
-
-
-class _FreezeOrTrace:
-    """A frozen pass that falls back to plain tracing where Dr.Jit refuses to record it.
-
-    Notes:
-        Dr.Jit validates a recording: a virtual call whose instances are not among the function's
-        inputs aborts it. That happens when the scene has no instance of a domain (a scene without
-        emitters) while other live scenes have some: the call is then over *their* instances. The
-        pass is traced normally instead (same kernels, same bits), for good for this configuration.
-    """
-
-    def __init__(self, frozen, function=_render_pass):
-        self.frozen, self.function = frozen, function
-
-    def __call__(self, *args):
-        if self.frozen is not None:
-            # Python's cyclic collector must not free Dr.Jit objects left by an earlier mi.load_file or
-            # mi.render while a pass records: Dr.Jit aborts the process then (seen with Mitsuba XML
-            # scenes loaded in the same process). No collection runs during the call; none is lost.
-            enabled = gc.isenabled()
-            gc.disable()
-            try:
-                return self.frozen(*args)
-            except RuntimeError as error:
-                if "frozen function" not in str(error):
-                    raise
-                self.frozen = None
-            finally:
-                if enabled:
-                    gc.enable()
-        return self.function(*args)
-
-
 @dataclass
 class RenderedFrame:
     """The buffers of one frame (see the module docstring for their conventions)."""
@@ -309,34 +123,6 @@ def stream_key(seed: int, frame: int, stream: int) -> tuple[int, int]:
     data = struct.pack("<qqq", int(seed), int(frame), int(stream))
     digest = hashlib.blake2b(data, digest_size=8).digest()
     return int.from_bytes(digest[:4], "little"), int.from_bytes(digest[4:], "little")
-
-
-def _lane_groups(band: int, width: int, target_lanes: int) -> int:
-    """Lanes per pixel for a band: enough lanes to keep every core busy on small images (never spp-dependent)."""
-    return max(1, -(-target_lanes // (band * width)))
-
-
-def _device_copy(mi, kind, values: np.ndarray):
-    """``values`` (1-D) as an evaluated Dr.Jit array of ``kind`` in memory Dr.Jit allocated, distinct from every other.
-
-    Notes:
-        ``kind(numpy_array)`` maps the NumPy buffer, and a frozen function's input layout includes
-        whether each buffer is aligned (render/camera.py ``_float_array``): mapped inputs made
-        replays record anew, at random (NumPy's alignment varies). Adding an opaque zero runs a
-        kernel that writes a fresh Dr.Jit array (fast for large arrays, unlike going through a
-        list); a gather by ``arange`` did not do it (Dr.Jit returned the mapped array itself).
-        A few values (a pass's scalars) go through a list: a copy without a kernel launch, which
-        in a ladder's pipelined rounds also queued behind the running pass.
-    """
-    import drjit as dr
-
-    if 1 < values.size <= 16:  # a pass's few scalars: copied from a list, without a kernel (one element: a literal)
-        copy = kind(values.tolist())
-    else:
-        mapped = kind(values)
-        copy = mapped + dr.opaque(kind, 0)  # a kernel writes a fresh array (an opaque 0 is not folded away)
-    dr.eval(copy)
-    return copy
 
 
 class FrameStream:
@@ -424,7 +210,7 @@ class FrameStream:
         rows = max(1, min(height, max_paths_per_pass // width))
         self._bands = [(row0, min(rows, height - row0)) for row0 in range(0, height, rows)]
         self._chunk = max(1, max_paths_per_pass // (rows * width))  # samples per pixel per pass
-        self._groups = [_lane_groups(band, width, target_lanes) for _, band in self._bands]
+        self._groups = [lane_groups(band, width, target_lanes) for _, band in self._bands]
         self._state: list = [None] * len(self._bands)
         self._counts = np.zeros((height, width), np.int64)
         self._round = None  # the launched round's (add, samples, pending, last), until finish()
@@ -487,13 +273,13 @@ class FrameStream:
                 count = int((ends - starts).max()) if self.keep_samples else 0
                 uniform = bool((starts == starts.flat[0]).all() and (ends == ends.flat[0]).all())
                 scalars = [*self._key, row0, int(starts.flat[0]), int(ends.flat[0])]
-                params = _device_copy(mi, mi.UInt32, np.asarray(scalars, np.uint32))
+                params = device_copy(mi, mi.UInt32, np.asarray(scalars, np.uint32))
                 ranges = (
                     ()
                     if uniform
-                    else tuple(_device_copy(mi, mi.UInt32, a.astype(np.uint32).ravel()) for a in (starts, ends))
+                    else tuple(device_copy(mi, mi.UInt32, a.astype(np.uint32).ravel()) for a in (starts, ends))
                 )
-                config = _PassConfig(
+                config = PassConfig(
                     self._opts,
                     self._switches,
                     tuple(self.stat_channels.items()),
@@ -505,7 +291,7 @@ class FrameStream:
                     uniform,
                     self._state[index] is None,
                 )
-                state, packed, targets = _compiled_pass(self.scene, config)(
+                state, packed, targets = compiled_pass(self.scene, config)(
                     self.scene,
                     params,
                     ranges,
@@ -578,7 +364,7 @@ class FrameStream:
 
         That is, after one finished round of ``n <= lanes_per_pixel`` samples for every pixel from a
         fresh stream, and ``1 <= total <= n``: the bytes :meth:`buffers` gives after a round of
-        ``total`` (:func:`_merge_pass`), from the lanes already traced. :func:`render_ladder` takes
+        ``total`` (:func:`merge_pass`), from the lanes already traced. :func:`render_ladder` takes
         its rungs below ``lanes_per_pixel`` this way: on small images a pixel's few samples occupy
         a few of its lanes while the others idle in the same SIMD vectors, so one pass of ``n``
         costs about what a pass of 1 costs. Merges queued with the round (:meth:`queue_prefixes`)
@@ -594,7 +380,7 @@ class FrameStream:
         return self._assemble(packed_host, np.full_like(self._counts, total))
 
     def _merge(self, total: int, counts: np.ndarray) -> list:
-        """Queue the merges of every band's lanes as ``total`` samples (:func:`_merge_pass`): device arrays."""
+        """Queue the merges of every band's lanes as ``total`` samples (:func:`merge_pass`): device arrays."""
         mi = load_mitsuba()
 
         n = int(counts.flat[0])
@@ -602,13 +388,11 @@ class FrameStream:
             raise ValueError(
                 f"prefix_buffers({total}) needs a uniform round of {total}..{self.lanes_per_pixel} samples"
             )
-        params = _device_copy(mi, mi.UInt32, np.asarray([total, 0], np.uint32))  # two: one element is a literal
+        params = device_copy(mi, mi.UInt32, np.asarray([total, 0], np.uint32))  # two: one element is a literal
         merged = []
         for index, ((_, band), groups) in enumerate(zip(self._bands, self._groups)):
-            config = _MergeConfig(tuple(self.stat_channels.items()), band, self.width, groups)
-            merged.append(
-                _compiled_pass(self.scene, config, _merge_pass)(self.scene, params, self._state[index], config)
-            )
+            config = MergeConfig(tuple(self.stat_channels.items()), band, self.width, groups)
+            merged.append(compiled_pass(self.scene, config, merge_pass)(self.scene, params, self._state[index], config))
         return merged
 
     def _assemble(self, packed: np.ndarray, counts: np.ndarray) -> dict[str, np.ndarray]:

@@ -63,151 +63,26 @@ Background (miss) convention: color is the environment's radiance (0 without one
 depth, position and roughness are 0; motion reprojects the ray *direction* (a point at infinity, so
 rotation only). Points behind either camera get zero motion. At frame 0 there is no previous
 frame and motion is 0. Everything is finite.
+
+What this tracer shares with the volumetric one (switches, camera ray, first-vertex BSDF queries) is in
+:mod:`~denoisebench.generator.render.tracing`; the loop that runs it over a pixel's samples and keeps
+per-pixel moments is :mod:`~denoisebench.generator.render.moments`.
 """
 
 from __future__ import annotations
 
 import functools
-import importlib
 from dataclasses import dataclass
 
-from denoisebench.generator.contract.render_plan import UNBOUNDED_DEPTH, paths_bounce
 from denoisebench.generator.render.camera import DrCamera
 from denoisebench.generator.render.motion import NO_OBJECT, ShutterMotionScene
-from denoisebench.generator.render.scene import PREVIOUS_POSITION
-
-
-@dataclass(frozen=True)
-class KernelOptions:
-    """Compile-time switches of the kernel (each combination compiles once and is cached)."""
-
-    max_depth: int
-    rr_depth: int
-    lobe_split: bool
-    features: bool  # False: color / diffuse / specular only (reference renders)
-    motion: bool
-    follow_delta_albedo: bool  # the scene has delta-only BSDFs: continue the albedo through them
-    jitter: bool = True  # False: every sample at the pixel center (tests compare with Mitsuba's aov)
-    # Per-sample data for RPF: the first vertex's light and bounce random numbers and the second hit
-    second_hit: bool = False
-    object_motion: bool = False  # meshes carry vertex_prev_position: motion follows moving objects
-    null_skips: int = (
-        0  # cut-outs (mask BSDFs): fully transparent surfaces the camera ray passes before its first vertex
-    )
-    media: bool = False  # the scene has participating media: trace with render/volpath.py (else never entered)
-
-    @property
-    def bounded(self) -> bool:
-        """False for ``max_depth == -1`` (unbounded: no depth test in the loop at all)."""
-        return self.max_depth != UNBOUNDED_DEPTH
-
-    @property
-    def bounces(self) -> bool:
-        """Paths go past the camera's first hit (next-event estimation and BSDF sampling happen)."""
-        return paths_bounce(self.max_depth)
-
-
-def _mis_weight(dr, pdf_a, pdf_b):
-    """Power heuristic, as Mitsuba's ``path`` (zero where it is not finite)."""
-    a2 = dr.square(pdf_a)
-    w = a2 / (a2 + dr.square(pdf_b))
-    return dr.select(dr.isfinite(w), w, 0.0)
-
-
-def scene_has_delta_only_bsdf(mi, scene) -> bool:
-    """True when some shape's BSDF has no smooth lobe (mirror, glass): albedo must look through it."""
-    for shape in scene.shapes():
-        bsdf = shape.bsdf()
-        if bsdf is None:
-            continue
-        flags = bsdf.flags()
-        if not mi.has_flag(flags, mi.BSDFFlags.Smooth):
-            return True
-    return False
-
-
-def _diffuse_part(mi, bsdf, ctx_diffuse, si, wo, val, active):
-    """The diffuse lobes' share of ``val`` (the full BSDF value): a second evaluation only when needed.
-
-    Notes
-    -----
-    Inside :func:`drjit.dispatch` ``bsdf`` is one concrete instance, so its lobe flags are known
-    while the kernel is traced. A BSDF whose lobes are all diffuse (``diffuse``, ``twosided``
-    diffuse) has ``val`` as its diffuse part, one without diffuse lobes (conductors, dielectrics)
-    has 0: both are exactly what the Diffuse-masked evaluation returns, without paying for it.
-    Only mixed BSDFs (principled, plastics) evaluate twice.
-    """
-    # Lobe bits only (BSDFFlags.All also holds Anisotropic, Delta1D, ...).
-    lobes = int(bsdf.flags()) & int(mi.BSDFFlags.Diffuse | mi.BSDFFlags.Glossy | mi.BSDFFlags.Delta)
-    diffuse = int(mi.BSDFFlags.Diffuse)
-    if lobes & diffuse == 0:
-        return mi.Color3f(0.0)
-    if lobes & ~diffuse == 0:
-        return mi.Color3f(val)
-    return bsdf.eval(ctx_diffuse, si, wo, active)
-
-
-#: Fully transparent cut-out layers a camera ray passes through before its first vertex (scenes with masks).
-NULL_SKIPS = 4
-
-
-def scene_has_null_bsdf(mi, scene) -> bool:
-    """True when some shape's BSDF has a null (pass-through) lobe: an opacity mask (cut-out)."""
-    return any(
-        shape.bsdf() is not None and mi.has_flag(shape.bsdf().flags(), mi.BSDFFlags.Null) for shape in scene.shapes()
-    )
-
-
-def scene_has_object_motion(scene) -> bool:
-    """True when the scene's meshes carry previous-frame positions (a scene with moving objects)."""
-    return any(shape.is_mesh() and bool(shape.has_attribute(PREVIOUS_POSITION)) for shape in scene.shapes())
-
-
-def _previous_point(shape, si, active):
-    """Where the hit point was one frame earlier (one concrete shape inside :func:`drjit.dispatch`)."""
-    import mitsuba as mi
-
-    if shape.is_mesh() and bool(shape.has_attribute(PREVIOUS_POSITION)):
-        return mi.Point3f(shape.eval_attribute_3(PREVIOUS_POSITION, si, active))
-    return mi.Point3f(si.p)
-
-
-def _first_vertex_bsdf(split, want_features, bsdf, ctx, ctx_diffuse, si, wo, sample1, sample2, active_em, active):
-    """Everything the first vertex asks of its BSDF, in one dynamic dispatch per BSDF instance."""
-    import drjit as dr
-    import mitsuba as mi
-
-    val, pdf, bs, weight = bsdf.eval_pdf_sample(ctx, si, wo, sample1, sample2, active)
-    val_diffuse = _diffuse_part(mi, bsdf, ctx_diffuse, si, wo, val, active_em) if split else mi.Color3f(0.0)
-    if want_features:
-        flags = bsdf.flags()
-        if mi.has_flag(flags, mi.BSDFFlags.Diffuse):
-            albedo = bsdf.eval_diffuse_reflectance(si, active)
-        else:
-            # No diffuse lobe (rough conductor, rough dielectric): Mitsuba's default
-            # eval_diffuse_reflectance is pi * f(wi, n), which a narrow lobe makes >> 1. The sampled
-            # weight f cos / pdf is an unbiased one-sample estimate of the directional albedo instead.
-            albedo = mi.Color3f(weight)
-        if bsdf.has_attribute("roughness"):
-            rough = bsdf.eval_attribute_1("roughness", si, active)
-        elif bsdf.has_attribute("alpha"):
-            rough = dr.sqrt(dr.maximum(bsdf.eval_attribute_1("alpha", si, active), 0.0))
-        elif bsdf.has_attribute("alpha_u"):
-            au = dr.maximum(bsdf.eval_attribute_1("alpha_u", si, active), 0.0)
-            av = dr.maximum(bsdf.eval_attribute_1("alpha_v", si, active), 0.0)
-            rough = dr.sqrt(0.5 * (au + av))
-        elif (
-            mi.has_flag(flags, mi.BSDFFlags.Diffuse)
-            and not mi.has_flag(flags, mi.BSDFFlags.Glossy)
-            and not mi.has_flag(flags, mi.BSDFFlags.Delta)
-        ):
-            rough = mi.Float(1.0)
-        else:
-            rough = mi.Float(0.0)
-    else:
-        albedo = mi.Color3f(0.0)
-        rough = mi.Float(0.0)
-    return val, pdf, bs, weight, val_diffuse, albedo, rough
+from denoisebench.generator.render.tracing import (
+    KernelOptions,
+    camera_ray,
+    first_vertex_bsdf,
+    mis_weight,
+    previous_point,
+)
 
 
 @dataclass
@@ -337,7 +212,7 @@ def _bounce(mi, scene, motion, poses, ctx, opts: KernelOptions, state: _PathStat
     prev_si = mi.Interaction3f(dr.zeros(mi.Float), ray.time, mi.Color0f(), prev.p, prev.n)
     ds = mi.DirectionSample3f(scene, si, prev_si)
     em_pdf = scene.pdf_emitter_direction(prev_si, ds, active & ~prev.delta)
-    mis = _mis_weight(dr, prev.pdf, em_pdf)
+    mis = mis_weight(dr, prev.pdf, em_pdf)
     emitted = ds.emitter.eval(si, active & (prev.pdf > 0.0))
     radiance = dr.select(active, state.radiance + beta * mis * emitted, state.radiance)
 
@@ -359,7 +234,7 @@ def _bounce(mi, scene, motion, poses, ctx, opts: KernelOptions, state: _PathStat
     active_em &= ds.pdf != 0.0
     wo = si.to_local(ds.d)
     val, pdf, bs, weight = bsdf.eval_pdf_sample(ctx, si, wo, sampler.next_1d(), sampler.next_2d(), active_next)
-    mis_em = dr.select(ds.delta, 1.0, _mis_weight(dr, ds.pdf, pdf))
+    mis_em = dr.select(ds.delta, 1.0, mis_weight(dr, ds.pdf, pdf))
     state.radiance = dr.select(active_em, radiance + beta * val * em_weight * mis_em, radiance)
 
     state.ray = si.spawn_ray(si.to_world(bs.wo))
@@ -369,34 +244,6 @@ def _bounce(mi, scene, motion, poses, ctx, opts: KernelOptions, state: _PathStat
     state.depth = dr.select(si.is_valid(), state.depth + 1, state.depth)
     state.roulette(opts.rr_depth, active_next)
     return (state,)
-
-
-def camera_ray(mi, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pixel_y, out: dict):
-    """(film position, time, camera ray, camera pose) of one sample per lane; its random parameters go to ``out``.
-
-    Draws, in this order: the sub-pixel offset (2, or the pixel centre without jitter), the shutter
-    time (1, only with time sampling), the lens point (2, only with a thin lens): the start of every
-    tracer's fixed random-number order (this module's :func:`trace`, ``volpath.trace``)."""
-    switches = camera.switches
-    if opts.jitter:
-        offset = sampler.next_2d()
-    else:
-        offset = mi.Point2f(0.5, 0.5)
-    film = mi.Point2f(mi.Float(pixel_x) + offset.x, mi.Float(pixel_y) + offset.y)
-    out["pixel"] = offset
-    if switches.time_sampling:
-        shutter = sampler.next_1d()
-        time = camera.sample_time(shutter)
-        out["time"] = shutter
-    else:
-        time = camera.frame_time + mi.Float(0.0) * film.x  # per-lane array
-    if switches.thin_lens:
-        lens_uv = sampler.next_2d()
-        out["lens"] = lens_uv
-    else:
-        lens_uv = None
-    ray, pose = camera.generate_ray(film, lens_uv, time)
-    return film, time, ray, pose
 
 
 def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pixel_y):
@@ -463,7 +310,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
             w = dr.select(valid, 1.0, 0.0)
             now_xy, front_now = camera.project(pose, target, w)
             if opts.object_motion:
-                was = dr.dispatch(si.shape, _previous_point, si, valid)
+                was = dr.dispatch(si.shape, previous_point, si, valid)
                 prev_xy, front_prev = camera.project(prev, dr.select(valid, was, ray.d), w)
             else:
                 prev_xy, front_prev = camera.project(prev, target, w)
@@ -505,7 +352,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     split = opts.lobe_split and opts.bounces
     val, pdf, bs, weight, val_diffuse, albedo, rough = dr.dispatch(
         bsdf,
-        functools.partial(_first_vertex_bsdf, split, opts.features),
+        functools.partial(first_vertex_bsdf, split, opts.features),
         ctx,
         ctx_diffuse,
         si,
@@ -521,7 +368,7 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
         albedo_pending = valid & ~smooth
 
     if opts.bounces:
-        mis_em = dr.select(ds.delta, 1.0, _mis_weight(dr, ds.pdf, pdf))
+        mis_em = dr.select(ds.delta, 1.0, mis_weight(dr, ds.pdf, pdf))
         nee = dr.select(active_em, val * em_weight * mis_em, 0.0)
         if split:
             nee_diffuse = dr.select(active_em, val_diffuse * em_weight * mis_em, 0.0)
@@ -579,220 +426,3 @@ def trace(mi, scene, sampler, camera: DrCamera, opts: KernelOptions, pixel_x, pi
     out["specular"] = specular
     out["color"] = diffuse + specular
     return out
-
-
-def _channel_type(mi, channels: int):
-    return {1: mi.Float, 2: mi.Vector2f, 3: mi.Color3f}[channels]
-
-
-@functools.cache
-def _sample_stream_type(pcg_type, point2_type):
-    """The :class:`SampleStream` class of one Dr.Jit variant (its ``DRJIT_STRUCT`` names the variant's PCG32)."""
-
-    class SampleStream:
-        """The random numbers of one sample per lane: a PCG32 stream with Mitsuba's sampler interface.
-
-        ``trace`` (and the loops that carry it) only call :meth:`next_1d` and :meth:`next_2d`;
-        ``DRJIT_STRUCT`` makes it a Dr.Jit PyTree, so that it can be loop state.
-        """
-
-        DRJIT_STRUCT = {"rng": pcg_type}
-
-        def __init__(self, rng=None):
-            self.rng = pcg_type() if rng is None else rng
-
-        def next_1d(self):
-            return self.rng.next_float32()
-
-        def next_2d(self):
-            x = self.rng.next_float32()
-            return point2_type(x, self.rng.next_float32())
-
-    return SampleStream
-
-
-def sample_stream(mi, key, pixel_index, sample_index):
-    """The random stream of sample ``sample_index`` of pixel ``pixel_index`` (UInt32 per lane).
-
-    ``key`` is a pair of UInt32 (the frame's stream key: a hash of seed, frame and stream). The
-    PCG32 state and sequence come from two rounds of TEA (Zafar et al. 2010, the scrambler Mitsuba's
-    ``independent`` sampler seeds with): ``(h0, h1) = TEA(pixel, key0)``, then
-    ``(state, seq) = TEA(h0 + sample, h1 ^ key1)``.
-
-    Notes
-    -----
-    A sample's random numbers depend on nothing but (key, pixel, sample): not on the lane that
-    traces it, the pass it falls in, the other samples of the pass or how many samples a pixel
-    gets. That is what makes a k-spp render the prefix of any longer one (nested spp ladders)
-    and lets per-pixel sample counts continue each pixel's own stream. For a fixed key the map
-    from (pixel, sample) to the TEA input is one to one for samples below 2^32, and TEA is a
-    permutation, so no two samples of a frame share a stream.
-    """
-    h0, h1 = mi.sample_tea_32(pixel_index, key[0])
-    state, seq = mi.sample_tea_32(h0 + sample_index, h1 ^ key[1])
-    rng = mi.PCG32()
-    rng.seed(mi.UInt64(state), mi.UInt64(seq))  # not the constructor: it adds arange(size) to both
-    return _sample_stream_type(mi.PCG32, mi.Point2f)(rng)
-
-
-def render_moments(
-    mi,
-    scene,
-    streams,
-    camera: DrCamera,
-    opts: KernelOptions,
-    pixel_x,
-    pixel_y,
-    first,
-    end,
-    step,
-    start: dict,
-    names: dict,
-    sample_targets: dict | None = None,
-    sample_slot=None,
-):
-    """Each lane traces samples ``first, first + step, ... < end`` of pixel ``(pixel_x, pixel_y)`` in a
-    loop, continuing running per-lane moments (Welford: mean and sum of squared deviations) of the
-    buffers in ``names`` (name → channels): one kernel yields per-pixel statistics without storing samples.
-
-    ``streams(s)`` is the :func:`sample_stream` of sample index ``s`` (UInt32 per lane). ``start``
-    holds the lane's moments so far (name → (mean, m2)); the lane's samples are ``s ≡ first (mod
-    step)``, so sample ``s`` is its ``s // step + 1``-th and the Welford weight needs no counter: a
-    lane that continues over several calls gives the same bits as one call over all its samples.
-
-    ``sample_targets`` (name → (flat Float array, channels)) also receives per-sample values: sample
-    ``s`` of a lane is written to row ``sample_slot(s)`` (row-major, channels innermost).
-    Returns ``{name: (mean, m2)}`` as Dr.Jit arrays (one entry per lane).
-    """
-    import drjit as dr
-
-    mean = {k: start[k][0] for k in names}
-    m2 = {k: start[k][1] for k in names}
-    s = mi.UInt32(first)
-    end = mi.UInt32(end)
-
-    def cond(s, mean, m2):
-        return s < end
-
-    tracer = trace
-    if opts.media:  # participating media: the volumetric tracer (a scene without media never imports it)
-        from denoisebench.generator.render.volpath import trace as tracer
-
-    def body(s, mean, m2):
-        out = tracer(mi, scene, streams(s), camera, opts, pixel_x, pixel_y)
-        inv_n = dr.rcp(mi.Float(s // step + 1))
-        new_mean, new_m2 = {}, {}
-        for k, c in names.items():
-            value = _channel_type(mi, c)(out[k])
-            delta = value - mean[k]
-            new_mean[k] = dr.fma(delta, inv_n, mean[k])
-            new_m2[k] = dr.fma(delta, value - new_mean[k], m2[k])
-        if sample_targets:
-            slot = sample_slot(s)
-            for k, (target, channels) in sample_targets.items():
-                value = out[k]
-                for c in range(channels):
-                    dr.scatter(target, value if channels == 1 else value[c], slot * channels + c)
-        return s + step, new_mean, new_m2
-
-    # Dr.Jit's loop optimisation records a loop twice whenever a state variable is loop-invariant,
-    # and the path loop's sample stream always carries one (its PCG32 stream increment); nested in
-    # the sample loop, the path loop was recorded four times per frame. Python tracing is a fixed
-    # cost per frame (~20 ms, a sixth of a 64x64 16-spp frame), so record once: the invariants stay
-    # plain loop variables, which costs nothing measurable and gives the same bits.
-    with dr.scoped_set_flag(dr.JitFlag.OptimizeLoops, False):
-        s, mean, m2 = dr.while_loop(state=(s, mean, m2), cond=cond, body=body, label="denoisebench samples per pixel")
-    return {k: (mean[k], m2[k]) for k in names}
-
-
-def pixel_moments(mi, moments: dict, names: dict, groups: int, total):
-    """Per-pixel moments of :func:`render_moments`' per-lane ones, packed into one flat array.
-
-    A pixel owns ``groups`` consecutive lanes (lane = pixel * groups + group); group ``g`` holds the
-    pixel's samples ``s ≡ g (mod groups)`` below ``total`` (UInt32 per pixel: samples so far), i.e.
-    ``total // groups + (g < total % groups)`` of them. Lanes merge by Chan et al.'s rule
-    generalised to K groups: ``mean = Σ n_k mean_k / n`` and ``M2 = Σ (M2_k + n_k (mean_k - mean)²)``;
-    a pixel without samples gets 0 for both. Returns ``(packed, layout)``: ``packed`` is a flat
-    Float, pixel-major, ``stride`` values per pixel; ``layout`` maps each name of ``names`` (name →
-    channels) to the column offsets of its mean and M2, and ``"stride"`` to the row length.
-
-    Notes
-    -----
-    One kernel merges and packs: each pixel gathers its lanes in a loop, in group order, so the
-    sums are the same bits on every run and thread count (scatter-adds from lanes that two
-    threads share would add in either order). Packing makes the host transfer one copy instead
-    of one per channel, which for small frames cost as much as the merge. With one lane per
-    pixel nothing is merged and the moments are copied as they are.
-    """
-    import drjit as dr
-
-    layout = moment_layout(names)
-    stride = layout["stride"]
-    lanes = dr.width(next(iter(moments.values()))[0])
-    pixels = lanes // groups
-    pixel = dr.arange(mi.UInt32, pixels)
-
-    if groups == 1:
-        merged = moments
-    else:
-        # Sizes as opaque values, so that every image size shares one compiled kernel.
-        groups_o = dr.opaque(mi.UInt32, groups)
-        first = pixel * groups_o
-        total = mi.UInt32(total)
-        base = total // groups_o
-        rem = total - base * groups_o
-        inv_total = dr.select(total > 0, dr.rcp(mi.Float(total)), 0.0)
-
-        def lane_weight(g):
-            return mi.Float(base + dr.select(g < rem, mi.UInt32(1), mi.UInt32(0)))
-
-        def cond(g, acc):
-            return g < groups_o
-
-        def mean_body(g, acc):
-            w = lane_weight(g) * inv_total
-            lane = first + g
-            return g + 1, {k: dr.fma(dr.gather(type(m), m, lane), w, acc[k]) for k, (m, _) in moments.items()}
-
-        zeros = {k: dr.zeros(type(m), pixels) for k, (m, _) in moments.items()}
-        _, means = dr.while_loop((mi.UInt32(0), zeros), cond, mean_body, label="denoisebench lane means")
-
-        def m2_body(g, acc):
-            w = lane_weight(g)
-            lane = first + g
-            new = {}
-            for k, (m, m2) in moments.items():
-                d = dr.gather(type(m), m, lane) - means[k]
-                new[k] = acc[k] + dr.fma(w, dr.square(d), dr.gather(type(m2), m2, lane))
-            return g + 1, new
-
-        _, m2s = dr.while_loop((mi.UInt32(0), zeros), cond, m2_body, label="denoisebench lane M2")
-        merged = {k: (means[k], m2s[k]) for k in moments}
-
-    columns = []
-    for part in (0, 1):  # every mean, then every M2 (moment_layout)
-        for k, c in names.items():
-            value = merged[k][part]
-            columns += [value] if c == 1 else [value[j] for j in range(c)]
-    # One scatter of a ``stride``-wide array writes whole rows (pixel * stride + column): separate
-    # scatters into one target would each launch a kernel (Dr.Jit flushes a dirty target first), and
-    # when the moments are not evaluated yet, each would trace all paths again.
-    row_type = getattr(importlib.import_module(type(columns[0]).__module__), "ArrayXf")
-    packed = dr.empty(mi.Float, pixels * stride)
-    dr.scatter(packed, row_type(*columns), pixel)
-    return packed, layout
-
-
-def moment_layout(names: dict) -> dict:
-    """Columns of :func:`pixel_moments`' packed rows: name → (mean offset, M2 offset), and ``"stride"``.
-
-    Every buffer's mean comes first, in the order of ``names``, then every M2 in the same order:
-    the means are one contiguous block ``[0, stride / 2)`` and the M2s ``[stride / 2, stride)``.
-    """
-    layout, offset = {}, 0
-    total = sum(names.values())
-    for k, c in names.items():
-        layout[k] = (offset, total + offset)
-        offset += c
-    layout["stride"] = 2 * total
-    return layout

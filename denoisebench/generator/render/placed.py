@@ -15,7 +15,7 @@ shutter is the renderer's random stream. A multidimensional sampler (``mdas``: H
 
 Everything else a path draws (light samples, BSDF samples, roulette) comes from a PCG32 stream of
 its own: sample ``i`` of the frame's placed samples (counted over all placed rounds) draws from
-:func:`~denoisebench.generator.render.integrator.sample_stream` with the frame's *placed* key
+:func:`~denoisebench.generator.render.moments.sample_stream` with the frame's *placed* key
 (:data:`PLACED_STREAM`), pixel index ``i`` and sample index 0, so no placed sample shares random
 numbers with another or with the count rounds' samples.
 
@@ -43,7 +43,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from denoisebench.generator.render.camera import DrCamera
-from denoisebench.generator.render.integrator import sample_stream, trace
+from denoisebench.generator.render.integrator import trace
+from denoisebench.generator.render.moments import sample_stream
 from denoisebench.mitsuba_runtime import load_mitsuba
 
 #: Stream tag of placed samples in :func:`~denoisebench.generator.render.frame.stream_key` (noisy 0, reference 1;
@@ -163,18 +164,18 @@ def trace_placed(
 
     Notes:
         The pass is recorded with ``dr.freeze`` like the count rounds' passes
-        (:func:`~denoisebench.generator.render.frame._compiled_pass`, the same per-scene cache) and
+        (:func:`~denoisebench.generator.render.passes.compiled_pass`, the same per-scene cache) and
         replayed for later rounds: measured on a 32 px depth-of-field frame, 0.3 s per traced round of
         2048 samples against a few hundredths replayed. :data:`FREEZE_PLACED` False traces every round
         (the same bits: tests/sampling/test_mdas.py compares them).
     """
     mi = load_mitsuba()
-    from denoisebench.generator.render.frame import _compiled_pass, _device_copy
+    from denoisebench.generator.render.passes import compiled_pass, device_copy
 
     config = _PlacedConfig(replace(opts, jitter=True), switches, tuple(names.items()))  # the offset is queued
     n = film.shape[0]
     out = {name: np.zeros((n, c), np.float32) for name, c in names.items()}
-    key_array = _device_copy(mi, mi.UInt32, np.asarray([key[0], key[1], 0], np.uint32))
+    key_array = device_copy(mi, mi.UInt32, np.asarray([key[0], key[1], 0], np.uint32))
     for lo in range(0, n, MAX_PLACED_PER_PASS):
         hi = min(n, lo + MAX_PLACED_PER_PASS)
         cell = np.floor(film[lo:hi])
@@ -191,9 +192,9 @@ def trace_placed(
         if switches.thin_lens:
             host["lu"] = (mi.Float, lens[lo:hi, 0].astype(np.float32))
             host["lv"] = (mi.Float, lens[lo:hi, 1].astype(np.float32))
-        inputs = {name: _device_copy(mi, kind, np.ascontiguousarray(array)) for name, (kind, array) in host.items()}
+        inputs = {name: device_copy(mi, kind, np.ascontiguousarray(array)) for name, (kind, array) in host.items()}
         inputs["key"] = key_array
-        function = _compiled_pass(scene, config, _placed_pass) if FREEZE_PLACED else _placed_pass
+        function = compiled_pass(scene, config, _placed_pass) if FREEZE_PLACED else _placed_pass
         picked = function(scene, inputs, values, config)
         for name, value in picked.items():
             array = np.asarray(value, dtype=np.float32)  # (N,) or (C, N)

@@ -1,6 +1,6 @@
 """The feature path tracer for scenes with participating media: Mitsuba's ``volpath`` estimator with features.
 
-:func:`trace` is what :func:`~denoisebench.generator.render.integrator.render_moments` calls instead
+:func:`trace` is what :func:`~denoisebench.generator.render.moments.render_moments` calls instead
 of the surface tracer when ``KernelOptions.media`` is set; the render plan sets it only for a scene that
 has a medium (a shape's ``interior``/``exterior``, or the sensor's), so a scene without media never
 traces this code (its frames are the bytes they were before media existed).
@@ -54,15 +54,15 @@ import functools
 from dataclasses import dataclass
 
 from denoisebench.generator.render.camera import DrCamera
-from denoisebench.generator.render.integrator import (
-    KernelOptions,
-    _first_vertex_bsdf,
-    _mis_weight,
-    _previous_point,
-    camera_ray,
-)
 from denoisebench.generator.render.media import camera_medium
 from denoisebench.generator.render.motion import ShutterMotionScene
+from denoisebench.generator.render.tracing import (
+    KernelOptions,
+    camera_ray,
+    first_vertex_bsdf,
+    mis_weight,
+    previous_point,
+)
 
 
 def _channels(c) -> list:
@@ -371,7 +371,7 @@ def _iteration(mi, dr, scene, opts: KernelOptions, state: _VolState):
     prev_it = mi.Interaction3f(dr.zeros(mi.Float), ray.time, ray.wavelengths, state.prev_p, state.prev_n)
     ds_hit = mi.DirectionSample3f(scene, si, prev_it)
     em_pdf = scene.pdf_emitter_direction(prev_it, ds_hit, at_surface & ~state.prev_delta)
-    mis_hit = _mis_weight(dr, state.prev_pdf, em_pdf)
+    mis_hit = mis_weight(dr, state.prev_pdf, em_pdf)
     emitted = ds_hit.emitter.eval(si, at_surface & (state.prev_pdf > 0.0))
     gathered = dr.select(at_surface, beta * mis_hit * emitted, 0.0)
     radiance = state.radiance + gathered
@@ -419,7 +419,7 @@ def _iteration(mi, dr, scene, opts: KernelOptions, state: _VolState):
     wo_local = si.to_local(ds.d)
     val, pdf, bs, weight, val_diffuse, albedo, rough = dr.dispatch(
         bsdf,
-        functools.partial(_first_vertex_bsdf, split, opts.features),
+        functools.partial(first_vertex_bsdf, split, opts.features),
         ctx,
         ctx_diffuse,
         si,
@@ -432,7 +432,7 @@ def _iteration(mi, dr, scene, opts: KernelOptions, state: _VolState):
 
     nee_f = dr.select(real, phase_val, val)
     nee_pdf = dr.select(real, phase_pdf, pdf)
-    mis_em = dr.select(ds.delta, 1.0, _mis_weight(dr, ds.pdf, nee_pdf))
+    mis_em = dr.select(ds.delta, 1.0, mis_weight(dr, ds.pdf, nee_pdf))
     nee = dr.select(want_light, beta * nee_f * em_weight * tr * mis_em, 0.0)
     radiance += nee
     if split:
@@ -466,7 +466,7 @@ def _iteration(mi, dr, scene, opts: KernelOptions, state: _VolState):
         f["hit"] = f["hit"] | here
         if opts.object_motion:  # moving meshes: the hit point's previous-frame position (media are static)
             at_mesh = here & surface_vertex
-            was = dr.dispatch(si.shape, _previous_point, si, at_mesh)
+            was = dr.dispatch(si.shape, previous_point, si, at_mesh)
             f["was"] = dr.select(at_mesh, was, dr.select(here, mei.p, f["was"]))
         f["albedo"] = dr.select(here, albedo_here, f["albedo"])
         flight = first & in_medium & ~f["medium_set"]

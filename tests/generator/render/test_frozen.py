@@ -13,7 +13,7 @@ import pytest
 
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
-from denoisebench.generator.render import frame as feature_renderer
+from denoisebench.generator.render import passes as render_passes
 from denoisebench.generator.render.frame import load_scene, render_frame
 from denoisebench.generator.render.scene import build_mitsuba_scene
 from denoisebench.generator.usd.translate import translate_usd
@@ -46,13 +46,13 @@ def test_replayed_frames_equal_fresh_traces(monkeypatch, tmp_path, family):
     # Frame 0 has no previous frame (another configuration); frame 1 records, frames 2 and 3 replay
     # with other poses, times and seeds, and the reference configuration runs in between.
     frames = [0, 1, 2, 3]
-    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", True)
+    monkeypatch.setattr(render_passes, "FREEZE_PASSES", True)
     frozen = []
     for f in frames:
         frozen.append(render_frame(scene, translated.camera, f, plan, width=SIZE, height=SIZE, spp=2, seed=3))
         render_frame(scene, translated.camera, f, plan, width=SIZE, height=SIZE, spp=4, seed=3, reference=True)
     frozen_ref = render_frame(scene, translated.camera, 3, plan, width=SIZE, height=SIZE, spp=4, seed=3, reference=True)
-    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", False)
+    monkeypatch.setattr(render_passes, "FREEZE_PASSES", False)
     for f, out in zip(frames, frozen):
         _assert_same(out, render_frame(scene, translated.camera, f, plan, width=SIZE, height=SIZE, spp=2, seed=3), f)
     fresh_ref = render_frame(scene, translated.camera, 3, plan, width=SIZE, height=SIZE, spp=4, seed=3, reference=True)
@@ -77,13 +77,13 @@ def test_sizes_seeds_and_scenes_change_between_replays(monkeypatch):
         (scenes[1], dict(width=SIZE, height=SIZE, spp=3, seed=2)),  # other scene object
         (scenes[0], dict(width=SIZE, height=SIZE, spp=3, seed=2, max_paths_per_pass=SIZE * 5)),  # row bands
     ]
-    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", True)
+    monkeypatch.setattr(render_passes, "FREEZE_PASSES", True)
     frozen = [render_frame(scene, camera, 1, plan, **kw) for scene, kw in calls[:2]]
     # The second call replayed the first one's recording: no fallback to tracing, no re-recording.
-    (compiled,) = feature_renderer._COMPILED.values()
+    (compiled,) = render_passes._COMPILED.values()
     assert compiled.frozen is not None and compiled.frozen.n_recordings == 1
     frozen += [render_frame(scene, camera, 1, plan, **kw) for scene, kw in calls[2:]]
-    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", False)
+    monkeypatch.setattr(render_passes, "FREEZE_PASSES", False)
     for k, ((scene, kw), out) in enumerate(zip(calls, frozen)):
         _assert_same(out, render_frame(scene, camera, 1, plan, **kw), k)
     assert not np.array_equal(frozen[0].buffers["color"], frozen[1].buffers["color"])  # seeds do matter
@@ -104,7 +104,7 @@ def test_motion_blur_reference_rounds_record_each_pass_once(monkeypatch, tmp_pat
     translated = translate_usd(get_family("motion_blur").author(tmp_path, seed=0, frames=3, width=SIZE, height=SIZE))
     scene = build_mitsuba_scene(translated)
     plan = make_render_plan(translated.effects, RenderOptions(), stage_max_depth=translated.max_depth)
-    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", True)
+    monkeypatch.setattr(render_passes, "FREEZE_PASSES", True)
     kw = dict(width=SIZE, height=SIZE)
     for frame in (0, 1, 2):
         render_frame(scene, translated.camera, frame, plan, spp=2, seed=3, **kw)
@@ -118,7 +118,7 @@ def test_motion_blur_reference_rounds_record_each_pass_once(monkeypatch, tmp_pat
         # cap 128: rounds of 2 spp; a target every floor meets stops after MIN_ROUNDS rounds
         assert render_adaptive(render_round, 128, 1e9).record["rounds"] == MIN_ROUNDS
     counts = {}
-    for config, compiled in feature_renderer._COMPILED.items():
+    for config, compiled in render_passes._COMPILED.items():
         assert compiled.frozen is not None, config  # no fallback to plain tracing
         counts[(config.opts.features, config.switches.has_previous)] = compiled.frozen.n_recordings
     assert counts == {(True, False): 1, (True, True): 1, (False, False): 1, (False, True): 1}
@@ -140,16 +140,16 @@ def test_moving_shapes_replay_equals_fresh_traces(monkeypatch, tmp_path):
     plan = make_render_plan(translated.effects, RenderOptions(per_sample=True))
     calls = [dict(frame=f, spp=2, seed=s, reference=r) for f, s, r in ((1, 3, False), (2, 4, False), (1, 5, False))]
     calls += [dict(frame=f, spp=4, seed=s, reference=True) for f, s in ((1, 1), (1, 2), (2, 3), (1, 4))]
-    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", True)
+    monkeypatch.setattr(render_passes, "FREEZE_PASSES", True)
     frozen = []
     for kw in calls:
         kw = dict(kw)
         frozen.append(render_frame(scene, translated.camera, kw.pop("frame"), plan, width=SIZE, height=SIZE, **kw))
-    recorded = [c.frozen for c in feature_renderer._COMPILED.values()]
+    recorded = [c.frozen for c in render_passes._COMPILED.values()]
     assert recorded and all(f is not None for f in recorded)  # recorded, not traced
     # Dr.Jit 1.5 records a function over several mi.Scene inputs twice (its third call), then replays.
     assert all(f.n_recordings <= 2 for f in recorded), [f.n_recordings for f in recorded]
-    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", False)
+    monkeypatch.setattr(render_passes, "FREEZE_PASSES", False)
     for k, (kw, out) in enumerate(zip(calls, frozen)):
         kw = dict(kw)
         fresh = render_frame(scene, translated.camera, kw.pop("frame"), plan, width=SIZE, height=SIZE, **kw)

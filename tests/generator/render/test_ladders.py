@@ -167,16 +167,16 @@ def test_generate_dataset_rung_equals_plain_render_and_independent_rungs_are_rec
 
 def test_frozen_ladder_passes_replay_what_a_fresh_trace_computes(monkeypatch, family_scene):
     """Continuation passes (the lanes' moments as inputs) replayed by dr.freeze: the bits of tracing afresh."""
-    from denoisebench.generator.render import frame as feature_renderer
+    from denoisebench.generator.render import passes as render_passes
 
     translated, scene = family_scene("motion_blur")  # per-ray poses and time
     plan = make_render_plan(translated.effects, RenderOptions(per_sample=True))
     kw = dict(width=SIZE, height=SIZE, rungs=(1, 3, 4))
-    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", True)
+    monkeypatch.setattr(render_passes, "FREEZE_PASSES", True)
     frozen = [render_ladder(scene, translated.camera, 1, plan, seed=s, **kw) for s in (1, 2)]  # 2: a replay
-    continuing = [c for c in feature_renderer._COMPILED.values() if c.frozen is not None]
+    continuing = [c for c in render_passes._COMPILED.values() if c.frozen is not None]
     assert continuing and all(c.frozen.n_recordings == 1 for c in continuing)
-    monkeypatch.setattr(feature_renderer, "FREEZE_PASSES", False)
+    monkeypatch.setattr(render_passes, "FREEZE_PASSES", False)
     traced = render_ladder(scene, translated.camera, 1, plan, seed=2, **kw)
     for a, b in zip(frozen[1], traced):
         for name in b.buffers:
