@@ -33,7 +33,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from denoisebench.models.training import TrainOptions, command_line, train  # noqa: E402
+from denoisebench.models.training import train  # noqa: E402
+from denoisebench.models.training_options import TrainOptions, command_line  # noqa: E402
 
 MODELS = ("dpcn", "kpcn")
 

@@ -178,7 +178,8 @@ def run(args) -> int:
         raise UserInputError(f"--steps must be >= 0 (got {args.steps})")
     if args.batch_size < 1 or (args.crop is not None and args.crop < 4):
         raise UserInputError("--batch-size must be >= 1 and --crop >= 4")
-    from denoisebench.models.training import TrainOptions, max_threads, parse_override, train
+    from denoisebench.models.training import train
+    from denoisebench.models.training_options import TrainOptions, max_threads, parse_override
 
     if not 1 <= args.threads <= max_threads():
         raise UserInputError(f"--threads must be between 1 and the core count {max_threads()} (got {args.threads})")

@@ -27,7 +27,7 @@ class ModelSpec:
     targets: tuple[str, ...]
     #: Buffers a training item carries when the dataset has them (features.py fills the rest with zeros).
     buffers: tuple[str, ...]
-    #: Training defaults per configuration name (``loss``, ``crop``, ...); see training.TrainOptions.
+    #: Training defaults per configuration name (``loss``, ``crop``, ...); see training_options.TrainOptions.
     recipes: dict[str, dict] = field(default_factory=dict)
 
 

@@ -298,7 +298,7 @@ def _builder(mode: str, without: tuple[str, ...] = ()) -> Callable[..., PCN]:
 
     Notes
     -----
-    ``training.apply_overrides`` reads a builder's signature to know which ``--set`` keys a model
+    ``training_options.apply_overrides`` reads a builder's signature to know which ``--set`` keys a model
     takes, so the builder carries PCN's signature (one parameter list to keep, not three) and refuses
     a parameter it leaves out with the TypeError a plain function would raise.
     """

@@ -1,13 +1,13 @@
-"""The training loop behind ``denoisebench train``: data, optimisation, validation, checkpoints, resume.
+"""The training loop behind ``denoisebench train``: where a run starts, optimisation, validation,
+checkpoints, resume.
 
-Data: the dataset's ``train`` split through :class:`~denoisebench.dataset.torch_dataset.CropDataset`
-(DPCN, KPCN) or :class:`~denoisebench.dataset.torch_dataset.SequenceCropDataset` (the recurrent
-autoencoder, K-frame windows) in a torch ``DataLoader``; validation on whole frames of the ``val``
-split, run the way a denoiser wrapper runs them (frames in order, ``reset()`` between sequences).
+The command's options and their defaults are :mod:`~denoisebench.models.training_options`; the data,
+its crops and the order of the batches are :mod:`~denoisebench.models.training_data`. Validation runs
+on whole frames of the ``val`` split, the way a denoiser wrapper runs them (frames in order,
+``reset()`` between sequences).
 
-Determinism: the model is initialised after ``torch.manual_seed(seed)``; batch *b* of epoch *e*
-is a fixed slice of a permutation drawn from ``(seed, e)`` and its crops come from the dataset's
-``(seed, e, item)`` generator. So a run resumed from its checkpoint at step *s* continues exactly
+Determinism: the model is initialised after ``torch.manual_seed(seed)`` and the batches are fixed by
+``(seed, epoch)`` (training_data), so a run resumed from its checkpoint at step *s* continues exactly
 as the uninterrupted run would have (tested bit for bit).
 
 Notes
@@ -22,33 +22,23 @@ Notes
   metric's definition exactly.
 * The checkpoint written during training carries the optimiser state (for ``--resume``);
   :func:`strip_for_shipping` drops it.
-* Device (``--device``): ``auto`` takes CUDA when ``torch.cuda.is_available()``, else the CPU.
-  On CUDA the loader uses ``workers`` processes and pinned memory so the GPU is not starved; the
-  batches and their crops are the same on any device and any worker count (each item's crop
-  comes from its own ``(seed, epoch, item)`` generator), though CUDA kernels are not bit-exact
-  with the CPU's. Threads are capped at the machine's core count.
-* Learning-rate schedule (``lr_schedule``): ``constant``, ``cosine`` (from ``lr`` down to
-  ``lr/100`` over this command's steps) or ``step`` (×0.1 at half and three quarters of them).
-  The schedule spans one command: a resumed run is a new stage with its own schedule, and every
-  stage is recorded in ``meta["stages"]`` (the model card lists them).
+* On CUDA the loader uses ``workers`` processes and pinned memory so the GPU is not starved; the
+  batches and their crops are the same on any device and any worker count, though CUDA kernels are
+  not bit-exact with the CPU's.
+* Every stage (one command) of a run is recorded in ``meta["stages"]`` (the model card lists them).
 * ``--resume`` continues a run on its own dataset only: with ``--steps`` > 0 on another dataset
   the card would list that dataset's scenes as though every step had been trained on them.
   ``--init-from`` fine-tunes instead: the checkpoint's weights, configuration and step count with a
   fresh optimiser on the new data; the earlier run's record moves into ``meta["earlier_runs"]``
   (:mod:`~denoisebench.models.provenance`) and the batch order continues from its step count.
-* ``loss`` None takes the configuration's recipe (catalog ``recipes``), else ``log``. ``lobes``
-  (DPCN/KPCN) is the paper's separate L1 per branch, no combined-colour term.
 """
 
 from __future__ import annotations
 
-import inspect
-import json
 import math
 import os
-import shlex
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -56,158 +46,31 @@ import torch
 from tqdm import tqdm
 
 from denoisebench.dataset.reader import Dataset, open_dataset
-from denoisebench.dataset.torch_dataset import CropDataset, SequenceCropDataset
 from denoisebench.errors import UserInputError
 from denoisebench.models.catalog import build_model, get_spec, model_config
 from denoisebench.models.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint
 from denoisebench.models.features import frame_tensors
-from denoisebench.models.losses import PCN_KINDS, SPATIAL, pcn_loss, rae_sequence_loss, relmse
+from denoisebench.models.losses import pcn_loss, rae_sequence_loss, relmse
 from denoisebench.models.provenance import run_record
-
-
-@dataclass
-class TrainOptions:
-    model: str
-    data: str
-    config: str = "small"
-    steps: int = 200
-    out: str | None = None
-    resume: str | None = None
-    #: fine-tune: start from these weights (shipped ones too) with a fresh optimiser, on ``data``
-    init_from: str | None = None
-    seed: int = 0
-    batch_size: int = 8
-    crop: int | None = None  # None: the configuration's recipe, else 32
-    lr: float = 1e-3
-    spp: list[int] | None = None  # None: every noisy spp of the dataset
-    sequence_length: int = 7
-    loss: str | None = (
-        None  # losses.SPATIAL name or one of losses.PCN_KINDS; None: the configuration's recipe, else "log"
-    )
-    val_every: int = 0  # 0: validate once, at the end
-    val_frames: int = 8  # per val scene and spp
-    checkpoint_every: int = 100
-    threads: int = 1
-    device: str = "auto"  # auto | cpu | cuda
-    workers: int | None = None  # loader processes; None: 0 on the CPU, min(4, cores) on CUDA
-    lr_schedule: str = "constant"  # constant | cosine | step
-    play_backward: bool | None = None  # temporal models: windows reversed half the time; None: recipe
-    progress: bool = True
-    #: configuration keys replaced for this run (``--set KEY=VALUE``: ablations such as rae
-    #: ``residual=false``); the checkpoint records the resulting configuration, so it loads as trained
-    overrides: dict = field(default_factory=dict)
-
-
-def _available(ds: Dataset, scene: str, spp: int, wanted: tuple[str, ...], targets: tuple[str, ...]):
-    frame = ds.frame(scene, spp, 0, reference=True, samples=False)
-    buffers = tuple(name for name in wanted if name in frame.buffers)
-    ref_layers = frame.meta.get("reference_buffers", {})
-    have_targets = tuple(t for t in targets if t == "color" or t in ref_layers)
-    return buffers, have_targets
-
-
-def _train_spp(ds: Dataset, scenes: list[str], spp: list[int] | None) -> list[int]:
-    common = set.intersection(*(set(ds.scene(s).spp) for s in scenes))
-    if spp is None:
-        if not common:
-            raise UserInputError("the train scenes share no noisy sample count")
-        return sorted(common)
-    missing = sorted(set(spp) - common)
-    if missing:
-        raise UserInputError(f"--spp {missing} not rendered for every train scene (have {sorted(common)})")
-    return sorted(set(spp))
-
-
-def _batches(length: int, batch_size: int, seed: int, epoch: int) -> list[list[int]]:
-    generator = torch.Generator().manual_seed(seed * 1_000_003 + epoch)
-    order = torch.randperm(length, generator=generator).tolist()
-    # Drop the ragged tail so every step sees a full batch (unless the dataset is smaller than one).
-    count = max(1, length // batch_size)
-    return [order[i * batch_size : (i + 1) * batch_size] for i in range(count)]
-
-
-LR_SCHEDULES = ("constant", "cosine", "step")
-
-
-def resolve_device(name: str) -> torch.device:
-    """``auto`` → CUDA when torch sees a GPU, else CPU; ``cuda`` without one is a UserInputError."""
-    if name not in ("auto", "cpu", "cuda"):
-        raise UserInputError(f"--device must be auto, cpu or cuda (got {name!r})")
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if name == "cuda" and not torch.cuda.is_available():
-        raise UserInputError("--device cuda: torch sees no CUDA device (this torch build or machine has none)")
-    return torch.device(name)
-
-
-def max_threads() -> int:
-    """CPU cores this process may use (affinity-aware where the OS says)."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
-
-def lr_factor(schedule: str, done: int, steps: int) -> float:
-    """Multiplier of the base rate after ``done`` of this command's ``steps`` (see the module Notes)."""
-    if schedule == "constant" or steps <= 0:
-        return 1.0
-    progress = min(max(done / steps, 0.0), 1.0)
-    if schedule == "cosine":
-        floor = 0.01
-        return floor + (1.0 - floor) * 0.5 * (1.0 + math.cos(math.pi * progress))
-    if schedule == "step":
-        return 1.0 if progress < 0.5 else 0.1 if progress < 0.75 else 0.01
-    raise UserInputError(f"unknown learning-rate schedule {schedule!r}; schedules: {', '.join(LR_SCHEDULES)}")
-
-
-def resolve_loss(spec, config, loss: str | None) -> str:
-    """The loss a run uses: the one asked for, else the configuration's recipe, else ``log``."""
-    loss = recipe_value(spec, config, "loss", loss, "log")
-    allowed = set(SPATIAL) | (set(PCN_KINDS) if spec.name in ("dpcn", "kpcn") else set())
-    if loss not in allowed:
-        raise UserInputError(f"unknown loss {loss!r} for {spec.name}; losses: {', '.join(sorted(allowed))}")
-    return loss
-
-
-def _to_device(batch: dict[str, torch.Tensor], device: torch.device) -> dict[str, torch.Tensor]:
-    if device.type == "cpu":
-        return batch
-    return {name: value.to(device, non_blocking=True) for name, value in batch.items()}
-
-
-class _EpochItems(torch.utils.data.Dataset):
-    """A crop dataset addressed by ``(epoch, index)``: the epoch is set where the item is read
-    (in a loader worker too), so crops do not depend on the worker count."""
-
-    def __init__(self, base):
-        self.base = base
-
-    def __len__(self) -> int:
-        return len(self.base)
-
-    def __getitem__(self, key):
-        epoch, index = key
-        if self.base.epoch != epoch:
-            self.base.set_epoch(epoch)
-        return self.base[index]
-
-
-def _batch_plan(
-    length: int, batch_size: int, seed: int, per_epoch: int, start: int, total: int
-) -> list[list[tuple[int, int]]]:
-    """Batches of ``(epoch, index)`` for steps ``start`` to ``total``: batch *b* of epoch *e* is
-    :func:`_batches`'s, so a resumed run continues with the batches the uninterrupted one had."""
-    plan = []
-    step = start
-    while step < total:
-        epoch, offset = divmod(step, per_epoch)
-        for batch in _batches(length, batch_size, seed, epoch)[offset:]:
-            plan.append([(epoch, int(i)) for i in batch])
-            step += 1
-            if step >= total:
-                break
-    return plan
+from denoisebench.models.training_data import (
+    EpochItems,
+    available_buffers,
+    batch_plan,
+    batches,
+    make_dataset,
+    to_device,
+    train_spp,
+)
+from denoisebench.models.training_options import (
+    LR_SCHEDULES,
+    TrainOptions,
+    apply_overrides,
+    command_line,
+    lr_factor,
+    max_threads,
+    resolve_device,
+    resolve_loss,
+)
 
 
 def _loss(model, spec, batch: dict[str, torch.Tensor], kind: str = "log") -> dict[str, torch.Tensor]:
@@ -239,7 +102,7 @@ def validate(model, spec, ds: Dataset, scenes: list[str], spp: list[int], max_fr
             frames = min(ds.scene(scene).frame_count, max_frames)
             for index in range(frames):
                 frame = ds.frame(scene, s, index, reference=True, samples=False)
-                out = model(_to_device(frame_tensors(frame), device))["color"].cpu()
+                out = model(to_device(frame_tensors(frame), device))["color"].cpu()
                 ref = torch.from_numpy(np.moveaxis(frame.reference, -1, 0).copy())[None]
                 ours.append(relmse(out, ref))
                 noisy.append(relmse(frame_tensors(frame, ("color",))["color"], ref))
@@ -256,71 +119,6 @@ def validate(model, spec, ds: Dataset, scenes: list[str], spp: list[int], max_fr
         "scenes": list(scenes),
         "spp": list(spp),
     }
-
-
-def parse_override(text: str) -> tuple[str, object]:
-    """``KEY=VALUE`` → (key, value); VALUE is JSON (``false``, ``3``, ``[12, 18]``), else the plain string."""
-    key, sep, value = text.partition("=")
-    key = key.strip()
-    if not sep or not key.isidentifier():
-        raise UserInputError(f"--set expects KEY=VALUE, e.g. residual=false (got {text!r})")
-    value = value.strip()
-    lowered = value.lower()
-    if lowered in ("true", "false"):
-        return key, lowered == "true"
-    try:
-        return key, json.loads(value)
-    except ValueError:
-        return key, value
-
-
-def apply_overrides(spec, config: dict, overrides: dict) -> dict:
-    """``config`` with ``overrides`` applied; a key the configuration does not have and the model's
-    constructor does not take, or a value of another type than the configuration's, is a UserInputError."""
-    if not overrides:
-        return config
-
-    accepted = set(config) | {name for name in inspect.signature(spec.build).parameters if name != "self"}
-    out = dict(config)
-    for key, value in overrides.items():
-        if key not in accepted:
-            raise UserInputError(
-                f"--set {key}: not a {spec.name} configuration key (keys: {', '.join(sorted(accepted))})"
-            )
-        if key in config and config[key] is not None and isinstance(config[key], bool) != isinstance(value, bool):
-            raise UserInputError(f"--set {key}={value!r}: expected a value like {config[key]!r}")
-        out[key] = value
-    return out
-
-
-def recipe_value(spec, config, key: str, given, default):
-    """``given`` unless None, else the configuration's recipe value for ``key``, else ``default``."""
-    if given is not None:
-        return given
-    recipe = spec.recipes.get(config, {}) if isinstance(config, str) else {}
-    return recipe.get(key, default)
-
-
-def _make_dataset(spec, ds, scenes, spp, options, buffers, targets):
-    smallest = min(min(ds.scene(s).height, ds.scene(s).width) for s in scenes)
-    # "where the data allows": a recipe's 128 px crop shrinks to the smallest train scene
-    crop = min(int(recipe_value(spec, options.config, "crop", options.crop, 32)), smallest)
-    if spec.temporal:
-        frames = min(options.sequence_length, min(ds.scene(s).frame_count for s in scenes))
-        backward = bool(recipe_value(spec, options.config, "play_backward", options.play_backward, False))
-        dataset = SequenceCropDataset(
-            ds,
-            scenes,
-            spp,
-            frames=frames,
-            crop=crop,
-            buffers=buffers,
-            targets=targets,
-            seed=options.seed,
-            play_backward=backward,
-        )
-        return dataset, crop, frames
-    return CropDataset(ds, scenes, spp, crop=crop, buffers=buffers, targets=targets, seed=options.seed), crop, 1
 
 
 @dataclass
@@ -565,7 +363,7 @@ def _optimise(start: _Start, spec, options, dataset, device, loss_kind, checkpoi
     model, optimizer, meta = start.model, start.optimizer, start.meta
     start_step = int(meta["steps"])
     total = start_step + int(options.steps)
-    per_epoch = len(_batches(len(dataset), options.batch_size, options.seed, 0))
+    per_epoch = len(batches(len(dataset), options.batch_size, options.seed, 0))
     workers = (
         options.workers if options.workers is not None else (min(4, max_threads()) if device.type == "cuda" else 0)
     )
@@ -575,15 +373,15 @@ def _optimise(start: _Start, spec, options, dataset, device, loss_kind, checkpoi
     try:
         # One loader for the whole run (its workers start once, not every epoch); items are
         # addressed as (epoch, index), so every worker draws the crops the single process would.
-        plan = _batch_plan(len(dataset), options.batch_size, options.seed, per_epoch, step, total)
+        plan = batch_plan(len(dataset), options.batch_size, options.seed, per_epoch, step, total)
         loader = torch.utils.data.DataLoader(
-            _EpochItems(dataset), batch_sampler=plan, num_workers=workers, pin_memory=device.type == "cuda"
+            EpochItems(dataset), batch_sampler=plan, num_workers=workers, pin_memory=device.type == "cuda"
         )
         if step < total:
             for batch in loader:
                 for group in optimizer.param_groups:
                     group["lr"] = options.lr * lr_factor(options.lr_schedule, step - start_step, options.steps)
-                loss = _loss(model, spec, _to_device(batch, device), loss_kind)["loss"]
+                loss = _loss(model, spec, to_device(batch, device), loss_kind)["loss"]
                 optimizer.zero_grad(set_to_none=True)
                 if torch.isfinite(loss):
                     loss.backward()
@@ -634,10 +432,10 @@ def train(options: TrainOptions) -> dict:
     train_scenes, val_scenes = ds.split("train"), ds.split("val")
     if not train_scenes:
         raise UserInputError(f"{options.data}: the train split is empty (the dataset needs more scenes)")
-    spp = _train_spp(ds, train_scenes, options.spp)
+    spp = train_spp(ds, train_scenes, options.spp)
     if not ds.scene(train_scenes[0]).has_reference:
         raise UserInputError(f"{options.data}: no reference frames; training needs them")
-    buffers, targets = _available(ds, train_scenes[0], spp[0], spec.buffers, spec.targets)
+    buffers, targets = available_buffers(ds, train_scenes[0], spp[0], spec.buffers, spec.targets)
 
     if options.resume and options.init_from:
         raise UserInputError("--resume continues a run, --init-from starts a new one from its weights: give one")
@@ -648,7 +446,7 @@ def train(options: TrainOptions) -> dict:
     else:
         start = _fresh_start(spec, options, device)
 
-    dataset, crop, frames = _make_dataset(spec, ds, train_scenes, spp, options, buffers, targets)
+    dataset, crop, frames = make_dataset(spec, ds, train_scenes, spp, options, buffers, targets)
     out = Path(
         options.out or f"checkpoints/{spec.name}_{options.config if isinstance(options.config, str) else 'custom'}.pt"
     )
@@ -686,48 +484,3 @@ def strip_for_shipping(src: str | Path, dst: str | Path) -> Path:
     return save_checkpoint(
         dst, payload["model"], payload["config"], model, meta, config_name=payload.get("config_name")
     )
-
-
-def command_line(options: TrainOptions, out: str) -> str:
-    """The ``denoisebench train`` command that runs ``options`` (recorded in the checkpoint for model cards)."""
-    parts = [
-        "denoisebench",
-        "train",
-        "--model",
-        options.model,
-        "--data",
-        str(options.data),
-        "--config",
-        str(options.config),
-        "--steps",
-        str(options.steps),
-        "--out",
-        out,
-    ]
-    if options.resume:
-        parts += ["--resume", str(options.resume)]
-    if options.init_from:
-        parts += ["--init-from", str(options.init_from)]
-    parts += ["--seed", str(options.seed), "--batch-size", str(options.batch_size)]
-    if options.crop is not None:
-        parts += ["--crop", str(options.crop)]
-    parts += ["--lr", str(options.lr)]
-    if options.play_backward is not None:
-        parts.append("--play-backward" if options.play_backward else "--no-play-backward")
-    if options.spp:
-        parts += ["--spp", ",".join(str(s) for s in options.spp)]
-    if get_spec(options.model).temporal:
-        parts += ["--sequence-length", str(options.sequence_length)]
-    if options.loss is not None and options.loss != "log":
-        parts += ["--loss", options.loss]
-    for key, value in sorted(options.overrides.items()):
-        parts += ["--set", f"{key}={json.dumps(value)}"]
-    if options.lr_schedule != "constant":
-        parts += ["--lr-schedule", options.lr_schedule]
-    if options.val_every:
-        parts += ["--val-every", str(options.val_every)]
-    if int(options.threads) != 1:
-        parts += ["--threads", str(options.threads)]
-    if options.device != "auto":
-        parts += ["--device", options.device]
-    return shlex.join(parts)

@@ -18,7 +18,7 @@ from denoisebench.models import pcn
 from denoisebench.models.catalog import build_model
 from denoisebench.models.checkpoint import load_checkpoint
 from denoisebench.models.losses import pcn_loss, spatial_l1
-from denoisebench.models.training import lr_factor, max_threads, resolve_device
+from denoisebench.models.training_options import lr_factor, max_threads, resolve_device
 from tests.support.paths import REPO
 
 SMALL = ["--batch-size", "2", "--crop", "12", "--quiet"]
