@@ -206,15 +206,16 @@ def test_a_version_1_database_stays_readable_and_is_migrated_when_written(tmp_pa
         assert old.strip("run1", NOISY, "s1", 1) is None and old.integrity_problems() == []
         assert all(d.trained_on == [] for d in old.denoisers("run1"))
     with ResultsStore(path) as migrated:
-        assert migrated.version == SCHEMA_VERSION == 5  # 4: the not_applicable table; 5: the sampler dimension
+        # 4: the not_applicable table; 5: the sampler dimension; 6: images keyed by frame
+        assert migrated.version == SCHEMA_VERSION
         assert [d.trained_on for d in migrated.denoisers("run1")] == [[]] * len(migrated.denoisers("run1"))
         assert migrated.frames("run1")[0].floors == {}  # old rows: no floor
         assert migrated.write_unit("run1", _unit("x", "s1", 0.1, 0.002))
         assert [f.floors for f in migrated.frames("run1") if f.denoiser == "x"][0] == {"relmse": 0.001}
         assert migrated.integrity_problems() == []
     with sqlite3.connect(path) as conn:
-        conn.execute("UPDATE schema_version SET version = 6")
-    with pytest.raises(Exception, match="schema version 6"):
+        conn.execute(f"UPDATE schema_version SET version = {SCHEMA_VERSION + 1}")
+    with pytest.raises(Exception, match=f"schema version {SCHEMA_VERSION + 1}"):
         ResultsStore(path, readonly=True)
 
 
