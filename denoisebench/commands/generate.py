@@ -65,7 +65,7 @@ from denoisebench.generator.dataset_run import (
     validate_request,
 )
 from denoisebench.generator.executors import make_executor
-from denoisebench.generator.mitsuba_xml import parse_defines
+from denoisebench.generator.mitsuba_xml_structure import parse_defines
 from denoisebench.outputs import check_writable_dir
 from denoisebench.scenes import list_families
 

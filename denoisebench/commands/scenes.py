@@ -21,7 +21,8 @@ from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.render_plan import make_render_plan
 from denoisebench.generator.dataset_run import transport_note
 from denoisebench.generator.dataset_scenes import stage_options
-from denoisebench.generator.mitsuba_xml import load_mitsuba_xml, parse_defines
+from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
+from denoisebench.generator.mitsuba_xml_structure import parse_defines
 from denoisebench.generator.preview import render_preview, tone_map_preview, write_png
 from denoisebench.generator.usd.translate import translate_usd
 from denoisebench.scenes import get_family, list_families

@@ -45,7 +45,8 @@ from pathlib import Path
 from denoisebench.dataset import layout
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.errors import UserInputError
-from denoisebench.generator.mitsuba_xml import XML_NAME, load_mitsuba_xml, portable_files
+from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
+from denoisebench.generator.mitsuba_xml_structure import XML_NAME, portable_files
 from denoisebench.generator.usd.materialx import document_files
 from denoisebench.generator.usd.translate import apply_additions, translate_usd
 from denoisebench.scenes.effects import METADATA_KEY

@@ -14,7 +14,8 @@ import pytest
 
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
-from denoisebench.generator.mitsuba_xml import XML_NAME, load_mitsuba_xml, read_structure
+from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
+from denoisebench.generator.mitsuba_xml_structure import XML_NAME, read_structure
 from denoisebench.generator.render.frame import render_frame
 
 SIZE = 24
@@ -238,7 +239,7 @@ def test_generate_refuses_a_malformed_xml_in_one_line_and_writes_nothing(tmp_pat
 
 
 def test_included_fragments_are_read_and_are_dependencies(tmp_path, mi):
-    from denoisebench.generator.mitsuba_xml import dependencies
+    from denoisebench.generator.mitsuba_xml_structure import dependencies
 
     write_cornell(tmp_path)
     body = CORNELL.split("\n", 1)[1].rsplit("</scene>", 1)[0].replace('value="$depth"', 'value="4"')

@@ -27,13 +27,8 @@ from denoisebench.cli import main
 from denoisebench.errors import UserInputError
 from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
-from denoisebench.generator.mitsuba_xml import (
-    XML_NAME,
-    load_mitsuba_xml,
-    parse_defines,
-    portable_files,
-    read_structure,
-)
+from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
+from denoisebench.generator.mitsuba_xml_structure import XML_NAME, parse_defines, portable_files, read_structure
 from denoisebench.generator.render.frame import render_frame
 
 SIZE = 16
@@ -492,7 +487,7 @@ def test_an_orthographic_dataset_records_its_projection_and_noisebase_refuses_it
 
 
 def test_mitsuba_path_is_searched_after_the_scenes_folder_and_not_recorded(tmp_path, mi):
-    from denoisebench.generator.mitsuba_xml import read_structure as structure_of
+    from denoisebench.generator.mitsuba_xml_structure import read_structure as structure_of
 
     # a scene written for Mitsuba's -a (as Mitsuba's sensor_orthographic.xml): names a mesh in no folder of its own
     (tmp_path / "lib" / "meshes").mkdir(parents=True)
