@@ -46,13 +46,31 @@ Notes:
 
 from __future__ import annotations
 
+import threading
 import time
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
 
 from denoisebench.generator.render.frame import FrameStream, stream_key
 from denoisebench.generator.render.placed import PLACED_STREAM, PlacedMoments, check_positions, trace_placed
+
+#: Live :class:`RenderClock` objects; Dr.Jit's kernel history is on while there is one.
+_LIVE_CLOCKS = 0
+_LIVE_LOCK = threading.Lock()
+
+
+def _release_clock() -> None:
+    """A clock was collected: the last one switches the kernel history off and drops what it holds."""
+    global _LIVE_CLOCKS
+    import drjit as dr
+
+    with _LIVE_LOCK:
+        _LIVE_CLOCKS -= 1
+        if _LIVE_CLOCKS == 0:
+            dr.set_flag(dr.JitFlag.KernelHistory, False)
+            dr.kernel_history()
 
 
 class RenderClock:
@@ -63,13 +81,23 @@ class RenderClock:
         compile time of every launch that missed the kernel cache; each call drains it and adds
         those times to :attr:`compile_seconds`, which it subtracts. Launches appear in the history
         once they ran, so read the clock after evaluating.
+
+        The history keeps every launch's kernel source (IR) until it is drained, cache hits
+        included, so it is on only while a clock lives: when the last one is collected it is
+        switched off and emptied. Left on, every later launch of the process (renders that read no
+        clock) would keep its IR: gigabytes over a long process (a test run), and a copy of them
+        all in Python when the next clock drains it.
     """
 
     def __init__(self):
+        global _LIVE_CLOCKS
         import drjit as dr
 
-        dr.set_flag(dr.JitFlag.KernelHistory, True)
-        dr.kernel_history()  # drains (and so clears) the history of earlier launches
+        with _LIVE_LOCK:
+            _LIVE_CLOCKS += 1
+            dr.set_flag(dr.JitFlag.KernelHistory, True)
+            dr.kernel_history()  # drains (and so clears) the history of earlier launches
+        weakref.finalize(self, _release_clock).atexit = False  # never call into Dr.Jit while it shuts down
         self.compile_seconds = 0.0
 
     def __call__(self) -> float:

@@ -13,7 +13,7 @@ import pytest
 
 from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
 from denoisebench.generator.render.frame import render_frame
-from denoisebench.generator.render.progressive import ProgressiveFrame, RoundBuffers
+from denoisebench.generator.render.progressive import ProgressiveFrame, RenderClock, RoundBuffers
 from denoisebench.generator.render.scene import build_mitsuba_scene
 from denoisebench.generator.usd.translate import translate_usd
 from denoisebench.scenes import get_family
@@ -128,3 +128,25 @@ def test_bad_count_maps_are_refused(cornell, counts, message):
     with pytest.raises(ValueError, match=message):
         frame.render_round(counts)
     assert not frame.counts.any()
+
+
+def test_the_kernel_history_is_on_only_while_a_clock_lives(cornell):
+    """Dr.Jit's kernel history keeps every launch's IR until drained: a round that is done must leave it off and
+    empty, or every later render of the process piles up its kernels' source."""
+    import drjit as dr
+
+    frame, _ = _frame(cornell)
+    frame.render_round(np.full((SIZE, SIZE), 2))
+    assert not dr.flag(dr.JitFlag.KernelHistory)
+    frame.render_round(np.full((SIZE, SIZE), 2))  # a round of its own: its clock drains what it records
+    first, second = RenderClock(), RenderClock()
+    assert dr.flag(dr.JitFlag.KernelHistory)
+    del first
+    assert dr.flag(dr.JitFlag.KernelHistory)  # the other clock still reads it
+    dr.eval(dr.arange(dr.llvm.Float, 7) * 3.0)
+    assert second() > 0.0 and second.compile_seconds >= 0.0
+    del second
+    assert not dr.flag(dr.JitFlag.KernelHistory)
+    _plain(cornell, make_render_plan(cornell[0].effects, RenderOptions()), 2)
+    dr.eval(dr.arange(dr.llvm.Float, 9) * 5.0)
+    assert dr.kernel_history() == []
