@@ -298,3 +298,39 @@ def test_the_untyped_annotation_check_catches_what_it_should():
     assert bare("list") and bare("Any") and bare("typing.Any") and bare("tuple")
     assert not bare("dict[str, list[int]]") and not bare("list[FrameRow]") and not bare("tuple[bytes, str]")
     assert not bare("dict[tuple[str, str, int], tuple[int, np.ndarray]] | None")
+
+
+#: Lines a module of the package may have before its docstring must say why it stays whole.
+MODULE_LINES = 600
+#: How that docstring says it: a line starting with this marker, followed by the reason.
+ONE_UNIT = "One unit:"
+
+
+def _one_unit_reason(docstring: str) -> str:
+    """The reason after the ``One unit:`` marker on a line of ``docstring`` ("" when none is given)."""
+    for line in docstring.splitlines():
+        line = line.strip()
+        if line.startswith(ONE_UNIT):
+            return line[len(ONE_UNIT) :].strip()
+    return ""
+
+
+def test_long_modules_are_split_or_say_why_they_are_one_unit():
+    """A module over :data:`MODULE_LINES` lines holds more than one concern unless its docstring has a line
+    ``One unit: <the reason it stays whole>``; split it into modules named for their concerns otherwise."""
+    unexplained = []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        text = path.read_text()
+        lines = len(text.splitlines())
+        if lines > MODULE_LINES and not _one_unit_reason(ast.get_docstring(ast.parse(text)) or ""):
+            unexplained.append(f"{path.relative_to(PACKAGE.parent)}: {lines} lines")
+    assert not unexplained, (
+        f"modules over {MODULE_LINES} lines without a '{ONE_UNIT} <reason>' line in their docstring "
+        "(split them by concern, or say why they are one):\n" + "\n".join(unexplained)
+    )
+
+
+def test_the_one_unit_marker_needs_a_reason():
+    assert _one_unit_reason("Render a frame.\n\nOne unit: the kernel and its state are traced together.")
+    assert not _one_unit_reason("Render a frame.\n\nOne unit:") and not _one_unit_reason("Render a frame.")
+    assert not _one_unit_reason("It is not One unit: of anything")  # the marker starts a line
