@@ -1,6 +1,24 @@
-"""Fixtures shared by test modules."""
+"""Fixtures shared by test modules, and what keeps one pytest process small over the whole run.
+
+Memory: the run is one process that imports torch, Mitsuba and USD and renders in hundreds of tests,
+and what a test frees is not returned to the system on its own: Dr.Jit keeps freed arrays in its
+allocation cache, glibc keeps freed heap pages, and cyclic garbage (Mitsuba scenes, torch modules)
+waits for a full collection. After each test module :func:`release_memory` collects garbage, flushes
+Dr.Jit's allocation cache and trims the heap; objects alive at the end of collection (imported
+modules, the collected tests) are frozen out of the collector first, so a full collection costs
+milliseconds instead of a tenth of a second. A lean process matters twice: every process a test forks
+(torch loader workers, a ``multiprocessing`` child) starts with the parent's resident pages.
+
+Pitfalls: a module-scoped fixture that holds a scene or a dataset lives until its module ends (that
+is when it is released), and a session-scoped one until the run ends: keep big objects module-scoped.
+"""
 
 from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import gc
+import sys
 
 import pytest
 
@@ -14,3 +32,38 @@ def mi():
     if not module.variant().startswith("llvm"):
         pytest.skip("needs the LLVM variant (libLLVM >= 16)")
     return module
+
+
+def _malloc_trim() -> None:
+    """Give glibc's free heap pages back to the system (nothing elsewhere)."""
+    name = ctypes.util.find_library("c")
+    try:
+        trim = ctypes.CDLL(name).malloc_trim if name else None
+    except (OSError, AttributeError):
+        trim = None
+    if trim is not None:
+        trim(0)
+
+
+def release_memory() -> None:
+    """Collect garbage, empty Dr.Jit's allocation cache (when Dr.Jit is loaded), trim the heap."""
+    gc.collect()
+    drjit = sys.modules.get("drjit")
+    if drjit is not None:
+        drjit.flush_malloc_cache()
+    _malloc_trim()
+
+
+def pytest_collection_finish(session):
+    gc.collect()
+    gc.freeze()  # what lives now lives to the end: later full collections skip it
+
+
+def pytest_unconfigure(config):
+    gc.unfreeze()  # the interpreter's shutdown frees them as usual
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_memory_after_module():
+    yield
+    release_memory()

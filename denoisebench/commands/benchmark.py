@@ -32,8 +32,8 @@ from denoisebench.errors import UserInputError
 from denoisebench.metrics.robust import check_trim
 from denoisebench.outputs import check_writable_dir, check_writable_file
 from denoisebench.plugins import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT
+from denoisebench.plugins.proxy import PluginProxy, limits_from_args
 from denoisebench.plugins.proxy import add_arguments as add_isolation_arguments
-from denoisebench.plugins.proxy import limits_from_args
 from denoisebench.plugins.sandbox import protect
 from denoisebench.reports.build import write_report
 from denoisebench.results.store import ResultsStore, utc_now
@@ -263,6 +263,23 @@ def _run(args) -> int:
         if fresh:
             _remove_store(args.db)
         raise
+    try:
+        return _finish(args, dataset, store, plan, started, time_at, time_size)
+    finally:
+        close_workers(plan)
+
+
+def close_workers(plan) -> None:
+    """Stop the worker processes of the run's isolated denoisers (plugins): a process that runs
+    several benchmarks (a notebook, the test suite) would keep one idle worker per plugin per run
+    until it exits."""
+    for d in plan.denoisers:
+        if isinstance(d.instance, PluginProxy):
+            d.instance.close()
+
+
+def _finish(args, dataset, store, plan, started, time_at, time_size) -> int:
+    """Summary lines, timings at the second size, and the report of a measured run."""
     with store:
         units = store.units(plan.run_id)
         failed = [u for u in units if u.status != "ok"]

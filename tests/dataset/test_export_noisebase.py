@@ -109,7 +109,21 @@ def test_training_loader_reads_a_sequence_equal_to_ours(rendered, tmp_path):
     assert moved > 0.5  # the camera moves: the motion check above is not 0 == 0
 
 
-def test_test_loader_reads_padded_frames_equal_to_ours(rendered, tmp_path):
+def _loader_workers_at_most_one(monkeypatch):
+    """Noisebase's test loader asks torch for 8 loader workers (for 3 frames here): each is a fork of this pytest
+    process and starts with its resident pages. One worker still reads every frame through the worker path."""
+    import torch.utils.data
+
+    class AtMostOneWorker(torch.utils.data.DataLoader):
+        def __init__(self, *args, **kwargs):
+            kwargs["num_workers"] = min(kwargs.get("num_workers", 0), 1)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(torch.utils.data, "DataLoader", AtMostOneWorker)
+
+
+def test_test_loader_reads_padded_frames_equal_to_ours(rendered, tmp_path, monkeypatch):
+    _loader_workers_at_most_one(monkeypatch)
     out = tmp_path / "test"
     summary = _export(rendered, out, "--layout", "test", "--spp", "1")
     ds = open_dataset(rendered)

@@ -28,6 +28,7 @@ from denoisebench.denoisers.runner import PUBLIC_META, run_denoisers, run_sequen
 from denoisebench.denoisers.synthetic import synthetic_sequence
 from denoisebench.plugins import Limits
 from denoisebench.results.store import ResultsStore
+from tests.support.processes import plugin_workers
 
 PLUGINS = textwrap.dedent(
     '''
@@ -271,9 +272,11 @@ def test_benchmark_survives_every_misbehaving_plugin_and_a_rerun_completes(datas
             for arg in ("--denoiser", f"evil_plugins:{attr}")
         ],
     ]
+    workers = plugin_workers()
     started = time.monotonic()
     assert cli.main(argv) == 0
     assert time.monotonic() - started < 120
+    assert plugin_workers() <= workers  # the run stopped the workers it started
     frames = _frames_by_denoiser(db)
     reasons = {name: frames[name][0].error or "" for name in frames}
     assert "SystemExit: 3" in reasons["exits"] and "status 3" in reasons["hard_exit"]

@@ -183,6 +183,19 @@ class _Plugin:
         )
         for row in sorted(self.rows, key=lambda row: -row[1])[:25]:
             write(f"{row[1]:8.0f} peak {row[2]:8.0f} pss {row[3]:8.0f} after {row[4]:8.0f} self  {row[0]}")
+        left = [pid for pid in tree(os.getpid()) if pid != os.getpid()]
+        write(f"processes below pytest at the end of the run: {len(left)}")
+        for pid in left[:40]:
+            write(f"{_mb(rss_bytes(pid)):8.0f} MiB  {pid}  {command_line(pid)[:160]}")
+
+
+def command_line(pid: int) -> str:
+    """``pid``'s command line, arguments joined by spaces ("" once it has exited)."""
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as handle:
+            return handle.read().replace(b"\0", b" ").decode(errors="replace").strip()
+    except OSError:
+        return ""
 
 
 def pytest_configure(config):
