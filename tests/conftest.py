@@ -3,8 +3,8 @@
 Memory: the run is one process that imports torch, Mitsuba and USD and renders in hundreds of tests,
 and what a test frees is not returned to the system on its own: Dr.Jit keeps freed arrays in its
 allocation cache, glibc keeps freed heap pages, and cyclic garbage (Mitsuba scenes, torch modules)
-waits for a full collection. After each test module :func:`release_memory` collects garbage, flushes
-Dr.Jit's allocation cache and trims the heap; objects alive at the end of collection (imported
+waits for a full collection. After each test module :func:`release_memory` stops the plugin workers
+the module left running, collects garbage, flushes Dr.Jit's allocation cache and trims the heap; objects alive at the end of collection (imported
 modules, the collected tests) are frozen out of the collector first, so a full collection costs
 milliseconds instead of a tenth of a second. A lean process matters twice: every process a test forks
 (torch loader workers, a ``multiprocessing`` child) starts with the parent's resident pages.
@@ -46,7 +46,15 @@ def _malloc_trim() -> None:
 
 
 def release_memory() -> None:
-    """Collect garbage, empty Dr.Jit's allocation cache (when Dr.Jit is loaded), trim the heap."""
+    """Stop plugin workers left running, collect garbage, empty Dr.Jit's allocation cache (when Dr.Jit is
+    loaded), trim the heap.
+
+    A plugin proxy a test did not close keeps its worker process (tens of MiB, a sandbox's ``bwrap`` pair)
+    until the interpreter exits: :mod:`denoisebench.plugins.process` holds every live worker for its exit
+    hook, which is called here instead."""
+    process = sys.modules.get("denoisebench.plugins.process")
+    if process is not None:
+        process._close_all()
     gc.collect()
     drjit = sys.modules.get("drjit")
     if drjit is not None:

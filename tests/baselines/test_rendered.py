@@ -46,7 +46,7 @@ def _render(family: str, aperture_scale: float, tmp_dir) -> Frame:
     )
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
     tmp_dir = tmp_path_factory.mktemp("rendered_baselines")
     return {family: _render(family, scale, tmp_dir) for family, scale in FAMILIES.items()}
