@@ -47,6 +47,8 @@ def _bench(dataset: Path, db: Path, *extra: str) -> int:
     return cli.main(
         [
             "benchmark",
+            "--time-size",
+            "64x64",
             "--data",
             str(dataset),
             "--db",
@@ -150,6 +152,8 @@ def test_unwritable_outputs_are_exit_2_before_measuring(dataset, tmp_path, capsy
     db = tmp_path / "ok.sqlite" if option == "--out" else Path(target)
     argv = [
         "benchmark",
+        "--time-size",
+        "64x64",
         "--data",
         str(dataset),
         "--split",

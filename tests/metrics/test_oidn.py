@@ -198,7 +198,7 @@ def test_run_benchmark_metrics_oidn(tmp_path):
 
     data = make_synthetic_dataset(tmp_path / "ds", scenes=2, frames=2, height=16, width=16, spp=(1,))
     argv = ["--data", str(data), "--db", str(tmp_path / "db.sqlite"), "--out", str(tmp_path / "report")]
-    assert main(["benchmark", *argv, "--denoisers", "identity", "--metrics", "oidn"]) == 0
+    assert main(["benchmark", *argv, "--denoisers", "identity", "--metrics", "oidn", "--time-size", "64x64"]) == 0
     results = json.loads((tmp_path / "report" / "results.json").read_text())
     row = next(r for r in results["summary"] if r["denoiser"] == "identity")
     assert {"oidn_psnr", "oidn_ssim"} <= set(row["metrics"])

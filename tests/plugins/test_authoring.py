@@ -201,6 +201,8 @@ def test_run_benchmark_scores_plain_function_plugins_quietly(tmp_path, plugin_di
             "-m",
             "denoisebench.cli",
             "benchmark",
+            "--time-size",
+            "64x64",
             "--data",
             str(dataset),
             "--denoisers",

@@ -250,6 +250,8 @@ def test_benchmark_survives_every_misbehaving_plugin_and_a_rerun_completes(datas
     db, out = tmp_path / "r.sqlite", tmp_path / "report"
     argv = [
         "benchmark",
+        "--time-size",
+        "64x64",
         "--data",
         str(dataset),
         "--db",

@@ -23,6 +23,7 @@ def report(tmp_path_factory):
     root = tmp_path_factory.mktemp("conditions")
     data = make_synthetic_dataset(root / "ds", scenes=2, frames=2, height=8, width=8, spp=(1,), ref_spp=4)
     args = ["--data", str(data), "--db", str(root / "db.sqlite"), "--out", str(root / "report")]
+    args += ["--time-size", "64x64"]
     assert main(["benchmark", *args, "--denoisers", "identity", "--metrics", "relmse,ssim,psnr", "--split", "all"]) == 0
     return root / "report"
 

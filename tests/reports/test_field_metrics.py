@@ -22,6 +22,8 @@ def report(tmp_path_factory):
     code = main(
         [
             "benchmark",
+            "--time-size",
+            "64x64",
             "--data",
             str(data),
             "--db",

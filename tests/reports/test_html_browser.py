@@ -49,6 +49,8 @@ def report(tmp_path_factory) -> Path:
             "-m",
             "denoisebench.cli",
             "benchmark",
+            "--time-size",
+            "64x64",
             "--data",
             str(data),
             "--db",

@@ -51,6 +51,8 @@ def run(tmp_path_factory):
     code = main(
         [
             "benchmark",
+            "--time-size",
+            "64x64",
             "--data",
             str(data),
             "--db",

@@ -69,6 +69,8 @@ def _command(dataset: Path, db: Path, *extra: str) -> list[str]:
         "-m",
         "denoisebench.cli",
         "benchmark",
+        "--time-size",
+        "64x64",
         "--data",
         str(dataset),
         "--db",
@@ -260,6 +262,8 @@ def test_scores_on_a_denoisers_own_training_scenes_are_marked_not_held_out(tmp_p
         main(
             [
                 "benchmark",
+                "--time-size",
+                "64x64",
                 "--data",
                 str(data),
                 "--db",
@@ -300,6 +304,8 @@ def test_scores_on_a_denoisers_own_training_scenes_are_marked_not_held_out(tmp_p
         main(
             [
                 "benchmark",
+                "--time-size",
+                "64x64",
                 "--data",
                 str(data),
                 "--db",
