@@ -7,8 +7,9 @@ their noise floor is <= DEMO_REF_ERROR, at most DEMO_REF_SPP spp; --quick: 2 fam
 48x48), and prints where they are.
 Eight frames give seven frame differences per sequence: enough for the flicker figure and the
 frame strips to show flicker (three frames gave two points per line).
-Finally it benchmarks every built-in denoiser on every scene of that dataset (``--split all``: it
-is made only to be benchmarked) at every rung, times each denoiser and one render again at
+Finally it benchmarks every built-in denoiser but DEMO_SKIPS (each left out for its seconds, with the
+reason beside it), with every default metric but DEMO_METRIC_SKIPS, on every scene of that dataset
+(``--split all``: it is made only to be benchmarked) at every rung, times each denoiser and one render again at
 DEMO_TIME_SIZE (the report's times are projected to 1920x1080 from fixed + per-pixel costs,
 :mod:`denoisebench.analysis.time_model`) and writes the report (OUT/report/index.html, results
 in OUT/benchmark.sqlite): the noisy input's "render more" curve over five measured rungs, the
@@ -73,15 +74,34 @@ DEMO_FRAMES = 8
 DEMO_SIZE = 64
 #: The demo's nested spp ladder (at least 1, 2, 4, 8, 16: the "render more" curve is measured, not fitted).
 DEMO_SPP = (1, 2, 4, 8, 16)
-#: Built-in denoisers the demo leaves out, each for its seconds: lightfield reprojects every sample in
-#: numpy, 3.0 s per 64-px frame measured in the demo (200 frames: 600 s, more than the rest of the
-#: benchmark together); ``run-benchmark --denoisers lightfield`` runs it on any dataset with samples.
-DEMO_SKIPS = ("lightfield",)
+#: Built-in denoisers the demo leaves out, each for its seconds (``run-benchmark --denoisers NAME`` runs any of
+#: them on the demo's dataset):
+#:
+#: * ``lightfield`` reprojects every sample in numpy: 3.0 s per 64-px frame measured in the demo (200 frames:
+#:   600 s, more than the rest of the benchmark together).
+#: * ``rpf``, the paper's preset of the random parameter filter: 106 s of denoising over the demo's 200 frames
+#:   plus 30 s of scoring, the most of any denoiser left; ``rpf_fast`` (the same filter with 48 samples per
+#:   neighbourhood instead of 128, baselines/rpf_card.md) stands for it.
+#: * ``identity`` returns its input: its scores are the noisy input's, which every report has as ``noisy``
+#:   (30 s of scoring the same images twice).
+DEMO_SKIPS = ("lightfield", "rpf", "identity")
+#: Default metrics the demo leaves out, the three dearest that no table or verdict of the report needs
+#: (measured per 16-denoiser group of 8 frames at 64 px, with the half-reference floors: deltae2000 2.4 s,
+#: cvvdp 2.3 s, msssim 2.2 s; about 150 s over the demo's 25 groups). ``run-benchmark --data
+#: demo_out/dataset --split all`` scores every default metric.
+DEMO_METRIC_SKIPS = ("deltae2000", "cvvdp", "msssim")
 
 
 def demo_denoisers() -> list[str]:
     """Every available denoiser (built-ins, then entry points) but :data:`DEMO_SKIPS`."""
     return [name for name in available_denoisers() if name not in DEMO_SKIPS]
+
+
+def demo_metrics() -> list[str]:
+    """Every default metric (:func:`~denoisebench.metrics.registry.default_metric_names`) but :data:`DEMO_METRIC_SKIPS`."""
+    from denoisebench.metrics.registry import default_metric_names
+
+    return [name for name in default_metric_names() if name not in DEMO_METRIC_SKIPS]
 
 
 #: The second size denoisers and one render are timed at, and each denoiser's seconds budget there.
@@ -141,11 +161,19 @@ def run(args) -> int:
         if translated.effects_mismatch:
             tqdm.write(f"warning: {family.name}: effects mismatch {translated.effects_mismatch}", file=sys.stderr)
         previews.append(write_png(tone_map_preview(image), out / "previews" / f"{family.name}.png"))
-    print(f"authored and previewed {len(families)} scene families in {time.perf_counter() - started:.1f} s")
+    previewed = time.perf_counter()
+    print(f"authored and previewed {len(families)} scene families in {previewed - started:.1f} s")
     for path in previews:
         print(f"  {path}")
     _dataset_stage(out / "dataset", args)
-    return _report_stage(out)
+    generated = time.perf_counter()
+    code = _report_stage(out)
+    ended = time.perf_counter()
+    print(
+        f"demo: {ended - started:.0f} s (previews {previewed - started:.0f} s, dataset {generated - previewed:.0f} s, "
+        f"benchmark, timing and report {ended - generated:.0f} s)"
+    )
+    return code
 
 
 def _dataset_stage(out: Path, args) -> None:
@@ -190,6 +218,8 @@ def _report_stage(out: Path) -> int:
             str(data),
             "--denoisers",
             ",".join(demo_denoisers()),
+            "--metrics",
+            ",".join(demo_metrics()),
             "--split",
             "all",
             "--db",

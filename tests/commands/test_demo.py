@@ -60,3 +60,22 @@ def test_inseparable_tells_fixed_pairs_from_pairs_a_seed_can_split():
     assert not _inseparable({"depth_of_field", "motion_blur"})  # cluttered draws them apart
     assert not _inseparable({"environment", "motion_blur"})  # glass_env has the environment alone
     assert not _inseparable({"area_lights", "indirect"})  # glossy_fireflies: area lights, no indirect
+
+
+def test_the_demo_scores_what_the_report_leads_with_and_leaves_out_only_what_it_names():
+    """The demo's metric selection keeps every metric the report's curves, tables, verdicts and flicker figure
+    read, and drops only the default metrics it names; its denoisers are every available one but the skips,
+    each of which is a denoiser that exists (a renamed one would otherwise slip back in unnoticed)."""
+    from denoisebench.commands.demo import DEMO_METRIC_SKIPS, DEMO_SKIPS, demo_denoisers, demo_metrics
+    from denoisebench.denoisers.registry import available_denoisers
+    from denoisebench.metrics.registry import default_metric_names
+    from denoisebench.results.names import ERROR_METRICS, FLICKER_METRICS, REQUIRED_METRICS
+    from tests.support.paths import REPO
+
+    metrics = set(demo_metrics())
+    assert set(REQUIRED_METRICS) | set(ERROR_METRICS) | set(FLICKER_METRICS) <= metrics
+    assert metrics | set(DEMO_METRIC_SKIPS) == set(default_metric_names())
+    assert set(DEMO_SKIPS) <= set(available_denoisers())
+    assert set(demo_denoisers()) == set(available_denoisers()) - set(DEMO_SKIPS)
+    page = (REPO / "docs" / "demo.md").read_text()
+    assert all(f"`{name}`" in page for name in (*DEMO_SKIPS, *DEMO_METRIC_SKIPS))
