@@ -4,6 +4,9 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.setup-stamp
 DEMO_OUT ?= demo_out
+# Test worker processes (pytest-xdist): each takes whole test modules, so a module's fixtures are built once.
+# Two on a 2-core machine: the suite alone keeps one core about half idle (Python between renders).
+TEST_WORKERS ?= 2
 
 .PHONY: setup demo test lint format clean
 
@@ -26,7 +29,7 @@ demo: setup
 
 test: setup lint
 	bash scripts/ensure_chromium.sh
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadfile tests
 
 # One style, enforced: ruff's linter and formatter, configured in pyproject.toml.
 lint: setup

@@ -63,7 +63,7 @@ def test_ray_executor_scores_like_local_and_contains_an_exiting_plugin(tmp_path)
         split="all",
     )
     results = {}
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
     try:
         for executor in ("local", "ray"):
             with ResultsStore(tmp_path / f"{executor}.sqlite") as store:

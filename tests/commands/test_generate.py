@@ -194,7 +194,7 @@ def test_sigkill_then_rerun_gives_the_bytes_of_an_uninterrupted_run(local_datase
 
 def test_ray_executor_gives_the_same_bytes(local_dataset, tmp_path):
     ray = pytest.importorskip("ray")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
     try:
         assert _generate(tmp_path / "ray", "--executor", "ray") == 0
     finally:
