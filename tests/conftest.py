@@ -1,6 +1,6 @@
 """Fixtures shared by test modules, and what keeps one pytest process small over the whole run.
 
-Memory: the run is one process that imports torch, Mitsuba and USD and renders in hundreds of tests,
+Memory: each test process (one, or one per pytest-xdist worker) imports torch, Mitsuba and USD and renders in hundreds of tests,
 and what a test frees is not returned to the system on its own: Dr.Jit keeps freed arrays in its
 allocation cache, glibc keeps freed heap pages, and cyclic garbage (Mitsuba scenes, torch modules)
 waits for a full collection. After each test module :func:`release_memory` stops the plugin workers
