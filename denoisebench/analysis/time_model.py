@@ -6,12 +6,18 @@ calls). Scaling such a time by the pixel ratio to 1920×1080 charges that overhe
 module separates the costs from measurements and projects them to the resolution a report states
 (``run-benchmark --time-at WxH``, default 1920×1080):
 
-* **Denoisers**: ``seconds(P, s) = fixed + (t₀(s) − fixed) · P / P₀``. ``t₀(s)`` is the mean
+* **Denoisers**: ``seconds(P, s) = fixed + (t₀(s) − fixed) · P / P₀``. ``t₀(s)`` is the median
   measured seconds per frame at the dataset's ``P₀`` pixels and input spp ``s`` (the run's own
   calls); ``fixed`` (per call) comes from a line through that time and one more call, after the
   run, on a synthetic frame of ``--time-size`` pixels (default 1024×1024, 1 MP): the frame's
   buffers (and per-sample data) tiled up to that size (:func:`upscaled_frame`) at the lowest spp.
-  The part that grows with spp (per-sample filters such as RPF) is taken as per-pixel.
+  The part that changes with spp is taken as per-pixel. Where ``t₀`` at the highest spp differs
+  from the lowest by more than the spread, the denoiser is timed at the larger size there too
+  (:class:`HighestSppTiming`) and ``seconds(P, s)`` lies between the two measured lines, at the
+  place ``t₀(s)`` takes between ``t₀`` at the two ends. Pitfall: a small frame's seconds mix fixed
+  and per-pixel work, so a change with spp measured only at ``P₀`` cannot be split; read through one
+  line it made cross_bilateral's 1080p time at 2–16 spp its 3 ms fixed cost (0.8 s measured:
+  its 1-spp frames estimate their own variance per pixel, 6 ms at 64×64 against 2.5 ms).
 * **Rendering**: ``seconds(P, s) = a(P) + b(P) · s``, a line through the stored render seconds of
   the ladder's rungs (seconds against spp; with nested rungs, the progressive time to reach each)
   at ``P₀``. ``b`` (per sample) is a per-pixel-sample cost: each sample is one camera path through
@@ -107,16 +113,18 @@ def line_through(points) -> tuple[float, float] | None:
 
 @dataclass
 class DenoiserCost:
-    """One denoiser's time per frame: ``fixed`` per call plus a per-pixel part measured at ``pixels0``."""
+    """One denoiser's time per frame: ``fixed`` per call plus a per-pixel part measured at ``pixels0``;
+    with ``highest`` (a second timing at the ladder's highest spp), one such line at each end of the ladder."""
 
     label: str
     pixels0: int
-    small: dict[int, float]  # spp → mean measured seconds per frame at pixels0
+    small: dict[int, float]  # spp → median measured seconds per frame at pixels0
     fixed: float | None = None  # None: no second size measured
     large_pixels: int | None = None
     large_seconds: float | None = None
     note: str = ""
     spread: float = MIN_SPREAD  # median / minimum of its timing calls (≥ MIN_SPREAD)
+    highest: HighestSppTiming | None = None
 
     @property
     def per_megapixel(self) -> float | None:
@@ -141,8 +149,26 @@ class DenoiserCost:
             return base
         if self.fixed is None:
             return None  # never scale a small frame's time by the pixel ratio alone
-        fixed = min(self.fixed, base)
-        return fixed + (base - fixed) * pixels / self.pixels0
+        high = self.highest
+        if high is None or high.spp not in self.small:
+            fixed = min(self.fixed, base)
+            return fixed + (base - fixed) * pixels / self.pixels0
+        low_spp = min(self.small)
+        at_low, at_high = self.small[low_spp], self.small[high.spp]
+        low_line = self.fixed + (at_low - self.fixed) * pixels / self.pixels0
+        high_line = high.fixed + (at_high - high.fixed) * pixels / self.pixels0
+        weight = float(np.clip((base - at_low) / (at_high - at_low), 0.0, 1.0)) if at_high != at_low else 1.0
+        return low_line + weight * (high_line - low_line)
+
+
+@dataclass(frozen=True)
+class HighestSppTiming:
+    """A denoiser's second timing, at the ladder's highest spp: the line ``fixed + per-pixel · P`` there."""
+
+    spp: int
+    pixels: int
+    seconds: float
+    fixed: float
 
 
 @dataclass
@@ -290,6 +316,9 @@ class TimeModel:
                     "measured_at_dataset_size": c.small,
                     "timed_pixels": c.large_pixels,
                     "timed_seconds": c.large_seconds,
+                    "timed_at_highest_spp": None
+                    if c.highest is None
+                    else {"spp": c.highest.spp, "pixels": c.highest.pixels, "seconds": c.highest.seconds},
                     "seconds_at_time_at": {str(s): c.seconds(self.pixels, s) for s in sorted(c.small)},
                     "note": c.note,
                     "spread": c.spread,
@@ -358,6 +387,15 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
             if line is not None and pixels > pixels0:
                 cost.fixed = min(line[0], small[min(small)])
                 cost.large_pixels, cost.large_seconds = pixels, float(record["seconds"])
+            high = record.get("highest") or {}
+            at_high = small.get(int(high.get("spp", -1)))
+            if cost.fixed is not None and at_high is not None and high.get("seconds") is not None:
+                pixels = int(high["width"]) * int(high["height"])
+                line = line_through([(pixels0, at_high), (pixels, high["seconds"])])
+                if line is not None and pixels > pixels0:
+                    cost.highest = HighestSppTiming(
+                        int(high["spp"]), pixels, float(high["seconds"]), min(line[0], at_high)
+                    )
         cost.note = record.get("note", "")
         cost.spread = max(float(record.get("spread") or MIN_SPREAD), MIN_SPREAD)
         costs[label] = cost

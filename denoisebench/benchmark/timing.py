@@ -1,7 +1,11 @@
 """Timing a run's denoisers and its renderer at a second, larger size (what the time model projects from).
 
 After the run each denoiser is called again on its frame tiled up to ``--time-size``
-(:func:`upscaled_frame`, :func:`time_call`) and the dataset's first stage is rendered at the
+(:func:`upscaled_frame`, :func:`time_call`) at the ladder's lowest spp, and once more at its highest
+spp when the run's own seconds per frame there differ by more than the spread (the record's
+``highest``): a per-sample filter grows with spp, and a filter that estimates the variance a 1-spp
+frame lacks does more per pixel at 1 spp (cross_bilateral on the demo's cluttered_915: 236 ms at 512×512
+and 1 spp, 90 ms at 16 spp). The dataset's first stage is rendered at the
 dataset's size and at ``--time-size`` (:func:`probe_render`); the records go to the store
 (:mod:`denoisebench.results.timings`) and :mod:`denoisebench.analysis.time_model` reads them.
 
@@ -82,6 +86,14 @@ def timing_size(small_seconds: float, pixels0: int, requested: tuple[int, int], 
     if width * height < MIN_SIZE_FACTOR * pixels0:
         return None
     return width, height, f"timed at {width}×{height}, not {requested[0]}×{requested[1]}, to stay within {budget:g} s"
+
+
+def _changes_with_spp(lowest: list[float], highest: list[float]) -> bool:
+    """True when a denoiser's median seconds per frame at the ladder's highest spp differ from those at its lowest
+    by more than :data:`MIN_SPREAD` either way: its cost depends on the input (per-sample filters grow with spp;
+    a filter that estimates variance itself where a 1-spp frame has none shrinks after 1 spp)."""
+    low, high = float(np.median(lowest)), float(np.median(highest))
+    return low > 0 and high > 0 and max(low / high, high / low) > MIN_SPREAD
 
 
 def time_call(denoiser, frame, label: str, repeats: int = TIMING_REPEATS) -> tuple[float | None, str, float]:
@@ -194,7 +206,7 @@ def measure_run_timings(
         write_timing(store, plan.run_id, "machine", machine())
     if size is None or not plan.scenes or not plan.spp:
         return read_timings(store, plan.run_id)
-    scene, spp = plan.scenes[0], min(plan.spp)
+    scene, spp, highest = plan.scenes[0], min(plan.spp), max(plan.spp)
     info = dataset.scene(scene)
     pixels0 = int(info.record["width"]) * int(info.record["height"])
     frames = store.frames(plan.run_id)
@@ -203,27 +215,40 @@ def measure_run_timings(
     bar = tqdm(
         total=len(todo) + wants_probe, desc="benchmark: timing at a larger size", file=sys.stderr, disable=not progress
     )
-    if todo:
-        needs_samples = any("samples" in getattr(d, "needs", ()) for d in plan.denoisers if d.label in todo)
-        small = dataset.frame(scene, spp, 0, samples=needs_samples)
-    for label in todo:
-        measured = [
-            f.denoise_seconds for f in frames if f.denoiser == label and f.spp == spp and f.denoise_seconds is not None
+    needs_samples = any("samples" in getattr(d, "needs", ()) for d in plan.denoisers if d.label in todo)
+    small_frames = {}  # spp -> the scene's frame 0 at that spp, read once
+
+    def run_seconds(label: str, at: int) -> list[float]:
+        return [
+            f.denoise_seconds for f in frames if f.denoiser == label and f.spp == at and f.denoise_seconds is not None
         ]
+
+    def timed(label: str, at: int, measured: list[float]) -> dict:
+        """One timing at the larger size on frame 0 at ``at`` spp, as the record's fields."""
+        chosen = timing_size(float(np.mean(measured)), pixels0, size, budget)
+        if chosen is None:
+            return {"seconds": None, "note": f"not timed at a larger size: over {budget:g} s even at 4× the frame"}
+        if at not in small_frames:
+            small_frames[at] = dataset.frame(scene, at, 0, samples=needs_samples)
+        width, height, note = chosen
+        started = time.perf_counter()
+        seconds, error, spread = time_call(instances[label], upscaled_frame(small_frames[at], width, height), label)
+        fields = {"width": width, "height": height, "seconds": seconds, "note": error or note}
+        if math.isfinite(spread):
+            fields["spread"] = spread
+        fields["wall_seconds"] = time.perf_counter() - started
+        return fields
+
+    for label in todo:
+        measured = run_seconds(label, spp)
         record = {"spp": spp, "scene": scene}
-        chosen = timing_size(float(np.mean(measured)), pixels0, size, budget) if measured else None
         if not measured:  # every unit failed (or none ran): a timing call would only fail or hang again
             record.update(seconds=None, note="not timed at a larger size: no successful frame in the run")
-        elif chosen is None:
-            record.update(seconds=None, note=f"not timed at a larger size: over {budget:g} s even at 4× the frame")
         else:
-            width, height, note = chosen
-            started = time.perf_counter()
-            seconds, error, spread = time_call(instances[label], upscaled_frame(small, width, height), label)
-            record.update(width=width, height=height, seconds=seconds, note=error or note)
-            if math.isfinite(spread):
-                record["spread"] = spread
-            record["wall_seconds"] = time.perf_counter() - started
+            record.update(timed(label, spp, measured))
+            at_highest = run_seconds(label, highest)
+            if record["seconds"] is not None and at_highest and _changes_with_spp(measured, at_highest):
+                record["highest"] = {"spp": highest, **timed(label, highest, at_highest)}
         write_timing(store, plan.run_id, f"denoiser:{label}", record)
         bar.update(1)
     if wants_probe:

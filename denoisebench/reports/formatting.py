@@ -244,6 +244,11 @@ def time_model_rows(report: ReportModel) -> tuple[list[str], list[list[str]]]:
         timed = (
             f"{num(c.small[lowest])} s at {model.dataset_size[0]}×{model.dataset_size[1]}"
             + (f", {num(c.large_seconds)} s at {num(c.large_pixels / 1e6, 2)} MP" if c.large_pixels else "")
+            + (
+                f" ({lowest} spp), {num(c.highest.seconds)} s at {num(c.highest.pixels / 1e6, 2)} MP ({c.highest.spp} spp)"
+                if c.highest
+                else ""
+            )
             + (f"; {c.note}" if c.note else "")
         )
         rows.append([label, num(c.fixed), num(c.per_megapixel), num(model.denoise_seconds(label, lowest)), timed])

@@ -5,6 +5,7 @@ measured in bench/, never in unit tests)."""
 
 from __future__ import annotations
 
+import textwrap
 from types import SimpleNamespace
 
 import numpy as np
@@ -180,3 +181,76 @@ def test_time_model_is_in_the_report(tmp_path):
     )
     md = (tmp_path / "r" / "report.md").read_text()
     assert "Times are per frame at 1920×1080, projected from 16×16" in md and "GPU" in md
+
+
+def _low_law(pixels: int) -> float:  # 1 spp: the filter estimates its own variance per pixel
+    return 0.0031 + (0.006 - 0.0031) / P0 * pixels
+
+
+def _high_law(pixels: int) -> float:  # 16 spp: less per-pixel work, less fixed cost
+    return 0.0005 + (0.0025 - 0.0005) / P0 * pixels
+
+
+def test_a_cost_that_shrinks_after_one_spp_is_projected_from_a_timing_at_each_end_of_the_ladder():
+    """cross_bilateral's pattern: 6 ms per 1-spp frame, 2.5 ms at 2-16 spp (its own variance estimate at 1 spp).
+    One line through the 1-spp timing puts its fixed cost above the 16-spp frame's whole time; the projection
+    then charged 2-16 spp only that fixed cost. With a timing at 16 spp, both ends are their planted laws and
+    the middle lies between them."""
+    small = {1: _low_law(P0), 2: 0.0027, 16: _high_law(P0)}
+    cost = tm.DenoiserCost("d", P0, dict(small))
+    cost.fixed = tm.line_through([(P0, _low_law(P0)), (P1, _low_law(P1))])[0]
+    assert cost.fixed == pytest.approx(0.0031)
+    assert cost.seconds(HD, 16) == pytest.approx(0.0025)  # the one-line projection: a 64x64 frame's time at 1080p
+    fixed16 = tm.line_through([(P0, _high_law(P0)), (P1, _high_law(P1))])[0]
+    cost.highest = tm.HighestSppTiming(16, P1, _high_law(P1), fixed16)
+    assert cost.seconds(HD, 1) == pytest.approx(_low_law(HD))
+    assert cost.seconds(HD, 16) == pytest.approx(_high_law(HD))
+    assert _high_law(HD) < cost.seconds(HD, 2) < _low_law(HD)
+    assert cost.seconds(P0, 2) == pytest.approx(0.0027)  # the dataset's own size stays as measured
+
+
+SPP_DEPENDENT = textwrap.dedent(
+    """
+    import time
+    import numpy as np
+
+    class SlowAtOneSpp:
+        name = "slow_at_one_spp"
+        needs = frozenset({"color"})
+        temporal = False
+        def reset(self):
+            pass
+        def denoise(self, frame):
+            color = np.asarray(frame.buffers["color"], np.float32)
+            time.sleep(2e-5 * color.shape[0] * color.shape[1] * (3 if frame.spp == 1 else 1))
+            return color
+
+    class Steady(SlowAtOneSpp):
+        name = "steady"
+        def denoise(self, frame):
+            time.sleep(0.05)  # the same at every spp (and every size)
+            return np.asarray(frame.buffers["color"], np.float32)
+    """
+)
+
+
+def test_a_denoiser_whose_time_changes_with_spp_is_timed_at_the_highest_spp_too(tmp_path):
+    from denoisebench.benchmark.run import run_benchmark
+    from denoisebench.benchmark.runner import BenchmarkConfig
+    from denoisebench.dataset import open_dataset
+    from denoisebench.dataset.synthetic import make_synthetic_dataset
+    from denoisebench.results.store import ResultsStore
+
+    plugin = tmp_path / "slow.py"
+    plugin.write_text(SPP_DEPENDENT)
+    spec, steady = f"{plugin}:SlowAtOneSpp", f"{plugin}:Steady"
+    dataset = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=1, frames=2, height=16, width=16, spp=(1, 4)))
+    config = BenchmarkConfig([spec, steady], [1, 4], split="all", metrics=["relmse"], isolation="none")
+    with ResultsStore(tmp_path / "db.sqlite") as store:
+        plan = run_benchmark(dataset, config, store, progress=False)
+        instances = {d.label: d.instance for d in plan.denoisers}
+        records = timing.measure_run_timings(store, dataset, plan, instances, (64, 64), progress=False)
+    slow, flat = records["denoiser:slow_at_one_spp"], records["denoiser:steady"]  # labelled by their names
+    assert slow["spp"] == 1 and slow["highest"]["spp"] == 4 and slow["highest"]["width"] == 64
+    assert slow["highest"]["seconds"] < slow["seconds"] / 2  # a third of the per-pixel sleep, plus call overhead
+    assert "highest" not in flat  # the same time at every spp: one timing
