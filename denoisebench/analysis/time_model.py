@@ -398,6 +398,8 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
                     )
         cost.note = record.get("note", "")
         cost.spread = max(float(record.get("spread") or MIN_SPREAD), MIN_SPREAD)
+        if cost.highest is not None:  # its times between the two lines carry the larger of the two spreads
+            cost.spread = max(cost.spread, float(high.get("spread") or MIN_SPREAD))
         costs[label] = cost
     timed = [c for c in costs.values() if c.fixed is not None]
     model = TimeModel(requested, pixels0, (width0, height0), render, costs, timings.get("machine") or machine())
