@@ -13,6 +13,12 @@ Notes
   is part of what a reader should see); the side is a quarter of the image's short side, between 8
   and 48 pixels.
 * Worst-region windows do not overlap; a window's score is its mean error.
+* **A window shows something.** Where a ``content`` map is given (:func:`content_map`: the pixels
+  of the reference visible after the report's tone map, at least :data:`VISIBLE_LEVEL` in display
+  units), a window must cover at least :data:`MIN_CONTENT` of such pixels whenever any window does.
+  A relative error such as relMSE is largest around small bright things on black (a lamp in the
+  night sky), and a crop there is black on every tile; the rule keeps the worst window among those a
+  reader can see into. An image with no such window falls back to the error alone.
 """
 
 from __future__ import annotations
@@ -20,13 +26,30 @@ from __future__ import annotations
 import numpy as np
 
 from denoisebench.metrics import temporal_relmse_map
+from denoisebench.metrics.tonemap import tonemap
 
 # Lazy imports: scipy only where windows are chosen.
 
 #: Frames in a strip (the first ones of the sequence).
 STRIP_FRAMES = 8
 
-__all__ = ["STRIP_FRAMES", "window_size", "worst_windows", "strip_side", "choose_window", "cut"]
+#: Least share of visible reference pixels a window must cover (where any window does).
+MIN_CONTENT = 0.5
+#: A reference pixel is visible when its tone-mapped value reaches this (display units 0–1; 8/255:
+#: darker reads as black on a screen).
+VISIBLE_LEVEL = 8 / 255
+
+__all__ = [
+    "STRIP_FRAMES",
+    "MIN_CONTENT",
+    "VISIBLE_LEVEL",
+    "window_size",
+    "content_map",
+    "worst_windows",
+    "strip_side",
+    "choose_window",
+    "cut",
+]
 
 
 def window_size(height: int, width: int) -> int:
@@ -34,8 +57,18 @@ def window_size(height: int, width: int) -> int:
     return max(4, min(height, width) // 4)
 
 
-def worst_windows(error_map: np.ndarray, size: int, count: int = 2) -> list[tuple[int, int]]:
-    """(top, left) of up to ``count`` non-overlapping size×size windows with the largest mean error."""
+def content_map(reference: np.ndarray) -> np.ndarray:
+    """H×W share of visible pixels of a reference (H×W×C, or F×H×W×C: the share over frames)."""
+    display = tonemap(np.nan_to_num(np.asarray(reference, np.float64), nan=0.0, posinf=0.0, neginf=0.0))
+    visible = np.asarray(display, np.float64).max(axis=-1) >= VISIBLE_LEVEL
+    return visible.mean(axis=0) if visible.ndim == 3 else visible.astype(np.float64)
+
+
+def worst_windows(
+    error_map: np.ndarray, size: int, count: int = 2, content: np.ndarray | None = None
+) -> list[tuple[int, int]]:
+    """(top, left) of up to ``count`` non-overlapping size×size windows with the largest mean error;
+    with ``content`` (:func:`content_map`) among those covering :data:`MIN_CONTENT` of it, where any does."""
     from scipy.ndimage import uniform_filter
 
     height, width = error_map.shape
@@ -47,6 +80,12 @@ def worst_windows(error_map: np.ndarray, size: int, count: int = 2) -> list[tupl
     valid[half : height - (size - half) + 1, half : width - (size - half) + 1] = score[
         half : height - (size - half) + 1, half : width - (size - half) + 1
     ]
+    if content is not None:
+        coverage = uniform_filter(np.asarray(content, np.float64), size=size, mode="constant")
+        lit = valid > -np.inf
+        lit &= coverage >= MIN_CONTENT - 1e-9
+        if lit.any():
+            valid = np.where(lit, valid, -np.inf)
     found: list[tuple[int, int]] = []
     for _ in range(count):
         index = int(np.argmax(valid))
@@ -67,13 +106,14 @@ def strip_side(height: int, width: int) -> int:
 
 
 def choose_window(noisy: np.ndarray, refs: np.ndarray, motion: np.ndarray | None = None) -> tuple[int, int, int]:
-    """(top, left, side) of the square where the noisy input's frame-to-frame error is largest."""
+    """(top, left, side) of the square where the noisy input's frame-to-frame error is largest, among
+    those that show the reference (module notes)."""
     height, width = refs.shape[1:3]
     side = strip_side(height, width)
     if len(refs) < 2:
         return (height - side) // 2, (width - side) // 2, side
     error = temporal_relmse_map(noisy, refs, motion=motion).mean(axis=0)
-    found = worst_windows(error, side, count=1)
+    found = worst_windows(error, side, count=1, content=content_map(refs))
     top, left = found[0] if found else ((height - side) // 2, (width - side) // 2)
     return int(top), int(left), side
 
