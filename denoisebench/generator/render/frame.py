@@ -6,8 +6,9 @@ blur) and traces them with :mod:`~denoisebench.generator.render.integrator`, an 
 of the image Mitsuba's ``path`` integrator renders at the same ``max_depth``, which also yields the
 diffuse/specular split and every feature. One kernel per pass computes all of it: each lane loops over
 samples of its pixel keeping running (Welford) moments, and when a small image gives a pixel several
-lanes their moments are merged on the device, so only per-pixel values (and per-sample data, when
-asked) reach the host.
+lanes their moments are merged on the device; the same kernel writes every buffer's mean and variance
+in the layout the host reads, so only finished per-pixel buffers (and per-sample data, when asked)
+reach the host, without a copy.
 
 Conventions:
 
@@ -61,7 +62,6 @@ from denoisebench.generator.contract.camera_track import CameraTrack
 from denoisebench.generator.contract.render_plan import RenderPlan
 from denoisebench.generator.render.camera import camera_setup, camera_switches, camera_values
 from denoisebench.generator.render.media import scene_has_media
-from denoisebench.generator.render.moments import moment_layout
 from denoisebench.generator.render.passes import (
     MergeConfig,
     PassConfig,
@@ -204,7 +204,6 @@ class FrameStream:
         self.keep_samples = bool(sample_channels)
         self._opts, self._switches = opts, camera_switches(setup)
         self._values = camera_values(mi, setup)
-        self._layout = moment_layout(stat_channels)
         stream = REFERENCE_STREAM if reference else NOISY_STREAM
         self._key = stream_key(seed, frame, stream)
         rows = max(1, min(height, max_paths_per_pass // width))
@@ -214,8 +213,8 @@ class FrameStream:
         self._state: list = [None] * len(self._bands)
         self._counts = np.zeros((height, width), np.int64)
         self._round = None  # the launched round's (add, samples, pending, last), until finish()
-        self._prefixes: dict = {}  # total → merged device moments queued with the first round (queue_prefixes)
-        self._packed = np.zeros((height, width, self._layout["stride"]), np.float32)
+        self._prefixes: dict = {}  # total → merged device buffers queued with the first round (queue_prefixes)
+        self._band_buffers: list = [None] * len(self._bands)  # per band: name → (mean, var) host views, or None
 
     @property
     def counts(self) -> np.ndarray:
@@ -261,7 +260,7 @@ class FrameStream:
                 for k, c in self.sample_channels.items()
             }
         pending = []  # (rows, offset, count, targets): per-sample data still on the device
-        last = {}  # band index → (rows, band, packed) of the band's last pass: all samples of the round
+        last = {}  # band index → the buffers (device arrays) of the band's last pass: all samples so far
         for index, ((row0, band), groups) in enumerate(zip(self._bands, self._groups)):
             rows = slice(row0, row0 + band)
             before = self._counts[rows]
@@ -291,7 +290,7 @@ class FrameStream:
                     uniform,
                     self._state[index] is None,
                 )
-                state, packed, targets = compiled_pass(self.scene, config)(
+                state, buffers, targets = compiled_pass(self.scene, config)(
                     self.scene,
                     params,
                     ranges,
@@ -300,7 +299,7 @@ class FrameStream:
                     config,
                 )
                 self._state[index] = state
-                last[index] = (rows, band, packed)
+                last[index] = buffers
                 if targets is not None:
                     if pending:
                         self._copy_samples(samples, *pending.pop())
@@ -308,7 +307,7 @@ class FrameStream:
         self._round = (add, samples, pending, last)
 
     def finish(self) -> dict[str, np.ndarray] | None:
-        """Wait for the launched round, copy its per-pixel moments to the host; return its per-sample data.
+        """Wait for the launched round, take its buffers to the host (views, no copy); return its per-sample data.
 
         What :meth:`advance` returns; afterwards :attr:`counts` and :meth:`buffers` include the round.
         """
@@ -316,9 +315,8 @@ class FrameStream:
             raise RuntimeError("no launched round to finish")
         add, samples, pending, last = self._round
         self._round = None
-        stride = self._layout["stride"]
-        for rows, band, packed in last.values():
-            self._packed[rows] = np.asarray(packed, dtype=np.float32).reshape(band, self.width, stride)
+        for index, buffers in last.items():
+            self._band_buffers[index] = self._host_views(buffers, self._bands[index][1])
         for entry in pending:
             self._copy_samples(samples, *entry)
         self._counts = self._counts + add
@@ -331,18 +329,25 @@ class FrameStream:
             values = np.asarray(targets[name]).reshape(count, band, self.width, chans)
             samples[name][offset : offset + count, rows] = values
 
-    def buffers(self) -> dict[str, np.ndarray]:
+    def buffers(self, copy: bool = True) -> dict[str, np.ndarray]:
         """Means and variances of the mean of every sample of the finished rounds (module docstring's conventions).
 
         A pixel without samples has mean 0 and variance ``inf``; one with a single sample has
         variance 0 (unknown, but finite, as in a 1-spp render).
 
+        ``copy=False`` returns the stream's own arrays where the frame is one band (views of the
+        device memory the pass wrote): no copy, but they are shared with every later call until
+        the next round, so a caller that writes into one changes what the stream returns next.
+        :func:`render_ladder` takes its rungs that way (each rung's arrays are fresh: a later round
+        writes new ones).
+
         Notes:
-            Each buffer is written once, contiguous, straight from the packed moments (a strided
-            read): means copied, variances as ``max(M2, 0) * scale`` in place, with ``scale = 1 /
-            ((n - 1) n)`` one float32 per pixel (one for the frame when counts are uniform).
+            The pass kernels write each buffer's mean and variance (``max(M2, 0) / ((n - 1) n)``)
+            in H×W×C order (:func:`~denoisebench.generator.render.moments.pixel_buffers`); the host
+            only joins bands of rows (frames above ``max_paths_per_pass`` pixels) and fills bands
+            that have no samples yet.
         """
-        return self._assemble(self._packed, self._counts)
+        return self._collect(self._band_buffers, self._counts, copy)
 
     @property
     def lanes_per_pixel(self) -> int:
@@ -368,19 +373,17 @@ class FrameStream:
         its rungs below ``lanes_per_pixel`` this way: on small images a pixel's few samples occupy
         a few of its lanes while the others idle in the same SIMD vectors, so one pass of ``n``
         costs about what a pass of 1 costs. Merges queued with the round (:meth:`queue_prefixes`)
-        are only copied; others run now. Raises ``ValueError`` otherwise.
+        are only taken (once: a second call merges anew); others run now. The arrays are the
+        caller's own. Raises ``ValueError`` otherwise.
         """
         if self._round is not None:
             raise ValueError("prefix_buffers() reads a finished round: finish() first")
-        merged = self._prefixes.get(int(total)) or self._merge(int(total), self._counts)
-        packed_host = np.empty_like(self._packed)
-        stride = self._layout["stride"]
-        for (row0, band), packed in zip(self._bands, merged):
-            packed_host[row0 : row0 + band] = np.asarray(packed, dtype=np.float32).reshape(band, self.width, stride)
-        return self._assemble(packed_host, np.full_like(self._counts, total))
+        merged = self._prefixes.pop(int(total), None) or self._merge(int(total), self._counts)
+        views = [self._host_views(buffers, band) for (_, band), buffers in zip(self._bands, merged)]
+        return self._collect(views, np.full_like(self._counts, total), False)  # fresh arrays: nobody else holds them
 
     def _merge(self, total: int, counts: np.ndarray) -> list:
-        """Queue the merges of every band's lanes as ``total`` samples (:func:`merge_pass`): device arrays."""
+        """Queue the merges of every band's lanes as ``total`` samples (:func:`merge_pass`): device buffers per band."""
         mi = load_mitsuba()
 
         n = int(counts.flat[0])
@@ -395,37 +398,34 @@ class FrameStream:
             merged.append(compiled_pass(self.scene, config, merge_pass)(self.scene, params, self._state[index], config))
         return merged
 
-    def _assemble(self, packed: np.ndarray, counts: np.ndarray) -> dict[str, np.ndarray]:
-        """The buffers of packed per-pixel moments (H×W×stride) of ``counts`` samples (:meth:`buffers`' Notes)."""
-        half = self._layout["stride"] // 2  # means, then M2s (moment_layout)
-        low, high = int(counts.min()), int(counts.max())
-        if low == high:
-            scale = np.float32(1.0 / ((low - 1) * low) if low > 1 else 0.0)
-            empty = np.s_[...] if low == 0 else None
-        else:
-            n = counts.astype(np.float64)
-            with np.errstate(divide="ignore"):
-                scale = np.where(counts > 1, 1.0 / ((n - 1) * n), 0.0).astype(np.float32)[..., None]
-            empty = counts == 0
-        out, at = {}, 0
+    def _host_views(self, buffers: dict, band: int) -> dict:
+        """A band's device buffers (name → (mean, var), flat) as H×W×C NumPy views of the same memory (waits for them)."""
+        shape = {name: (band, self.width, c) for name, c in self.stat_channels.items()}
+        return {name: tuple(np.asarray(a).reshape(shape[name]) for a in pair) for name, pair in buffers.items()}
+
+    def _collect(self, bands: list, counts: np.ndarray, copy: bool) -> dict[str, np.ndarray]:
+        """The frame's buffers from each band's host views (None: a band without samples yet) (:meth:`buffers`)."""
+        out = {}
         for name, c in self.stat_channels.items():
-            shape = (self.height, self.width, c)
-            mean = np.empty(shape, np.float32)
-            np.copyto(mean, packed[..., at : at + c])
-            out[name] = mean
-            var = np.empty(shape, np.float32)
-            np.maximum(packed[..., half + at : half + at + c], np.float32(0.0), out=var)
-            var *= scale
-            if empty is not None:
-                var[empty] = np.inf
-            out[f"{name}_var"] = var
-            at += c
+            for part, key in enumerate((name, f"{name}_var")):
+                pieces = [
+                    views[name][part] if views is not None else self._unsampled(band, c, part)
+                    for (_, band), views in zip(self._bands, bands)
+                ]
+                if len(pieces) > 1:
+                    out[key] = np.concatenate(pieces)
+                else:
+                    out[key] = np.array(pieces[0]) if copy and bands[0] is not None else pieces[0]
         if self.zero_motion:
             out["motion"] = np.zeros((self.height, self.width, 2), np.float32)
             out["motion_var"] = np.where(counts[..., None] == 0, np.inf, 0.0).astype(np.float32) * np.ones(
                 2, np.float32
             )
         return out
+
+    def _unsampled(self, band: int, channels: int, part: int) -> np.ndarray:
+        """A band's mean (part 0: zeros) or variance (part 1: ``inf``) before any of its pixels has a sample."""
+        return np.full((band, self.width, channels), np.inf if part else 0.0, np.float32)
 
 
 def render_frame(
@@ -498,8 +498,9 @@ def render_ladder(
     Notes:
         The passes are split at rung boundaries (each rung is a snapshot of the carried moments),
         so a ladder ``1, 2, 4, ..., 64`` traces what a plain 64-spp render traces plus one launch
-        and one host copy per rung. A rung's buffers (copies and variances) are assembled on the
-        host while the next rung's passes trace (:meth:`FrameStream.launch`). On small images,
+        and one write of every buffer per rung (by the rung's last pass, on the device: the host
+        only wraps the arrays). The next rung's passes are queued before a rung is handed out
+        (:meth:`FrameStream.launch`). On small images,
         whose pixels have several lanes, the rungs below the lanes per pixel all come from the
         first round (:meth:`FrameStream.prefix_buffers`): traced one by one, each would cost a
         pass of mostly idle lanes. bench/ladder_cost.py measures the difference against the top
@@ -550,5 +551,5 @@ def render_ladder(
         if index + 1 < len(rounds):
             stream.launch(rounds[index + 1] - spp)  # traces while the host assembles this rung
         if spp in rungs:
-            emit(spp, stream.buffers())
+            emit(spp, stream.buffers(copy=False))  # this round's own arrays: the next round writes new ones
     return out

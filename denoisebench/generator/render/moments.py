@@ -4,8 +4,8 @@
 numbers never depend on the lane, the pass or the sample count (nested spp ladders, per-pixel counts).
 :func:`render_moments` traces a lane's samples in one Dr.Jit loop (the surface tracer, or the volumetric
 one for scenes with media) and keeps running Welford moments of the buffers asked for, optionally
-scattering per-sample values; :func:`pixel_moments` merges a pixel's lanes in a fixed order and packs
-every buffer's mean and M2 into one flat array (:func:`moment_layout` names its columns).
+scattering per-sample values; :func:`pixel_buffers` merges a pixel's lanes in a fixed order
+(:func:`merge_lanes`) and writes every buffer's mean and variance of the mean as the host reads it.
 
 Pitfall: the merge order is fixed (group order, one kernel) so the sums are the same bits on every
 run and thread count; scatter-adds from shared lanes would not be.
@@ -145,94 +145,110 @@ def render_moments(
     return {k: (mean[k], m2[k]) for k in names}
 
 
-def pixel_moments(mi, moments: dict, names: dict, groups: int, total):
-    """Per-pixel moments of :func:`render_moments`' per-lane ones, packed into one flat array.
+def merge_lanes(mi, moments: dict, groups: int, total) -> dict:
+    """Per-pixel moments of :func:`render_moments`' per-lane ones: name → (mean, M2), one entry per pixel.
 
     A pixel owns ``groups`` consecutive lanes (lane = pixel * groups + group); group ``g`` holds the
     pixel's samples ``s ≡ g (mod groups)`` below ``total`` (UInt32 per pixel: samples so far), i.e.
     ``total // groups + (g < total % groups)`` of them. Lanes merge by Chan et al.'s rule
     generalised to K groups: ``mean = Σ n_k mean_k / n`` and ``M2 = Σ (M2_k + n_k (mean_k - mean)²)``;
-    a pixel without samples gets 0 for both. Returns ``(packed, layout)``: ``packed`` is a flat
-    Float, pixel-major, ``stride`` values per pixel; ``layout`` maps each name of ``names`` (name →
-    channels) to the column offsets of its mean and M2, and ``"stride"`` to the row length.
+    a pixel without samples gets 0 for both. With one lane per pixel nothing is merged and the
+    moments are returned as they are.
 
     Notes
     -----
-    One kernel merges and packs: each pixel gathers its lanes in a loop, in group order, so the
-    sums are the same bits on every run and thread count (scatter-adds from lanes that two
-    threads share would add in either order). Packing makes the host transfer one copy instead
-    of one per channel, which for small frames cost as much as the merge. With one lane per
-    pixel nothing is merged and the moments are copied as they are.
+    Each pixel gathers its lanes in a loop, in group order, so the sums are the same bits on every
+    run and thread count (scatter-adds from lanes that two threads share would add in either order).
     """
     import drjit as dr
 
-    layout = moment_layout(names)
-    stride = layout["stride"]
+    if groups == 1:
+        return moments
     lanes = dr.width(next(iter(moments.values()))[0])
     pixels = lanes // groups
     pixel = dr.arange(mi.UInt32, pixels)
+    # Sizes as opaque values, so that every image size shares one compiled kernel.
+    groups_o = dr.opaque(mi.UInt32, groups)
+    first = pixel * groups_o
+    total = mi.UInt32(total)
+    base = total // groups_o
+    rem = total - base * groups_o
+    inv_total = dr.select(total > 0, dr.rcp(mi.Float(total)), 0.0)
 
-    if groups == 1:
-        merged = moments
-    else:
-        # Sizes as opaque values, so that every image size shares one compiled kernel.
-        groups_o = dr.opaque(mi.UInt32, groups)
-        first = pixel * groups_o
-        total = mi.UInt32(total)
-        base = total // groups_o
-        rem = total - base * groups_o
-        inv_total = dr.select(total > 0, dr.rcp(mi.Float(total)), 0.0)
+    def lane_weight(g):
+        return mi.Float(base + dr.select(g < rem, mi.UInt32(1), mi.UInt32(0)))
 
-        def lane_weight(g):
-            return mi.Float(base + dr.select(g < rem, mi.UInt32(1), mi.UInt32(0)))
+    def cond(g, acc):
+        return g < groups_o
 
-        def cond(g, acc):
-            return g < groups_o
+    def mean_body(g, acc):
+        w = lane_weight(g) * inv_total
+        lane = first + g
+        return g + 1, {k: dr.fma(dr.gather(type(m), m, lane), w, acc[k]) for k, (m, _) in moments.items()}
 
-        def mean_body(g, acc):
-            w = lane_weight(g) * inv_total
-            lane = first + g
-            return g + 1, {k: dr.fma(dr.gather(type(m), m, lane), w, acc[k]) for k, (m, _) in moments.items()}
+    zeros = {k: dr.zeros(type(m), pixels) for k, (m, _) in moments.items()}
+    _, means = dr.while_loop((mi.UInt32(0), zeros), cond, mean_body, label="denoisebench lane means")
 
-        zeros = {k: dr.zeros(type(m), pixels) for k, (m, _) in moments.items()}
-        _, means = dr.while_loop((mi.UInt32(0), zeros), cond, mean_body, label="denoisebench lane means")
+    def m2_body(g, acc):
+        w = lane_weight(g)
+        lane = first + g
+        new = {}
+        for k, (m, m2) in moments.items():
+            d = dr.gather(type(m), m, lane) - means[k]
+            new[k] = acc[k] + dr.fma(w, dr.square(d), dr.gather(type(m2), m2, lane))
+        return g + 1, new
 
-        def m2_body(g, acc):
-            w = lane_weight(g)
-            lane = first + g
-            new = {}
-            for k, (m, m2) in moments.items():
-                d = dr.gather(type(m), m, lane) - means[k]
-                new[k] = acc[k] + dr.fma(w, dr.square(d), dr.gather(type(m2), m2, lane))
-            return g + 1, new
-
-        _, m2s = dr.while_loop((mi.UInt32(0), zeros), cond, m2_body, label="denoisebench lane M2")
-        merged = {k: (means[k], m2s[k]) for k in moments}
-
-    columns = []
-    for part in (0, 1):  # every mean, then every M2 (moment_layout)
-        for k, c in names.items():
-            value = merged[k][part]
-            columns += [value] if c == 1 else [value[j] for j in range(c)]
-    # One scatter of a ``stride``-wide array writes whole rows (pixel * stride + column): separate
-    # scatters into one target would each launch a kernel (Dr.Jit flushes a dirty target first), and
-    # when the moments are not evaluated yet, each would trace all paths again.
-    row_type = getattr(importlib.import_module(type(columns[0]).__module__), "ArrayXf")
-    packed = dr.empty(mi.Float, pixels * stride)
-    dr.scatter(packed, row_type(*columns), pixel)
-    return packed, layout
+    _, m2s = dr.while_loop((mi.UInt32(0), zeros), cond, m2_body, label="denoisebench lane M2")
+    return {k: (means[k], m2s[k]) for k in moments}
 
 
-def moment_layout(names: dict) -> dict:
-    """Columns of :func:`pixel_moments`' packed rows: name → (mean offset, M2 offset), and ``"stride"``.
+def variance_scale(mi, total):
+    """``1 / ((n - 1) n)`` as float32 per pixel (``n = total``, UInt32), 0 where ``n <= 1``.
 
-    Every buffer's mean comes first, in the order of ``names``, then every M2 in the same order:
-    the means are one contiguous block ``[0, stride / 2)`` and the M2s ``[stride / 2, stride)``.
+    Computed in float64 and rounded once to float32, as NumPy computes ``1 / ((n - 1) * n)`` from
+    float64 counts: the same bits (the product is exact for ``n < 2^26``; the division is IEEE).
     """
-    layout, offset = {}, 0
-    total = sum(names.values())
+    import drjit as dr
+
+    n = mi.Float64(total)
+    return dr.select(total > 1, mi.Float(1.0 / ((n - 1.0) * n)), 0.0)
+
+
+def pixel_buffers(mi, moments: dict, names: dict, groups: int, total) -> dict:
+    """The buffers of :func:`render_moments`' per-lane moments: name → (mean, variance of the mean).
+
+    Each is a flat Float of the band's pixels, row-major with channels innermost (an H×W×C image
+    as NumPy reads it), so the host reads every buffer as it is, without a copy. ``total`` is
+    UInt32 per pixel, the samples so far (:func:`merge_lanes`). The variance of the mean is
+    ``max(M2, 0) * variance_scale(total)`` in float32 (NaN stays NaN, as ``np.maximum`` keeps it),
+    and ``inf`` for a pixel without samples (its mean is 0).
+
+    Notes
+    -----
+    One kernel merges the lanes and writes every buffer (with one lane per pixel it is the tracing
+    kernel itself). A buffer of several channels is one scatter of a ``C``-wide array, which writes
+    whole pixels (``pixel * C + channel``).
+    """
+    import drjit as dr
+
+    merged = merge_lanes(mi, moments, groups, total)
+    pixels = dr.width(next(iter(merged.values()))[0])
+    pixel = dr.arange(mi.UInt32, pixels)
+    total = mi.UInt32(total)
+    scale = variance_scale(mi, total)
+    empty = total == 0
+    out = {}
     for k, c in names.items():
-        layout[k] = (offset, total + offset)
-        offset += c
-    layout["stride"] = 2 * total
-    return layout
+        mean, m2 = merged[k]
+        var = dr.select(empty, dr.inf, dr.select(m2 < 0, 0.0, m2) * scale)
+        pair = []
+        for value in (mean, var):
+            target = dr.empty(mi.Float, pixels * c)
+            if c == 1:
+                dr.scatter(target, value, pixel)
+            else:
+                row_type = getattr(importlib.import_module(type(value).__module__), "ArrayXf")
+                dr.scatter(target, row_type(*(value[j] for j in range(c))), pixel)
+            pair.append(target)
+        out[k] = tuple(pair)
+    return out

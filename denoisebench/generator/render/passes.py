@@ -1,9 +1,9 @@
 """One pass of the feature renderer: the kernels that trace a band of rows and pack per-pixel moments.
 
 :func:`render_pass` traces samples ``start[p] .. end[p]`` of every pixel of a band, continuing each
-lane's running moments (:mod:`~denoisebench.generator.render.moments`), and packs the pixels' merged
-moments; :func:`merge_pass` packs a fresh stream's lanes as a smaller sample count (the rungs of a ladder
-below the lanes per pixel). Both are shaped by a hashable configuration (:class:`PassConfig`,
+lane's running moments (:mod:`~denoisebench.generator.render.moments`), and writes the pixels' buffers
+(means and variances of the mean, as the host reads them); :func:`merge_pass` writes a fresh stream's
+lanes as a smaller sample count (the rungs of a ladder below the lanes per pixel). Both are shaped by a hashable configuration (:class:`PassConfig`,
 :class:`MergeConfig`); everything that varies per frame (stream key, rows, sample ranges, camera)
 arrives as Dr.Jit inputs, so :func:`compiled_pass` records each configuration once per scene with
 ``dr.freeze`` and replays it for later frames (:data:`FREEZE_PASSES` off: every pass traced afresh, the
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from denoisebench.generator.render.camera import CameraSwitches, DrCamera
-from denoisebench.generator.render.moments import channel_type, pixel_moments, render_moments, sample_stream
+from denoisebench.generator.render.moments import channel_type, pixel_buffers, render_moments, sample_stream
 from denoisebench.generator.render.tracing import KernelOptions
 from denoisebench.mitsuba_runtime import load_mitsuba
 
@@ -52,10 +52,11 @@ def render_pass(scene, params, ranges: tuple, state, camera_values: dict, config
     band's first row and, when ``config.uniform``, every pixel's sample range); otherwise ``ranges``
     is ``(starts, ends)``, UInt32 per pixel of the band (row-major). ``state`` holds the lanes'
     moments so far (name → (mean, m2), one entry per lane; ``None`` when ``config.fresh``: the first
-    pass starts from zeros made inside, so that single-pass renders have no state inputs at all). Returns ``(state, packed, targets)``: the lanes' moments after
-    the pass, the per-pixel moments packed as :func:`moment_layout` says (all samples so far), and
-    the per-sample arrays (name → flat Float, row ``(s - starts[p]) * pixels + p``) or ``None``.
-    Dr.Jit arrays, evaluated.
+    pass starts from zeros made inside, so that single-pass renders have no state inputs at all).
+    Returns ``(state, buffers, targets)``: the lanes' moments after the pass, the band's buffers of
+    all samples so far (:func:`~denoisebench.generator.render.moments.pixel_buffers`: name → (mean,
+    variance of the mean), H×W×C row-major), and the per-sample arrays (name → flat Float, row
+    ``(s - starts[p]) * pixels + p``) or ``None``. Dr.Jit arrays, evaluated.
     """
     mi = load_mitsuba()
     import drjit as dr
@@ -108,11 +109,11 @@ def render_pass(scene, params, ranges: tuple, state, camera_values: dict, config
     if groups > 1:
         dr.eval(state, targets)  # one kernel traces everything; the merge gathers from its results
     samples_so_far = end if config.uniform else ranges[1]  # per pixel (the lanes' `end` is per lane)
-    packed, _ = pixel_moments(mi, state, stat_channels, groups, samples_so_far)
+    buffers = pixel_buffers(mi, state, stat_channels, groups, samples_so_far)
     targets = None if targets is None else {k: target for k, (target, _) in targets.items()}
-    # One lane per pixel: tracing and packing are a single kernel. Several: the merge kernel.
-    dr.eval(state, packed, targets)
-    return state, packed, targets
+    # One lane per pixel: tracing and writing the buffers are a single kernel. Several: the merge kernel.
+    dr.eval(state, buffers, targets)
+    return state, buffers, targets
 
 
 @dataclass(frozen=True)
@@ -126,20 +127,20 @@ class MergeConfig:
 
 
 def merge_pass(scene, params, state, config: MergeConfig):
-    """The per-pixel moments of ``state`` (a band's lanes) counted as ``params[0]`` samples per pixel, packed.
+    """The buffers of ``state`` (a band's lanes) counted as ``params[0]`` samples per pixel (:func:`render_pass`'s).
 
     Right where every lane holds at most one sample (a fresh stream of at most ``groups`` samples):
     lane ``g`` then holds sample ``g`` and the merge weighs lanes ``g >= params[0]`` by 0, so the
-    result is the bits a stream of ``params[0]`` samples packs (:meth:`FrameStream.prefix_buffers`).
+    result is the bits a stream of ``params[0]`` samples writes (:meth:`FrameStream.prefix_buffers`).
     ``scene`` is unused (the compiled-pass cache is per scene).
     """
     mi = load_mitsuba()
     import drjit as dr
 
     total = dr.gather(mi.UInt32, params, 0)
-    packed, _ = pixel_moments(mi, state, dict(config.stat_channels), config.groups, total)
-    dr.eval(packed)
-    return packed
+    buffers = pixel_buffers(mi, state, dict(config.stat_channels), config.groups, total)
+    dr.eval(buffers)
+    return buffers
 
 
 #: Record passes with ``dr.freeze`` and replay them (False: trace every pass afresh; same bits).
