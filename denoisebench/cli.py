@@ -26,6 +26,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "leaderboard": ("leaderboard", "rank denoisers across the runs on one dataset in a results database"),
     "check-plugin": ("check_plugin", "run a denoiser through the hard-case suite; print a pass/fail table"),
     "export": ("export", "export a dataset for OIDN's training toolkit or Noisebase's loaders"),
+    "study": ("study", "train, then benchmark on third-party scenes: what the generated data is worth (data-value)"),
 }
 
 EPILOG = textwrap.dedent(

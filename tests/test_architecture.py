@@ -40,6 +40,22 @@ ALLOWED = {
         "scenes",
         "plugins",
     },
+    # a study combines the stages (generate, train, benchmark, read results); no stage imports it
+    "study": {
+        "generator",
+        "dataset",
+        "scenes",
+        "models",
+        "denoisers",
+        "baselines",
+        "metrics",
+        "benchmark",
+        "results",
+        "analysis",
+        "reports",
+        "sampling",
+        "plugins",
+    },
 }
 #: Top-level helper modules every stage may use (no stage of their own).
 HELPERS = {"errors", "mitsuba_runtime", "outputs", "progress"}

@@ -45,6 +45,11 @@ need none: denoisebench sets its own. Its integrator's restriction is honoured a
 path-family max_depth, and `direct` (read through wrappers such as moment and aov) as direct
 illumination only (max_depth 2); --max-depth wins; another integrator gets a warning.
 
+--scene-list FILE --root DIR renders the scenes a scene list names (TOML: source usd or mitsuba, a path
+under DIR, camera orbit or own, defines, licence, where to get it; generator/scene_lists.py), as if each
+were given with --usd/--mitsuba; shipped lists (denoisebench/scenes/lists/) are named without their
+folder. A scene missing under DIR is one line naming the repository to clone (exit 2).
+
 Exit codes: 0 done, 2 bad input (one line, nothing written), 1 some frames failed to render
 (reported; the dataset is left resumable and marked incomplete).
 """
@@ -78,6 +83,8 @@ EPILOG = """examples:
   generate-dataset --out data/clean --families cornell --ref-error 2e-4 --ref-spp 16384
   generate-dataset --out data/direct --families cornell --max-depth 2 --ref-error 0 --ref-spp 1024
   generate-dataset --out data/big --scenes 20 --executor ray --ray-address auto
+  generate-dataset --out data/tp --scene-list mitsuba_docs --root mitsuba-data --frames 2 --width 64 --height 64
+  generate-dataset --out data/tp_usd --scene-list usd_wg_assets --root assets --frames 2 --spp 1,4,16
   generate-dataset --out data/asset --usd asset.usdz --auto-camera --default-light --frames 8 --spp 4
   generate-dataset --out data/bitterli --mitsuba staircase/scene_v3.xml --frames 4 --spp 1,4 --ref-spp 1024
   generate-dataset --out data/docs --mitsuba mitsuba-data/docs/scenes/sensor_thinlens.xml --frames 1
@@ -196,6 +203,19 @@ def add_arguments(parser) -> None:
         "Mitsuba's -a); the dataset's copies hold every file, so DIR is not recorded",
     )
     parser.add_argument(
+        "--scene-list",
+        default=None,
+        metavar="FILE",
+        help="render the scenes a scene list names (TOML; a shipped list by name, e.g. mitsuba_docs, "
+        "usd_wg_assets), found under --root (default none); e.g. --scene-list mitsuba_docs --root ~/mitsuba-data",
+    )
+    parser.add_argument(
+        "--root",
+        default=None,
+        metavar="DIR",
+        help="the folder a --scene-list's paths are relative to: a clone of the repository the list names (default none)",
+    )
+    parser.add_argument(
         "--camera", default=None, metavar="PATH", help="camera prim of the --usd stages (default: the first)"
     )
     parser.add_argument(
@@ -231,10 +251,39 @@ def _ref_error(value: float | None) -> float | None:
     return None if value == 0 else float(value)
 
 
+def _scene_list(args) -> dict:
+    """The --scene-list's --usd/--mitsuba scenes and their options, merged with the ones given (or {})."""
+    if getattr(args, "scene_list", None) is None:
+        if getattr(args, "root", None) is not None:
+            raise UserInputError("--root is the folder a --scene-list's paths are relative to: give --scene-list too")
+        return {}
+    from denoisebench.generator.scene_lists import read_scene_list, request_fields
+
+    if args.root is None:
+        raise UserInputError(f"--scene-list {args.scene_list}: give --root, the clone its scenes lie in")
+    fields = request_fields(read_scene_list(args.scene_list), args.root)
+    given = dict(parse_defines(args.define))
+    return {
+        "usd": tuple(args.usd) + fields["usd"],
+        "xml": tuple(args.xml) + fields["xml"],
+        "camera": args.camera or fields["camera"],
+        "auto_camera": args.auto_camera or fields["auto_camera"],
+        "default_light": args.default_light or fields["default_light"],
+        "defines": tuple(sorted({**dict(fields["defines"]), **given}.items())),
+    }
+
+
 def request_from_args(args):
+    listed = _scene_list(args)
+    return _request(args, listed)
+
+
+def _request(args, listed: dict):
+    usd = listed.get("usd", tuple(args.usd))
+    xml = listed.get("xml", tuple(args.xml))
     return GenerateRequest(
         out=Path(args.out),
-        families=_families(args.families, bool(args.usd or args.xml)),
+        families=_families(args.families, bool(usd or xml)),
         scenes=args.scenes,
         frames=args.frames,
         width=args.width,
@@ -245,13 +294,13 @@ def request_from_args(args):
         max_depth=args.max_depth,
         samples=args.samples,
         seed=args.seed,
-        usd=tuple(args.usd),
-        xml=tuple(args.xml),
-        camera=args.camera,
-        auto_camera=args.auto_camera,
-        default_light=args.default_light,
+        usd=usd,
+        xml=xml,
+        camera=listed.get("camera", args.camera),
+        auto_camera=listed.get("auto_camera", args.auto_camera),
+        default_light=listed.get("default_light", args.default_light),
         independent_rungs=args.independent_rungs,
-        defines=tuple(parse_defines(args.define).items()),
+        defines=listed.get("defines", tuple(parse_defines(args.define).items())),
         search_paths=tuple(args.mitsuba_path),
         force=args.force,
     )

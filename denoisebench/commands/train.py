@@ -170,6 +170,13 @@ def add_arguments(parser) -> None:
         metavar="DIR",
         help="implies --evaluate; write DIR/MODEL_CONFIG.pt (no optimiser state) and its model card DIR/MODEL_CONFIG.md",
     )
+    parser.add_argument(
+        "--train-scenes",
+        default=None,
+        metavar="A,B,...",
+        help="train on these scenes of --data instead of its train split (not its val scenes), e.g. "
+        "cornell_000,cornell_001 (default: the train split)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -215,6 +222,9 @@ def run(args) -> int:
         val_every=args.val_every,
         progress=not args.quiet,
         overrides=dict(parse_override(text) for text in args.overrides),
+        train_scenes=None
+        if args.train_scenes is None
+        else tuple(name.strip() for name in args.train_scenes.split(",") if name.strip()),
     )
     try:
         meta = train(options)

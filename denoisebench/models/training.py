@@ -411,6 +411,19 @@ def _optimise(start: _Start, spec, options, dataset, device, loss_kind, checkpoi
     return running
 
 
+def chosen_train_scenes(ds: Dataset, names, val_scenes: list[str]) -> list[str]:
+    """``names`` (``TrainOptions.train_scenes``) checked against the dataset, sorted: an unknown
+    scene or one of the val split is a UserInputError (validation must stay on unseen scenes)."""
+    names = sorted(dict.fromkeys(names))
+    unknown = [name for name in names if name not in ds.scenes]
+    if unknown:
+        raise UserInputError(f"{ds.root}: no scene {unknown[0]!r} to train on ({len(unknown)} unknown)")
+    validated = sorted(set(names) & set(val_scenes))
+    if validated:
+        raise UserInputError(f"{validated[0]}: a val-split scene cannot be trained on (it validates the run)")
+    return names
+
+
 def train(options: TrainOptions) -> dict:
     """Train (or resume) and write the checkpoint; returns its metadata. Raises UserInputError on bad input.
 
@@ -430,6 +443,8 @@ def train(options: TrainOptions) -> dict:
     torch.set_num_threads(threads)
     ds = open_dataset(options.data)
     train_scenes, val_scenes = ds.split("train"), ds.split("val")
+    if options.train_scenes is not None:
+        train_scenes = chosen_train_scenes(ds, options.train_scenes, val_scenes)
     if not train_scenes:
         raise UserInputError(f"{options.data}: the train split is empty (the dataset needs more scenes)")
     spp = train_spp(ds, train_scenes, options.spp)

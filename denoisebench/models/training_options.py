@@ -58,6 +58,9 @@ class TrainOptions:
     #: configuration keys replaced for this run (``--set KEY=VALUE``: ablations such as rae
     #: ``residual=false``); the checkpoint records the resulting configuration, so it loads as trained
     overrides: dict = field(default_factory=dict)
+    #: train on these scenes of the dataset instead of its train split (None: the train split); a
+    #: val-split scene among them is refused, so validation stays on scenes the model never saw
+    train_scenes: tuple[str, ...] | None = None
 
 
 LR_SCHEDULES = ("constant", "cosine", "step")
@@ -179,6 +182,8 @@ def command_line(options: TrainOptions, out: str) -> str:
         parts += ["--sequence-length", str(options.sequence_length)]
     if options.loss is not None and options.loss != "log":
         parts += ["--loss", options.loss]
+    if options.train_scenes is not None:
+        parts += ["--train-scenes", ",".join(options.train_scenes)]
     for key, value in sorted(options.overrides.items()):
         parts += ["--set", f"{key}={json.dumps(value)}"]
     if options.lr_schedule != "constant":

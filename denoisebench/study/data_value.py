@@ -1,0 +1,543 @@
+"""The data-value study: the same model, trained at the same budget on several training sets drawn
+from the generator's families, scored on a third-party dataset through the normal benchmark.
+
+Inputs are two datasets made by ``generate-dataset``: a **pool** of family scenes (``--families
+... --scenes N``) and a **third-party** dataset (``--scene-list``, ``--usd``/``--mitsuba``: scenes
+nobody here wrote). Training sets are subsets of the pool's scenes (``train_scenes`` of
+:class:`~denoisebench.models.training_options.TrainOptions`, so training is ``denoisebench train``'s
+own loop), named by :func:`resolve_sets`:
+
+* ``full``: every trainable pool scene (the generator's whole mix);
+* ``family:F``: family F alone (e.g. ``family:cornell``);
+* ``without:E``: the mix without the families that declare effect E (``without:textures``);
+* ``leave_one_out:F``: the mix without family F (``loo:F`` for short);
+* ``n:K``: the first K scenes of the mix, taken round-robin over the families (the scaling curve's
+  points; ``--scaling 8,16`` adds them, and ``full`` is the curve's last point).
+
+Trainable pool scenes are those outside its val split (which validates every run) and outside
+held-out variants (``variants["pool"] == "held_out"``). Every run has the same budget: steps ×
+batch × crop pixels, one seed per run (several seeds: their spread is shown).
+
+Scores: each checkpoint is benchmarked on the whole third-party dataset (split ``all``) at one spp
+(default 4) by :func:`~denoisebench.benchmark.run.run_benchmark` into ``OUT/study.sqlite``, and read
+as a report reads them: corrected scores aggregated over scenes by the metric's rule with their 95 %
+bootstrap intervals over scenes (:func:`~denoisebench.analysis.summary.metric_cell`). The scenes a
+report would set apart are judged once, from the reference run (noisy input, cross_bilateral,
+OIDN), and left out of every aggregate alike, so rows compare over the same scenes; the per-scene
+table still shows them.
+
+Resumable: a checkpoint's name carries its budget; a run that stopped is resumed from its last
+checkpoint (same seed, same batches); a benchmark run's identity includes the checkpoint's sha256
+(a retrained checkpoint is scored anew); a finished part's record ``OUT/parts/*.json`` is reused.
+
+Pitfalls: the pool and the third-party dataset must not share scenes (a family scene is not
+third-party); scaling points with fewer scenes than families hold fewer families too (the curve
+measures the generator's scenes as it makes them, variety and count together).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from tqdm import tqdm
+
+from denoisebench.analysis import aggregate as agg
+from denoisebench.analysis.summary import RunData, metric_cell, set_apart
+from denoisebench.benchmark.run import run_benchmark
+from denoisebench.benchmark.runner import BenchmarkConfig
+from denoisebench.dataset import open_dataset
+from denoisebench.errors import UserInputError
+from denoisebench.results.names import NOISY
+from denoisebench.results.store import ResultsStore
+
+# Lazy imports: torch and the trainer only where a model is trained; matplotlib only for the figure.
+
+STORE_NAME = "study.sqlite"
+REPORT_JSON = "study.json"
+REPORT_MD = "study.md"
+FIGURE = "scaling.png"
+#: Metrics scored (relmse always comes with the benchmark); the first leads tables and the curve.
+METRICS = ("relmse_robust", "flip")
+DEFAULT_SETS = ("full", "family:cornell", "without:textures")
+REFERENCES = ("cross_bilateral", "oidn")
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainingSet:
+    """One training set: its name (:func:`resolve_sets`), kind, pool scenes and their families."""
+
+    name: str
+    kind: str  # full | family | without | leave_one_out | scaling
+    scenes: tuple[str, ...]
+    families: tuple[str, ...]
+
+
+@dataclass(frozen=True, kw_only=True)
+class StudyOptions:
+    """What ``denoisebench study data-value`` asks for (see the module docstring)."""
+
+    out: Path
+    pool: Path
+    third_party: Path
+    models: tuple[str, ...] = ("kpcn", "rae")
+    sets: tuple[str, ...] = DEFAULT_SETS
+    scaling: tuple[int, ...] = ()
+    seeds: tuple[int, ...] = (0,)
+    steps: int = 300
+    batch_size: int = 8
+    crop: int = 32
+    lr: float = 1e-3
+    spp: int = 4
+    references: tuple[str, ...] = REFERENCES
+    threads: int = 1
+    progress: bool = True
+
+
+@dataclass(frozen=True, kw_only=True)
+class PoolScene:
+    name: str
+    family: str
+    effects: tuple[str, ...]
+
+
+def trainable_scenes(ds) -> list[PoolScene]:
+    """Pool scenes a training set may hold: not in the val split, not a held-out variant, from a family."""
+    val = set(ds.split("val"))
+    out = []
+    for name in ds.scenes:
+        record = ds.scene(name).record
+        family = str(record.get("family") or "")
+        if name in val or not family or family == "usd" or (record.get("variants") or {}).get("pool") == "held_out":
+            continue
+        effects = record.get("effects") or {}
+        declared = effects.get("declared", []) if isinstance(effects, dict) else list(effects)
+        out.append(PoolScene(name=name, family=family, effects=tuple(declared)))
+    return out
+
+
+def round_robin(scenes: list[PoolScene]) -> list[PoolScene]:
+    """Scenes ordered one per family at a time (families and scenes by name): prefixes stay mixed."""
+    by_family: dict[str, list[PoolScene]] = {}
+    for scene in sorted(scenes, key=lambda s: s.name):
+        by_family.setdefault(scene.family, []).append(scene)
+    order, depth = [], 0
+    while len(order) < len(scenes):
+        order += [members[depth] for _, members in sorted(by_family.items()) if depth < len(members)]
+        depth += 1
+    return order
+
+
+def _set(name: str, kind: str, scenes: list[PoolScene]) -> TrainingSet:
+    return TrainingSet(
+        name=name,
+        kind=kind,
+        scenes=tuple(sorted(s.name for s in scenes)),
+        families=tuple(sorted({s.family for s in scenes})),
+    )
+
+
+def resolve_sets(names, scaling, scenes: list[PoolScene]) -> list[TrainingSet]:
+    """The training sets ``names`` and the scaling points ``scaling`` name, over the trainable ``scenes``.
+
+    An unknown name, a family or effect the pool lacks, or a set left empty is a UserInputError.
+    A scaling point at or above the pool's size is ``full`` itself (the curve's last point)."""
+    if not scenes:
+        raise UserInputError("the pool has no trainable scene (family scenes outside its val split)")
+    families = sorted({s.family for s in scenes})
+    effects = sorted({e for s in scenes for e in s.effects})
+    out: dict[str, TrainingSet] = {}
+    for raw in list(names) + ["full"]:
+        kind, _, arg = raw.partition(":")
+        kind = {"loo": "leave_one_out"}.get(kind, kind)
+        if kind == "full" and not arg:
+            chosen = scenes
+        elif kind in ("family", "leave_one_out") and arg:
+            if arg not in families:
+                raise UserInputError(
+                    f"training set {raw!r}: the pool has no family {arg!r} (families: {', '.join(families)})"
+                )
+            chosen = [s for s in scenes if (s.family == arg) == (kind == "family")]
+        elif kind == "without" and arg:
+            if arg not in effects:
+                raise UserInputError(
+                    f"training set {raw!r}: no pool family declares {arg!r} (effects: {', '.join(effects)})"
+                )
+            chosen = [s for s in scenes if arg not in s.effects]
+        else:
+            raise UserInputError(
+                f"unknown training set {raw!r}: use full, family:F, without:EFFECT, leave_one_out:F (loo:F) or n:K"
+            )
+        if not chosen:
+            raise UserInputError(f"training set {raw!r} holds no pool scene")
+        name = "full" if kind == "full" else f"{kind}:{arg}"
+        out.setdefault(name, _set(name, kind, chosen))
+    ordered = round_robin(scenes)
+    for count in sorted(set(int(c) for c in scaling)):
+        if count < 1:
+            raise UserInputError(f"--scaling wants positive scene counts (got {count})")
+        if count < len(scenes):
+            out.setdefault(f"n:{count}", _set(f"n:{count}", "scaling", ordered[:count]))
+    return list(out.values())
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def part_stem(model: str, training_set: str, seed: int, options: StudyOptions) -> str:
+    """File stem of one (model, set, seed) run: the budget is in it, so another budget trains anew."""
+    safe = training_set.replace(":", "-")
+    return f"{model}__{safe}__seed{seed}__{options.steps}x{options.batch_size}x{options.crop}"
+
+
+def _train(options: StudyOptions, model: str, training_set: TrainingSet, seed: int, checkpoint: Path) -> dict:
+    """Train (or resume) one run to ``options.steps``; return the checkpoint's metadata."""
+    from denoisebench.models.checkpoint import load_checkpoint
+    from denoisebench.models.training import train
+    from denoisebench.models.training_options import TrainOptions
+
+    done = 0
+    if checkpoint.is_file():
+        done = int(load_checkpoint(checkpoint, expect_model=model)["meta"].get("steps", 0))
+    if done >= options.steps:
+        return dict(load_checkpoint(checkpoint)["meta"])
+    return train(
+        TrainOptions(
+            model=model,
+            data=str(options.pool),
+            config="small",
+            steps=options.steps - done,
+            out=str(checkpoint),
+            resume=str(checkpoint) if done else None,
+            seed=seed,
+            batch_size=options.batch_size,
+            crop=options.crop,
+            lr=options.lr,
+            threads=options.threads,
+            device="cpu",
+            progress=options.progress,
+            train_scenes=training_set.scenes,
+        )
+    )
+
+
+def _benchmark(options: StudyOptions, store, denoisers: list[str], extra: dict | None = None) -> str:
+    """Run (or resume) the benchmark of ``denoisers`` on the third-party dataset; return its run id."""
+    dataset = open_dataset(options.third_party)
+    config = BenchmarkConfig(
+        denoisers=denoisers,
+        spp=[options.spp],
+        split="all",
+        metrics=list(METRICS),
+        options=(extra or {}).get("options", {}),
+        nonce=(extra or {}).get("nonce"),
+    )
+    return run_benchmark(dataset, config, store, progress=options.progress).run_id
+
+
+def read_scores(store, run_id: str, label: str, spp: int, kept: list[str]) -> dict:
+    """{metric: {value, low, high, raw, rule, per_scene: {scene: corrected}}} of ``label`` in one run.
+
+    ``value``/``low``/``high``: the corrected aggregate over ``kept`` and its 95 % interval over
+    scenes (the report's cell); ``per_scene``: every scene's corrected score (or the raw one where
+    the metric has no floor), set-apart scenes included."""
+    data = RunData(store, run_id)
+    out = {}
+    for metric in METRICS:
+        cell = metric_cell(data, label, spp, metric, kept)
+        mine, floors, ses = data.per_scene(label, spp, metric, None)
+        per_scene = dict(mine)
+        if floors and len(floors) == len(mine):
+            per_scene = agg.corrected_values(mine, floors, ses, agg.higher_is_better(metric))[0]
+        out[metric] = {
+            "value": cell.value,
+            "low": cell.low,
+            "high": cell.high,
+            "raw": cell.raw,
+            "rule": cell.rule,
+            "corrected": cell.floor is not None,
+            "scenes": cell.scenes,
+            "per_scene": {scene: float(v) for scene, v in sorted(per_scene.items())},
+        }
+    return out
+
+
+@dataclass(kw_only=True)
+class StudyResult:
+    """What :func:`run_study` returns and writes as ``study.json``."""
+
+    options: dict
+    pool: dict
+    third_party: dict
+    sets: list[dict]
+    parts: list[dict] = field(default_factory=list)
+    references: dict = field(default_factory=dict)
+    scaling: dict = field(default_factory=dict)
+
+
+def _references(options: StudyOptions, store, dataset) -> tuple[dict, list[str], dict]:
+    """(scores of the noisy input and the references, scenes kept, {scene set apart: reason})."""
+    run_id = _benchmark(options, store, list(options.references))
+    data = RunData(store, run_id)
+    apart = {u.scene: u.reason for u in set_apart(data, dataset)}
+    kept = [s for s in data.scenes if s not in apart]
+    scores = {label: read_scores(store, run_id, label, options.spp, kept) for label in [NOISY, *options.references]}
+    return scores, kept, apart
+
+
+def run_study(options: StudyOptions) -> StudyResult:
+    """Train, score and report every part that is not done yet; return the study's numbers."""
+    if options.steps < 1 or options.batch_size < 1 or options.crop < 4:
+        raise UserInputError("--steps and --batch-size must be >= 1 and --crop >= 4")
+    pool = open_dataset(options.pool)
+    third = open_dataset(options.third_party)
+    shared = sorted(set(pool.scenes) & set(third.scenes))
+    if shared:
+        raise UserInputError(
+            f"{options.third_party}: scene {shared[0]} is also in the pool; third-party scenes must not be trained on"
+        )
+    if options.spp not in {s for name in third.scenes for s in third.scene(name).spp}:
+        raise UserInputError(f"{options.third_party}: no {options.spp}-spp inputs to score at")
+    scenes = trainable_scenes(pool)
+    sets = resolve_sets(options.sets, options.scaling, scenes)
+    out = Path(options.out)
+    (out / "checkpoints").mkdir(parents=True, exist_ok=True)
+    (out / "parts").mkdir(parents=True, exist_ok=True)
+    result = StudyResult(
+        options={k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(options).items() if k != "progress"},
+        pool={"path": str(options.pool), "config_hash": pool.config_hash, "trainable": [s.name for s in scenes]},
+        third_party={"path": str(options.third_party), "config_hash": third.config_hash, "scenes": third.scenes},
+        sets=[asdict(s) for s in sets],
+    )
+    with ResultsStore(out / STORE_NAME) as store:
+        references, kept, apart = _references(options, store, third)
+        result.references = references
+        result.third_party.update({"kept": kept, "set_apart": apart})
+        jobs = [(m, s, seed) for m in options.models for s in sets for seed in options.seeds]
+        bar = tqdm(jobs, desc="study: model × set × seed", unit="run", disable=not options.progress, file=sys.stderr)
+        for model, training_set, seed in bar:
+            bar.set_postfix_str(f"{model} {training_set.name} seed {seed}")
+            result.parts.append(_part(options, store, model, training_set, seed, kept))
+        bar.close()
+    result.scaling = scaling_curve(result.parts, sets, options.models)
+    return result
+
+
+def _part(options: StudyOptions, store, model: str, training_set: TrainingSet, seed: int, kept: list[str]) -> dict:
+    """One (model, set, seed): trained, scored and recorded (a finished record is reused)."""
+    stem = part_stem(model, training_set.name, seed, options)
+    record_path = Path(options.out) / "parts" / f"{stem}.json"
+    checkpoint = Path(options.out) / "checkpoints" / f"{stem}.pt"
+    if record_path.is_file() and checkpoint.is_file():
+        record = json.loads(record_path.read_text())
+        if record.get("scenes") == list(training_set.scenes) and record.get("kept") == kept:
+            return record
+    meta = _train(options, model, training_set, seed, checkpoint)
+    digest = _sha256(checkpoint)
+    run_id = _benchmark(
+        options,
+        store,
+        [model],
+        {"options": {model: {"checkpoint": str(checkpoint.resolve())}}, "nonce": f"checkpoint sha256 {digest}"},
+    )
+    record = {
+        "model": model,
+        "set": training_set.name,
+        "kind": training_set.kind,
+        "seed": seed,
+        "scenes": list(training_set.scenes),
+        "families": list(training_set.families),
+        "steps": int(meta.get("steps", options.steps)),
+        "budget_pixels": options.steps * options.batch_size * options.crop * options.crop,
+        "train_seconds": float(meta.get("seconds", 0.0)),
+        "checkpoint": str(checkpoint),
+        "checkpoint_sha256": digest,
+        "run_id": run_id,
+        "kept": kept,
+        "scores": read_scores(store, run_id, model, options.spp, kept),
+    }
+    record_path.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
+    return record
+
+
+def _seed_summary(parts: list[dict], metric: str) -> dict:
+    """Mean over seeds of the aggregate and its interval ends, and the seeds' min and max."""
+    values = [p["scores"][metric]["value"] for p in parts if p["scores"][metric]["value"] is not None]
+    if not values:
+        return {"value": None, "low": None, "high": None, "seeds": len(parts), "spread": None}
+    lows = [p["scores"][metric]["low"] for p in parts if p["scores"][metric]["low"] is not None]
+    highs = [p["scores"][metric]["high"] for p in parts if p["scores"][metric]["high"] is not None]
+    mean = lambda xs: sum(xs) / len(xs) if xs else None  # noqa: E731
+    return {
+        "value": mean(values),
+        "low": mean(lows),
+        "high": mean(highs),
+        "seeds": len(values),
+        "spread": [min(values), max(values)] if len(values) > 1 else None,
+    }
+
+
+def scaling_curve(parts: list[dict], sets: list[TrainingSet], models) -> dict:
+    """{model: [{scenes, set, metric: seed summary}]}: error against the number of training scenes
+    for the mix's prefixes (``n:K``) and ``full``, in order of scene count."""
+    points = [s for s in sets if s.kind in ("scaling", "full")]
+    out = {}
+    for model in models:
+        rows = []
+        for s in sorted(points, key=lambda s: len(s.scenes)):
+            mine = [p for p in parts if p["model"] == model and p["set"] == s.name]
+            if mine:
+                rows.append({"scenes": len(s.scenes), "set": s.name, **{m: _seed_summary(mine, m) for m in METRICS}})
+        out[model] = rows
+    return out
+
+
+# --------------------------------------------------------------------------- report
+
+
+def _num(value, digits: int = 4) -> str:
+    return "–" if value is None else f"{value:.{digits}g}"
+
+
+def _cell(summary: dict) -> str:
+    text = _num(summary.get("value"))
+    if summary.get("low") is not None and summary.get("high") is not None:
+        text += f" [{_num(summary['low'], 3)}, {_num(summary['high'], 3)}]"
+    if summary.get("spread"):
+        text += f" (seeds {_num(summary['spread'][0], 3)}–{_num(summary['spread'][1], 3)})"
+    return text
+
+
+def markdown(result: StudyResult) -> str:
+    """The study's report: the summary table, training set × third-party scene, the scaling curve."""
+    o = result.options
+    spp = o["spp"]
+    lines = [
+        "# Data-value study",
+        "",
+        f"Same model, same budget ({o['steps']} steps × batch {o['batch_size']} × {o['crop']}² px crops), "
+        f"trained on subsets of the pool `{result.pool['path']}`; scored on `{result.third_party['path']}` "
+        f"(split all, {spp} spp) by corrected scores aggregated over the kept scenes, with 95 % bootstrap "
+        "intervals over scenes. Seeds: " + ", ".join(str(s) for s in o["seeds"]) + ".",
+        "",
+        "Third-party scenes kept: " + ", ".join(result.third_party.get("kept", [])) + ".",
+    ]
+    apart = result.third_party.get("set_apart") or {}
+    if apart:
+        lines += [
+            "Set apart (as the benchmark report does; shown per scene below): "
+            + "; ".join(f"{s} ({why})" for s, why in apart.items())
+            + "."
+        ]
+    lines += [
+        "",
+        f"## Summary at {spp} spp",
+        "",
+        "| model | training set | scenes | relmse_robust (corrected) | FLIP |",
+        "|---|---|---|---|---|",
+    ]
+    for label, scores in result.references.items():
+        lines.append(f"| {label} | (reference) | – | {_cell(scores['relmse_robust'])} | {_cell(scores['flip'])} |")
+    groups = _groups(result.parts)
+    for (model, name), parts in groups.items():
+        cells = [_cell(_seed_summary(parts, m)) for m in METRICS]
+        lines.append(f"| {model} | {name} | {len(parts[0]['scenes'])} | {cells[0]} | {cells[1]} |")
+    scenes = result.third_party.get("scenes", [])
+    for metric in METRICS:
+        lines += [
+            "",
+            f"## {metric} per third-party scene ({spp} spp; mean over seeds)",
+            "",
+            "| model | training set | " + " | ".join(scenes) + " |",
+            "|---|---|" + "---|" * len(scenes),
+        ]
+        for label, scores in result.references.items():
+            per = scores[metric]["per_scene"]
+            lines.append(f"| {label} | (reference) | " + " | ".join(_num(per.get(s)) for s in scenes) + " |")
+        for (model, name), parts in groups.items():
+            row = []
+            for s in scenes:
+                values = [p["scores"][metric]["per_scene"].get(s) for p in parts]
+                values = [v for v in values if v is not None]
+                row.append(_num(sum(values) / len(values) if values else None))
+            lines.append(f"| {model} | {name} | " + " | ".join(row) + " |")
+    lines += [
+        "",
+        "## Scaling curve",
+        "",
+        f"Error against the number of generated training scenes (the mix's round-robin prefixes); figure: `{FIGURE}`.",
+        "",
+        "| model | training scenes | set | relmse_robust (corrected) | FLIP |",
+        "|---|---|---|---|---|",
+    ]
+    for model, rows in result.scaling.items():
+        for row in rows:
+            lines.append(
+                f"| {model} | {row['scenes']} | {row['set']} | {_cell(row['relmse_robust'])} | {_cell(row['flip'])} |"
+            )
+    lines += ["", "## Training sets", ""]
+    for s in result.sets:
+        lines.append(f"* `{s['name']}` ({s['kind']}): {len(s['scenes'])} scenes of {', '.join(s['families'])}")
+    return "\n".join(lines) + "\n"
+
+
+def _groups(parts: list[dict]) -> dict[tuple[str, str], list[dict]]:
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for part in parts:
+        groups.setdefault((part["model"], part["set"]), []).append(part)
+    return groups
+
+
+def scaling_figure(result: StudyResult, path: Path) -> Path | None:
+    """The scaling curve (corrected relmse_robust against training scenes, log x) as a PNG; None when empty."""
+    if not any(result.scaling.values()):
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3.4), dpi=120)
+    for model, rows in result.scaling.items():
+        rows = [r for r in rows if r["relmse_robust"]["value"] is not None]
+        if not rows:
+            continue
+        x = [r["scenes"] for r in rows]
+        y = [r["relmse_robust"]["value"] for r in rows]
+        low = [r["relmse_robust"]["low"] if r["relmse_robust"]["low"] is not None else v for r, v in zip(rows, y)]
+        high = [r["relmse_robust"]["high"] if r["relmse_robust"]["high"] is not None else v for r, v in zip(rows, y)]
+        ax.errorbar(
+            x,
+            y,
+            yerr=[[max(v - lo, 0) for v, lo in zip(y, low)], [max(hi - v, 0) for v, hi in zip(y, high)]],
+            marker="o",
+            capsize=3,
+            label=model,
+        )
+    for label, scores in result.references.items():
+        value = scores["relmse_robust"]["value"]
+        if value is not None:
+            ax.axhline(value, linestyle="--", linewidth=0.8, color="grey")
+            ax.annotate(label, (ax.get_xlim()[0], value), fontsize=7, color="grey")
+    ax.set_xscale("log")
+    ax.set_xlabel("generated training scenes")
+    ax.set_ylabel("relmse_robust (corrected)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def write_report(result: StudyResult, out: Path) -> Path:
+    """Write ``study.json``, ``study.md`` and the scaling figure into ``out``; return the Markdown's path."""
+    out = Path(out)
+    (out / REPORT_JSON).write_text(json.dumps(asdict(result), indent=1, sort_keys=True) + "\n")
+    scaling_figure(result, out / FIGURE)
+    path = out / REPORT_MD
+    path.write_text(markdown(result))
+    return path
