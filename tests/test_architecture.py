@@ -58,42 +58,89 @@ ALLOWED = {
     },
 }
 #: Top-level helper modules every stage may use (no stage of their own).
-HELPERS = {"errors", "mitsuba_runtime", "outputs", "progress"}
+HELPERS = {"errors", "interrupts", "mitsuba_runtime", "outputs", "progress"}
 
 
-def _module_name(path: Path) -> str:
-    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+def _module_name(path: Path, package: Path = PACKAGE) -> str:
+    parts = path.relative_to(package.parent).with_suffix("").parts
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def _imports(path: Path) -> set[str]:
-    """Absolute names of the project modules that ``path`` imports (relative imports resolved)."""
-    tree = ast.parse(path.read_text(), filename=str(path))
-    here = _module_name(path).split(".")
-    if path.name != "__init__.py":
-        here = here[:-1]
-    found = set()
-    for node in ast.walk(tree):
+def _importlib_targets(node: ast.Call, project: str) -> list[str]:
+    """The project modules an ``importlib.import_module(...)`` call names: its string, or for an
+    f-string the package its constant head names (``f"{project}.commands.{name}"``: ``commands``)."""
+    func = node.func
+    name = func.attr if isinstance(func, ast.Attribute) else func.id if isinstance(func, ast.Name) else ""
+    if name != "import_module" or not node.args:
+        return []
+    arg = node.args[0]
+    if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
+        text = arg.value
+    elif isinstance(arg, ast.JoinedStr) and arg.values and isinstance(arg.values[0], ast.Constant):
+        text = str(arg.values[0].value).rstrip(".")
+    else:
+        return []
+    return [text] if text.split(".")[0] == project else []
+
+
+def _edges(path: Path, modules: set[str], package: Path = PACKAGE) -> set[str]:
+    """Modules of ``modules`` that ``path`` depends on, wherever it imports them: at module level,
+    inside a function (a lazy import is still an arrow) and through
+    ``importlib.import_module("<project>...")``.
+
+    ``from pkg import name`` depends on ``pkg.name`` when that is a module and on ``pkg`` itself (its
+    ``__init__``) when a name is not; relative imports are resolved; a module's own parent packages
+    are initialised before it in any case and are no arrow.
+    """
+    project = package.name
+    me = _module_name(path, package)
+    here = me.split(".") if path.name == "__init__.py" else me.split(".")[:-1]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
         if isinstance(node, ast.Import):
-            found.update(alias.name for alias in node.names if alias.name.startswith("denoisebench"))
+            found.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom):
             if node.level:
-                base = here[: len(here) - node.level + 1]
-                module = ".".join(base + ([node.module] if node.module else []))
+                module = ".".join(here[: len(here) - node.level + 1] + ([node.module] if node.module else []))
             else:
                 module = node.module or ""
-            if module.startswith("denoisebench"):
-                found.add(module)
-                found.update(f"{module}.{alias.name}" for alias in node.names)
-    return found
+            submodules = {f"{module}.{a.name}" for a in node.names} & modules
+            found.update(submodules | ({module} if len(submodules) < len(node.names) else set()))
+        elif isinstance(node, ast.Call):
+            found.update(_importlib_targets(node, project))
+    return {m for m in found if m in modules and m != me and not me.startswith(m + ".")}
+
+
+def _module_graph(package: Path = PACKAGE) -> dict[str, set[str]]:
+    """{module: the project modules it depends on (:func:`_edges`)} for every module of ``package``."""
+    paths = {_module_name(p, package): p for p in package.rglob("*.py")}
+    return {name: _edges(path, set(paths), package) for name, path in paths.items()}
+
+
+def _find_cycle(graph: dict[str, set[str]]) -> list[str]:
+    """One import cycle of ``graph`` as ``[a, b, ..., a]``, or [] when there is none."""
+    state: dict[str, int] = {}
+    cycle: list[str] = []
+
+    def visit(node: str, trail: list[str]) -> bool:
+        state[node] = 1
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                cycle.extend(trail[trail.index(nxt) :] + [nxt])
+                return True
+            if nxt not in state and visit(nxt, trail + [nxt]):
+                return True
+        state[node] = 2
+        return False
+
+    for module in sorted(graph):
+        if module not in state and visit(module, [module]):
+            break
+    return cycle
 
 
 def _graph() -> dict[str, set[str]]:
-    modules = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
-    graph = {}
-    for name, path in modules.items():
-        graph[name] = {m for m in _imports(path) if m in modules and m != name}
-    return graph
+    return _module_graph()
 
 
 def _stage(module: str) -> str | None:
@@ -157,42 +204,66 @@ def test_usd_side_never_loads_mitsuba_and_render_side_never_loads_pxr():
                     assert not name.startswith(forbidden), f"{path.name} imports {name}"
 
 
-def test_no_import_cycles_between_modules_at_import_time():
-    """Module-level imports only (lazy ones inside functions cannot deadlock an import)."""
-    modules = {_module_name(p): p for p in PACKAGE.rglob("*.py")}
-    graph = {}
-    for name, path in modules.items():
-        tree = ast.parse(path.read_text())
-        top = ast.Module(body=[n for n in tree.body if isinstance(n, (ast.Import, ast.ImportFrom))], type_ignores=[])
-        found = set()
-        for node in top.body:
-            if isinstance(node, ast.ImportFrom) and node.module and not node.level:
-                # `from pkg import submodule` depends on the submodule, not on the package's own __init__
-                submodules = {f"{node.module}.{a.name}" for a in node.names} & modules.keys()
-                names_only = len(submodules) < len(node.names)
-                found.update(submodules | ({node.module} if names_only else set()))
-            elif isinstance(node, ast.Import):
-                found.update(a.name for a in node.names)
-        # a module's own parent packages are initialised before it in any case: not an edge
-        graph[name] = {m for m in found if m in modules and m != name and not name.startswith(m + ".")}
-    state: dict[str, int] = {}
-    cycle: list[str] = []
-
-    def visit(node: str, trail: list[str]) -> bool:
-        state[node] = 1
-        for nxt in sorted(graph[node]):
-            if state.get(nxt) == 1:
-                cycle.extend(trail[trail.index(nxt) :] + [nxt] if nxt in trail else [node, nxt])
-                return True
-            if nxt not in state and visit(nxt, trail + [nxt]):
-                return True
-        state[node] = 2
-        return False
-
-    for module in sorted(graph):
-        if module not in state and visit(module, [module]):
-            break
+def test_no_import_cycles_between_modules():
+    """No circle of arrows, lazy or not: imports inside functions and ``importlib`` calls to project
+    modules count (a circle looked up late still means two modules that cannot be read apart)."""
+    cycle = _find_cycle(_module_graph())
     assert not cycle, " -> ".join(cycle)
+
+
+def _plant(root: Path, files: dict[str, str]) -> Path:
+    """A synthetic package ``root/denoisebench`` with ``files`` ({relative path: source})."""
+    package = root / "denoisebench"
+    for relative, text in {"__init__.py": "", **files}.items():
+        path = package / relative
+        path.parent.mkdir(parents=True, exist_ok=True)
+        (path.parent / "__init__.py").touch()
+        path.write_text(text)
+    return package
+
+
+def test_the_cycle_check_sees_a_lazy_import(tmp_path):
+    package = _plant(
+        tmp_path,
+        {
+            "bench/runner.py": "from denoisebench.bench.units import pairs\n",
+            "bench/units.py": "def pairs():\n    from denoisebench.bench.runner import measure  # late\n    return measure\n",
+        },
+    )
+    assert _find_cycle(_module_graph(package)) == [
+        "denoisebench.bench.runner",
+        "denoisebench.bench.units",
+        "denoisebench.bench.runner",
+    ]
+    (package / "bench" / "units.py").write_text("def pairs():\n    return 1\n")
+    assert _find_cycle(_module_graph(package)) == []
+
+
+def test_the_cycle_check_sees_an_importlib_arrow_and_a_relative_one(tmp_path):
+    package = _plant(
+        tmp_path,
+        {
+            "a/one.py": "import importlib\n\ndef f():\n    return importlib.import_module('denoisebench.b.two')\n",
+            "b/two.py": "def g():\n    from ..a import one\n    return one\n",
+        },
+    )
+    assert _find_cycle(_module_graph(package)) == ["denoisebench.a.one", "denoisebench.b.two", "denoisebench.a.one"]
+    graph = _module_graph(package)
+    assert graph["denoisebench.a.one"] == {"denoisebench.b.two"} and graph["denoisebench.b.two"] == {
+        "denoisebench.a.one"
+    }
+
+
+def test_the_importlib_arrow_is_seen_by_the_layering(tmp_path):
+    """An ``importlib`` call with an f-string names the package its constant head names."""
+    package = _plant(
+        tmp_path,
+        {
+            "cli.py": "import importlib\nm = importlib.import_module(f'denoisebench.commands.{1}')\n",
+            "commands/run.py": "",
+        },
+    )
+    assert _module_graph(package)["denoisebench.cli"] == {"denoisebench.commands"}
 
 
 def test_one_plugin_shell():
@@ -350,3 +421,109 @@ def test_the_one_unit_marker_needs_a_reason():
     assert _one_unit_reason("Render a frame.\n\nOne unit: the kernel and its state are traced together.")
     assert not _one_unit_reason("Render a frame.\n\nOne unit:") and not _one_unit_reason("Render a frame.")
     assert not _one_unit_reason("It is not One unit: of anything")  # the marker starts a line
+
+
+#: The benchmark side, whose calls to the project's own functions and records name their arguments.
+BENCHMARK_SIDE = ("results", "analysis", "reports", "benchmark")
+#: The most arguments such a call may pass by position.
+MAX_POSITIONAL = 3
+
+
+def _project_methods(package: Path = PACKAGE) -> set[str]:
+    """Names of the methods defined on the project's classes (``obj.name(...)`` may call one)."""
+    names = set()
+    for path in package.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ClassDef):
+                names.update(f.name for f in node.body if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef)))
+    return names - {"__init__", "__call__"}
+
+
+def _positional_overflows(tree: ast.Module, methods: set[str], project: str = "denoisebench") -> list[str]:
+    """Calls in ``tree`` to the project's own functions, classes or methods that pass more than
+    :data:`MAX_POSITIONAL` arguments by position, as ``line: callee (n)``.
+
+    A callee is the project's when its name is defined in the module or imported from the project
+    (``f(...)``, ``module.f(...)``), or when it is an attribute call whose name is a project method
+    and whose object is not a third-party import (``np.clip(...)`` is not ours)."""
+    ours, foreign = set(), set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            mine = node.level > 0 or (node.module or "").split(".")[0] == project
+            (ours if mine else foreign).update(a.asname or a.name for a in node.names)
+        elif isinstance(node, ast.Import):
+            for a in node.names:
+                mine = a.name.split(".")[0] == project
+                (ours if mine else foreign).add(a.asname or a.name.split(".")[0])
+        elif isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            ours.add(node.name)
+    bad = []
+    for node in ast.walk(tree):
+        if not isinstance(node, ast.Call) or len(node.args) <= MAX_POSITIONAL:
+            continue
+        func = node.func
+        if isinstance(func, ast.Name):
+            project_call = func.id in ours and func.id not in foreign
+        elif isinstance(func, ast.Attribute):
+            root = func.value
+            while isinstance(root, ast.Attribute):
+                root = root.value
+            name = root.id if isinstance(root, ast.Name) else None
+            project_call = name not in foreign and (name in ours or func.attr in methods)
+        else:
+            project_call = False
+        if project_call:
+            bad.append(f"{node.lineno}: {ast.unparse(func)} ({len(node.args)})")
+    return bad
+
+
+def test_benchmark_side_calls_name_their_arguments():
+    """On the benchmark side a call to the project's own function or record passes at most
+    :data:`MAX_POSITIONAL` arguments by position; the rest go by name (``ref_var=``, ``trim=``)."""
+    methods = _project_methods()
+    bad = [
+        f"{path.relative_to(PACKAGE.parent)}:{line}"
+        for stage in BENCHMARK_SIDE
+        for path in sorted((PACKAGE / stage).rglob("*.py"))
+        for line in _positional_overflows(ast.parse(path.read_text()), methods)
+    ]
+    assert not bad, f"calls passing more than {MAX_POSITIONAL} arguments by position:\n" + "\n".join(bad)
+
+
+def test_the_positional_check_catches_a_planted_call():
+    planted = ast.parse(
+        "import numpy as np\n"
+        "from denoisebench.metrics import compute_metrics\n"
+        "from denoisebench.results import store as results_store\n"
+        "def local(a, b, c, d): ...\n"
+        "local(1, 2, 3, 4)\n"
+        "compute_metrics(p, r, names, None)\n"
+        "results_store.encode_image(a, b, c, d)\n"
+        "store.image(run, label, scene, spp, frame)\n"
+        "np.clip(x, 0, 1, out)\n"  # third-party: not ours
+        "local(1, 2, 3, d=4)\n"  # by name: allowed
+        "print(1, 2, 3, 4)\n"  # a builtin
+    )
+    found = _positional_overflows(planted, methods={"image"})
+    assert found == [
+        "5: local (4)",
+        "6: compute_metrics (4)",
+        "7: results_store.encode_image (4)",
+        "8: store.image (5)",
+    ]
+
+
+def test_benchmark_side_records_are_keyword_only():
+    """Every dataclass under the benchmark side's packages is ``kw_only=True``: built by name."""
+    bad = []
+    for stage in BENCHMARK_SIDE:
+        for path in sorted((PACKAGE / stage).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text())):
+                for deco in getattr(node, "decorator_list", []) if isinstance(node, ast.ClassDef) else []:
+                    func = deco.func if isinstance(deco, ast.Call) else deco
+                    if ast.unparse(func).split(".")[-1] != "dataclass":
+                        continue
+                    keywords = {k.arg: ast.unparse(k.value) for k in getattr(deco, "keywords", [])}
+                    if keywords.get("kw_only") != "True":
+                        bad.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno} {node.name}")
+    assert not bad, "dataclasses built by position (add kw_only=True):\n" + "\n".join(bad)

@@ -41,7 +41,7 @@ from denoisebench.results.names import NOISY
 DEFAULT_SLOPE = {"relmse_robust": -1.0, "relmse": -1.0, "mse": -1.0, "flip": -0.5}
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Point:
     denoiser: str
     spp: int
@@ -50,7 +50,7 @@ class Point:
     pareto: bool = False
 
 
-@dataclass
+@dataclass(kw_only=True)
 class NoisyFit:
     """log(error) = intercept + slope · log(spp); render seconds = time_offset + seconds_per_spp · spp."""
 
@@ -71,7 +71,7 @@ class NoisyFit:
         return math.exp(self.intercept + self.slope * math.log(spp))
 
 
-@dataclass
+@dataclass(kw_only=True)
 class AccuracyTime:
     metric: str
     points: list[Point]  # denoisers (noisy included, as label NOISY)
@@ -130,7 +130,14 @@ def fit_noisy(points: list[Point], render_times: list[tuple[float, float]], metr
     else:
         slope, assumed = DEFAULT_SLOPE.get(metric, -1.0), True
         intercept = float(np.mean(log_err - slope * log_spp))
-    return NoisyFit(float(intercept), float(slope), timing[1], sorted(p.spp for p in noisy), assumed, timing[0])
+    return NoisyFit(
+        intercept=float(intercept),
+        slope=float(slope),
+        seconds_per_spp=timing[1],
+        measured_spp=sorted(p.spp for p in noisy),
+        assumed_slope=assumed,
+        time_offset=timing[0],
+    )
 
 
 def accuracy_time(
@@ -161,7 +168,7 @@ def accuracy_time(
                 f"{row.denoiser} at {row.spp} spp ({metric} {cell.value:.3g}, {seconds:.3g} s): not positive, off a log axis"
             )
             continue
-        points.append(Point(row.denoiser, row.spp, seconds, cell.value))
+        points.append(Point(denoiser=row.denoiser, spp=row.spp, seconds=seconds, error=cell.value))
     pareto_front(points)
     render_times = [(f.spp, f.render_seconds) for f in data.frames_of(NOISY) if f.render_seconds]
     if reference_seconds and reference_spp and model is None:
@@ -175,7 +182,16 @@ def accuracy_time(
             reference_seconds = model.render_seconds(reference_spp)
         width, height = model.time_at
         label = f"seconds per frame at {width}×{height}" + (" (projected)" if model.projected else "")
-    at = AccuracyTime(metric, points, fit, reference_seconds, reference_spp, hidden, label, model=model)
+    at = AccuracyTime(
+        metric=metric,
+        points=points,
+        fit=fit,
+        reference_seconds=reference_seconds,
+        reference_spp=reference_spp,
+        hidden=hidden,
+        time_label=label,
+        model=model,
+    )
     at.noisy_curve = {p.spp: p.error for p in points if p.denoiser == NOISY}
     return at
 

@@ -167,7 +167,7 @@ def bootstrap_mean(terms, ses=None) -> tuple[float | None, float | None]:
 
 def aggregate(rule: str, mine: dict, noisy: dict | None = None, ses: dict | None = None):
     """(value, low, high, scenes used) of per-scene values ``mine`` under ``rule`` (module docstring)."""
-    terms, term_ses, back = scene_terms(rule, mine, noisy, ses)
+    terms, term_ses, back = scene_terms(rule, mine, noisy, ses=ses)
     if back is None:  # geometric mean with a zero
         return 0.0, None, None, len([v for v in mine.values() if is_finite(v)])
     if not terms:
@@ -233,7 +233,7 @@ def reference_resolution(rule: str, mine_a: dict, ses_a: dict, mine_b: dict, ses
 # references that cannot resolve a score
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Unresolved:
     """One scene whose reference cannot resolve a score (module Notes): why, and what it would need.
 
@@ -315,7 +315,7 @@ def _can_rank(data, scene: str, metric: str) -> bool | None:
     entries = []
     for spp in data.spp:
         for label in data.labels:
-            values, floors, ses = data.per_scene(label, spp, metric, [scene])
+            values, floors, ses = data.per_scene(label, spp, metric, scenes=[scene])
             if scene not in values or not is_finite(values[scene]):
                 continue
             corrected, _ = corrected_values(values, floors, ses)
@@ -366,7 +366,7 @@ def unresolved_references(
             best = None  # (value, label, spp, floor)
             for label in data.labels:
                 for spp in data.spp:
-                    values, floors, _ = data.per_scene(label, spp, metric, [scene])
+                    values, floors, _ = data.per_scene(label, spp, metric, scenes=[scene])
                     value = values.get(scene)
                     if value is not None and (best is None or value < best[0]):
                         best = (value, label, spp, floors.get(scene))
@@ -375,37 +375,61 @@ def unresolved_references(
         first = bests[0] if bests else (None, None, None, None, None)
         if growth is not None and growth > growth_limit:
             metric, value, label, spp, floor = first
-            needed = _needed(ref_spp, floor, value, fraction)
+            needed = _needed(ref_spp, floor, value, fraction=fraction)
             needed = max(needed or 0, 2 * ref_spp) if ref_spp else needed
             out.append(
-                Unresolved(scene, "floor_growing", metric, ref_spp, growth, value, label, spp, floor, needed, True)
+                Unresolved(
+                    scene=scene,
+                    reason="floor_growing",
+                    metric=metric,
+                    reference_spp=ref_spp,
+                    floor_growth=growth,
+                    best=value,
+                    label=label,
+                    spp=spp,
+                    floor=floor,
+                    needed_spp=needed,
+                    needed_is_lower_bound=True,
+                )
             )
             continue
         if share is not None and share > noisy_limit:
             metric, value, label, spp, floor = first
-            needed = _needed(ref_spp, floor, value, fraction)
+            needed = _needed(ref_spp, floor, value, fraction=fraction)
             out.append(
                 Unresolved(
-                    scene,
-                    "reference_too_noisy",
-                    metric,
-                    ref_spp,
-                    growth,
-                    value,
-                    label,
-                    spp,
-                    floor,
-                    needed,
-                    False,
-                    share,
+                    scene=scene,
+                    reason="reference_too_noisy",
+                    metric=metric,
+                    reference_spp=ref_spp,
+                    floor_growth=growth,
+                    best=value,
+                    label=label,
+                    spp=spp,
+                    floor=floor,
+                    needed_spp=needed,
+                    needed_is_lower_bound=False,
+                    noisy_share=share,
                 )
             )
             continue
         for metric, value, label, spp, floor in bests:
             if floor is not None and _can_rank(data, scene, metric) is False:
-                needed = _needed(ref_spp, floor, value, fraction)
+                needed = _needed(ref_spp, floor, value, fraction=fraction)
                 out.append(
-                    Unresolved(scene, "cannot_rank", metric, ref_spp, growth, value, label, spp, floor, needed, False)
+                    Unresolved(
+                        scene=scene,
+                        reason="cannot_rank",
+                        metric=metric,
+                        reference_spp=ref_spp,
+                        floor_growth=growth,
+                        best=value,
+                        label=label,
+                        spp=spp,
+                        floor=floor,
+                        needed_spp=needed,
+                        needed_is_lower_bound=False,
+                    )
                 )
                 break
     return out

@@ -53,7 +53,7 @@ def lead_metrics(measured: list[str]) -> list[str]:
     return [m for m in (first, "flip") if m in measured]
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Estimate:
     """A value read off measured rungs: ``how`` is ``measured``, ``interpolated``, ``at_most`` or ``extrapolated``."""
 
@@ -79,18 +79,18 @@ def error_at(curve: dict[int, float], spp: float) -> Estimate | None:
         return None
     for s, e in points:
         if math.isclose(s, spp):
-            return Estimate(e, "measured")
+            return Estimate(value=e, how="measured")
     if len(points) == 1:
         return None
     if spp < points[0][0]:
         (x0, y0), (x1, y1) = points[0], points[1]
-        return Estimate(_log_segment(x0, y0, x1, y1, spp), "extrapolated")
+        return Estimate(value=_log_segment(x0, y0, x1, y1=y1, x=spp), how="extrapolated")
     if spp > points[-1][0]:
         (x0, y0), (x1, y1) = points[-2], points[-1]
-        return Estimate(_log_segment(x0, y0, x1, y1, spp), "extrapolated")
+        return Estimate(value=_log_segment(x0, y0, x1, y1=y1, x=spp), how="extrapolated")
     for (x0, y0), (x1, y1) in zip(points, points[1:]):
         if x0 <= spp <= x1:
-            return Estimate(_log_segment(x0, y0, x1, y1, spp), "interpolated")
+            return Estimate(value=_log_segment(x0, y0, x1, y1=y1, x=spp), how="interpolated")
     return None
 
 
@@ -104,24 +104,24 @@ def spp_for(curve: dict[int, float], target: float) -> Estimate | None:
     if not points or target <= 0:
         return None
     if points[0][1] <= target:
-        return Estimate(float(points[0][0]), "at_most")
+        return Estimate(value=float(points[0][0]), how="at_most")
     for (x0, y0), (x1, y1) in zip(points, points[1:]):
         if y1 <= target < y0:
             if math.isclose(y1, target):
-                return Estimate(float(x1), "measured")
+                return Estimate(value=float(x1), how="measured")
             t = (math.log(target) - math.log(y0)) / (math.log(y1) - math.log(y0))
-            return Estimate(math.exp(math.log(x0) + t * (math.log(x1) - math.log(x0))), "interpolated")
+            return Estimate(value=math.exp(math.log(x0) + t * (math.log(x1) - math.log(x0))), how="interpolated")
     if len(points) >= 2:
         (x0, y0), (x1, y1) = points[-2], points[-1]
         if y1 < y0:
             slope = (math.log(y1) - math.log(y0)) / (math.log(x1) - math.log(x0))
             spp = math.exp(math.log(x1) + (math.log(target) - math.log(y1)) / slope)
             if spp <= EXTRAPOLATION_LIMIT * x1:
-                return Estimate(spp, "extrapolated")
+                return Estimate(value=spp, how="extrapolated")
     return None
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Curves:
     """Per label {spp: (mean, low, high)} of one metric from the summary rows."""
 
@@ -139,10 +139,10 @@ class Curves:
             if cell is None or cell.value is None or row.failed_units:
                 continue
             cells.setdefault(row.denoiser, {})[int(row.spp)] = (float(cell.value), cell.low, cell.high)
-        return cls(metric, cells)
+        return cls(metric=metric, cells=cells)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class EqualTimeRow:
     budget_spp: int
     budget_seconds: float
@@ -162,7 +162,7 @@ class EqualTimeRow:
         return self.best_error.value / self.render_error.value
 
 
-@dataclass
+@dataclass(kw_only=True)
 class EqualQualityRow:
     target: float
     target_spp: float  # spp rendering alone needs
@@ -172,7 +172,7 @@ class EqualQualityRow:
     ratio_bounds: dict[str, tuple[float, float]] = field(default_factory=dict)  # label → time ratio across spreads
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Tables:
     metric: str
     time_at: tuple[int, int]
@@ -201,7 +201,7 @@ def equal_time(curves: Curves, model, rungs: list[int]) -> list[EqualTimeRow]:
             continue
         budget = model.render_seconds(s)
         mean, low, high = noisy[s]
-        render_error = Estimate(mean, "measured", low, high)
+        render_error = Estimate(value=mean, how="measured", low=low, high=high)
         best = None
         count = 0
         maybe = []
@@ -212,20 +212,45 @@ def equal_time(curves: Curves, model, rungs: list[int]) -> list[EqualTimeRow]:
                 seconds = model.total_seconds(label, spp)
                 if seconds is None:
                     continue
-                surely, possibly = _fits(model, label, spp, s, seconds, budget)
+                surely, possibly = _fits(model, label, spp, budget_spp=s, seconds=seconds, budget=budget)
                 if not surely:
                     if possibly:
                         maybe.append(e)
                     continue
                 count += 1
                 if best is None or e < best[3].value:
-                    best = (label, spp, seconds, Estimate(e, "measured", lo, hi))
+                    best = (label, spp, seconds, Estimate(value=e, how="measured", low=lo, high=hi))
         floor = best[3].value if best is not None and best[3].value < mean else mean
         contested = any(e < floor for e in maybe)
         if best is not None and best[3].value < mean:
-            rows.append(EqualTimeRow(s, budget, render_error, *best, count, contested))
+            label, spp, seconds, error = best
+            rows.append(
+                EqualTimeRow(
+                    budget_spp=s,
+                    budget_seconds=budget,
+                    render_error=render_error,
+                    best=label,
+                    best_spp=spp,
+                    best_seconds=seconds,
+                    best_error=error,
+                    candidates=count,
+                    contested=contested,
+                )
+            )
         else:
-            rows.append(EqualTimeRow(s, budget, render_error, None, None, None, None, count, contested))
+            rows.append(
+                EqualTimeRow(
+                    budget_spp=s,
+                    budget_seconds=budget,
+                    render_error=render_error,
+                    best=None,
+                    best_spp=None,
+                    best_seconds=None,
+                    best_error=None,
+                    candidates=count,
+                    contested=contested,
+                )
+            )
     return rows
 
 
@@ -234,7 +259,7 @@ def equal_quality(curves: Curves, model, rungs: list[int]) -> list[EqualQualityR
     noisy = curves.curve(NOISY)
     if not noisy:
         return []
-    targets = [(float(s), Estimate(noisy[s], "measured")) for s in sorted(noisy) if s in rungs]
+    targets = [(float(s), Estimate(value=noisy[s], how="measured")) for s in sorted(noisy) if s in rungs]
     top = max(noisy)
     for factor in EXTRA_TARGETS:
         found = error_at(noisy, top * factor)
@@ -245,7 +270,7 @@ def equal_quality(curves: Curves, model, rungs: list[int]) -> list[EqualQualityR
         render = model.render_seconds(target_spp)
         if render is None:
             continue
-        row = EqualQualityRow(target.value, target_spp, render, target.how)
+        row = EqualQualityRow(target=target.value, target_spp=target_spp, render_seconds=render, render_how=target.how)
         for label in curves.cells:
             if label == NOISY:
                 continue
@@ -254,7 +279,7 @@ def equal_quality(curves: Curves, model, rungs: list[int]) -> list[EqualQualityR
                 row.needs[label] = None
                 continue
             seconds = model.total_seconds(label, need.value)
-            row.needs[label] = None if seconds is None else (need, Estimate(seconds, need.how))
+            row.needs[label] = None if seconds is None else (need, Estimate(value=seconds, how=need.how))
             bounds = model.ratio_bounds(label, need.value, target_spp) if hasattr(model, "ratio_bounds") else None
             if seconds is not None and bounds is not None:
                 row.ratio_bounds[label] = bounds
@@ -266,12 +291,12 @@ def build_tables(summary, model, rungs: list[int], metric: str) -> Tables:
     curves = Curves.from_summary(summary, metric)
     labels = [label for label in curves.cells if label != NOISY]
     return Tables(
-        metric,
-        tuple(model.time_at),
-        bool(model.projected),
-        equal_time(curves, model, rungs),
-        equal_quality(curves, model, rungs),
-        labels,
+        metric=metric,
+        time_at=tuple(model.time_at),
+        projected=bool(model.projected),
+        equal_time=equal_time(curves, model, rungs),
+        equal_quality=equal_quality(curves, model, rungs),
+        denoisers=labels,
     )
 
 

@@ -36,7 +36,7 @@ from denoisebench.results.store import ResultsStore
 from denoisebench.results.timings import read_timings
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Entry:
     denoiser: str
     value: float | None
@@ -50,7 +50,7 @@ class Entry:
     denoiser_label: str | None = None  # the denoiser run on it (None: none)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Ranking:
     """What :func:`leaderboard` returns: the metric, spp, dataset hash, entries best first, and the lines
     that say how the numbers were read (scenes left out, the seconds' basis)."""
@@ -63,7 +63,7 @@ class Ranking:
 
     def text(self) -> str:
         """:func:`format_leaderboard` of this ranking, its notes included."""
-        return format_leaderboard(self.metric, self.spp, self.data_hash, self.entries, self.notes)
+        return format_leaderboard(self.metric, self.spp, self.data_hash, entries=self.entries, notes=self.notes)
 
 
 def ranks(entries: list[Entry]) -> list[int | None]:
@@ -161,23 +161,48 @@ def leaderboard(
         if not labels:
             continue
         data = RunData(store, run_id)
-        scenes, model, note = _as_its_report(store, data, row, include_unresolved, time_at)
+        scenes, model, note = _as_its_report(store, data, row, include_unresolved=include_unresolved, time_at=time_at)
         notes += note
         for label in sorted(labels):
             ok = [f for f in data.ok_frames(label, spp) if f.scene in scenes]
             # the report's own cell: corrected for the reference's noise where the score has a floor
-            value = metric_cell(data, label, spp, m.name, sorted(scenes)).value
+            value = metric_cell(data, label, spp, metric=m.name, scenes=sorted(scenes)).value
             failed = sum(1 for u in data.units_of(label, spp) if u.status != "ok")
             where = dimension.get(label, (None, label))
             if value is None and not failed:  # this run did not compute the metric: look further back
-                unmeasured.setdefault(label, Entry(label, None, len(ok), 0, None, None, run_id, row.created_at, *where))
+                sampler, denoiser_label = where
+                unmeasured.setdefault(
+                    label,
+                    Entry(
+                        denoiser=label,
+                        value=None,
+                        frames=len(ok),
+                        failed_units=0,
+                        denoise_seconds=None,
+                        total_seconds=None,
+                        run_id=run_id,
+                        created_at=row.created_at,
+                        sampler=sampler,
+                        denoiser_label=denoiser_label,
+                    ),
+                )
                 continue
             denoise = finite_mean(f.denoise_seconds for f in ok)
             total = finite_mean(f.total_seconds for f in ok)
             if model is not None:
                 denoise, total = model.denoise_seconds(label, spp), model.total_seconds(label, spp)
+            sampler, denoiser_label = where
             entries[label] = Entry(
-                label, value if not failed else None, len(ok), failed, denoise, total, run_id, row.created_at, *where
+                denoiser=label,
+                value=value if not failed else None,
+                frames=len(ok),
+                failed_units=failed,
+                denoise_seconds=denoise,
+                total_seconds=total,
+                run_id=run_id,
+                created_at=row.created_at,
+                sampler=sampler,
+                denoiser_label=denoiser_label,
             )
     for label, entry in unmeasured.items():
         entries.setdefault(label, entry)
@@ -185,7 +210,7 @@ def leaderboard(
     ranked = sorted(
         entries.values(), key=lambda e: (e.value is None, sign * e.value if e.value is not None else 0.0, e.denoiser)
     )
-    return Ranking(m, spp, data_hash, ranked, list(dict.fromkeys(notes)))
+    return Ranking(metric=m, spp=spp, data_hash=data_hash, entries=ranked, notes=list(dict.fromkeys(notes)))
 
 
 def _as_its_report(store, data, row, include_unresolved: bool, time_at) -> tuple[set[str], object, list[str]]:
@@ -215,7 +240,7 @@ def _as_its_report(store, data, row, include_unresolved: bool, time_at) -> tuple
         )
     record = dataset.scene(data.scenes[0]).record if data.scenes else {}
     size = (int(record.get("width", 0)), int(record.get("height", 0)))
-    model = build_time_model(data, read_timings(store, row.run_id), time_at, size) if size[0] else None
+    model = build_time_model(data, read_timings(store, row.run_id), time_at, dataset_size=size) if size[0] else None
     if model is not None:
         w, h = model.time_at
         notes.append(

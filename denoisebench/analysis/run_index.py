@@ -163,11 +163,11 @@ class RunIndex:
         """({scene: value}, {scene: floor}, {scene: ref_se}) over ``scenes`` (default: every scene)."""
         values, floors, ses = {}, {}, {}
         for scene in self.scenes if scenes is None else scenes:
-            value = self.scene_value(label, spp, scene, metric)
+            value = self.scene_value(label, spp, scene, metric=metric)
             if value is None:
                 continue
             values[scene] = value
-            floor, se = self.scene_floor(label, spp, scene, metric)
+            floor, se = self.scene_floor(label, spp, scene, metric=metric)
             if floor is not None:
                 floors[scene] = floor
             if se is not None:

@@ -51,7 +51,7 @@ def bootstrap_interval(values, ses=None) -> tuple[float | None, float | None]:
     return agg.bootstrap_mean([float(values[i]) for i in keep], None if ses is None else [ses[i] for i in keep])
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Cell:
     """A metric aggregated over scenes under its ``rule`` (:mod:`.aggregate`), with a 95 % interval.
 
@@ -80,7 +80,7 @@ class Cell:
         return self.value if self.floor is not None else None
 
 
-@dataclass
+@dataclass(kw_only=True)
 class SummaryRow:
     denoiser: str
     spp: int
@@ -163,19 +163,19 @@ def summary_table(data: RunData, exclude=()) -> list[SummaryRow]:
             ok_scenes = [u.scene for u in units if u.status == "ok" and u.scene not in exclude]
             cells = {}
             for metric in data.frame_metric_names + data.sequence_metric_names:
-                cells[metric] = metric_cell(data, label, spp, metric, ok_scenes)
+                cells[metric] = metric_cell(data, label, spp, metric=metric, scenes=ok_scenes)
             frames = [f for s in ok_scenes for f in data.ok_frames(label, spp, s)]
             rows.append(
                 SummaryRow(
-                    label,
-                    spp,
-                    cells,
-                    finite_mean(f.denoise_seconds for f in frames),
-                    finite_mean(f.total_seconds for f in frames),
-                    finite_mean(f.render_seconds for f in frames),
-                    len(frames),
-                    sum(u.status != "ok" for u in units),
-                    sorted({u.error for u in units if u.error}),
+                    denoiser=label,
+                    spp=spp,
+                    metrics=cells,
+                    denoise_seconds=finite_mean(f.denoise_seconds for f in frames),
+                    total_seconds=finite_mean(f.total_seconds for f in frames),
+                    render_seconds=finite_mean(f.render_seconds for f in frames),
+                    frames=len(frames),
+                    failed_units=sum(u.status != "ok" for u in units),
+                    errors=sorted({u.error for u in units if u.error}),
                 )
             )
     return rows
@@ -187,25 +187,36 @@ def metric_cell(data: RunData, label: str, spp: int, metric: str, scenes: list[s
     With floors on every scene the cell leads with the corrected aggregate (:class:`Cell`); for
     ``relative_to_input`` both the denoiser's and the input's scores are corrected before the ratio."""
     rule = agg.rule_of(metric)
-    mine, floors, ses = data.per_scene(label, spp, metric, scenes)
+    mine, floors, ses = data.per_scene(label, spp, metric, scenes=scenes)
     noisy = noisy_floors = noisy_ses = None
     if rule == "relative_to_input":
-        noisy, noisy_floors, noisy_ses = data.per_scene(NOISY, spp, metric, scenes)
-    value, low, high, count = agg.aggregate(rule, mine, noisy, ses)
+        noisy, noisy_floors, noisy_ses = data.per_scene(NOISY, spp, metric, scenes=scenes)
+    value, low, high, count = agg.aggregate(rule, mine, noisy, ses=ses)
     if not (floors and len(floors) == len(mine) and value is not None):
-        return Cell(value, low, high, count, rule, raw=value, raw_low=low, raw_high=high)
+        return Cell(value=value, low=low, high=high, scenes=count, rule=rule, raw=value, raw_low=low, raw_high=high)
     # relative_to_input: the floor relative to the input's own score (noisy is None otherwise)
     floor = agg.aggregate(rule, floors, noisy)[0]
     higher = agg.higher_is_better(metric)
-    corrected, raised = agg.corrected_values(mine, floors, ses, higher)
+    corrected, raised = agg.corrected_values(mine, floors, ses, higher_is_better=higher)
     noisy_corrected = None
     if noisy is not None:
-        noisy_corrected = agg.corrected_values(noisy, noisy_floors or {}, noisy_ses, higher)[0]
-    c_value, c_low, c_high, c_count = agg.aggregate(rule, corrected, noisy_corrected, ses)
-    return Cell(c_value, c_low, c_high, c_count, rule, floor, value, low, high, len(raised))
+        noisy_corrected = agg.corrected_values(noisy, noisy_floors or {}, noisy_ses, higher_is_better=higher)[0]
+    c_value, c_low, c_high, c_count = agg.aggregate(rule, corrected, noisy_corrected, ses=ses)
+    return Cell(
+        value=c_value,
+        low=c_low,
+        high=c_high,
+        scenes=c_count,
+        rule=rule,
+        floor=floor,
+        raw=value,
+        raw_low=low,
+        raw_high=high,
+        at_resolution=len(raised),
+    )
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Indistinguishable:
     """Two denoisers whose aggregated scores differ by less than the reference can resolve."""
 
@@ -238,7 +249,7 @@ def indistinguishable_pairs(data: RunData, summary: list[SummaryRow]) -> list[In
             for i, a in enumerate(labels):
                 for b in labels[i + 1 :]:
                     (va, _, sa), (vb, _, sb) = per[a], per[b]
-                    resolution = agg.reference_resolution(rule, va, sa, vb, sb)
+                    resolution = agg.reference_resolution(rule, va, sa, mine_b=vb, ses_b=sb)
                     if resolution is None:
                         continue
                     common = [s for s in va if s in vb]
@@ -249,7 +260,9 @@ def indistinguishable_pairs(data: RunData, summary: list[SummaryRow]) -> list[In
                     else:
                         continue
                     if abs(diff) <= resolution:
-                        found.append(Indistinguishable(spp, metric, a, b, diff, resolution))
+                        found.append(
+                            Indistinguishable(spp=spp, metric=metric, a=a, b=b, difference=diff, resolution=resolution)
+                        )
     return found
 
 
@@ -257,7 +270,7 @@ def indistinguishable_pairs(data: RunData, summary: list[SummaryRow]) -> list[In
 # effects and flicker
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class EffectBreakdown:
     """Per denoiser and effect, the geometric-mean share of the input's error left (:func:`effect_breakdown`).
 
@@ -311,7 +324,10 @@ def effect_breakdown(data: RunData, scene_effects: dict[str, list[str]], metric:
         shares: dict[str, list[float]] = {}
         for scene in data.scenes:
             for spp in data.spp:
-                mine, noisy = data.scene_value(label, spp, scene, metric), data.scene_value(NOISY, spp, scene, metric)
+                mine, noisy = (
+                    data.scene_value(label, spp, scene, metric=metric),
+                    data.scene_value(NOISY, spp, scene, metric=metric),
+                )
                 if mine is None or not noisy or mine <= 0 or not data.unit_ok(label, spp, scene):
                     continue
                 for key in ["overall", *scene_effects.get(scene, [])]:
@@ -320,7 +336,7 @@ def effect_breakdown(data: RunData, scene_effects: dict[str, list[str]], metric:
             key: (float(np.exp(np.mean(np.log(shares[key])))) if shares.get(key) else None)
             for key in ["overall", *effects]
         }
-    return EffectBreakdown(metric, effects, table, too_few, notes)
+    return EffectBreakdown(metric=metric, effects=effects, table=table, too_few=too_few, notes=notes)
 
 
 def _merge_inseparable(scene_effects: dict[str, list[str]], scenes) -> dict[str, list[str]]:

@@ -111,7 +111,7 @@ def line_through(points) -> tuple[float, float] | None:
     return 0.0, float(max(np.sum(x * y) / np.sum(x * x), 0.0))
 
 
-@dataclass
+@dataclass(kw_only=True)
 class DenoiserCost:
     """One denoiser's time per frame: ``fixed`` per call plus a per-pixel part measured at ``pixels0``;
     with ``highest`` (a second timing at the ladder's highest spp), one such line at each end of the ladder."""
@@ -161,7 +161,7 @@ class DenoiserCost:
         return low_line + weight * (high_line - low_line)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class HighestSppTiming:
     """A denoiser's second timing, at the ladder's highest spp: the line ``fixed + per-pixel · P`` there."""
 
@@ -171,7 +171,7 @@ class HighestSppTiming:
     fixed: float
 
 
-@dataclass
+@dataclass(kw_only=True)
 class RenderCost:
     """Render seconds per frame ``a(P) + b(P) · spp`` from the ladder at ``pixels0`` (and a probe)."""
 
@@ -209,7 +209,7 @@ class RenderCost:
         return self.per_spp(1_000_000)
 
 
-@dataclass
+@dataclass(kw_only=True)
 class TimeModel:
     """What a report's time axis rests on: the resolution, the machine and every cost."""
 
@@ -340,7 +340,12 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
     fitted = line_through(render_points)
     render = None
     if fitted is not None:
-        render = RenderCost(pixels0, fitted[0], fitted[1], sorted({int(s) for s, _ in render_points}))
+        render = RenderCost(
+            pixels0=pixels0,
+            offset0=fitted[0],
+            per_spp0=fitted[1],
+            measured_spp=sorted({int(s) for s, _ in render_points}),
+        )
         probe = timings.get("render_probe")
         if probe and probe.get("points"):
             line = line_through(probe["points"])
@@ -379,7 +384,7 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
                 small[int(spp)] = float(np.median(values))  # a loaded moment adds to a few calls, not to all
         if not small:
             continue
-        cost = DenoiserCost(label, pixels0, small)
+        cost = DenoiserCost(label=label, pixels0=pixels0, small=small)
         record = timings.get(f"denoiser:{label}") or {}
         if record.get("seconds") is not None:
             pixels = int(record["width"]) * int(record["height"])
@@ -394,7 +399,7 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
                 line = line_through([(pixels0, at_high), (pixels, high["seconds"])])
                 if line is not None and pixels > pixels0:
                     cost.highest = HighestSppTiming(
-                        int(high["spp"]), pixels, float(high["seconds"]), min(line[0], at_high)
+                        spp=int(high["spp"]), pixels=pixels, seconds=float(high["seconds"]), fixed=min(line[0], at_high)
                     )
         cost.note = record.get("note", "")
         cost.spread = max(float(record.get("spread") or MIN_SPREAD), MIN_SPREAD)
@@ -402,7 +407,14 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
             cost.spread = max(cost.spread, float(high.get("spread") or MIN_SPREAD))
         costs[label] = cost
     timed = [c for c in costs.values() if c.fixed is not None]
-    model = TimeModel(requested, pixels0, (width0, height0), render, costs, timings.get("machine") or machine())
+    model = TimeModel(
+        time_at=requested,
+        pixels0=pixels0,
+        dataset_size=(width0, height0),
+        render=render,
+        denoisers=costs,
+        machine=timings.get("machine") or machine(),
+    )
     if requested != (width0, height0):
         if costs and len(timed) < len(costs):
             missing = sorted(c.label for c in costs.values() if c.fixed is None)

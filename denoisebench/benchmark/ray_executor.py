@@ -68,9 +68,13 @@ def _measure_remote(
                 errors[d.label] = f"load in worker: {exc}"
     pairs = {p.label: p.denoiser for p in plan.samplers}
     failed = {label: errors.get(pairs.get(label, label)) for label in labels if errors.get(pairs.get(label, label))}
-    units = list(measure_group(open_dataset(root), plan, scene, spp, [l for l in labels if l not in failed], instances))
+    units = list(
+        measure_group(
+            open_dataset(root), plan, scene, spp=spp, labels=[l for l in labels if l not in failed], instances=instances
+        )
+    )
     for label, error in failed.items():
-        units.append(UnitRecord(label, scene, spp, "failed", error, []))
+        units.append(UnitRecord(denoiser=label, scene=scene, spp=spp, status="failed", error=error, frames=[]))
     return units
 
 

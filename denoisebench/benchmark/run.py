@@ -59,9 +59,9 @@ def run_benchmark(
 
     try:
         if executor == "local":
-            run_local(dataset, plan, store, on_unit)
+            run_local(dataset, plan, store, on_unit=on_unit)
         elif executor == "ray":
-            run_ray(dataset, plan, store, config, on_unit)
+            run_ray(dataset, plan, store, config=config, on_unit=on_unit)
         else:
             raise UserInputError(f"unknown executor {executor!r}; use one of {', '.join(EXECUTORS)}")
     finally:

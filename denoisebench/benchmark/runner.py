@@ -35,13 +35,11 @@ from __future__ import annotations
 
 import hashlib
 import importlib.metadata
-import math
 import platform
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
-import numpy as np
-
+from denoisebench.benchmark.measure import measure_unit
 from denoisebench.benchmark.sampler_units import measure_pairs, plan_pairs, register_pairs
 from denoisebench.dataset import Dataset, DatasetError, layout
 from denoisebench.dataset.bounds import check_scene_record
@@ -50,25 +48,15 @@ from denoisebench.dataset.verify import run_files, verify_files
 from denoisebench.denoisers import isolation as isolation_mod
 from denoisebench.denoisers.protocol import describe
 from denoisebench.denoisers.registry import DenoiserLoadError, available_denoisers
-from denoisebench.denoisers.runner import run_sequence, sanitize_array
 from denoisebench.errors import UserInputError
-from denoisebench.metrics import compute_metrics
-from denoisebench.metrics.cost import total_seconds
-from denoisebench.metrics.half_reference import half_reference_floor, other_half
 from denoisebench.metrics.registry import default_metric_names, expand_metric_names, get_metric
-from denoisebench.metrics.validation import MetricNotApplicable
 from denoisebench.plugins import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, Limits
 from denoisebench.plugins.sandbox import version as sandbox_version
-from denoisebench.results.crops import cut
-from denoisebench.results.finite import is_finite
 from denoisebench.results.names import (
-    DECIDING_SCORES,
-    FLICKER_METRICS,
-    FLICKER_PREFIX,
     NOISY,
     REQUIRED_METRICS,
 )
-from denoisebench.results.records import FrameRecord, UnitRecord
+from denoisebench.results.records import UnitRecord
 from denoisebench.results.store import ResultsStore
 
 #: A unit's key: (label, scene, spp).
@@ -90,7 +78,7 @@ VERSIONED = (
 )
 
 
-@dataclass
+@dataclass(kw_only=True)
 class BenchmarkConfig:
     """What a run measures; its canonical JSON (with the dataset hash) identifies the run."""
 
@@ -141,7 +129,7 @@ class BenchmarkConfig:
         )
 
 
-@dataclass
+@dataclass(kw_only=True)
 class LoadedDenoiser:
     label: str
     spec: str
@@ -263,182 +251,6 @@ def check_dataset(dataset: Dataset, scenes: list[str], spp: list[int]) -> None:
 
 
 # --------------------------------------------------------------------------------------------------
-# one unit
-
-
-def _split_results(results) -> tuple[dict[str, float], dict[str, float], dict[str, float]]:
-    """(values, floors, ref_se) of compute_metrics results; floors only where the metric has one."""
-    values = {name: r.value for name, r in results.items()}
-    floors = {name: r.floor for name, r in results.items() if r.floor is not None}
-    ses = {name: r.ref_se for name, r in results.items() if r.ref_se is not None}
-    return values, floors, ses
-
-
-def _applicable(compute: Callable[[list[str]], dict], names: list[str]) -> tuple[dict, dict[str, str]]:
-    """``compute(names)``, and when a metric's precondition fails (MetricNotApplicable, e.g. SSIM on
-    frames under 11×11 px), each metric on its own: (results of those that apply, {name: reason})."""
-    try:
-        return compute(names), {}
-    except MetricNotApplicable:
-        pass
-    results: dict = {}
-    skipped: dict[str, str] = {}
-    for name in names:
-        try:
-            results.update(compute([name]))
-        except MetricNotApplicable as exc:
-            skipped[name] = str(exc)
-    return results, skipped
-
-
-def _frame_metrics(pred: np.ndarray, ref: np.ndarray, names: list[str], ref_var=None, trim=None, halves=None):
-    """(values, floors, ref_se, not applicable {name: reason}) of the per-frame metrics.
-
-    ``halves`` (:func:`_reference_halves`): the reference's two halves and their spp; the metrics
-    without a closed-form floor then get the floor measured from them (:mod:`denoisebench.metrics.half_reference`)."""
-    results, skipped = _applicable(lambda chosen: compute_metrics(pred, ref, chosen, ref_var=ref_var, trim=trim), names)
-    values, floors, ses = _split_results(results)
-    if halves is not None:
-        (half_a, half_b), full_spp, half_spp = halves
-        open_ = [n for n in values if n not in floors and math.isfinite(values[n])]
-        if open_:
-            against_a = compute_metrics(pred, half_a, open_, trim=trim)
-            against_b = compute_metrics(pred, half_b, open_, trim=trim)
-            for name in open_:
-                measured = half_reference_floor(
-                    values[name], (against_a[name].value, against_b[name].value), full_spp, half_spp
-                )
-                if math.isfinite(measured.floor) and math.isfinite(measured.se):
-                    floors[name], ses[name] = measured.floor, measured.se
-    return values, floors, ses, skipped
-
-
-def _reference_halves(frame):
-    """((half a, half b), full spp, (spp a, spp b)) of the frame's reference, or None without halves."""
-    meta = frame.meta if isinstance(frame.meta, dict) else {}
-    half = meta.get("reference_buffers", {}).get("color_half")
-    half_spp, full_spp = meta.get("reference_half_spp"), meta.get("reference_spp")
-    if half is None or not half_spp or not full_spp or frame.reference is None:
-        return None
-    if np.shape(half) != np.shape(frame.reference) or sum(half_spp) != int(full_spp):
-        return None
-    other = other_half(frame.reference, half, int(full_spp), tuple(half_spp))
-    return (np.asarray(half, np.float32), other.astype(np.float32)), int(full_spp), tuple(int(s) for s in half_spp)
-
-
-def _sequence_metrics(outputs, refs, motion, names: list[str], ref_vars=None, trim=None):
-
-    usable = [n for n in names if "motion" not in get_metric(n).requires or motion is not None]
-    if len(outputs) < 2 or not usable:
-        return {}, {}, {}, {}
-    ref_var = None if ref_vars is None else np.stack(ref_vars)
-    pred, ref = np.stack(outputs), np.stack(refs)
-    results, skipped = _applicable(
-        lambda chosen: compute_metrics(pred, ref, chosen, motion=motion, ref_var=ref_var, trim=trim), usable
-    )
-    return (*_split_results(results), skipped)
-
-
-def _flicker(outputs, refs, motion=None, trim=None, ref_vars=None) -> list[tuple[dict, dict, dict]]:
-    """FLICKER_METRICS of each consecutive pair: (values, floors, ref_se) of frame t against frame t−1,
-    named ``flicker.<metric>``. The scene's temporal score is their trimmed mean over pairs
-    (:mod:`denoisebench.analysis.run_index`), so one pair cannot decide it; the floors correct it."""
-    out = []
-    for t in range(1, len(outputs)):
-        pair_motion = None if motion is None else motion[t - 1 : t + 1]
-        pair_var = None if ref_vars is None else np.stack(ref_vars[t - 1 : t + 1])
-        results = compute_metrics(
-            np.stack(outputs[t - 1 : t + 1]),
-            np.stack(refs[t - 1 : t + 1]),
-            list(FLICKER_METRICS),
-            motion=pair_motion,
-            ref_var=pair_var,
-            trim=trim,
-        )
-        out.append(tuple({FLICKER_PREFIX + k: v for k, v in part.items()} for part in _split_results(results)))
-    return out
-
-
-def _reference_variance(frame) -> np.ndarray | None:
-    """The reference's per-pixel variance of the mean (``color_var`` of the reference file), or None."""
-    var = frame.meta.get("reference_buffers", {}).get("color_var") if isinstance(frame.meta, dict) else None
-    if var is None or frame.reference is None or np.shape(var)[:2] != frame.reference.shape[:2]:
-        return None
-    return np.asarray(var, dtype=np.float32)
-
-
-def kept_images(records: list[FrameRecord], outputs: list[np.ndarray]) -> dict[int, np.ndarray]:
-    """The outputs a unit keeps for reports ({frame: image}): its last frame, and for each of
-    :data:`DECIDING_SCORES` (the first alternative measured) the frame it scores worst, the one that
-    would decide a plain mean. ``records`` and ``outputs`` are the unit's frames, all successful, in order."""
-    kept = {records[-1].frame: outputs[-1]}
-    for alternatives in DECIDING_SCORES:
-        name = next((n for n in alternatives if all(is_finite(r.metrics.get(n)) for r in records)), None)
-        if name is None:
-            continue
-        worse = min if get_metric(name).higher_is_better else max
-        k = worse(range(len(records)), key=lambda i: records[i].metrics[name])
-        kept.setdefault(records[k].frame, outputs[k])
-    return kept
-
-
-def measure_unit(
-    label: str, denoiser: object | None, sequence, spatial: list[str], temporal: list[str], trim: float | None = None
-) -> UnitRecord:
-    """Run one denoiser (None: the noisy input) on ``sequence`` and measure every frame.
-
-    ``trim``: the robust scores' dropped fraction (None: their default, :mod:`denoisebench.metrics.robust`)."""
-    frames = list(sequence)
-    if denoiser is None:
-        results = [(True, None, 0.0, sanitize_array(f.color)[0].astype(np.float32), 0) for f in frames]
-    else:
-        results = [
-            (r.ok, r.error, r.seconds, r.output, r.sanitized_total)
-            for r in run_sequence(denoiser, frames, name=label, keep_output=True)
-        ]
-    records: list[FrameRecord] = []
-    outputs: list[np.ndarray] = []
-    for frame, (ok, error, seconds, output, sanitized) in zip(frames, results):
-        render = frame.meta.get("seconds")
-        total = None
-        if render is not None and seconds is not None:
-            total = total_seconds(float(render) / frame.spp, frame.spp, float(seconds))
-        record = FrameRecord(frame.index, "ok" if ok else "failed", error, render, seconds, total, sanitized)
-        if ok:
-            try:
-                record.metrics, record.floors, record.ref_se, record.not_applicable = _frame_metrics(
-                    output, frame.reference, spatial, _reference_variance(frame), trim, _reference_halves(frame)
-                )
-            except ValueError as exc:  # a metric refusing this output is the denoiser's failure
-                record.status, record.error, ok = "failed", f"metrics: {exc}", False
-        if ok:
-            outputs.append(output)
-        records.append(record)
-    all_ok = all(r.status == "ok" for r in records)
-    unit = UnitRecord(label, sequence.scene, sequence.spp, "ok" if all_ok else "failed", None, records)
-    if not all_ok:
-        unit.error = next(r.error for r in records if r.status != "ok")
-        return unit
-    refs = [f.reference for f in frames]
-    motion = np.stack([f.buffers["motion"] for f in frames]) if all(f.has("motion") for f in frames) else None
-    ref_vars = [_reference_variance(f) for f in frames]
-    ref_vars = None if any(v is None for v in ref_vars) else ref_vars
-    unit.sequence_metrics, unit.sequence_floors, unit.sequence_ref_se, unit.sequence_not_applicable = _sequence_metrics(
-        outputs, refs, motion, temporal, ref_vars, trim
-    )
-    unit.images = kept_images(records, outputs)
-    if len(outputs) > 1:
-        for record, (values, floors, ses) in zip(records[1:], _flicker(outputs, refs, motion, trim, ref_vars)):
-            record.metrics.update(values)
-            record.floors.update(floors)
-            record.ref_se.update(ses)
-
-        first, unit.strip_window, unit.strip = cut(outputs, [f.color for f in frames], refs, motion)
-        unit.strip_first = frames[first].index
-    return unit
-
-
-# --------------------------------------------------------------------------------------------------
 # the run
 
 
@@ -457,7 +269,7 @@ def split_metrics(names: list[str]) -> tuple[list[str], list[str]]:
     return spatial, temporal
 
 
-@dataclass
+@dataclass(kw_only=True)
 class RunPlan:
     run_id: str
     scenes: list[str]
@@ -532,7 +344,16 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     store.add_denoiser(
         run_id=run_id, label=NOISY, spec=NOISY, kind="input", needs={"color"}, temporal=False, load_error=None
     )
-    plan = RunPlan(run_id, scenes, spp, denoisers, spatial, temporal, resumed=not created, trim=config.trim)
+    plan = RunPlan(
+        run_id=run_id,
+        scenes=scenes,
+        spp=spp,
+        denoisers=denoisers,
+        spatial=spatial,
+        temporal=temporal,
+        resumed=not created,
+        trim=config.trim,
+    )
     seen = plan.trained_on()
     for d in denoisers:
         store.add_denoiser(
@@ -547,7 +368,7 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
         )
     if pairs:
         plan.samplers = pairs
-        register_pairs(store, run_id, pairs, denoisers)
+        register_pairs(store, run_id, pairs, denoisers=denoisers)
     return plan
 
 
@@ -569,11 +390,13 @@ def measure_group(
     sequence = dataset.sequence(scene, spp, samples=wants_samples) if stored else None
     if len(stored) < len(labels):
         live = [pairs[label] for label in labels if label in pairs]
-        yield from measure_pairs(dataset, plan, scene, spp, live, instances)
+        yield from measure_pairs(dataset, plan, scene, spp=spp, pairs=live, instances=instances)
     for label in stored:
         if label != NOISY and label not in instances:
             raise KeyError(f"no denoiser instance for {label!r}")  # never measure a denoiser as the input
-        yield measure_unit(label, instances.get(label), sequence, plan.spatial, plan.temporal, plan.trim)
+        yield measure_unit(
+            label, instances.get(label), sequence, spatial=plan.spatial, temporal=plan.temporal, trim=plan.trim
+        )
 
 
 def run_local(
@@ -586,5 +409,5 @@ def run_local(
         labels = [label for label, s, p in plan.missing(done) if (s, p) == (scene, spp)]
         if not labels:
             continue
-        for unit in measure_group(dataset, plan, scene, spp, labels, instances):
+        for unit in measure_group(dataset, plan, scene, spp=spp, labels=labels, instances=instances):
             on_unit(unit, store.write_unit(plan.run_id, unit))

@@ -6,7 +6,7 @@ denoiser, unit by unit (scene × spp): each frame of the scene's sequence is ren
 sampler at that spp as its mean budget (:mod:`denoisebench.sampling.live`: the scene's own stage,
 plan and size, a seed disjoint from the stored inputs' and the reference's, the same seed for every
 sampler), the denoiser gets those buffers in place of the stored input, and the output is scored
-against the dataset's reference with the run's metrics (:func:`~.runner.measure_unit`). The frame's
+against the dataset's reference with the run's metrics (:func:`~.measure.measure_unit`). The frame's
 render seconds are the sampler's (render + decision), so the pairs are curves of their own in the
 accuracy-vs-time figure and rows in the equal-time tables.
 
@@ -32,6 +32,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from denoisebench.benchmark.measure import measure_unit
 from denoisebench.dataset.frame import Frame
 from denoisebench.errors import UserInputError
 from denoisebench.results.names import PAIR_LABEL_SEPARATOR, PAIR_SPEC_SEPARATOR, SAMPLER_SPEC_PREFIX
@@ -44,7 +45,7 @@ from denoisebench.sampling.protocol import Budget
 SEPARATOR = PAIR_LABEL_SEPARATOR  # between a pair's sampler and denoiser labels
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SamplerPair:
     """A sampler and the denoiser its buffers go to (None: none); ``label`` names the pair in the store."""
 
@@ -77,7 +78,9 @@ def plan_pairs(
     for spec in dict.fromkeys(s.strip() for s in sampler_specs if s.strip()):
         if spec in taken:
             raise UserInputError(f"sampler {spec!r} has the label of a denoiser of this run")
-        alone = SamplerPair(spec, spec, None, policy, time_limit, memory)
+        alone = SamplerPair(
+            label=spec, sampler=spec, denoiser=None, isolation=policy, time_limit=time_limit, memory_limit_mb=memory
+        )
         _close(alone.load())  # UnknownSamplerError / SamplerLoadError: one line, before any work
         pairs.append(alone)
         pairs.extend(
@@ -124,7 +127,7 @@ def live_sequence(dataset, scene: str, spp: int, pair: SamplerPair, live=None, m
     for frame in stored:
         sampler = pair.load()
         try:
-            result = run_live(sampler, live, frame.index, Budget(spp=spp))
+            result = run_live(sampler, live, frame.index, budget=Budget(spp=spp))
         finally:
             _close(sampler)
         if result.error:
@@ -147,19 +150,20 @@ def live_sequence(dataset, scene: str, spp: int, pair: SamplerPair, live=None, m
 
 def measure_pairs(dataset, plan, scene: str, spp: int, pairs: list[SamplerPair], instances: dict):
     """Yield the UnitRecord of every pair on ``scene`` at ``spp`` (one live render per sampler)."""
-    from denoisebench.benchmark.runner import measure_unit  # runner imports this module: look it up late
 
     by_sampler: dict[str, list[SamplerPair]] = {}
     for pair in pairs:
         by_sampler.setdefault(pair.sampler, []).append(pair)
     for sampler, group in by_sampler.items():
         maps: list = []
-        sequence, error = live_sequence(dataset, scene, spp, group[0], maps=maps)
+        sequence, error = live_sequence(dataset, scene, spp, pair=group[0], maps=maps)
         for pair in group:
             if sequence is None:
-                yield UnitRecord(pair.label, scene, spp, "failed", error, [])
+                yield UnitRecord(denoiser=pair.label, scene=scene, spp=spp, status="failed", error=error, frames=[])
                 continue
             denoiser = instances.get(pair.denoiser) if pair.denoiser else None
-            unit = measure_unit(pair.label, denoiser, sequence, plan.spatial, plan.temporal, plan.trim)
+            unit = measure_unit(
+                pair.label, denoiser, sequence, spatial=plan.spatial, temporal=plan.temporal, trim=plan.trim
+            )
             unit.sampler_frames = frame_records(maps)  # spp maps and empty pixels, for the report
             yield unit

@@ -72,7 +72,9 @@ def upscaled_frame(frame, width: int, height: int):
 
     buffers = {name: tile(array, (0, 1)) for name, array in frame.buffers.items()}
     samples = None if frame.samples is None else {name: tile(a, (1, 2)) for name, a in frame.samples.items()}
-    return Frame(buffers, frame.spp, frame.scene, frame.index, None, samples, dict(frame.meta))
+    return Frame(
+        buffers, frame.spp, frame.scene, index=frame.index, reference=None, samples=samples, meta=dict(frame.meta)
+    )
 
 
 def timing_size(small_seconds: float, pixels0: int, requested: tuple[int, int], budget: float):
@@ -146,13 +148,13 @@ def probe_render(dataset, scene: str, size: tuple[int, int], spp=PROBE_SPP, repe
             scene,
             0,
             str(record.get("stage_sha256", scene)),
-            str(usd),
-            tuple(int(s) for s in spp),
-            None,
-            width,
-            height,
-            int(record.get("render_seed", 0)),
-            options,
+            usd_path=str(usd),
+            spp=tuple(int(s) for s in spp),
+            ref_spp=None,
+            width=width,
+            height=height,
+            render_seed=int(record.get("render_seed", 0)),
+            options=options,
         )
 
     jobs = {"small": job(*small), "large": job(int(size[0]), int(size[1]))}
@@ -203,7 +205,7 @@ def measure_run_timings(
     ``size`` None: nothing is timed (the report's times stay at the dataset's resolution)."""
     done = read_timings(store, plan.run_id)
     if "machine" not in done:
-        write_timing(store, plan.run_id, "machine", machine())
+        write_timing(store, plan.run_id, "machine", value=machine())
     if size is None or not plan.scenes or not plan.spp:
         return read_timings(store, plan.run_id)
     scene, spp, highest = plan.scenes[0], min(plan.spp), max(plan.spp)
@@ -225,7 +227,7 @@ def measure_run_timings(
 
     def timed(label: str, at: int, measured: list[float]) -> dict:
         """One timing at the larger size on frame 0 at ``at`` spp, as the record's fields."""
-        chosen = timing_size(float(np.mean(measured)), pixels0, size, budget)
+        chosen = timing_size(float(np.mean(measured)), pixels0, size, budget=budget)
         if chosen is None:
             return {"seconds": None, "note": f"not timed at a larger size: over {budget:g} s even at 4× the frame"}
         if at not in small_frames:
@@ -249,14 +251,14 @@ def measure_run_timings(
             at_highest = run_seconds(label, highest)
             if record["seconds"] is not None and at_highest and _changes_with_spp(measured, at_highest):
                 record["highest"] = {"spp": highest, **timed(label, highest, at_highest)}
-        write_timing(store, plan.run_id, f"denoiser:{label}", record)
+        write_timing(store, plan.run_id, f"denoiser:{label}", value=record)
         bar.update(1)
     if wants_probe:
         try:
             record = probe_render(dataset, scene, size)
         except Exception as error:  # noqa: BLE001 - no renderer here, or a stage it cannot load: say so
             record = {"error": f"render probe failed: {type(error).__name__}: {error}".splitlines()[0][:300]}
-        write_timing(store, plan.run_id, "render_probe", record)
+        write_timing(store, plan.run_id, "render_probe", value=record)
         bar.update(1)
     bar.close()
     return read_timings(store, plan.run_id)

@@ -166,7 +166,7 @@ def _flicker(data: analysis.RunData) -> FlickerSection:
             found = analysis.flicker_series(data, spp, metric)
             if found:
                 series.setdefault(metric, {})[spp] = found
-    return FlickerSection(list(data.spp), [m for m in metrics if m in series], series)
+    return FlickerSection(spp=list(data.spp), metrics=[m for m in metrics if m in series], series=series)
 
 
 def _cvvdp_viewing(dataset: Dataset, data: analysis.RunData) -> CvvdpViewing:
@@ -191,7 +191,7 @@ def _cvvdp_viewing(dataset: Dataset, data: analysis.RunData) -> CvvdpViewing:
             clipped_fraction=found["clipped_fraction"],
             text=found["text"],
         )
-    return CvvdpViewing(display, scenes)
+    return CvvdpViewing(display=display, scenes=scenes)
 
 
 def _not_applicable_detail(store: ResultsStore, run_id: str) -> list[NotApplicableDetail]:
@@ -223,8 +223,12 @@ def _deciding_frames(data: analysis.RunData, metrics: list[str]) -> list[Decidin
     for metric, label in ((m, label) for m in metrics if m in data.frame_metric_names for label in data.labels):
         for spp in data.spp:
             for scene in data.scenes:
-                for frame, value, median in data.deciding_frames(label, spp, scene, metric):
-                    found.append(DecidingFrame(label, spp, scene, frame, metric, value, median))
+                for frame, value, median in data.deciding_frames(label, spp, scene, metric=metric):
+                    found.append(
+                        DecidingFrame(
+                            label=label, spp=spp, scene=scene, frame=frame, metric=metric, value=value, median=median
+                        )
+                    )
     return found
 
 
@@ -233,7 +237,10 @@ def _stability(table: dict[str, list[dict]] | None) -> dict[str, list[StabilityC
     if table is None:
         return None
     return {
-        label: [StabilityCase(r["case"], r["status"], r["detail"], r.get("seconds")) for r in rows]
+        label: [
+            StabilityCase(case=r["case"], status=r["status"], detail=r["detail"], seconds=r.get("seconds"))
+            for r in rows
+        ]
         for label, rows in table.items()
     }
 
@@ -257,7 +264,9 @@ def build_report(
     unresolved = analysis.set_apart(data, dataset)
     summary = analysis.summary_table(data, exclude=() if include_unresolved else agg.excluded_scenes(unresolved))
     reference = _reference_info(dataset, data.scenes)
-    model = time_model.build_time_model(data, read_timings(store, run_id), time_at, _dataset_size(dataset, data.scenes))
+    model = time_model.build_time_model(
+        data, read_timings(store, run_id), time_at, dataset_size=_dataset_size(dataset, data.scenes)
+    )
     lead = equal_tables.lead_metrics(data.frame_metric_names + data.sequence_metric_names)
     deciding = _deciding_frames(data, lead)
     measured = data.frame_metric_names + data.sequence_metric_names
@@ -269,7 +278,7 @@ def build_report(
         )
         for metric in shown
     ]
-    tables = [equal_tables.build_tables(summary, model, data.spp, metric) for metric in lead]
+    tables = [equal_tables.build_tables(summary, model, data.spp, metric=metric) for metric in lead]
     palette = figures.colors(data.labels)
     figure_files = {}
     if any(p.points for p in panels):
@@ -279,7 +288,11 @@ def build_report(
         figure_files["flicker"] = figures.flicker_figure(flicker.series, palette)
     scene_effects = _scene_effects(dataset, data.scenes)
     samplers = report_samplers.sampler_section(store, data.run)
-    failures = [Failure(u.denoiser, u.scene, u.spp, u.error) for u in data.unit_rows if u.status != "ok"]
+    failures = [
+        Failure(denoiser=u.denoiser, scene=u.scene, spp=u.spp, error=u.error)
+        for u in data.unit_rows
+        if u.status != "ok"
+    ]
     return ReportModel(
         run=data.run,
         denoisers=data.entries,
@@ -299,12 +312,12 @@ def build_report(
         flicker=flicker,
         temporal_metrics=temporal_metric_order(data.sequence_metric_names),
         indistinguishable=analysis.indistinguishable_pairs(data, summary),
-        strips=comparisons.scene_strips(store, data, dataset, data.spp[0]) if data.spp else [],
+        strips=comparisons.scene_strips(store, data, dataset, spp=data.spp[0]) if data.spp else [],
         failures=failures,
-        unresolved_references=UnresolvedReferences(include_unresolved, unresolved),
+        unresolved_references=UnresolvedReferences(included=include_unresolved, scenes=unresolved),
         # metrics whose preconditions the frames do not meet (SSIM under 11×11 px): frames count, reason
         not_applicable=store.not_applicable_summary(run_id),
-        comparisons=comparisons.comparisons(store, data, dataset, deciding, samplers),
+        comparisons=comparisons.comparisons(store, data, dataset, deciding=deciding, samplers=samplers),
         # live samplers: per-frame spp counts, maps (on comparison entries) and pixels left without a sample
         samplers=samplers,
         # cvvdp's display, pixels per degree and each scene's exposure (None: cvvdp not measured)
@@ -484,7 +497,9 @@ def write_report(
 ) -> Path:
     """Write the report folder; return the path of index.html (``time_at``: see :func:`build_report`)."""
     out = Path(out_dir)
-    report = build_report(store, run_id, dataset, stability, time_at, include_unresolved)
+    report = build_report(
+        store, run_id, dataset, stability=stability, time_at=time_at, include_unresolved=include_unresolved
+    )
     for name, (png, svg) in report.figures.items():
         atomic_write_bytes(out / "figures" / f"{name}.png", png)
         atomic_write_bytes(out / "figures" / f"{name}.svg", svg.encode("utf-8"))

@@ -57,7 +57,7 @@ def comparisons(
     out = []
     for scene in data.scenes:
         for spp in data.spp:
-            found = comparison(store, data, dataset, scene, spp, None, samplers)
+            found = comparison(store, data, dataset, scene=scene, spp=spp, frame_index=None, samplers=samplers)
             if found is not None:
                 out.append(found)
     seen: set[tuple[str, int, int]] = set()
@@ -67,7 +67,8 @@ def comparisons(
             continue
         seen.add(key)
         why = f"{item.label}'s {item.metric} is {item.value:.3g} on this frame, against its scene median of {item.median:.3g}"
-        found = comparison(store, data, dataset, *key, samplers, why=why)
+        scene, spp, frame = key
+        found = comparison(store, data, dataset, scene=scene, spp=spp, frame_index=frame, samplers=samplers, why=why)
         if found is not None:
             out.append(found)
     return out
@@ -88,7 +89,7 @@ def comparison(
     comes from the dataset where its unit did not keep that frame."""
     shown: list[tuple[str, np.ndarray]] = []
     for label in data.labels:
-        stored = store.image(data.run_id, label, scene, spp, frame_index)
+        stored = store.image(data.run_id, label, scene, spp=spp, frame=frame_index)
         if stored is None:
             continue
         frame_index = stored[0] if frame_index is None else frame_index
@@ -114,8 +115,10 @@ def comparison(
             kind=_kind(label),
             relmse=None if label == "reference" else float(np.mean(relmse_map(img, reference))),
             image=images.data_uri(images.to_png(img, full_scale)),
-            crops=[images.data_uri(images.to_png(images.crop(img, t, l, size), scale)) for t, l in windows],
-            spp_map=report_samplers.map_entry(samplers, label, scene, spp, int(frame_index), full_scale),
+            crops=[images.data_uri(images.to_png(images.crop(img, t, l, size=size), scale)) for t, l in windows],
+            spp_map=report_samplers.map_entry(
+                samplers, label, scene, spp=spp, frame=int(frame_index), scale=full_scale
+            ),
         )
         for label, img in shown + [("reference", reference)]
     ]
@@ -126,7 +129,7 @@ def comparison(
         why=why,
         width=int(reference.shape[1] * full_scale),
         height=int(reference.shape[0] * full_scale),
-        windows=[CropWindow(t, l, size) for t, l in windows],
+        windows=[CropWindow(top=t, left=l, size=size) for t, l in windows],
         entries=entries,
     )
 
@@ -135,7 +138,7 @@ def scene_strips(store: ResultsStore, data: analysis.RunData, dataset: Dataset, 
     """Per scene: the noisy input's, each denoiser's and the reference's strip of one crop at ``spp``."""
     out = []
     for scene in data.scenes:
-        found = [(label, store.strip(data.run_id, label, scene, spp)) for label in data.labels]
+        found = [(label, store.strip(data.run_id, label, scene, spp=spp)) for label in data.labels]
         found = [(label, strip) for label, strip in found if strip is not None]
         if not found:
             continue
@@ -170,7 +173,7 @@ def scene_strips(store: ResultsStore, data: analysis.RunData, dataset: Dataset, 
                 spp=spp,
                 first_frame=first.first_frame,
                 frames=count,
-                window=StripWindow(top, left, side),
+                window=StripWindow(top=top, left=left, side=side),
                 entries=entries,
             )
         )

@@ -34,7 +34,7 @@ if TYPE_CHECKING:  # annotations only: build.py imports these modules where it b
 # parts results.json holds (field order = key order in the file)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ReferenceInfo:
     """The run's references: mean render seconds and spp, light transport, adaptive spp used and worst floor."""
 
@@ -51,7 +51,7 @@ class ReferenceInfo:
     floor_max: float | None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class FlickerSection:
     """Per-frame flicker: the spp, the metrics with a series, and the series themselves."""
 
@@ -61,7 +61,7 @@ class FlickerSection:
     """{metric: {spp: {label: [mean flicker of frame 1, 2, ...] over scenes]}}}."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Failure:
     """A unit that did not finish."""
 
@@ -71,7 +71,7 @@ class Failure:
     error: str | None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class UnresolvedReferences:
     """Scenes whose reference cannot resolve the headline scores, and whether they were ``included``."""
 
@@ -79,7 +79,7 @@ class UnresolvedReferences:
     scenes: list[Unresolved]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SamplerFrameCount:
     """One live-rendered frame of a sampler: its samples, mean and largest spp, pixels without a sample."""
 
@@ -93,7 +93,7 @@ class SamplerFrameCount:
     pixels_without_samples: int
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Undersampled:
     """A (sampler, scene, spp) that left pixels with fewer than one sample: frames and pixels concerned."""
 
@@ -106,7 +106,7 @@ class Undersampled:
     pixels_total: int
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SamplerSection:
     """The run's live samplers (:func:`~.samplers.sampler_section`); results.json holds it without
     the maps (:func:`~.samplers.as_json`)."""
@@ -120,7 +120,7 @@ class SamplerSection:
     undersampled: list[Undersampled]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ViewingDisplay:
     """cvvdp's display (:func:`denoisebench.metrics.colorvideovdp.viewing_conditions`, no reference)."""
 
@@ -136,7 +136,7 @@ class ViewingDisplay:
     text: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SceneViewing:
     """cvvdp's view of one scene: frame size, its visual angle, the exposure set from its reference."""
 
@@ -149,7 +149,7 @@ class SceneViewing:
     text: str
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CvvdpViewing:
     """cvvdp's display once, and per scene its viewing (the one every denoiser of that scene got)."""
 
@@ -157,7 +157,7 @@ class CvvdpViewing:
     scenes: dict[str, SceneViewing]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class StabilityCase:
     """One hard case of one denoiser instance (:func:`denoisebench.benchmark.stability.stability_table`)."""
 
@@ -175,7 +175,7 @@ class StabilityCase:
         return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class DecidingFrame:
     """A frame over 10× its scene's median of the lead score: a plain mean would be decided by it."""
 
@@ -192,7 +192,7 @@ class DecidingFrame:
 # parts only the renderers read
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class StripEntry:
     """One row of a scene's frame strip: a label's (or the reference's) crops as a strip and an animation."""
 
@@ -205,14 +205,14 @@ class StripEntry:
     """APNG data URI: the crops looping in place."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class StripWindow:
     top: int
     left: int
     side: int
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SceneStrip:
     """One scene's frame strips: the same crop of consecutive frames for every label and the reference."""
 
@@ -224,7 +224,7 @@ class SceneStrip:
     entries: list[StripEntry]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class SppMap:
     """A live sampler's spp map at the compared frame, and its numbers (:func:`~.samplers.map_entry`)."""
 
@@ -239,7 +239,7 @@ class SppMap:
     pixels_without_samples: int
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class ComparisonEntry:
     """One image of a scene's comparison: the noisy input, a denoiser or the reference."""
 
@@ -256,14 +256,14 @@ class ComparisonEntry:
     """A live sampler's spp map of this frame; None for anything else."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class CropWindow:
     top: int
     left: int
     size: int
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Comparison:
     """One scene's compared frame at one spp: every label's image and the reference, with worst-region crops."""
 
@@ -279,7 +279,7 @@ class Comparison:
     """The labels' entries, then the reference's (last)."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class NotApplicableDetail:
     """A metric that did not apply somewhere: the scenes, how many frames and sequences, and why."""
 
@@ -294,7 +294,7 @@ class NotApplicableDetail:
 # the model
 
 
-@dataclass
+@dataclass(kw_only=True)
 class ReportModel:
     """A run's report, ready to render (module docstring)."""
 

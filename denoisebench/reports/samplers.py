@@ -38,7 +38,14 @@ def sampler_section(store, run: RunRow) -> SamplerSection | None:
     for r in rows:
         frames.append(
             SamplerFrameCount(
-                r.denoiser, r.scene, r.spp, r.frame, r.samples, r.mean_spp, r.max_spp, r.pixels_without_samples
+                sampler=r.denoiser,
+                scene=r.scene,
+                spp=r.spp,
+                frame=r.frame,
+                samples=r.samples,
+                mean_spp=r.mean_spp,
+                max_spp=r.max_spp,
+                pixels_without_samples=r.pixels_without_samples,
             )
         )
         if r.spp_map is not None:
@@ -60,7 +67,7 @@ def sampler_section(store, run: RunRow) -> SamplerSection | None:
                     pixels_total=sum(f.pixels_without_samples for f in hit),
                 )
             )
-    return SamplerSection(samplers, frames, maps, scale, undersampled)
+    return SamplerSection(samplers=samplers, frames=frames, maps=maps, scale=scale, undersampled=undersampled)
 
 
 def frame_groups(frames: list[SamplerFrameCount]) -> dict[tuple[str, str, int], list[SamplerFrameCount]]:

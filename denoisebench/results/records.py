@@ -34,7 +34,7 @@ import numpy as np
 # written
 
 
-@dataclass
+@dataclass(kw_only=True)
 class FrameRecord:
     """One frame of a unit: what the runner measured."""
 
@@ -51,7 +51,7 @@ class FrameRecord:
     not_applicable: dict[str, str] = field(default_factory=dict)  # metric → why it does not apply to this frame
 
 
-@dataclass
+@dataclass(kw_only=True)
 class UnitRecord:
     """One denoiser on one scene's sequence at one spp, ready to be written in one transaction."""
 
@@ -101,7 +101,7 @@ class Row:
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in self._attributes_only}
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class RunRow(Row):
     """One benchmark run: its identity, what it measured (``config``) and with which software."""
 
@@ -114,7 +114,7 @@ class RunRow(Row):
     finished_at: str | None
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class EntryRow(Row):
     """One label of a run (a row of ``run_denoisers``): the noisy input, a denoiser or a sampler pair.
 
@@ -135,7 +135,7 @@ class EntryRow(Row):
     denoiser_label: str | None = None
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class UnitRow(Row):
     """One unit: a label on one scene's sequence at one spp (seconds summed over its frames)."""
 
@@ -150,7 +150,7 @@ class UnitRow(Row):
     render_seconds: float | None
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class FrameRow(Row):
     """One frame of a unit with its metric values, and the floors/ref_se of the metrics that have them."""
 
@@ -169,7 +169,7 @@ class FrameRow(Row):
     ref_se: dict[str, float]
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class SequenceRow(Row):
     """One temporal metric of one unit (``floor``/``ref_se`` None without)."""
 
@@ -182,7 +182,7 @@ class SequenceRow(Row):
     ref_se: float | None
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class NotApplicableRow(Row):
     """A metric that did not apply to a frame (``frame`` ≥ 0) or to a unit's sequence (``frame`` = -1)."""
 
@@ -194,7 +194,7 @@ class NotApplicableRow(Row):
     reason: str
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class StripRow(Row):
     """A unit's strip: the crop window and its F×side×side×3 float32 crops of consecutive frames."""
 
@@ -205,7 +205,7 @@ class StripRow(Row):
     crops: np.ndarray
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class NotApplicableCount(Row):
     """One metric's not-applicable rows of a run: how many frames or sequences (``count``), and one reason."""
 

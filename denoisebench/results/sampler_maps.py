@@ -44,7 +44,7 @@ CREATE TABLE IF NOT EXISTS {TABLE} (
 """
 
 
-@dataclass
+@dataclass(kw_only=True)
 class SamplerFrame:
     """One live-rendered frame of a sampler.
 
@@ -70,7 +70,7 @@ class SamplerFrame:
     spp: np.ndarray | None = field(default=None, repr=False)
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class SamplerMapRow:
     """One live-rendered frame as the store reads it back: the unit's label (``denoiser``), scene,
     spp and frame, the frame's counts (:class:`SamplerFrame`) and ``spp_map`` (H×W int32, or None: kept
@@ -146,6 +146,16 @@ def read(store, run_id: str) -> list[SamplerMapRow]:
         if blob is not None:
             counts = np.frombuffer(zlib.decompress(blob), dtype="<i4").reshape(height, width).astype(np.int32)
         out.append(
-            SamplerMapRow(label, scene, int(spp), int(frame), int(samples), float(mean), int(top), int(empty), counts)
+            SamplerMapRow(
+                denoiser=label,
+                scene=scene,
+                spp=int(spp),
+                frame=int(frame),
+                samples=int(samples),
+                mean_spp=float(mean),
+                max_spp=int(top),
+                pixels_without_samples=int(empty),
+                spp_map=counts,
+            )
         )
     return out

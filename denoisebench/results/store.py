@@ -25,7 +25,7 @@ import json
 import os
 import sqlite3
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from datetime import UTC, datetime
 from pathlib import Path
@@ -63,6 +63,14 @@ def decode_image(blob: bytes, height: int, width: int) -> np.ndarray:
     return np.frombuffer(zlib.decompress(blob), dtype="<f4").reshape(height, width, 3).astype(np.float32)
 
 
+def _by_name(record: type, cursor: sqlite3.Cursor, more: Callable[[], dict] | None = None) -> list:
+    """The rows of ``cursor`` as ``record``s, each column passed by its name (``cursor.description``; a
+    column missing from an older schema is selected as ``NULL AS <name>``). ``more()``: further fields,
+    fresh for each row (a row's own dicts)."""
+    names = [column[0] for column in cursor.description]
+    return [record(**dict(zip(names, row)), **(more() if more else {})) for row in cursor]
+
+
 class ResultsStore:
     """A connection to the results database at ``path`` (created with its schema when new)."""
 
@@ -92,9 +100,11 @@ class ResultsStore:
 
     def _check_version(self) -> None:
         self.version = schema.read_version(self.conn, self.path)
-        self._floor_columns = "floor, ref_se" if self.version >= 2 else "NULL, NULL"
-        self._trained_column = "trained_on" if self.version >= 3 else "NULL"
-        self._sampler_columns = "sampler, denoiser_label" if self.version >= 5 else "NULL, NULL"
+        self._floor_columns = "floor, ref_se" if self.version >= 2 else "NULL AS floor, NULL AS ref_se"
+        self._trained_column = "trained_on" if self.version >= 3 else "NULL AS trained_on"
+        self._sampler_columns = (
+            "sampler, denoiser_label" if self.version >= 5 else "NULL AS sampler, NULL AS denoiser_label"
+        )
 
     @contextmanager
     def transaction(self) -> Iterator[sqlite3.Connection]:
@@ -190,7 +200,15 @@ class ResultsStore:
         if row is None:
             raise UserInputError(f"{self.path}: no run {run_id!r}")
         run, data_hash, path, config, versions, created, finished = row
-        return RunRow(run, data_hash, path, json.loads(config), json.loads(versions), created, finished)
+        return RunRow(
+            run_id=run,
+            dataset_hash=data_hash,
+            dataset_path=path,
+            config=json.loads(config),
+            versions=json.loads(versions),
+            created_at=created,
+            finished_at=finished,
+        )
 
     def runs(self, dataset_hash: str | None = None) -> list[RunRow]:
         """Every run (newest first), optionally only those on one dataset."""
@@ -214,15 +232,15 @@ class ResultsStore:
                 sampler, denoiser_label = schema.sampler_dimension(kind, label, spec)
             out.append(
                 EntryRow(
-                    label,
-                    spec,
-                    kind,
-                    json.loads(needs),
-                    bool(temporal),
-                    load_error,
-                    json.loads(trained) if trained else [],
-                    sampler,
-                    denoiser_label,
+                    label=label,
+                    spec=spec,
+                    kind=kind,
+                    needs=json.loads(needs),
+                    temporal=bool(temporal),
+                    load_error=load_error,
+                    trained_on=json.loads(trained) if trained else [],
+                    sampler=sampler,
+                    denoiser_label=denoiser_label,
                 )
             )
         return out
@@ -349,7 +367,7 @@ class ResultsStore:
             "FROM units WHERE run_id = ? ORDER BY denoiser, scene, spp",
             (run_id,),
         )
-        return [UnitRow(*r) for r in rows]
+        return _by_name(UnitRow, rows)
 
     def frames(self, run_id: str) -> list[FrameRow]:
         """Every frame row of ``run_id`` with its metrics as ``metrics: {name: value}``, and
@@ -357,11 +375,12 @@ class ResultsStore:
         columns = (
             "denoiser, scene, spp, frame, status, error, render_seconds, denoise_seconds, total_seconds, sanitized"
         )
+        cursor = self.conn.execute(
+            f"SELECT {columns} FROM frames WHERE run_id = ? ORDER BY denoiser, scene, spp, frame", (run_id,)
+        )
         rows = {
-            tuple(r[:4]): FrameRow(*r, metrics={}, floors={}, ref_se={})
-            for r in self.conn.execute(
-                f"SELECT {columns} FROM frames WHERE run_id = ? ORDER BY denoiser, scene, spp, frame", (run_id,)
-            )
+            (r.denoiser, r.scene, r.spp, r.frame): r
+            for r in _by_name(FrameRow, cursor, lambda: {"metrics": {}, "floors": {}, "ref_se": {}})
         }
         for denoiser, scene, spp, frame, metric, value, floor, se in self.conn.execute(
             f"SELECT denoiser, scene, spp, frame, metric, value, {self._floor_columns} FROM frame_metrics WHERE run_id = ?",
@@ -385,7 +404,7 @@ class ResultsStore:
             "ORDER BY denoiser, scene, spp, frame, metric",
             (run_id,),
         )
-        return [NotApplicableRow(*r) for r in rows]
+        return _by_name(NotApplicableRow, rows)
 
     def not_applicable_summary(self, run_id: str) -> dict[str, NotApplicableCount]:
         """Per metric: how many frames (or sequences, frame -1) it did not apply to, and one reason."""
@@ -395,7 +414,7 @@ class ResultsStore:
             "SELECT metric, COUNT(*), MIN(reason) FROM not_applicable WHERE run_id = ? GROUP BY metric ORDER BY metric",
             (run_id,),
         )
-        return {metric: NotApplicableCount(int(count), reason) for metric, count, reason in rows}
+        return {metric: NotApplicableCount(count=int(count), reason=reason) for metric, count, reason in rows}
 
     def sequence_metrics(self, run_id: str) -> list[SequenceRow]:
         """Temporal metric rows: denoiser, scene, spp, metric, value, floor, ref_se (None without)."""
@@ -404,7 +423,7 @@ class ResultsStore:
             "ORDER BY denoiser, scene, spp, metric",
             (run_id,),
         )
-        return [SequenceRow(*r) for r in rows]
+        return _by_name(SequenceRow, rows)
 
     def image_frames(self, run_id: str, denoiser: str, scene: str, spp: int) -> list[int]:
         """The frames of a unit whose output is stored (its last frame and the frames its deciding scores
@@ -441,7 +460,7 @@ class ResultsStore:
             return None
         first, count, top, left, side, blob = row
         crops = np.frombuffer(zlib.decompress(blob), dtype="<f4").reshape(count, side, side, 3).astype(np.float32)
-        return StripRow(int(first), int(top), int(left), int(side), crops)
+        return StripRow(first_frame=int(first), top=int(top), left=int(left), side=int(side), crops=crops)
 
     def integrity_problems(self) -> list[str]:
         """SQLite's integrity check plus ours: every frame row belongs to a unit row and vice versa."""

@@ -15,7 +15,7 @@ import pytest
 
 from denoisebench.analysis import aggregate as agg
 from denoisebench.analysis import summary as analysis
-from denoisebench.benchmark.runner import measure_unit
+from denoisebench.benchmark.measure import measure_unit
 from denoisebench.dataset.frame import Frame, Sequence
 from denoisebench.reports import strips
 from denoisebench.results import crops
@@ -94,8 +94,8 @@ def measured(tmp_path_factory):
     for spp in (1, 4):
         for scene, scale in SCENES.items():
             seq = _sequence(scene, scale, spp)
-            units.append(measure_unit(NOISY, None, seq, spatial, temporal))
-            units.append(measure_unit("blur", Blur(), seq, spatial, temporal))
+            units.append(measure_unit(NOISY, None, seq, spatial=spatial, temporal=temporal))
+            units.append(measure_unit("blur", Blur(), seq, spatial=spatial, temporal=temporal))
     store, run_id = _store_with_units(tmp_path_factory.mktemp("scores") / "r.sqlite", units)
     data = analysis.RunData(store, run_id)
     return store, data, analysis.summary_table(data)
@@ -160,10 +160,21 @@ def test_bootstrap_interval_widens_with_the_reference_uncertainty():
 
 def _unit(label, scene, value, se, frames=2):
     records = [
-        FrameRecord(i, "ok", None, 1.0, 0.1, 1.1, 0, {"relmse": value}, {"relmse": 0.001}, {"relmse": se})
+        FrameRecord(
+            frame=i,
+            status="ok",
+            error=None,
+            render_seconds=1.0,
+            denoise_seconds=0.1,
+            total_seconds=1.1,
+            sanitized=0,
+            metrics={"relmse": value},
+            floors={"relmse": 0.001},
+            ref_se={"relmse": se},
+        )
         for i in range(frames)
     ]
-    return UnitRecord(label, scene, 1, "ok", None, records)
+    return UnitRecord(denoiser=label, scene=scene, spp=1, status="ok", error=None, frames=records)
 
 
 def test_pairs_within_the_reference_noise_are_marked_not_distinguishable(tmp_path):
@@ -272,7 +283,7 @@ def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
     with ResultsStore(tmp_path / "r.sqlite") as store:
         plan = run_benchmark(
             data,
-            BenchmarkConfig(["cross_bilateral_fast"], [1, 4], split="all", metrics=["relmse"]),
+            BenchmarkConfig(denoisers=["cross_bilateral_fast"], spp=[1, 4], split="all", metrics=["relmse"]),
             store,
             progress=False,
         )
@@ -308,8 +319,30 @@ def test_the_leaderboard_command_ranks_a_linear_flicker_score_per_scene_against_
     units = []
     for label, values in ((NOISY, noisy), ("oidn", oidn)):
         for scene, value in values.items():
-            frames = [FrameRecord(i, "ok", None, 1.0, 0.1, 1.1, 0, {"relmse": 0.1}) for i in range(2)]
-            units.append(UnitRecord(label, scene, 4, "ok", None, frames, {"temporal_l1": value}))
+            frames = [
+                FrameRecord(
+                    frame=i,
+                    status="ok",
+                    error=None,
+                    render_seconds=1.0,
+                    denoise_seconds=0.1,
+                    total_seconds=1.1,
+                    sanitized=0,
+                    metrics={"relmse": 0.1},
+                )
+                for i in range(2)
+            ]
+            units.append(
+                UnitRecord(
+                    denoiser=label,
+                    scene=scene,
+                    spp=4,
+                    status="ok",
+                    error=None,
+                    frames=frames,
+                    sequence_metrics={"temporal_l1": value},
+                )
+            )
     store, _ = _store_with_units(tmp_path / "r.sqlite", units, (NOISY, "oidn"))
     ranking = leaderboard(store, "temporal_l1", 4)
     metric, spp, ranked = ranking.metric, ranking.spp, ranking.entries
@@ -428,7 +461,10 @@ def test_the_report_leaves_unresolved_scenes_out_of_the_summary_unless_asked(tmp
     data = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=2, frames=2, height=16, width=16, spp=(1,)))
     with ResultsStore(tmp_path / "r.sqlite") as store:
         plan = run_benchmark(
-            data, BenchmarkConfig(["identity"], [1], split="all", metrics=["relmse"]), store, progress=False
+            data,
+            BenchmarkConfig(denoisers=["identity"], spp=[1], split="all", metrics=["relmse"]),
+            store,
+            progress=False,
         )
         scenes = sorted(data.scenes)
         states = agg.reference_states({s: data.scene(s).record for s in scenes})
@@ -460,8 +496,8 @@ def test_the_runner_passes_the_trim_to_the_robust_scores():
 
     seq = _sequence("plain", 1.0, 1, frames=3, size=24)
     spatial, temporal = ["relmse_robust"], ["temporal_relmse_robust"]
-    default = measure_unit(NOISY, None, seq, spatial, temporal)
-    wide = measure_unit(NOISY, None, seq, spatial, temporal, trim=0.2)
+    default = measure_unit(NOISY, None, seq, spatial=spatial, temporal=temporal)
+    wide = measure_unit(NOISY, None, seq, spatial=spatial, temporal=temporal, trim=0.2)
     frames = list(seq)
     for unit, trim in ((default, robust.DEFAULT_TRIM), (wide, 0.2)):
         for record, frame in zip(unit.frames, frames):

@@ -32,7 +32,16 @@ class _Model:
 
 
 def _row(label, spp, error, low=None, high=None):
-    return SummaryRow(label, spp, {"relmse": Cell(error, low, high, 4)}, None, None, None, 8, 0)
+    return SummaryRow(
+        denoiser=label,
+        spp=spp,
+        metrics={"relmse": Cell(value=error, low=low, high=high, scenes=4)},
+        denoise_seconds=None,
+        total_seconds=None,
+        render_seconds=None,
+        frames=8,
+        failed_units=0,
+    )
 
 
 def _summary():

@@ -22,7 +22,9 @@ from denoisebench.results.store import ResultsStore
 def run(tmp_path_factory):
     root = tmp_path_factory.mktemp("agree")
     data = open_dataset(make_synthetic_dataset(root / "ds", scenes=3, frames=3, height=16, width=16, spp=(1, 4)))
-    config = BenchmarkConfig(["identity", "cross_bilateral_fast"], [1, 4], split="all", metrics=["relmse", "flip"])
+    config = BenchmarkConfig(
+        denoisers=["identity", "cross_bilateral_fast"], spp=[1, 4], split="all", metrics=["relmse", "flip"]
+    )
     with ResultsStore(root / "r.sqlite") as store:
         plan = run_benchmark(data, config, store, progress=False)
         write_report(store, plan.run_id, data, root / "report")
@@ -78,7 +80,16 @@ def test_scenes_the_report_sets_apart_are_left_out_of_the_leaderboard(run, monke
 
 def test_equal_scores_share_a_rank():
     entries = [
-        table.Entry(name, value, 1, 0, None, None, "r", "d")
+        table.Entry(
+            denoiser=name,
+            value=value,
+            frames=1,
+            failed_units=0,
+            denoise_seconds=None,
+            total_seconds=None,
+            run_id="r",
+            created_at="d",
+        )
         for name, value in (("a", 0.1), ("b", 0.1), ("c", 0.2), ("d", None))
     ]
     assert table.ranks(entries) == [1, 1, 3, None]

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from denoisebench.analysis.run_index import FRAME_TRIM, RunIndex, kept_frames
-from denoisebench.benchmark.runner import measure_unit
+from denoisebench.benchmark.measure import measure_unit
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.synthetic import make_synthetic_dataset
 from denoisebench.results.names import FLICKER_PREFIX
@@ -23,23 +23,33 @@ from denoisebench.results.records import FrameRow, SequenceRow, UnitRow
 def _index(values: list[float], floor: float = 0.001, se: float = 1e-4) -> RunIndex:
     frames = [
         FrameRow(
-            "oidn",
-            "s",
-            16,
-            i,
-            "ok",
-            None,
-            1.0,
-            0.1,
-            1.1,
-            0,
-            {"relmse_robust": v},
-            {"relmse_robust": floor},
-            {"relmse_robust": se},
+            denoiser="oidn",
+            scene="s",
+            spp=16,
+            frame=i,
+            status="ok",
+            error=None,
+            render_seconds=1.0,
+            denoise_seconds=0.1,
+            total_seconds=1.1,
+            sanitized=0,
+            metrics={"relmse_robust": v},
+            floors={"relmse_robust": floor},
+            ref_se={"relmse_robust": se},
         )
         for i, v in enumerate(values)
     ]
-    unit = UnitRow("oidn", "s", 16, "ok", None, len(values), len(values), 0.8, 8.0)
+    unit = UnitRow(
+        denoiser="oidn",
+        scene="s",
+        spp=16,
+        status="ok",
+        error=None,
+        frames=len(values),
+        frames_ok=len(values),
+        denoise_seconds=0.8,
+        render_seconds=8.0,
+    )
     return RunIndex([unit], frames, [])
 
 
@@ -92,17 +102,55 @@ class _BlowsOneFrame:
 def _flicker_index(tmp_path, blown: int | None) -> RunIndex:
     data = open_dataset(make_synthetic_dataset(tmp_path / "data", scenes=1, frames=8, spp=(4,), ref_spp=64))
     sequence = data.sequence("synthetic_000", 4)
-    unit = measure_unit("d", _BlowsOneFrame(blown), sequence, [], ["temporal_relmse_robust"])
+    unit = measure_unit("d", _BlowsOneFrame(blown), sequence, spatial=[], temporal=["temporal_relmse_robust"])
     assert unit.status == "ok", unit.error
     rows = [
-        FrameRow("d", unit.scene, 4, r.frame, r.status, r.error, None, None, None, 0, r.metrics, r.floors, r.ref_se)
+        FrameRow(
+            denoiser="d",
+            scene=unit.scene,
+            spp=4,
+            frame=r.frame,
+            status=r.status,
+            error=r.error,
+            render_seconds=None,
+            denoise_seconds=None,
+            total_seconds=None,
+            sanitized=0,
+            metrics=r.metrics,
+            floors=r.floors,
+            ref_se=r.ref_se,
+        )
         for r in unit.frames
     ]
     sequences = [
-        SequenceRow("d", unit.scene, 4, m, v, unit.sequence_floors.get(m), unit.sequence_ref_se.get(m))
+        SequenceRow(
+            denoiser="d",
+            scene=unit.scene,
+            spp=4,
+            metric=m,
+            value=v,
+            floor=unit.sequence_floors.get(m),
+            ref_se=unit.sequence_ref_se.get(m),
+        )
         for m, v in unit.sequence_metrics.items()
     ]
-    return RunIndex([UnitRow("d", unit.scene, 4, "ok", None, 8, 8, None, None)], rows, sequences)
+    return RunIndex(
+        [
+            UnitRow(
+                denoiser="d",
+                scene=unit.scene,
+                spp=4,
+                status="ok",
+                error=None,
+                frames=8,
+                frames_ok=8,
+                denoise_seconds=None,
+                render_seconds=None,
+            )
+        ],
+        rows,
+        sequences,
+    )
 
 
 def test_one_blown_up_frame_of_eight_moves_the_flicker_score_by_a_bounded_amount(tmp_path):

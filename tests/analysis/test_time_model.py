@@ -38,7 +38,7 @@ def test_line_through_separates_offset_and_slope_and_stays_non_negative():
 
 
 def test_denoiser_cost_projects_fixed_plus_per_pixel_and_never_scales_a_small_frame_alone():
-    cost = tm.DenoiserCost("d", P0, {1: _law(P0), 4: _law(P0) + 0.01})
+    cost = tm.DenoiserCost(label="d", pixels0=P0, small={1: _law(P0), 4: _law(P0) + 0.01})
     assert cost.seconds(HD, 1) is None  # one size measured: no projection by pixel ratio
     assert cost.seconds(P0, 4) == pytest.approx(_law(P0) + 0.01)
     offset, _ = tm.line_through([(P0, _law(P0)), (P1, _law(P1))])
@@ -53,7 +53,7 @@ def test_denoiser_cost_projects_fixed_plus_per_pixel_and_never_scales_a_small_fr
 
 
 def test_render_cost_scales_the_per_sample_cost_with_pixels_and_splits_the_offset_with_a_probe():
-    render = tm.RenderCost(P0, offset0=0.3, per_spp0=0.002, measured_spp=[1, 2, 4, 8, 16])
+    render = tm.RenderCost(pixels0=P0, offset0=0.3, per_spp0=0.002, measured_spp=[1, 2, 4, 8, 16])
     assert render.seconds(P0, 8) == pytest.approx(0.3 + 0.016)
     assert render.offset(HD) == 0.3  # held fixed without a probe
     assert render.per_spp(HD) == pytest.approx(0.002 * HD / P0)
@@ -153,7 +153,10 @@ def test_timings_are_measured_once_per_run_and_kept_in_the_store(tmp_path):
     dataset = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=2, frames=2, height=16, width=16, spp=(1,)))
     with ResultsStore(tmp_path / "db.sqlite") as store:
         plan = run_benchmark(
-            dataset, BenchmarkConfig(["identity"], [1], split="all", metrics=["relmse"]), store, progress=False
+            dataset,
+            BenchmarkConfig(denoisers=["identity"], spp=[1], split="all", metrics=["relmse"]),
+            store,
+            progress=False,
         )
         instances = {d.label: d.instance for d in plan.denoisers}
         first = timing.measure_run_timings(store, dataset, plan, instances, (64, 48), progress=False)
@@ -197,12 +200,12 @@ def test_a_cost_that_shrinks_after_one_spp_is_projected_from_a_timing_at_each_en
     then charged 2-16 spp only that fixed cost. With a timing at 16 spp, both ends are their planted laws and
     the middle lies between them."""
     small = {1: _low_law(P0), 2: 0.0027, 16: _high_law(P0)}
-    cost = tm.DenoiserCost("d", P0, dict(small))
+    cost = tm.DenoiserCost(label="d", pixels0=P0, small=dict(small))
     cost.fixed = tm.line_through([(P0, _low_law(P0)), (P1, _low_law(P1))])[0]
     assert cost.fixed == pytest.approx(0.0031)
     assert cost.seconds(HD, 16) == pytest.approx(0.0025)  # the one-line projection: a 64x64 frame's time at 1080p
     fixed16 = tm.line_through([(P0, _high_law(P0)), (P1, _high_law(P1))])[0]
-    cost.highest = tm.HighestSppTiming(16, P1, _high_law(P1), fixed16)
+    cost.highest = tm.HighestSppTiming(spp=16, pixels=P1, seconds=_high_law(P1), fixed=fixed16)
     assert cost.seconds(HD, 1) == pytest.approx(_low_law(HD))
     assert cost.seconds(HD, 16) == pytest.approx(_high_law(HD))
     assert _high_law(HD) < cost.seconds(HD, 2) < _low_law(HD)
@@ -245,7 +248,7 @@ def test_a_denoiser_whose_time_changes_with_spp_is_timed_at_the_highest_spp_too(
     plugin.write_text(SPP_DEPENDENT)
     spec, steady = f"{plugin}:SlowAtOneSpp", f"{plugin}:Steady"
     dataset = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=1, frames=2, height=16, width=16, spp=(1, 4)))
-    config = BenchmarkConfig([spec, steady], [1, 4], split="all", metrics=["relmse"], isolation="none")
+    config = BenchmarkConfig(denoisers=[spec, steady], spp=[1, 4], split="all", metrics=["relmse"], isolation="none")
     with ResultsStore(tmp_path / "db.sqlite") as store:
         plan = run_benchmark(dataset, config, store, progress=False)
         instances = {d.label: d.instance for d in plan.denoisers}

@@ -86,7 +86,7 @@ def _run(dataset, db, loaded: bool) -> dict[tuple, str]:
             w.start()
     try:
         with ResultsStore(db) as store:
-            config = BenchmarkConfig(DENOISERS, [1, 2, 4], split="all", metrics=["relmse", "flip"])
+            config = BenchmarkConfig(denoisers=DENOISERS, spp=[1, 2, 4], split="all", metrics=["relmse", "flip"])
             plan = run_benchmark(dataset, config, store, progress=False)
             instances = {d.label: d.instance for d in plan.denoisers}
             timing.measure_run_timings(store, dataset, plan, instances, (96, 96), progress=False)
@@ -106,37 +106,49 @@ def test_time_verdicts_do_not_flip_beside_a_cpu_bound_load(dataset, tmp_path):
 
 
 def test_ratio_bounds_hold_the_nominal_ratio_and_widen_with_the_spread():
-    render = time_model.RenderCost(100, 0.5, 0.1, [1, 4], spread=1.5)
-    model = time_model.TimeModel((10, 10), 100, (10, 10), render)
-    model.denoisers["d"] = time_model.DenoiserCost("d", 100, {1: 0.4}, spread=2.0)
+    render = time_model.RenderCost(pixels0=100, offset0=0.5, per_spp0=0.1, measured_spp=[1, 4], spread=1.5)
+    model = time_model.TimeModel(time_at=(10, 10), pixels0=100, dataset_size=(10, 10), render=render)
+    model.denoisers["d"] = time_model.DenoiserCost(label="d", pixels0=100, small={1: 0.4}, spread=2.0)
     low, high = model.ratio_bounds("d", 1, 8)
     nominal = model.total_seconds("d", 1) / model.render_seconds(8)
     assert low < nominal < high
     # rendering at its slowest and the denoiser at its fastest, and the other way round
     assert low == pytest.approx((1.5 * 0.6 + 0.4) / (1.5 * 1.3)) and high == pytest.approx((0.6 + 0.8) / 1.3)
-    tight = time_model.TimeModel((10, 10), 100, (10, 10), time_model.RenderCost(100, 0.5, 0.1, [1, 4], spread=1.0))
-    tight.denoisers["d"] = time_model.DenoiserCost("d", 100, {1: 0.4}, spread=1.0)
+    tight = time_model.TimeModel(
+        time_at=(10, 10),
+        pixels0=100,
+        dataset_size=(10, 10),
+        render=time_model.RenderCost(pixels0=100, offset0=0.5, per_spp0=0.1, measured_spp=[1, 4], spread=1.0),
+    )
+    tight.denoisers["d"] = time_model.DenoiserCost(label="d", pixels0=100, small={1: 0.4}, spread=1.0)
     assert tight.ratio_bounds("d", 1, 8) == pytest.approx((nominal, nominal))
 
 
 def test_a_verdict_whose_bounds_straddle_one_is_withheld():
     # a denoiser at 1 spp matching 4-spp rendering at about its time: no verdict either way
-    render = time_model.RenderCost(100, 0.0, 1.0, [1, 4], spread=1.3)
-    model = time_model.TimeModel((10, 10), 100, (10, 10), render)
-    model.denoisers["d"] = time_model.DenoiserCost("d", 100, {1: 3.0}, spread=1.3)
+    render = time_model.RenderCost(pixels0=100, offset0=0.0, per_spp0=1.0, measured_spp=[1, 4], spread=1.3)
+    model = time_model.TimeModel(time_at=(10, 10), pixels0=100, dataset_size=(10, 10), render=render)
+    model.denoisers["d"] = time_model.DenoiserCost(label="d", pixels0=100, small={1: 3.0}, spread=1.3)
     points = [
-        accuracy.Point("noisy", 1, 1.0, 0.4),
-        accuracy.Point("noisy", 4, 4.0, 0.1),
-        accuracy.Point("d", 1, 4.0, 0.1),
+        accuracy.Point(denoiser="noisy", spp=1, seconds=1.0, error=0.4),
+        accuracy.Point(denoiser="noisy", spp=4, seconds=4.0, error=0.1),
+        accuracy.Point(denoiser="d", spp=1, seconds=4.0, error=0.1),
     ]
-    fit = accuracy.NoisyFit(0.0, -1.0, 1.0, [1, 4], False)
-    at = accuracy.AccuracyTime("relmse", points, fit, None, None, [], model=model)
+    fit = accuracy.NoisyFit(intercept=0.0, slope=-1.0, seconds_per_spp=1.0, measured_spp=[1, 4], assumed_slope=False)
+    at = accuracy.AccuracyTime(
+        metric="relmse", points=points, fit=fit, reference_seconds=None, reference_spp=None, hidden=[], model=model
+    )
     at.noisy_curve = {1: 0.4, 4: 0.1}
     sentence = next(s for s in accuracy.readings(at) if s.startswith("d at 1 spp"))
     assert "no time verdict" in sentence and "cheaper" not in sentence
-    tables = equal_tables.Tables("relmse", (10, 10), False, [], [], ["d"])
-    row = equal_tables.EqualQualityRow(0.1, 4.0, 4.0, "measured")
-    row.needs["d"] = (equal_tables.Estimate(1.0, "measured"), equal_tables.Estimate(4.0, "measured"))
+    tables = equal_tables.Tables(
+        metric="relmse", time_at=(10, 10), projected=False, equal_time=[], equal_quality=[], denoisers=["d"]
+    )
+    row = equal_tables.EqualQualityRow(target=0.1, target_spp=4.0, render_seconds=4.0, render_how="measured")
+    row.needs["d"] = (
+        equal_tables.Estimate(value=1.0, how="measured"),
+        equal_tables.Estimate(value=4.0, how="measured"),
+    )
     row.ratio_bounds["d"] = model.ratio_bounds("d", 1, 4)
     tables.equal_quality.append(row)
     (text,) = equal_tables.verdicts(tables)

@@ -19,16 +19,34 @@ RUNGS = [1, 2, 4, 8, 16]
 def _case(denoise_seconds: float, errors: dict[int, float]):
     noisy = {s: 0.8 / s for s in RUNGS}  # Monte Carlo: error ∝ 1/spp
     rows = [
-        analysis.SummaryRow(NOISY, s, {"relmse": analysis.Cell(e, None, None, 3)}, 0.0, None, None, 3, 0)
+        analysis.SummaryRow(
+            denoiser=NOISY,
+            spp=s,
+            metrics={"relmse": analysis.Cell(value=e, low=None, high=None, scenes=3)},
+            denoise_seconds=0.0,
+            total_seconds=None,
+            render_seconds=None,
+            frames=3,
+            failed_units=0,
+        )
         for s, e in noisy.items()
     ]
     rows += [
-        analysis.SummaryRow("d", s, {"relmse": analysis.Cell(e, None, None, 3)}, None, None, None, 3, 0)
+        analysis.SummaryRow(
+            denoiser="d",
+            spp=s,
+            metrics={"relmse": analysis.Cell(value=e, low=None, high=None, scenes=3)},
+            denoise_seconds=None,
+            total_seconds=None,
+            render_seconds=None,
+            frames=3,
+            failed_units=0,
+        )
         for s, e in errors.items()
     ]
-    render = time_model.RenderCost(100, 1.0, 0.5, RUNGS)
-    model = time_model.TimeModel((10, 10), 100, (10, 10), render)
-    model.denoisers["d"] = time_model.DenoiserCost("d", 100, {s: denoise_seconds for s in errors})
+    render = time_model.RenderCost(pixels0=100, offset0=1.0, per_spp0=0.5, measured_spp=RUNGS)
+    model = time_model.TimeModel(time_at=(10, 10), pixels0=100, dataset_size=(10, 10), render=render)
+    model.denoisers["d"] = time_model.DenoiserCost(label="d", pixels0=100, small={s: denoise_seconds for s in errors})
     frames = [SimpleNamespace(spp=s, render_seconds=model.render_seconds(s)) for s in RUNGS]
     data = SimpleNamespace(frames_of=lambda label: frames if label == NOISY else [])
     at = accuracy.accuracy_time(data, rows, "relmse", model=model)

@@ -57,8 +57,8 @@ def test_ray_executor_scores_like_local_and_contains_an_exiting_plugin(tmp_path)
     plugin.write_text(PLUGIN)
     data = open_dataset(make_synthetic_dataset(tmp_path / "ds", scenes=2, frames=2, height=16, width=16, spp=(2,)))
     config = BenchmarkConfig(
-        ["identity", "cross_bilateral_fast", f"{plugin}:Copy", f"{plugin}:Exits"],
-        [2],
+        denoisers=["identity", "cross_bilateral_fast", f"{plugin}:Copy", f"{plugin}:Exits"],
+        spp=[2],
         metrics=["relmse", "ssim"],
         split="all",
     )

@@ -20,9 +20,14 @@ def db(tmp_path_factory):
     path = root / "r.sqlite"
     with ResultsStore(path) as store:
         # two runs on one dataset: identity in the first, cross_bilateral_fast in the second
-        run_benchmark(data, BenchmarkConfig(["identity"], [1, 4], metrics=["relmse", "ssim"]), store, progress=False)
         run_benchmark(
-            data, BenchmarkConfig(["cross_bilateral_fast"], [1, 4], metrics=["relmse", "ssim"]), store, progress=False
+            data, BenchmarkConfig(denoisers=["identity"], spp=[1, 4], metrics=["relmse", "ssim"]), store, progress=False
+        )
+        run_benchmark(
+            data,
+            BenchmarkConfig(denoisers=["cross_bilateral_fast"], spp=[1, 4], metrics=["relmse", "ssim"]),
+            store,
+            progress=False,
         )
         expected = {}
         for run in store.runs():

@@ -81,7 +81,7 @@ def test_the_merger_keeps_the_even_rounds_and_the_odd_ones_follow():
 
 
 def test_a_frame_with_half_references_carries_floors_for_its_open_scores():
-    from denoisebench.benchmark.runner import _frame_metrics
+    from denoisebench.benchmark.measure import _frame_metrics
 
     truth = _truth(24)
     rng = np.random.default_rng(5)
@@ -91,10 +91,10 @@ def test_a_frame_with_half_references_carries_floors_for_its_open_scores():
     pred = (truth * 1.02).astype(np.float32)
     var = np.full_like(full, 0.05**2 / 2)
     names = ["relmse", "ssim", "flip", "psnr"]
-    values, floors, ses, skipped = _frame_metrics(pred, full, names, var, None, ((a, b), 64, (32, 32)))
+    values, floors, ses, skipped = _frame_metrics(pred, full, names, ref_var=var, halves=((a, b), 64, (32, 32)))
     assert not skipped and set(floors) == set(names) and all(ses[n] >= 0 for n in names)
     assert floors["ssim"] < 0 and floors["psnr"] < 0  # a noisy reference lowers them: corrected is higher
     assert floors["flip"] > 0
-    plain = _frame_metrics(pred, full, names, var)[1]
+    plain = _frame_metrics(pred, full, names, ref_var=var)[1]
     assert set(plain) == {"relmse"}  # without halves only the closed-form floor
     assert plain["relmse"] == floors["relmse"]

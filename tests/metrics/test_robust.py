@@ -212,5 +212,5 @@ def test_run_benchmark_rejects_a_bad_trim_and_records_a_given_one(tmp_path, caps
     assert main(["benchmark", "--data", str(tmp_path), "--trim", "0.7"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--trim" in err[0]
-    assert BenchmarkConfig(["identity"], [1], trim=0.002).as_dict()["trim"] == 0.002
-    assert "trim" not in BenchmarkConfig(["identity"], [1]).as_dict()  # the default keeps old runs' ids
+    assert BenchmarkConfig(denoisers=["identity"], spp=[1], trim=0.002).as_dict()["trim"] == 0.002
+    assert "trim" not in BenchmarkConfig(denoisers=["identity"], spp=[1]).as_dict()  # the default keeps old runs' ids

@@ -16,14 +16,16 @@ from denoisebench.results.names import NOISY
 
 def _curve(seconds_per_spp=0.01, spps=(1, 4, 16), c=0.5):
     """Noisy points with relMSE = c/spp exactly (the Monte Carlo rate) and time = spp × seconds per spp."""
-    return [accuracy.Point(NOISY, s, s * seconds_per_spp, c / s) for s in spps]
+    return [accuracy.Point(denoiser=NOISY, spp=s, seconds=s * seconds_per_spp, error=c / s) for s in spps]
 
 
 def test_pareto_front_marks_exactly_the_undominated_points():
     points = _curve() + [
-        accuracy.Point("fast_good", 1, 0.02, 0.01),  # dominates noisy@4 and noisy@16
-        accuracy.Point("slow_bad", 4, 1.0, 0.2),  # dominated by everything cheaper and better
-        accuracy.Point("best", 16, 0.5, 0.001),
+        accuracy.Point(denoiser="fast_good", spp=1, seconds=0.02, error=0.01),  # dominates noisy@4 and noisy@16
+        accuracy.Point(
+            denoiser="slow_bad", spp=4, seconds=1.0, error=0.2
+        ),  # dominated by everything cheaper and better
+        accuracy.Point(denoiser="best", spp=16, seconds=0.5, error=0.001),
     ]
     accuracy.pareto_front(points)
     front = {(p.denoiser, p.spp) for p in points if p.pareto}
@@ -31,11 +33,15 @@ def test_pareto_front_marks_exactly_the_undominated_points():
 
 
 def test_equivalent_spp_and_time_ratio_follow_the_noisy_curve():
-    points = _curve() + [accuracy.Point("den", 4, 0.05, 0.5 / 8)]  # the error of 8-spp rendering
+    points = _curve() + [
+        accuracy.Point(denoiser="den", spp=4, seconds=0.05, error=0.5 / 8)
+    ]  # the error of 8-spp rendering
     fit = accuracy.fit_noisy(points, [(s, 0.01 * s) for s in (1, 4, 16)], "relmse")
     assert fit.slope == pytest.approx(-1.0) and not fit.assumed_slope
     assert fit.spp_for(0.005) == pytest.approx(100.0)
-    at = accuracy.AccuracyTime("relmse", points, fit, reference_seconds=10.24, reference_spp=1024, hidden=[])
+    at = accuracy.AccuracyTime(
+        metric="relmse", points=points, fit=fit, reference_seconds=10.24, reference_spp=1024, hidden=[]
+    )
     accuracy.pareto_front(points)
     text = accuracy.readings(at)[0]
     # 8 spp (between the measured 4 and 16) take 0.08 s; the denoiser takes 0.05 s: 62 % of the time
@@ -44,24 +50,42 @@ def test_equivalent_spp_and_time_ratio_follow_the_noisy_curve():
 
 
 def test_no_verdict_rests_on_an_extrapolation_beyond_the_measured_rungs():
-    points = _curve() + [accuracy.Point("den", 4, 0.05, 0.5 / 100)]  # the error of 100-spp rendering
+    points = _curve() + [
+        accuracy.Point(denoiser="den", spp=4, seconds=0.05, error=0.5 / 100)
+    ]  # the error of 100-spp rendering
     fit = accuracy.fit_noisy(points, [(s, 0.01 * s) for s in (1, 4, 16)], "relmse")
-    at = accuracy.AccuracyTime("relmse", points, fit, reference_seconds=10.24, reference_spp=1024, hidden=[])
+    at = accuracy.AccuracyTime(
+        metric="relmse", points=points, fit=fit, reference_seconds=10.24, reference_spp=1024, hidden=[]
+    )
     text = accuracy.readings(at)[0]
     assert text.startswith("den at 4 spp (relmse 0.005) is below the error of rendering alone at every measured")
     assert "no verdict" in text and "matches" not in text and "cheaper" not in text
     # one measured rung: every comparison would extrapolate along an assumed slope
-    one = accuracy.fit_noisy(_curve(spps=(4,)) + [accuracy.Point("den", 4, 0.05, 0.01)], [(4, 0.04)], "relmse")
+    one = accuracy.fit_noisy(
+        _curve(spps=(4,)) + [accuracy.Point(denoiser="den", spp=4, seconds=0.05, error=0.01)], [(4, 0.04)], "relmse"
+    )
     single = accuracy.AccuracyTime(
-        "relmse", _curve(spps=(4,)) + [accuracy.Point("den", 4, 0.05, 0.01)], one, None, None, []
+        metric="relmse",
+        points=_curve(spps=(4,)) + [accuracy.Point(denoiser="den", spp=4, seconds=0.05, error=0.01)],
+        fit=one,
+        reference_seconds=None,
+        reference_spp=None,
+        hidden=[],
     )
     assert "no verdict" in accuracy.readings(single)[0]
 
 
 def test_readings_say_when_rendering_is_cheaper_or_the_input_is_not_improved():
-    points = _curve() + [accuracy.Point("slow", 1, 0.5, 0.5 / 8), accuracy.Point("worse", 4, 0.05, 0.2)]
+    points = _curve() + [
+        accuracy.Point(denoiser="slow", spp=1, seconds=0.5, error=0.5 / 8),
+        accuracy.Point(denoiser="worse", spp=4, seconds=0.05, error=0.2),
+    ]
     fit = accuracy.fit_noisy(points, [(s, 0.01 * s) for s in (1, 4, 16)], "relmse")
-    texts = accuracy.readings(accuracy.AccuracyTime("relmse", points, fit, None, 256, []))
+    texts = accuracy.readings(
+        accuracy.AccuracyTime(
+            metric="relmse", points=points, fit=fit, reference_seconds=None, reference_spp=256, hidden=[]
+        )
+    )
     slow = next(t for t in texts if t.startswith("slow"))
     assert "8-spp rendering" in slow and "(0.5 s vs 0.08 s per frame)" in slow  # 8 spp take 0.08 s
     assert "× as long" in slow and "rendering more samples is cheaper" in slow
@@ -72,9 +96,16 @@ def test_readings_say_when_rendering_is_cheaper_or_the_input_is_not_improved():
 def test_single_spp_assumes_the_monte_carlo_slope_and_a_flat_curve_gives_no_fit():
     fit = accuracy.fit_noisy(_curve(spps=(4,)), [(4, 0.04)], "relmse")
     assert fit.assumed_slope and fit.slope == -1.0 and fit.spp_for(0.5 / 32) == pytest.approx(32.0)
-    flat = [accuracy.Point(NOISY, s, s * 0.01, 0.1) for s in (1, 4)]
+    flat = [accuracy.Point(denoiser=NOISY, spp=s, seconds=s * 0.01, error=0.1) for s in (1, 4)]
     assert accuracy.fit_noisy(flat, [(1, 0.01), (4, 0.04)], "relmse") is None
-    assert "does not fall" in accuracy.readings(accuracy.AccuracyTime("relmse", flat, None, None, None, []))[0]
+    assert (
+        "does not fall"
+        in accuracy.readings(
+            accuracy.AccuracyTime(
+                metric="relmse", points=flat, fit=None, reference_seconds=None, reference_spp=None, hidden=[]
+            )
+        )[0]
+    )
 
 
 def test_bootstrap_interval_brackets_the_mean_and_needs_two_scenes():
@@ -120,7 +151,7 @@ def test_render_time_line_keeps_the_fixed_cost_out_of_the_per_sample_cost():
     # 0.9 s per frame whatever the spp, plus 0.02 s per sample: 1, 4 and 256 spp measured
     offset, per_spp = accuracy.fit_render_time([(1, 0.92), (4, 0.98), (256, 6.02)])
     assert offset == pytest.approx(0.9) and per_spp == pytest.approx(0.02)
-    points = _curve(spps=(1, 4)) + [accuracy.Point("den", 4, 1.2, 0.5 / 100)]
+    points = _curve(spps=(1, 4)) + [accuracy.Point(denoiser="den", spp=4, seconds=1.2, error=0.5 / 100)]
     fit = accuracy.fit_noisy(points, [(1, 0.92), (4, 0.98), (256, 6.02)], "relmse")
     assert fit.seconds_at(100) == pytest.approx(2.9)  # not 100 × 0.92
     assert accuracy.fit_render_time([(4, 0.4)]) == (0.0, pytest.approx(0.1))

@@ -40,7 +40,7 @@ def run(tmp_path_factory):
     )
     data = open_dataset(make_synthetic_dataset(root / "ds", scenes=1, frames=8, height=16, width=16, spp=(1, 4)))
     config = BenchmarkConfig(
-        ["identity", f"{plugin}:Blows"], [1, 4], split="all", metrics=["relmse", "flip"], isolation="none"
+        denoisers=["identity", f"{plugin}:Blows"], spp=[1, 4], split="all", metrics=["relmse", "flip"], isolation="none"
     )
     with ResultsStore(root / "r.sqlite") as store:
         plan = run_benchmark(data, config, store, progress=False)

@@ -159,7 +159,17 @@ def test_sampler_frames_round_trip_through_the_store_and_an_old_store_reads_as_n
     frames = sampler_maps.frame_records(maps)
     assert [f.spp is None for f in frames] == [True, True, False]  # only the image frame keeps its map
     assert [f.pixels_without_samples for f in frames] == [int((m < 1).sum()) for _, m in maps]
-    unit = UnitRecord("s", "scene", 4, "ok", None, [FrameRecord(t, "ok", None, 1.0, 0.0, 1.0) for t in range(3)])
+    unit = UnitRecord(
+        denoiser="s",
+        scene="scene",
+        spp=4,
+        status="ok",
+        error=None,
+        frames=[
+            FrameRecord(frame=t, status="ok", error=None, render_seconds=1.0, denoise_seconds=0.0, total_seconds=1.0)
+            for t in range(3)
+        ],
+    )
     unit.sampler_frames = frames
     with ResultsStore(tmp_path / "r.sqlite") as store:
         store.ensure_run("run", dataset_hash="hash", dataset_path="/data", config={"denoisers": []}, versions={})

@@ -48,7 +48,16 @@ def _plan(labels=("a", "b"), samplers=()) -> RunPlan:
         LoadedDenoiser(label=label, spec=label, instance=object(), needs=frozenset({"color"}), temporal=False)
         for label in labels
     ]
-    return RunPlan("run", ["s1", "s2"], [1, 4], denoisers, ["relmse"], [], resumed=False, samplers=list(samplers))
+    return RunPlan(
+        run_id="run",
+        scenes=["s1", "s2"],
+        spp=[1, 4],
+        denoisers=denoisers,
+        spatial=["relmse"],
+        temporal=[],
+        resumed=False,
+        samplers=list(samplers),
+    )
 
 
 def test_the_unit_set_is_every_label_scene_and_spp_once_and_pending_groups_are_what_is_missing():
@@ -68,8 +77,8 @@ def test_the_unit_set_is_every_label_scene_and_spp_once_and_pending_groups_are_w
 
 
 def test_the_plan_sent_to_ray_tasks_keeps_trained_scenes_and_sampler_pairs_without_instances():
-    pair = SamplerPair("uniform+a", "uniform", "a")
-    plan = _plan(samplers=[SamplerPair("uniform", "uniform", None), pair])
+    pair = SamplerPair(label="uniform+a", sampler="uniform", denoiser="a")
+    plan = _plan(samplers=[SamplerPair(label="uniform", sampler="uniform", denoiser=None), pair])
     plan.denoisers[0].trained_scenes = frozenset({"s1", "elsewhere"})
     plan.denoisers[1].load_error = "no module named b"
     light = pickle.loads(pickle.dumps(light_plan(plan)))  # what travels to a task
@@ -93,7 +102,15 @@ def test_the_plan_sent_to_ray_tasks_keeps_trained_scenes_and_sampler_pairs_witho
 
 
 def _frame(index: int, relmse: float, seconds: float = 0.01) -> FrameRecord:
-    return FrameRecord(index, "ok", None, 0.1, seconds, 0.1 + seconds, metrics={"relmse": relmse})
+    return FrameRecord(
+        frame=index,
+        status="ok",
+        error=None,
+        render_seconds=0.1,
+        denoise_seconds=seconds,
+        total_seconds=0.1 + seconds,
+        metrics={"relmse": relmse},
+    )
 
 
 PLANTED = {NOISY: 0.8, "box": 0.2, "uniform": 0.6, "uniform+box": 0.1}  # relMSE of each label's frame 0
@@ -114,12 +131,20 @@ def _sampler_store(path) -> ResultsStore:
     store.add_denoiser(label="box", spec="box", kind="denoiser", **plain)
     box = LoadedDenoiser(label="box", spec="box", instance=object(), needs=frozenset({"color"}), temporal=False)
     register_pairs(
-        store, "run1", [SamplerPair("uniform", "uniform", None), SamplerPair("uniform+box", "uniform", "box")], [box]
+        store,
+        "run1",
+        [
+            SamplerPair(label="uniform", sampler="uniform", denoiser=None),
+            SamplerPair(label="uniform+box", sampler="uniform", denoiser="box"),
+        ],
+        [box],
     )
     for label, value in PLANTED.items():
         for scene, factor in (("s1", 1.0), ("s2", 3.0)):
             frames = [_frame(t, value * factor * (1 + 0.1 * t)) for t in range(2)]
-            assert store.write_unit("run1", UnitRecord(label, scene, 4, "ok", None, frames))
+            assert store.write_unit(
+                "run1", UnitRecord(denoiser=label, scene=scene, spp=4, status="ok", error=None, frames=frames)
+            )
     return store
 
 
@@ -226,7 +251,10 @@ def measured_run(tmp_path_factory):
     data = open_dataset(make_synthetic_dataset(root / "ds", scenes=2, frames=3, height=16, width=16, spp=(1, 4)))
     store = ResultsStore(root / "r.sqlite")
     config = BenchmarkConfig(
-        ["identity", "cross_bilateral_fast"], [1, 4], split="all", metrics=["relmse", "ssim", "temporal_l1"]
+        denoisers=["identity", "cross_bilateral_fast"],
+        spp=[1, 4],
+        split="all",
+        metrics=["relmse", "ssim", "temporal_l1"],
     )
     plan = run_benchmark(data, config, store, progress=False)
     yield store, plan.run_id

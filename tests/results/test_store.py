@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from denoisebench.benchmark.runner import kept_images
+from denoisebench.benchmark.measure import kept_images
 from denoisebench.dataset.synthetic import make_synthetic_dataset
 from denoisebench.results.records import FrameRecord, UnitRecord
 from denoisebench.results.schema import SCHEMA_VERSION
@@ -326,8 +326,20 @@ def test_scores_on_a_denoisers_own_training_scenes_are_marked_not_held_out(tmp_p
 
 
 def _unit_with_images(frames: dict[int, float]) -> UnitRecord:
-    records = [FrameRecord(f, "ok", None, 1.0, 0.1, 1.1, 0, {"relmse": v}) for f, v in frames.items()]
-    return UnitRecord("d", "s", 4, "ok", None, records)
+    records = [
+        FrameRecord(
+            frame=f,
+            status="ok",
+            error=None,
+            render_seconds=1.0,
+            denoise_seconds=0.1,
+            total_seconds=1.1,
+            sanitized=0,
+            metrics={"relmse": v},
+        )
+        for f, v in frames.items()
+    ]
+    return UnitRecord(denoiser="d", scene="s", spp=4, status="ok", error=None, frames=records)
 
 
 def test_a_unit_keeps_its_last_frame_and_the_frames_its_deciding_scores_are_worst_on(tmp_path):

@@ -69,7 +69,9 @@ def test_the_benchmark_measures_sampler_denoiser_pairs_live(live, tmp_path):
     data, scene, _ = live
     plugin = f"{EXAMPLE}:PixelVariance"  # a file plugin: it runs in a worker of its own
     samplers = ["uniform", "hachisuka2008", plugin]
-    config = BenchmarkConfig(["identity"], [4], split="all", metrics=["relmse"], samplers=samplers, verify=False)
+    config = BenchmarkConfig(
+        denoisers=["identity"], spp=[4], split="all", metrics=["relmse"], samplers=samplers, verify=False
+    )
     with ResultsStore(tmp_path / "r.sqlite") as store:
         plan = run_benchmark(data, config, store, progress=False)
         units = {u.denoiser: u for u in store.units(plan.run_id)}
@@ -93,6 +95,6 @@ def test_the_benchmark_refuses_an_unknown_sampler_before_any_work(live, tmp_path
     data, _, _ = live
     with ResultsStore(tmp_path / "r.sqlite") as store:
         with pytest.raises(UnknownSamplerError):
-            config = BenchmarkConfig(["identity"], [4], split="all", samplers=["nope"])
+            config = BenchmarkConfig(denoisers=["identity"], spp=[4], split="all", samplers=["nope"])
             run_benchmark(data, config, store, progress=False)
         assert not store.runs()
