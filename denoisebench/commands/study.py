@@ -105,7 +105,7 @@ def run(args) -> int:
         threads=args.threads,
         progress=not args.quiet,
     )
-    result = run_study(options)
+    result = run_study(options, on_part=lambda partial: write_report(partial, options.out))
     path = write_report(result, options.out)
     print(f"report: {path.resolve()}")
     return 0

@@ -284,13 +284,16 @@ def _references(options: StudyOptions, store, dataset) -> tuple[dict, list[str],
     run_id = _benchmark(options, store, list(options.references))
     data = RunData(store, run_id)
     apart = {u.scene: u.reason for u in set_apart(data, dataset)}
-    kept = [s for s in data.scenes if s not in apart]
+    kept = [s for s in data.scenes if s not in apart] or list(data.scenes)  # all set apart: keep them all
     scores = {label: read_scores(store, run_id, label, options.spp, kept) for label in [NOISY, *options.references]}
     return scores, kept, apart
 
 
-def run_study(options: StudyOptions) -> StudyResult:
-    """Train, score and report every part that is not done yet; return the study's numbers."""
+def run_study(options: StudyOptions, on_part=None) -> StudyResult:
+    """Train, score and report every part that is not done yet; return the study's numbers.
+
+    ``on_part(result)`` is called after each part with the numbers so far (the command writes the
+    report then, so a study stopped half-way still has one)."""
     if options.steps < 1 or options.batch_size < 1 or options.crop < 4:
         raise UserInputError("--steps and --batch-size must be >= 1 and --crop >= 4")
     pool = open_dataset(options.pool)
@@ -322,6 +325,9 @@ def run_study(options: StudyOptions) -> StudyResult:
         for model, training_set, seed in bar:
             bar.set_postfix_str(f"{model} {training_set.name} seed {seed}")
             result.parts.append(_part(options, store, model, training_set, seed, kept))
+            if on_part is not None:
+                result.scaling = scaling_curve(result.parts, sets, options.models)
+                on_part(result)
         bar.close()
     result.scaling = scaling_curve(result.parts, sets, options.models)
     return result
