@@ -43,7 +43,7 @@ from denoisebench.baselines.cross_bilateral import cross_bilateral_filter  # noq
 from denoisebench.denoisers.registry import load_denoiser  # noqa: E402
 from denoisebench.denoisers.runner import run_frame  # noqa: E402
 from denoisebench.denoisers.synthetic import synthetic_frame  # noqa: E402
-from denoisebench.metrics.spatial import relmse  # noqa: E402
+from denoisebench.metrics.ours.spatial import relmse  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 

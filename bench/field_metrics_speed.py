@@ -23,7 +23,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from denoisebench.metrics import get_metric  # noqa: E402
-from denoisebench.metrics.colorvideovdp import cvvdp  # noqa: E402
+from denoisebench.metrics.field.colorvideovdp import cvvdp  # noqa: E402
 
 
 def make_sequence(size: int, frames: int, seed: int = 0):

@@ -1,4 +1,4 @@
-"""OIDN's own comparison code on fixed frames: the pinned values of ``tests/metrics/test_oidn.py``.
+"""OIDN's own comparison code on fixed frames: the pinned values of ``tests/metrics/field/test_oidn.py``.
 
     OIDN_TRAINING=/path/to/oidn/training [OIDN_COMMIT=<hash>] .venv/bin/python bench/oidn_compare_pins.py
 
@@ -14,7 +14,7 @@ called ``color``, ``image``, ``util``: kept out of this process):
    ``image.compare_images(..., 'psnr' | 'ssim')``;
 2. ``compare_image.py pred.hdr.exr ref.hdr.exr`` itself, whose printed 4-decimal line is parsed.
 
-It prints both beside ours (:mod:`denoisebench.metrics.oidn_compare`) and the largest
+It prints both beside ours (:mod:`denoisebench.metrics.field.oidn_compare`) and the largest
 differences, then the ``PINS`` dictionary to paste into the test (OIDN's full-precision values).
 
 Notes
@@ -149,7 +149,7 @@ def oidn_commit(training: Path) -> str:
 
 
 def main() -> int:
-    from denoisebench.metrics.oidn_compare import oidn_psnr, oidn_ssim
+    from denoisebench.metrics.field.oidn_compare import oidn_psnr, oidn_ssim
 
     training = os.environ.get("OIDN_TRAINING")
     if not training or not (Path(training) / "compare_image.py").is_file():

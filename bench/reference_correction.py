@@ -3,7 +3,7 @@
 For each scene family: one frame rendered at ``--spp`` (the noisy input) and two independent
 references, at ``--ref-spp`` and at ``--factor`` × that. The noisy input and OIDN's output of it are
 scored (relMSE and its robust form) against both: the corrected score against the cheap reference
-(``score − floor``, ± 1.96 se: :mod:`denoisebench.metrics.floors`) beside the raw score against the
+(``score − floor``, ± 1.96 se: :mod:`denoisebench.metrics.floors.closed_form`) beside the raw score against the
 expensive one. Agreement within the interval is what lets a report lead with corrected scores on a
 user's modest references (issue 42).
 
@@ -89,7 +89,7 @@ def measure(
     """Rows for the noisy input and OIDN on one frame of each family (see the module docstring)."""
     from denoisebench.baselines.oidn import OIDN
     from denoisebench.dataset.frame import Frame
-    from denoisebench.metrics.floors import noisy_value_share
+    from denoisebench.metrics.floors.closed_form import noisy_value_share
     from denoisebench.scenes import get_family
 
     rows = []

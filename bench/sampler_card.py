@@ -32,7 +32,7 @@ from denoisebench.dataset import open_dataset  # noqa: E402
 from denoisebench.dataset.frame import Frame  # noqa: E402
 from denoisebench.denoisers.registry import load_denoiser  # noqa: E402
 from denoisebench.denoisers.runner import run_frame  # noqa: E402
-from denoisebench.metrics.spatial import relmse  # noqa: E402
+from denoisebench.metrics.ours.spatial import relmse  # noqa: E402
 from denoisebench.sampling.live import LiveScene, run_live  # noqa: E402
 from denoisebench.sampling.protocol import Budget  # noqa: E402
 from denoisebench.sampling.registry import BUILTINS, load_sampler  # noqa: E402

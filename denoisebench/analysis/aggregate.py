@@ -16,7 +16,7 @@ Notes
 -----
 * **Intervals.** A percentile bootstrap over scenes (frames of one scene are not independent
   samples) of the mean on the rule's own scale (values, or logs), mapped back. When the scores
-  carry a standard error from the reference's noise (``ses``; :mod:`denoisebench.metrics.floors`)
+  carry a standard error from the reference's noise (``ses``; :mod:`denoisebench.metrics.floors.closed_form`)
   every resample also adds a normal draw of that size to each scene's value (on the log scale:
   sqrt(log(1 + (se/value)²)), the spread of a log-normal with that mean and se; the delta method's
   se/value explodes where the se is comparable to the value, as for linear MSE on a reference
@@ -45,7 +45,7 @@ Notes
     the floor is a lower bound and the correction too small);
   - ``reference_too_noisy``: more than :data:`NOISY_VALUES_LIMIT` of the reference's values have a
     noise comparable to their signal (variance above ``floors.SECOND_ORDER_LIMIT · (r² + 0.01)``),
-    where the floor's expansion is outside its stated validity (:mod:`denoisebench.metrics.floors`);
+    where the floor's expansion is outside its stated validity (:mod:`denoisebench.metrics.floors.closed_form`);
   - ``cannot_rank``: no two entries on the scene (denoisers and the noisy input, at every spp) differ
     by more than the reference resolves (95 %, the two se added): nothing there can be ranked.
 

@@ -30,7 +30,7 @@ import numpy as np
 from denoisebench.analysis import aggregate as agg
 from denoisebench.analysis.aggregate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401 (re-exported)
 from denoisebench.analysis.run_index import RunIndex
-from denoisebench.metrics import floors
+from denoisebench.metrics.floors import closed_form as floors
 from denoisebench.results.finite import finite_mean, is_finite
 from denoisebench.results.names import (  # noqa: F401 (ERROR_METRICS: re-exported for the report)
     ERROR_METRICS,
@@ -121,7 +121,7 @@ NOISE_CHECK_FRAMES = 4
 
 def reference_noisy_shares(dataset, scenes: list[str]) -> dict[str, float]:
     """{scene: largest share of reference values too noisy for a floor} over a few frames of each scene
-    (:func:`denoisebench.metrics.floors.noisy_value_share`); scenes without a reference variance are left out."""
+    (:func:`denoisebench.metrics.floors.closed_form.noisy_value_share`); scenes without a reference variance are left out."""
     out = {}
     for scene in scenes:
         info = dataset.scene(scene)

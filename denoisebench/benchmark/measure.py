@@ -28,7 +28,7 @@ import numpy as np
 from denoisebench.denoisers.runner import run_sequence, sanitize_array
 from denoisebench.metrics import compute_metrics
 from denoisebench.metrics.cost import total_seconds
-from denoisebench.metrics.half_reference import half_reference_floor, other_half
+from denoisebench.metrics.floors.half_reference import half_reference_floor, other_half
 from denoisebench.metrics.registry import get_metric
 from denoisebench.metrics.validation import MetricNotApplicable
 from denoisebench.results.crops import cut
@@ -66,7 +66,7 @@ def _frame_metrics(pred: np.ndarray, ref: np.ndarray, names: list[str], *, ref_v
     """(values, floors, ref_se, not applicable {name: reason}) of the per-frame metrics.
 
     ``halves`` (:func:`_reference_halves`): the reference's two halves and their spp; the metrics
-    without a closed-form floor then get the floor measured from them (:mod:`denoisebench.metrics.half_reference`)."""
+    without a closed-form floor then get the floor measured from them (:mod:`denoisebench.metrics.floors.half_reference`)."""
     results, skipped = _applicable(lambda chosen: compute_metrics(pred, ref, chosen, ref_var=ref_var, trim=trim), names)
     values, floors, ses = _split_results(results)
     if halves is not None:
@@ -159,7 +159,7 @@ def measure_unit(
 ) -> UnitRecord:
     """Run one denoiser (None: the noisy input) on ``sequence`` and measure every frame.
 
-    ``trim``: the robust scores' dropped fraction (None: their default, :mod:`denoisebench.metrics.robust`)."""
+    ``trim``: the robust scores' dropped fraction (None: their default, :mod:`denoisebench.metrics.ours.robust`)."""
     frames = list(sequence)
     if denoiser is None:
         results = [(True, None, 0.0, sanitize_array(f.color)[0].astype(np.float32), 0) for f in frames]

@@ -29,7 +29,7 @@ from denoisebench.benchmark.timing import DEFAULT_TIME_BUDGET, measure_run_timin
 from denoisebench.dataset import disk_space, open_dataset
 from denoisebench.denoisers.registry import check_denoiser_spec
 from denoisebench.errors import UserInputError
-from denoisebench.metrics.robust import check_trim
+from denoisebench.metrics.ours.robust import check_trim
 from denoisebench.outputs import check_writable_dir, check_writable_file
 from denoisebench.plugins import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT
 from denoisebench.plugins.proxy import PluginProxy, limits_from_args

@@ -34,7 +34,7 @@ from denoisebench.dataset.reader import open_dataset
 from denoisebench.denoisers.registry import load_denoiser
 from denoisebench.denoisers.runner import run_sequence
 from denoisebench.errors import UserInputError
-from denoisebench.metrics.spatial import relmse
+from denoisebench.metrics.ours.spatial import relmse
 from denoisebench.models.card import render_card
 
 # Lazy imports: the models and the trainer (torch: 1 s) only when a model is trained or shipped, so

@@ -1,10 +1,18 @@
 """Metrics of denoised images against references: pure functions over numpy arrays.
 
-Spatial (``spatial``), gradient (``gradient``) and temporal (``temporal``) metrics, their cost
-(``cost``), the one tone map (``tonemap``), input checks and the non-finite policy
-(``validation``), a registry by name (``registry``) and ``compute_metrics`` for a chosen set on a
-frame or a sequence. docs/architecture.md, section "Metrics", is the contract. This package imports nothing
-else of denoisebench; bad input raises ``ValueError``.
+Grouped by concern (docs/architecture.md, section "Metrics", is the contract):
+
+* here: the machinery: the ``Metric`` entry (``metric``), a registry by name (``registry``),
+  ``compute_metrics`` for a chosen set on a frame or a sequence (``compute``), input checks and the
+  non-finite policy (``validation``), the one tone map (``tonemap``), cost (``cost``);
+* ``ours/``: our own scores (``spatial``, ``gradient``, ``temporal``, ``robust``);
+* ``field/``: the field's scores as their authors compute them (``noisebase``, ``oidn_compare``,
+  ``colorvideovdp``, ``msssim``);
+* ``floors/``: what the reference's noise adds to a score (``closed_form``, ``half_reference``).
+
+**The one place of re-exports.** The public names below (``__all__``) are re-exported here and only
+here; the subpackages re-export nothing. This package imports nothing else of denoisebench; bad input
+raises ``ValueError``.
 """
 
 from denoisebench.metrics import tonemap  # the module: tonemap.tonemap(x), tonemap.reinhard(x), tonemap.srgb_oetf(y)
@@ -18,10 +26,9 @@ from denoisebench.metrics.cost import (
     summarize_costs,
     total_seconds,
 )
-from denoisebench.metrics.floors import Floor, mse_floor, relmse_floor
-from denoisebench.metrics.gradient import grad_l1, grad_l1_map, hfen, hfen_map
-from denoisebench.metrics.registry import Metric, get_metric, metric_names, register_metric, unregister_metric
-from denoisebench.metrics.spatial import (
+from denoisebench.metrics.floors.closed_form import Floor, mse_floor, relmse_floor
+from denoisebench.metrics.ours.gradient import grad_l1, grad_l1_map, hfen, hfen_map
+from denoisebench.metrics.ours.spatial import (
     deltae2000,
     deltae2000_map,
     flip,
@@ -38,7 +45,7 @@ from denoisebench.metrics.spatial import (
     ssim,
     ssim_map,
 )
-from denoisebench.metrics.temporal import (
+from denoisebench.metrics.ours.temporal import (
     disocclusion_mask,
     temporal_l1,
     temporal_l1_map,
@@ -51,6 +58,7 @@ from denoisebench.metrics.temporal import (
     warp_previous,
     warped_valid_masks,
 )
+from denoisebench.metrics.registry import Metric, get_metric, metric_names, register_metric, unregister_metric
 
 __all__ = [
     "MetricResult",

@@ -11,8 +11,9 @@ each module in their order, which is the order of :func:`metric_names`. Plugins 
 
 from __future__ import annotations
 
-from denoisebench.metrics import colorvideovdp, gradient, msssim, noisebase, oidn_compare, robust, spatial, temporal
+from denoisebench.metrics.field import colorvideovdp, msssim, noisebase, oidn_compare
 from denoisebench.metrics.metric import AGGREGATES, Metric
+from denoisebench.metrics.ours import gradient, robust, spatial, temporal
 
 __all__ = [
     "Metric",

@@ -13,7 +13,7 @@ Notes
   bright colours; that is the price of one fixed, documented map that needs no per-image statistic
   (an exposure chosen from the reference would make two predictions' scores depend on each other).
 * ΔE2000 uses the *linear* stage, ``reinhard(x)``, as linear sRGB (no OETF and no decoding): see
-  :func:`denoisebench.metrics.spatial.deltae2000`.
+  :func:`denoisebench.metrics.ours.spatial.deltae2000`.
 * NaN propagates; the metrics never pass non-finite predictions here (see ``validation``).
 """
 

@@ -19,7 +19,7 @@ Notes
   ``cvvdp`` in JOD beside ``temporal_relmse``), each aggregated by its rule. Frame strips (:mod:`.strips`) show one crop of consecutive frames per denoiser.
 * **Floors.** results.json, results.csv and the tables give each MSE-family score's
   reference-noise floor and its floor-corrected value (``score − floor``, an unbiased estimate of
-  the score against the noise-free image; :mod:`denoisebench.metrics.floors`).
+  the score against the noise-free image; :mod:`denoisebench.metrics.floors.closed_form`).
 """
 
 from __future__ import annotations
@@ -40,7 +40,7 @@ from denoisebench.analysis import summary as analysis
 from denoisebench.analysis.aggregate import rule_of
 from denoisebench.dataset import Dataset
 from denoisebench.dataset.atomic import atomic_write_bytes
-from denoisebench.metrics.colorvideovdp import viewing_conditions
+from denoisebench.metrics.field.colorvideovdp import viewing_conditions
 from denoisebench.reports import comparisons, figures, images
 from denoisebench.reports import samplers as report_samplers
 from denoisebench.reports.html import render_html
@@ -170,7 +170,7 @@ def _flicker(data: analysis.RunData) -> FlickerSection:
 
 
 def _cvvdp_viewing(dataset: Dataset, data: analysis.RunData) -> CvvdpViewing:
-    """cvvdp's viewing conditions (:func:`denoisebench.metrics.colorvideovdp.viewing_conditions`): the
+    """cvvdp's viewing conditions (:func:`denoisebench.metrics.field.colorvideovdp.viewing_conditions`): the
     display once, and per scene the frame's visual angle and the exposure from its reference sequence
     (the one cvvdp set for every denoiser of that scene)."""
     display = ViewingDisplay(**viewing_conditions())

@@ -122,7 +122,7 @@ class SamplerSection:
 
 @dataclass(frozen=True, kw_only=True)
 class ViewingDisplay:
-    """cvvdp's display (:func:`denoisebench.metrics.colorvideovdp.viewing_conditions`, no reference)."""
+    """cvvdp's display (:func:`denoisebench.metrics.field.colorvideovdp.viewing_conditions`, no reference)."""
 
     display: str
     description: str

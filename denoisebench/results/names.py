@@ -19,7 +19,7 @@ FLICKER_METRICS = ("temporal_relmse_robust", "temporal_relmse", "tpsnr")
 FLICKER_PREFIX = "flicker."
 
 #: The error metrics of the accuracy-against-time figure, in panel order (the first leads:
-#: :mod:`denoisebench.metrics.robust`).
+#: :mod:`denoisebench.metrics.ours.robust`).
 ERROR_METRICS = ("relmse_robust", "relmse", "flip")
 
 #: A sampler × denoiser pair is labelled ``SAMPLER+DENOISER`` (the sampler alone: ``SAMPLER``).

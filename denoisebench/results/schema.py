@@ -27,7 +27,7 @@ Tables (schema version :data:`SCHEMA_VERSION`, kept in ``schema_version``):
 Notes
 -----
 * **Schema versions.** Version 2 added ``floor`` and ``ref_se`` to ``frame_metrics`` and
-  ``sequence_metrics`` and the ``strips`` table (:mod:`denoisebench.metrics.floors`). A version-1 database opened for
+  ``sequence_metrics`` and the ``strips`` table (:mod:`denoisebench.metrics.floors.closed_form`). A version-1 database opened for
   writing is migrated in place (``ALTER TABLE ... ADD COLUMN``, one transaction; its old rows get
   NULL floors); opened read-only it is read as it is, every floor None. Version 3 added
   ``run_denoisers.trained_on`` (migrated the same way; NULL: not declared). Version 4 added the

@@ -492,7 +492,7 @@ def test_the_report_leaves_unresolved_scenes_out_of_the_summary_unless_asked(tmp
 
 
 def test_the_runner_passes_the_trim_to_the_robust_scores():
-    from denoisebench.metrics import robust
+    from denoisebench.metrics.ours import robust
 
     seq = _sequence("plain", 1.0, 1, frames=3, size=24)
     spatial, temporal = ["relmse_robust"], ["temporal_relmse_robust"]

@@ -13,7 +13,7 @@ from denoisebench.baselines.oidn import OIDN, clamp_isolated
 from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.registry import load_denoiser
 from denoisebench.denoisers.synthetic import synthetic_frame
-from denoisebench.metrics.spatial import relmse
+from denoisebench.metrics.ours.spatial import relmse
 
 
 @pytest.fixture(scope="module")

@@ -16,7 +16,7 @@ from denoisebench.baselines.rpf import RPFSettings, rpf_filter
 from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.registry import load_denoiser
 from denoisebench.denoisers.runner import run_frame
-from denoisebench.metrics.spatial import relmse
+from denoisebench.metrics.ours.spatial import relmse
 
 pytestmark = pytest.mark.slow
 

@@ -24,7 +24,7 @@ from denoisebench.baselines.rpf_statistics import mutual_information
 from denoisebench.denoisers.registry import load_denoiser
 from denoisebench.denoisers.runner import run_frame
 from denoisebench.denoisers.synthetic import synthetic_frame
-from denoisebench.metrics.spatial import relmse
+from denoisebench.metrics.ours.spatial import relmse
 
 
 @pytest.fixture(scope="module")

@@ -59,7 +59,7 @@ def test_installed_plugin_is_found_through_its_entry_point(installed_example):
         from denoisebench.denoisers.registry import available_denoisers, load_denoiser
         from denoisebench.denoisers.runner import run_frame
         from denoisebench.denoisers.synthetic import synthetic_frame
-        from denoisebench.metrics.spatial import relmse
+        from denoisebench.metrics.ours.spatial import relmse
         origin = available_denoisers()["{installed_example}"]
         denoiser = load_denoiser("{installed_example}", size=5)
         frame = synthetic_frame("textured", 32, 32, 4, seed=3)

@@ -15,7 +15,7 @@ from denoisebench.dataset.frame import Frame
 from denoisebench.dataset.synthetic import make_synthetic_dataset
 from denoisebench.denoisers.registry import load_denoiser
 from denoisebench.denoisers.synthetic import synthetic_frame
-from denoisebench.metrics.spatial import relmse
+from denoisebench.metrics.ours.spatial import relmse
 from denoisebench.models import lbf
 from denoisebench.models.catalog import build_model
 from denoisebench.models.checkpoint import load_checkpoint, model_from_checkpoint, save_checkpoint

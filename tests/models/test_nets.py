@@ -234,7 +234,7 @@ def test_frame_weights_rise_and_sum_to_one():
 
 
 def test_laplacian_of_gaussian_matches_the_metric_kernel():
-    from denoisebench.metrics.gradient import laplacian_of_gaussian as metric_log
+    from denoisebench.metrics.ours.gradient import laplacian_of_gaussian as metric_log
 
     image = np.random.default_rng(1).random((40, 40, 3)).astype(np.float32)
     ours = laplacian_of_gaussian(torch.from_numpy(image).permute(2, 0, 1)[None])[0].permute(1, 2, 0).numpy()
@@ -244,7 +244,7 @@ def test_laplacian_of_gaussian_matches_the_metric_kernel():
 
 
 def test_relmse_matches_the_metric():
-    from denoisebench.metrics.spatial import relmse as metric_relmse
+    from denoisebench.metrics.ours.spatial import relmse as metric_relmse
 
     rng = np.random.default_rng(2)
     pred, ref = rng.random((8, 8, 3)).astype(np.float32) * 5, rng.random((8, 8, 3)).astype(np.float32)

@@ -12,7 +12,7 @@ import pytest
 
 from denoisebench.cli import main
 from denoisebench.dataset.synthetic import make_synthetic_dataset
-from denoisebench.metrics.noisebase import NOISEBASE_METRICS
+from denoisebench.metrics.field.noisebase import NOISEBASE_METRICS
 
 
 @pytest.fixture(scope="module")

@@ -220,8 +220,9 @@ def pixel_buffers(mi, moments: dict, names: dict, groups: int, total) -> dict:
     Each is a flat Float of the band's pixels, row-major with channels innermost (an H×W×C image
     as NumPy reads it), so the host reads every buffer as it is, without a copy. ``total`` is
     UInt32 per pixel, the samples so far (:func:`merge_lanes`). The variance of the mean is
-    ``max(M2, 0) * variance_scale(total)`` in float32 (NaN stays NaN, as ``np.maximum`` keeps it),
-    and ``inf`` for a pixel without samples (its mean is 0).
+    ``max(M2, 0) * variance_scale(total)`` in float32, with ``np.maximum``'s NaN rule (a NaN M2 stays
+    NaN; Dr.Jit's own maximum would return 0), and ``inf`` for a pixel without samples (its mean is
+    0). (A -0.0 M2 would read +0.0; Welford's sums start at +0.0 and never reach -0.0.)
 
     Notes
     -----
@@ -240,7 +241,7 @@ def pixel_buffers(mi, moments: dict, names: dict, groups: int, total) -> dict:
     out = {}
     for k, c in names.items():
         mean, m2 = merged[k]
-        var = dr.select(empty, dr.inf, dr.select(m2 < 0, 0.0, m2) * scale)
+        var = dr.select(empty, dr.inf, dr.select(m2 <= 0, 0.0, m2) * scale)
         pair = []
         for value in (mean, var):
             target = dr.empty(mi.Float, pixels * c)

@@ -20,7 +20,7 @@ Half references:
     from the full one: ``(N · full − N_even · half) / N_odd``) and the record their spp as
     ``half_spp``. Scores without a closed-form noise floor (FLIP, SSIM, PSNR, ...) measure the
     reference's effect from them (the score against each half and against the full reference gives
-    its 1/spp trend: ``denoisebench.metrics.half_reference``).
+    its 1/spp trend: ``denoisebench.metrics.floors.half_reference``).
 
 Robust floor estimate (why not just the sample variance):
     Fireflies are rare, very bright paths. With them the per-sample variance is unbiased but very

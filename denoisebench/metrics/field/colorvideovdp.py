@@ -25,7 +25,7 @@ The mapping from our data to what the model sees (it needs absolute photometric 
 
    Why black pixels do not count: floored at 1/1000 of the mean and counted, a reference with a
    black background got a key far too low. Measured on depth_of_field_900 (80 px, 8
-   frames, 1024-spp reference, 31 % of its pixels black; ``tests/metrics/test_cvvdp.py``
+   frames, 1024-spp reference, 31 % of its pixels black; ``tests/metrics/field/test_cvvdp.py``
    reproduces the case): k = 24 849 instead of 3220, the median surface at 490 cd/m² instead of
    ~65, and the 1-spp outputs of cross_bilateral / rae scored −39.0 / −18.9 JOD (the demo's
    −19.2 / −21.9) against the noisy input's −0.09; with the lit key −16.2 / −4.1 against +0.35
@@ -50,7 +50,7 @@ The mapping from our data to what the model sees (it needs absolute photometric 
    temporal channels need ≥ 250 ms of video, and cvvdp pads the start by replicating frame 0.
 
 Measured with this mapping on a textured static reference (mean 0.5, key → ≈ 230 cd/m² per
-unit), 8 frames of 32² or 64² at 30 fps (``tests/metrics/test_cvvdp.py`` holds the predictions):
+unit), 8 frames of 32² or 64² at 30 fps (``tests/metrics/field/test_cvvdp.py`` holds the predictions):
 brightness alternating ±15 % frame to frame → 5.2 JOD while the same +15 % held static → 10.0
 (the model's contrast constancy ignores a steady global gain); Gaussian noise σ = 0.03 → 9.9,
 σ = 0.1 → 9.2–9.3 (new noise every frame) and 9.1 (the same noise in every frame). With a plain
@@ -116,7 +116,7 @@ DISPLAY_DESCRIPTION = (
 FPS = 30.0
 TARGET_KEY_CD_M2 = 100.0
 KEY_FLOOR = 1e-3  # pixels at or below this × the reference's mean luminance are left out of the key
-#: ``DISPLAY``'s model in cvvdp 0.5.7's display_models.json (tests/metrics/test_cvvdp.py checks them
+#: ``DISPLAY``'s model in cvvdp 0.5.7's display_models.json (tests/metrics/field/test_cvvdp.py checks them
 #: against the package): resolution, diagonal, viewing distance, peak, contrast, ambient light, and
 #: the pixels per degree at the centre that pycvvdp's display geometry computes from them.
 DISPLAY_MODEL = {

@@ -39,7 +39,7 @@ ColorVideoVDP as ``cvvdp`` (:mod:`.colorvideovdp`), whose JOD values are not the
 Their warm-up (the first frames of a sequence excluded) is a property of their test set; we
 score the frames given.
 
-Checked against Noisebase's own code (``noisebase`` 1.1.1, tests/metrics/test_noisebase.py): their
+Checked against Noisebase's own code (``noisebase`` 1.1.1, tests/metrics/field/test_noisebase.py): their
 ``Sequence.save`` PNGs equal :func:`nb_encode` exactly, and their script's ``psnr``, ``ssim``,
 ``msssim``, ``tpsnr``, ``trmae`` and their PyTorch LDR-FLIP (run on the CPU) give our values to
 2e-7 (dB, or relative for FLIP).
@@ -51,8 +51,8 @@ import math
 
 import numpy as np
 
+from denoisebench.metrics.field.msssim import ms_ssim_tensor
 from denoisebench.metrics.metric import Metric, worst_values
-from denoisebench.metrics.msssim import ms_ssim_tensor
 from denoisebench.metrics.torch_threads import one_torch_thread
 from denoisebench.metrics.validation import MetricNotApplicable, check_pair, check_sequences
 

@@ -39,7 +39,7 @@ Notes
   other PSNRs). Non-finite predictions: their loader turns NaN into 0 (``np.nan_to_num``); ours get
   the worst value (project policy, :mod:`.validation`).
 * Precision: theirs runs in float32 torch, ours in float64; measured against their own code on
-  six frames (``bench/oidn_compare_pins.py``, ``tests/metrics/test_oidn.py``) the two differ by at
+  six frames (``bench/oidn_compare_pins.py``, ``tests/metrics/field/test_oidn.py``) the two differ by at
   most 3.4e-6 dB and 5.1e-6 SSIM (largest on near-white frames, where float32 variances cancel),
   below the 4 decimals their script prints.
 """

@@ -34,7 +34,7 @@ Notes
   values are beyond it, and summing the second-order terms there too made OIDN's floor negative
   (−0.073 against a first-order 0.019); with the limit it is 0.018. Such a reference's relMSE
   floor is approximate and low: with 5 % of the values at 70 % relative noise the floor was 0.195
-  where the true noise share was 0.36 (300 draws, tests/metrics/test_floors.py). Render such
+  where the true noise share was 0.36 (300 draws, tests/metrics/floors/test_floors.py). Render such
   references with a lower ``--ref-error``. The floor estimates the noise's
   share of *this* prediction's score, so it can be slightly negative (a prediction darker than
   the reference, e·R < 0); it is not clamped, which would bias the corrected score. For a perfect denoiser it is mean(v/D) to first order, its expected score; for
@@ -42,7 +42,7 @@ Notes
   noise share 40 % below mean(v/D) when the reference is 5 % noisy: left out, the corrected score
   is biased by that much). What is left is third order in the relative noise √v/R (for a 5 %
   reference, ~0.3 % of the floor). The approximation needs v ≪ D: a reference whose noise is
-  comparable to its signal has no meaningful relMSE floor. tests/metrics/test_floors.py checks
+  comparable to its signal has no meaningful relMSE floor. tests/metrics/floors/test_floors.py checks
   unbiasedness over hundreds of noise draws.
 * **se**: with Gaussian noise, Var_n[(e − n)²] = 4e²v + 2v²; e² is estimated by max(d² − v, 0),
   d = p − r; values are taken as independent (box-filtered noise: docs/architecture.md), so

@@ -33,7 +33,7 @@ import math
 
 import numpy as np
 
-from denoisebench.metrics.floors import Floor
+from denoisebench.metrics.floors.closed_form import Floor
 
 __all__ = ["other_half", "half_reference_floor"]
 

@@ -25,7 +25,7 @@ import math
 import numpy as np
 
 from denoisebench.metrics.metric import Metric, worst_values
-from denoisebench.metrics.spatial import mean_of_map
+from denoisebench.metrics.ours.spatial import mean_of_map
 from denoisebench.metrics.validation import Checked, check_pair
 
 # Lazy imports: scipy (0.3 s) is imported inside the functions that filter.

@@ -27,7 +27,7 @@ deterministic. The default fraction, :data:`DEFAULT_TRIM` = 0.001 (0.1 %), drops
 80×80 frame and 2074 of a 1920×1080 one; ``run-benchmark --trim F`` changes it and records it
 in the run's config.
 
-What one firefly can do (the bound ``tests/metrics/test_robust.py`` checks): raising one
+What one firefly can do (the bound ``tests/metrics/ours/test_robust.py`` checks): raising one
 pixel's error to any value, however large, raises the robust score by at most
 ``e_(N−k+1) / (N − k)``, where ``e_(N−k+1)`` is the smallest error the trim dropped from the
 unchanged image: the firefly either is dropped itself or pushes the kept set's largest value out
@@ -57,10 +57,10 @@ import math
 
 import numpy as np
 
-from denoisebench.metrics import temporal as tm
-from denoisebench.metrics.floors import Floor, as_variance, relmse_floor, squared_error_floor
+from denoisebench.metrics.floors.closed_form import Floor, as_variance, relmse_floor, squared_error_floor
 from denoisebench.metrics.metric import Metric, worst_values
-from denoisebench.metrics.spatial import _pixelwise_map, _rel_sq
+from denoisebench.metrics.ours import temporal as tm
+from denoisebench.metrics.ours.spatial import _pixelwise_map, _rel_sq
 from denoisebench.metrics.validation import check_pair
 
 __all__ = [

@@ -44,7 +44,7 @@ import warnings
 
 import numpy as np
 
-from denoisebench.metrics.floors import EPS_RELMSE, mse_floor, relmse_floor
+from denoisebench.metrics.floors.closed_form import EPS_RELMSE, mse_floor, relmse_floor
 from denoisebench.metrics.metric import Metric, worst_values
 from denoisebench.metrics.tonemap import reinhard, tonemap
 from denoisebench.metrics.validation import Checked, MetricNotApplicable, check_pair

@@ -58,7 +58,7 @@ import math
 
 import numpy as np
 
-from denoisebench.metrics.floors import EPS_RELMSE, Floor, as_variance, squared_error_floor
+from denoisebench.metrics.floors.closed_form import EPS_RELMSE, Floor, as_variance, squared_error_floor
 from denoisebench.metrics.metric import Metric, worst_values
 from denoisebench.metrics.tonemap import tonemap
 from denoisebench.metrics.validation import Checked, as_depth, as_mask, as_motion, check_sequences

@@ -18,7 +18,7 @@ import pytest
 import torch
 
 from denoisebench.metrics import compute_metrics, get_metric
-from denoisebench.metrics.colorvideovdp import (
+from denoisebench.metrics.field.colorvideovdp import (
     DISPLAY_MODEL,
     cvvdp,
     exposure_from_reference,
@@ -121,7 +121,7 @@ def test_hard_cases_are_finite_and_quiet(caplog):
 
 
 def test_torchvision_compiled_ops_still_fail_loudly():
-    from denoisebench.metrics.colorvideovdp import load_pycvvdp
+    from denoisebench.metrics.field.colorvideovdp import load_pycvvdp
 
     load_pycvvdp()
     import torchvision
@@ -172,7 +172,7 @@ def test_black_pixels_do_not_set_the_exposure():
 
 
 def test_viewing_conditions_match_the_package_display_model():
-    from denoisebench.metrics.colorvideovdp import _model
+    from denoisebench.metrics.field.colorvideovdp import _model
 
     model = _model()
     assert model.display_geometry.get_ppd() == pytest.approx(DISPLAY_MODEL["ppd"], abs=0.01)

@@ -6,7 +6,7 @@ import torch
 from pytorch_msssim import ms_ssim, ssim
 
 from denoisebench.metrics import compute_metrics, get_metric
-from denoisebench.metrics.msssim import ms_ssim_tensor, msssim, msssim_scales
+from denoisebench.metrics.field.msssim import ms_ssim_tensor, msssim, msssim_scales
 from denoisebench.metrics.tonemap import tonemap
 
 

@@ -14,7 +14,7 @@ from skimage.metrics import peak_signal_noise_ratio, structural_similarity
 
 from denoisebench.benchmark.runner import split_metrics
 from denoisebench.metrics import compute_metrics, get_metric
-from denoisebench.metrics import noisebase as nb
+from denoisebench.metrics.field import noisebase as nb
 from denoisebench.metrics.registry import default_metric_names, expand_metric_names
 
 

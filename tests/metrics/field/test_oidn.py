@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from denoisebench.metrics import compute_metrics, get_metric
-from denoisebench.metrics import oidn_compare as oc
+from denoisebench.metrics.field import oidn_compare as oc
 from denoisebench.metrics.registry import default_metric_names, expand_metric_names
 from denoisebench.metrics.validation import MetricNotApplicable
 from tests.support.paths import REPO

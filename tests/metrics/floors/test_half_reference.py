@@ -3,7 +3,7 @@
 Truth: a smooth image ``R``; a prediction ``p`` = R with its own error; references ``R + n`` with
 Gaussian noise of variance ``v / N`` made as the mean of two independent halves. Over many reference
 draws the raw score against the reference is biased by its noise; the half-reference correction
-(:mod:`denoisebench.metrics.half_reference`) removes most of that bias (it is first order: 64-75 % of it
+(:mod:`denoisebench.metrics.floors.half_reference`) removes most of that bias (it is first order: 64-75 % of it
 here, where the reference's noise is as large as the prediction's own error). Plus the generator's side
 (the even rounds' mean is kept, the odd rounds' follows from the full mean) and the runner's (a frame
 with halves carries floors for FLIP and SSIM).
@@ -16,7 +16,7 @@ import pytest
 
 from denoisebench import metrics as M
 from denoisebench.generator.render.reference import RoundMerger
-from denoisebench.metrics.half_reference import half_reference_floor, other_half
+from denoisebench.metrics.floors.half_reference import half_reference_floor, other_half
 
 
 def _truth(size=32, seed=0):

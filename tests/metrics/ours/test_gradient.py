@@ -9,7 +9,7 @@ import pytest
 from numpy.lib.stride_tricks import sliding_window_view
 
 from denoisebench import metrics as M
-from denoisebench.metrics import gradient
+from denoisebench.metrics.ours import gradient
 
 
 @pytest.fixture

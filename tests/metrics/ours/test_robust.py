@@ -1,4 +1,4 @@
-"""Robust (trimmed) relMSE and temporal_relmse: one firefly cannot decide them (metrics/robust.py)."""
+"""Robust (trimmed) relMSE and temporal_relmse: one firefly cannot decide them (metrics/ours/robust.py)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from denoisebench.metrics import compute_metrics, get_metric, relmse, relmse_floor, temporal_relmse
-from denoisebench.metrics import robust as rb
-from denoisebench.metrics.temporal import temporal_relmse_floor, temporal_relmse_map
+from denoisebench.metrics.ours import robust as rb
+from denoisebench.metrics.ours.temporal import temporal_relmse_floor, temporal_relmse_map
 
 
 def _textured(rng, shape=(32, 32, 3), low=0.05, high=1.0):

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from denoisebench import metrics as M
-from denoisebench.metrics import spatial
 from denoisebench.metrics import tonemap as tm
+from denoisebench.metrics.ours import spatial
 
 with warnings.catch_warnings():
     warnings.simplefilter("ignore")

@@ -11,7 +11,7 @@ from scipy.ndimage import gaussian_filter, map_coordinates
 from skimage.metrics import peak_signal_noise_ratio
 
 from denoisebench import metrics as M
-from denoisebench.metrics import temporal
+from denoisebench.metrics.ours import temporal
 from denoisebench.metrics.tonemap import tonemap
 
 
