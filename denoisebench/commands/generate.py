@@ -25,8 +25,9 @@ Running the same command again resumes where it stopped and gives the same bytes
 uninterrupted run; a different config in the same OUT is refused unless --force. The executor is
 not part of the config: --executor ray gives the same bytes as the local executor.
 
---usd FILE copies the stage and the files it depends on (which must lie in its folder) into
-OUT/usd_<stem>/ and renders it along its own camera time samples (--frames does not apply to it).
+--usd FILE copies the stage and the files it depends on into OUT/usd_<stem>/ (those outside its folder, as
+production assets lay them out, under files/ with the stage's paths rewritten, so the copy renders
+anywhere) and renders it along its own camera time samples (--frames does not apply to it).
 Every --usd file is checked before anything is written: a missing or malformed stage, or one
 without a camera (give --camera PATH or --auto-camera), without a light (--default-light) or with
 nothing renderable, refuses the command (one line, exit 2). --auto-camera's orbit (over --frames

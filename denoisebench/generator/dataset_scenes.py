@@ -26,17 +26,24 @@ Notes:
     ``scene.usda`` sublayers it, repeating its root layer's upAxis, metersPerUnit, time codes and
     default prim (sublayers do not carry those).
 
-    A user's stage may only depend on files inside its own folder (textures, sublayers,
-    references): they are copied at the same relative paths, so the stage's relative asset paths
-    still resolve. A dependency outside that folder is refused (one-line error): rewriting asset
-    paths in a user's layers is not worth the surprise. A binary root layer (``.usdc``/``.usd``)
-    is written out as text ``scene.usda`` by USD's own ``Sdf.Layer.Export``.
+    A stage whose dependencies (textures, sublayers, references, payloads) all lie inside its own
+    folder is copied as it is: each file at the same relative path, byte for byte, so the stage's
+    relative asset paths still resolve. A stage laid out as production assets are (usd-wg's Mini Car
+    Kit: ``ambulance/asset/ambulanceFullAsset.usda`` references ``../geo/ambulanceGeo.usd`` and
+    ``../../../wheels/...``) has dependencies outside its folder: then every dependency is copied to
+    ``files/<its path below the dependencies' common folder>`` (:data:`FILES_DIR`), which keeps their
+    relative paths to one another, and only the root layer's asset paths (and any absolute path in a
+    dependency layer) are rewritten to the copies (:func:`relocated_layer_text`). Either way the copy
+    is checked to resolve only inside ``OUT/<scene>`` (datasets are untrusted files: a copied stage
+    never reaches out of its folder). A binary root layer (``.usdc``/``.usd``) is written out as text
+    ``scene.usda`` by USD's own ``Sdf.Layer.Export``.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
 import re
 import struct
 from dataclasses import dataclass
@@ -56,6 +63,8 @@ from denoisebench.scenes.effects import METADATA_KEY
 
 USD_SUFFIXES = (".usda", ".usdc", ".usd", ".usdz")
 PACKAGE_NAME = "package.usdz"
+#: Where a stage's dependencies go when some lie outside its folder (``files/<path below their common folder>``).
+FILES_DIR = "files"
 
 
 def stage_options(
@@ -153,10 +162,12 @@ def author_family_scene(family, scene_dir: Path, seed: int, frames: int, width: 
 
 
 def user_stage_dependencies(path: Path) -> list[tuple[Path, str]]:
-    """``(absolute file, path relative to the stage's folder)`` of every file the stage needs.
+    """``(absolute file, path relative to the copy's folder)`` of every file the stage needs.
 
-    UserInputError when a dependency lies outside the stage's folder or is a package (``.usdz``).
-    Unresolvable asset paths are left to the translator (it warns about missing textures).
+    Inside the stage's folder: the same relative path. When any lies outside it: every one under
+    ``files/`` at its path below the common folder of the stage and its dependencies (the module's
+    Notes). A dependency named ``scene.usda`` at the folder's top is a UserInputError (the dataset
+    reserves it). Unresolvable asset paths are left to the translator (it warns about missing textures).
     """
     from pxr import UsdUtils
 
@@ -170,21 +181,81 @@ def user_stage_dependencies(path: Path) -> list[tuple[Path, str]]:
     del quiet
     # usd-core cannot open .mtlx documents: their textures are found by reading them.
     assets = list(assets) + [f for a in assets if str(a).lower().endswith(".mtlx") for f in document_files(a)]
-    out = []
-    for layer_or_asset in [layer.realPath for layer in layers[1:]] + list(assets):
-        absolute = Path(layer_or_asset).resolve()
-        try:
-            relative = absolute.relative_to(root).as_posix()
-        except ValueError:
-            raise UserInputError(
-                f"{path}: depends on {absolute}, outside the stage's folder; move it under {root} to generate from it"
-            ) from None
+    files = sorted({Path(f).resolve() for f in [layer.realPath for layer in layers[1:]] + list(assets)})
+    if all(f.is_relative_to(root) for f in files):
+        out = [(f, f.relative_to(root).as_posix()) for f in files]
+    else:
+        base = Path(os.path.commonpath([root, *files]))
+        out = [(f, f"{FILES_DIR}/{f.relative_to(base).as_posix()}") for f in files]
+    for absolute, relative in out:
         if relative == layout.SCENE_USD:
             raise UserInputError(
                 f"{path}: a dependency is named {layout.SCENE_USD}, which the dataset reserves for the stage"
             )
-        out.append((absolute, relative))
     return sorted(set(out), key=lambda item: item[1])
+
+
+def _rewritten(layer, origin: Path, new_place: str, mapping: dict[Path, str], only_absolute: bool) -> bool:
+    """Rewrite ``layer``'s asset paths (in memory) that resolve, from ``origin`` (its file), to a copied
+    file: to that copy's path relative to ``new_place`` (the layer's own path in the copy); with
+    ``only_absolute`` just the absolute ones. True when any path changed."""
+    from pxr import UsdUtils
+
+    changed = []
+
+    def move(asset: str) -> str:
+        if not asset or "://" in asset or (only_absolute and not os.path.isabs(asset)):
+            return asset
+        target = Path(os.path.normpath(asset if os.path.isabs(asset) else origin.parent / asset))
+        try:
+            target = target.resolve()
+        except OSError:
+            return asset
+        if target not in mapping:
+            return asset
+        relative = os.path.relpath(mapping[target], os.path.dirname(new_place) or ".")
+        moved = "./" + Path(relative).as_posix() if not relative.startswith("..") else Path(relative).as_posix()
+        if moved != asset:
+            changed.append(asset)
+        return moved
+
+    UsdUtils.ModifyAssetPaths(layer, move)
+    return bool(changed)
+
+
+def relocated_layer_text(
+    path: Path, new_place: str, mapping: dict[Path, str], only_absolute: bool = False
+) -> str | None:
+    """The text of ``path``'s layer with its asset paths pointing at the copies ``mapping`` names
+    (absolute file → path in the copy), as it will lie at ``new_place``; None when nothing changes.
+    The user's layer is not modified (an anonymous copy is)."""
+    from pxr import Sdf
+
+    source = Sdf.Layer.FindOrOpen(str(path))
+    if source is None:
+        raise UserInputError(f"{path}: cannot open USD layer")
+    copy = Sdf.Layer.CreateAnonymous(".usda")
+    copy.TransferContent(source)
+    return copy.ExportToString() if _rewritten(copy, Path(path), new_place, mapping, only_absolute) else None
+
+
+def check_confined(scene_dir: Path) -> None:
+    """UserInputError unless every file the copied ``scene_dir/scene.usda`` depends on lies inside ``scene_dir``."""
+    from pxr import Sdf, UsdUtils
+
+    stage_path = scene_dir / layout.SCENE_USD
+    for relative in (stage_path,):
+        cached = Sdf.Layer.Find(str(relative))
+        if cached is not None:
+            cached.Reload(force=True)
+    quiet = UsdUtils.CoalescingDiagnosticDelegate()
+    layers, assets, _ = UsdUtils.ComputeAllDependencies(str(stage_path))
+    quiet.TakeCoalescedDiagnostics()
+    del quiet
+    folder = scene_dir.resolve()
+    for f in [layer.realPath for layer in layers] + list(assets):
+        if f and not Path(f).resolve().is_relative_to(folder):
+            raise UserInputError(f"{stage_path}: the copy still depends on {f}, outside its folder {folder}")
 
 
 def _package_wrapper(path: Path) -> str:
@@ -230,14 +301,25 @@ def copy_user_stage(path: str | Path, scene_dir: Path, options: dict | None = No
             raise UserInputError(f"{path}: cannot open USD stage")
         # ExportToString keeps the authored (relative) asset paths; the bytes go through our atomic write.
         text = layer.ExportToString()
+        mapping = {absolute: relative for absolute, relative in dependencies}
+        relocated = any(relative.startswith(FILES_DIR + "/") for relative in mapping.values())
+        # dependencies outside the stage's folder: the root layer points at their copies (else only
+        # an absolute path to a copied file is rewritten; a stage without one keeps its bytes)
+        text = relocated_layer_text(path.resolve(), layout.SCENE_USD, mapping, only_absolute=not relocated) or text
         for absolute, relative in dependencies:
-            atomic_write_bytes(scene_dir / relative, absolute.read_bytes())
+            data = absolute.read_bytes()
+            if absolute.suffix.lower() in (".usda", ".usd", ".usdc"):
+                rewritten = relocated_layer_text(absolute, relative, mapping, only_absolute=True)
+                data = data if rewritten is None else rewritten.encode("utf-8")
+            atomic_write_bytes(scene_dir / relative, data)
         dependencies_out = tuple(relative for _, relative in dependencies)
     atomic_write_bytes(scene_dir / layout.SCENE_USD, text.encode("utf-8"))
     if options and (options.get("camera_path") or options.get("auto_camera") or options.get("default_light")):
         atomic_write_bytes(
             scene_dir / layout.SCENE_USD, _with_additions(scene_dir / layout.SCENE_USD, options).encode("utf-8")
         )
+    if path.suffix.lower() != ".usdz":
+        check_confined(scene_dir)
     return (layout.SCENE_USD,) + dependencies_out
 
 
@@ -275,8 +357,8 @@ def check_user_stage(path: str | Path, options: dict | None = None):
     """Open, check and translate a user's stage before anything is written; return the translation.
 
     A missing or malformed file, a stage without a camera (unless ``options`` give one), without a
-    light (unless ``default_light``), with nothing renderable, or a dependency outside the stage's
-    folder is a UserInputError (one line naming the file).
+    light (unless ``default_light``), or with nothing renderable is a UserInputError (one line
+    naming the file).
     """
     path = Path(path)
     if not path.is_file():
