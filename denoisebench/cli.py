@@ -3,7 +3,8 @@
 Each command lives in ``denoisebench/commands/<name>.py`` with two functions:
 ``add_arguments(parser)`` and ``run(args) -> int``. This file only wires them up and maps errors
 to exit codes (docs/architecture.md): 0 success, 2 bad input with a one-line message and no traceback,
-1 internal failure.
+1 internal failure, 130 interrupted (SIGINT or SIGTERM: :mod:`denoisebench.interrupts`); a command may
+document one more (``benchmark``: 3, some units failed).
 """
 
 from __future__ import annotations
@@ -15,6 +16,8 @@ import textwrap
 
 from denoisebench import __version__
 from denoisebench.errors import UserInputError
+from denoisebench.interrupts import EXIT_INTERRUPTED, exit_interrupted, handling_signals
+from denoisebench.interrupts import requested as interrupted
 
 #: command name -> (module under denoisebench.commands, one-line help). Order is the --help order.
 COMMANDS: dict[str, tuple[str, str]] = {
@@ -71,18 +74,27 @@ def build_parser() -> argparse.ArgumentParser:
 def run_parsed(args: argparse.Namespace) -> int:
     """Run a parsed command with the exit-code contract."""
     try:
-        return int(args._run(args) or 0)
+        with handling_signals():
+            return int(args._run(args) or 0)
     except UserInputError as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
-        return 130
+        return EXIT_INTERRUPTED
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    return run_parsed(args)
+    try:
+        with handling_signals():  # from the first import of a command on: a signal is exit 130
+            args = build_parser().parse_args(argv)
+        code = run_parsed(args)
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        code = EXIT_INTERRUPTED
+    if code == EXIT_INTERRUPTED and interrupted():
+        exit_interrupted()  # a real signal: within 2 s, without the interpreter's slow shutdown
+    return code
 
 
 def _alias_main(command: str, argv: list[str] | None) -> int:

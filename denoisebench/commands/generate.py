@@ -22,7 +22,10 @@ Light transport is complete (unbounded depth, Russian roulette as Mitsuba's path
 records the restriction and who asked for it.
 
 Running the same command again resumes where it stopped and gives the same bytes as an
-uninterrupted run; a different config in the same OUT is refused unless --force. The executor is
+uninterrupted run (also after Ctrl-C or SIGTERM: exit 130 within 2 s, no frame counted as failed);
+a different config in the same OUT is refused unless --force. A non-empty OUT that is not a
+dataset is refused too; with --force the dataset is written beside the files there, none of which
+it touches. The executor is
 not part of the config: --executor ray gives the same bytes as the local executor.
 
 --usd FILE copies the stage and the files it depends on into OUT/usd_<stem>/ (those outside its folder, as
@@ -67,6 +70,7 @@ from denoisebench.generator.dataset_run import (
     DEFAULT_REF_SPP,
     REFERENCE_SPP_FACTOR,
     GenerateRequest,
+    check_out_folder,
     generate_dataset,
     validate_request,
 )
@@ -240,7 +244,12 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--ray-cpus-per-task", type=int, default=1, help="CPUs (and Dr.Jit threads) per Ray task (default 1)"
     )
-    parser.add_argument("--force", action="store_true", help="overwrite a dataset made with another config")
+    parser.add_argument(
+        "--force",
+        action="store_true",
+        help="overwrite a dataset made with another config; or write the dataset into a non-empty folder that is no "
+        "dataset, beside its files (refused where one of the dataset's names is taken)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -349,6 +358,7 @@ def run(args) -> int:
     validate_request(request)  # before a Ray cluster is started for nothing
 
     check_writable_dir(request.out, "--out")  # one line and exit 2, not a traceback after set-up
+    check_out_folder(request)  # someone's folder that is no dataset: refused unless --force
     if request.ref_spp < REFERENCE_SPP_FACTOR * max(request.spp):
         print(
             f"warning: --ref-spp {request.ref_spp} is below {REFERENCE_SPP_FACTOR}x the largest --spp "

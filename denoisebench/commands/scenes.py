@@ -14,6 +14,7 @@ for USD stages only).
 
 from __future__ import annotations
 
+import argparse
 import json
 import sys
 
@@ -112,18 +113,49 @@ def translate_options(args, frames: int = 8) -> dict:
 def add_arguments(parser) -> None:
     actions = parser.add_subparsers(dest="action", metavar="ACTION")
     actions.required = True
-    actions.add_parser("list", help="families with their effects")
-    make = actions.add_parser("make", help="author one scene of a family as USD")
+
+    def action(name: str, help_text: str, description: str, examples: str):
+        return actions.add_parser(
+            name,
+            help=help_text,
+            description=description,
+            epilog="examples:\n" + examples,
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+
+    action(
+        "list",
+        "families with their effects",
+        "List the procedural scene families, each with the effects it exercises (what `make` and "
+        "generate-dataset --families take).",
+        "  denoisebench scenes list\n",
+    )
+    make = action(
+        "make",
+        "author one scene of a family as USD",
+        "Author one scene of a family as a USD stage: DIR/scene.usda (+ DIR/textures/). The same family, "
+        "seed and frames give byte-identical files.",
+        "  denoisebench scenes make cornell --out scenes/cornell_0\n"
+        "  denoisebench scenes make glossy_fireflies --seed 7 --frames 4 --out scenes/fireflies_7\n",
+    )
     make.add_argument("family", help="family name (see `denoisebench scenes list`)")
-    make.add_argument("--seed", type=int, default=0, help="random seed (same seed: byte-identical files)")
+    make.add_argument("--seed", type=int, default=0, help="random seed (default 0; same seed: byte-identical files)")
     make.add_argument("--frames", type=int, default=8, help="frames in the camera animation (default 8)")
     make.add_argument("--out", required=True, help="output folder: gets scene.usda and textures/")
-    preview = actions.add_parser("preview", help="render a quick tone-mapped PNG of a stage")
+    preview = action(
+        "preview",
+        "render a quick tone-mapped PNG of a stage",
+        "Render one frame of a USD stage (or a Mitsuba 3 XML scene) with Mitsuba and write it tone-mapped "
+        "as a PNG: a quick look, not a reference.",
+        "  denoisebench scenes preview scenes/cornell_0/scene.usda --out cornell.png\n"
+        "  denoisebench scenes preview scenes/cornell_0/scene.usda --out small.png --width 64 --height 64 "
+        "--spp 16 --frame 2\n",
+    )
     preview.add_argument("usd", help="a .usda/.usdc/.usd/.usdz file, or a Mitsuba 3 .xml scene")
     preview.add_argument("--out", required=True, help="PNG to write")
     preview.add_argument("--frame", type=int, default=0, help="frame index (default 0)")
-    preview.add_argument("--width", type=int, default=256)
-    preview.add_argument("--height", type=int, default=256)
+    preview.add_argument("--width", type=int, default=256, help="image width in pixels (default 256)")
+    preview.add_argument("--height", type=int, default=256, help="image height in pixels (default 256)")
     preview.add_argument("--spp", type=int, default=64, help="samples per pixel (default 64)")
     preview.add_argument(
         "--max-depth",
@@ -134,7 +166,14 @@ def add_arguments(parser) -> None:
         "default: full transport, or the stage's own denoisebench maxDepth",
     )
     _add_stage_options(preview)
-    check = actions.add_parser("check", help="translate a stage; print effects, render plan and warnings")
+    check = action(
+        "check",
+        "translate a stage; print effects, render plan and warnings",
+        "Translate a USD stage (or a Mitsuba 3 XML scene) as generate-dataset would, without rendering: print "
+        "its effects, render plan and translation warnings. Defaults: the first camera, no added light.",
+        "  denoisebench scenes check scenes/cornell_0/scene.usda\n"
+        "  denoisebench scenes check scenes/cornell_0/scene.usda --auto-camera --default-light\n",
+    )
     check.add_argument("usd", help="a .usda/.usdc/.usd/.usdz file, or a Mitsuba 3 .xml scene")
     _add_stage_options(check)
 

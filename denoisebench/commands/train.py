@@ -49,7 +49,7 @@ EPILOG = """examples:
   denoisebench train --model dpcn --data data/mine --steps 3000 --lr 1e-4 --loss relmse --init-from denoisebench/models/weights/dpcn_small.pt --out d.pt
   denoisebench train --model dpcn --data data/mine --steps 0 --resume denoisebench/models/weights/dpcn_small.pt --out d.pt --evaluate
   denoisebench train --model rae --data data/small --steps 0 --resume rae.pt --out rae.pt --evaluate
-  denoisebench benchmark ... --denoiser kpcn --option checkpoint=kpcn.pt   # use the result
+  denoisebench benchmark --data data/small --denoisers kpcn --option kpcn:checkpoint=kpcn.pt   # use the result
 
 documentation:
   docs/training.md  training the learned denoisers; the shipped weights' model cards

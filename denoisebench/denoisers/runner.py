@@ -45,6 +45,7 @@ from denoisebench.dataset.frame import Frame, Sequence
 from denoisebench.denoisers.isolation import IsolatedDenoiser
 from denoisebench.denoisers.protocol import describe
 from denoisebench.errors import one_line
+from denoisebench.interrupts import raise_if_requested
 from denoisebench.plugins import PluginFailure
 from denoisebench.plugins.proxy import log_failure
 
@@ -210,11 +211,13 @@ def run_frame(denoiser: object, frame: Frame, *, name: str | None = None, keep_o
     try:
         output = denoiser.denoise(safe)
     except PluginFailure as error:  # an isolated call: the reason is already one line
+        raise_if_requested()  # a worker stopped by the interrupt has not failed
         result.seconds = denoiser.last_seconds if isolated else time.perf_counter() - started
         result.error = str(error)
         result.traceback = log_failure("denoiser", label, f"{frame.scene} frame {frame.index}", result.error, error)
         return result
     except Exception as error:  # noqa: BLE001 - contained and recorded
+        raise_if_requested()  # a KeyboardInterrupt that native code handed back as another exception
         result.seconds = time.perf_counter() - started
         result.error = f"raised {one_line(error)}"
         result.traceback = log_failure("denoiser", label, f"{frame.scene} frame {frame.index}", result.error, error)
@@ -240,6 +243,7 @@ def run_sequence(
         try:
             reset()
         except Exception as error:  # noqa: BLE001
+            raise_if_requested()
             reason = str(error) if isinstance(error, PluginFailure) else f"reset() raised {one_line(error)}"
             text = log_failure("denoiser", label, "reset()", reason, error)
             return [DenoiseResult(label, f.scene, f.index, STATUS_FAILED, reason, traceback=text) for f in frames]

@@ -8,7 +8,8 @@ the user's transport restriction ``max_depth``, per-sample data, seed and the us
 (path and sha256). The
 executor is *not* part of it: local and Ray runs give the same bytes, so a run started locally may
 be finished on a cluster. Running again with the same config resumes; another config is refused
-unless ``force`` (:class:`~denoisebench.dataset.writer.DatasetWriter`).
+unless ``force`` (:class:`~denoisebench.dataset.writer.DatasetWriter`). A non-empty OUT that is
+no dataset is refused, and with ``force`` filled beside the files there (:func:`check_out_folder`).
 
 The options applied to user scenes (``--camera``, ``--auto-camera``, ``--default-light``; for
 ``--usd`` stages and ``--mitsuba`` files alike) sit under the config key ``stage_options``.
@@ -37,6 +38,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from denoisebench.dataset import bounds, layout
+from denoisebench.dataset.atomic import is_temporary
 from denoisebench.dataset.errors import DatasetError
 from denoisebench.dataset.manifest import assign_splits, config_hash, load_header, pin_held_out
 from denoisebench.dataset.writer import DatasetWriter
@@ -166,6 +168,44 @@ def validate_request(request: GenerateRequest) -> None:
             auto_camera=request.auto_camera,
             defines=request.define_dict(),
             search_paths=request.search_paths,
+        )
+
+
+def dataset_names(request: GenerateRequest) -> list[str]:
+    """Every name the dataset writes directly under OUT: the manifest, its frame index, the scene folders."""
+    family_names = [
+        name for _, _, name in scenes_mod.family_scene_names(list(request.families), request.scenes, request.seed)
+    ]
+    user_names = scenes_mod.user_scene_names(list(request.usd), set(family_names))
+    return [layout.MANIFEST_NAME, layout.INDEX_NAME, *family_names, *user_names, *xml_scene_names(request)]
+
+
+def check_out_folder(request: GenerateRequest) -> None:
+    """UserInputError where OUT is a non-empty folder that is not a dataset (no ``dataset.json``).
+
+    Such a folder is someone's: without ``force`` it is refused; with ``force`` the dataset goes in
+    beside the files there, and is refused only where one of its own names (:func:`dataset_names`)
+    is taken, since writing it would replace that file or folder. A dataset's own folder (resume,
+    or another config with ``force``) is the writer's to judge; a run's hidden temporaries do not
+    make a folder foreign.
+    """
+    out = Path(request.out)
+    if not out.is_dir() or (out / layout.MANIFEST_NAME).exists():
+        return
+    entries = sorted(p.name for p in out.iterdir() if not is_temporary(p))
+    if not entries:
+        return
+    shown = ", ".join(entries[:3]) + (f" and {len(entries) - 3} more" if len(entries) > 3 else "")
+    if not request.force:
+        raise UserInputError(
+            f"--out {out} holds {len(entries)} entries that are not a denoisebench dataset ({shown}): give an empty "
+            "or new folder, or --force to write the dataset beside them"
+        )
+    taken = [name for name in dataset_names(request) if (out / name).exists() or (out / name).is_symlink()]
+    if taken:
+        raise UserInputError(
+            f"--out {out}: the dataset would replace your {', '.join(taken[:3])}"
+            f"{' and more' if len(taken) > 3 else ''}; give another folder"
         )
 
 
@@ -378,6 +418,7 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
     }
     user_names = scenes_mod.user_scene_names(list(request.usd), family_names)
 
+    check_out_folder(request)
     config = dataset_config(request)
     config = resumable_config(request.out, config, absolute_xml_config(request, config))
     writer = DatasetWriter(request.out, config, render_versions(), force=request.force)

@@ -3,7 +3,8 @@
 Both executors take the same :class:`~denoisebench.generator.frame_jobs.FrameJob` list and yield one
 outcome per job, a :class:`~denoisebench.generator.frame_jobs.RenderedJob` or a :class:`JobFailure`,
 as the jobs finish; the caller writes results with the one dataset writer it owns. A failing job
-never stops the others.
+never stops the others. An interrupt (SIGINT, SIGTERM: :mod:`denoisebench.interrupts`) stops them
+all and is never a job's failure.
 
 * :class:`LocalExecutor` renders the jobs one after another; each render uses every core through
   Dr.Jit's own thread pool, which beats several processes fighting over the same cores.
@@ -28,6 +29,7 @@ from dataclasses import dataclass
 from denoisebench.errors import UserInputError, one_line
 from denoisebench.generator.dataset_scenes import SceneSpec, read_stage_files
 from denoisebench.generator.frame_jobs import FrameJob, RenderedJob, render_job
+from denoisebench.interrupts import raise_if_requested
 from denoisebench.mitsuba_runtime import load_mitsuba
 
 # Lazy imports: Dr.Jit (after mitsuba_runtime has picked Mitsuba's variant) and Ray (an optional
@@ -54,6 +56,7 @@ def _run_guarded(job: FrameJob, stage_files=None, threads: int | None = None) ->
             dr.set_thread_count(int(threads))
         return render_job(job, stage_files)
     except Exception as error:  # one bad job must not take the others down
+        raise_if_requested()  # Dr.Jit hands a KeyboardInterrupt back as RuntimeError: not the job's failure
         return JobFailure(job.scene, job.frame, one_line(error))
 
 
@@ -64,7 +67,9 @@ class LocalExecutor:
 
     def run(self, jobs: Iterable[FrameJob], scenes: Mapping[str, SceneSpec]) -> Iterator[RenderedJob | JobFailure]:
         for job in jobs:
-            yield _run_guarded(job)
+            outcome = _run_guarded(job)
+            raise_if_requested()  # an interrupt Dr.Jit swallowed: the job's result is not kept
+            yield outcome
 
     def close(self) -> None:
         pass

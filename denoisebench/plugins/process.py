@@ -37,6 +37,7 @@ from dataclasses import dataclass
 from multiprocessing import Pipe
 
 from denoisebench.errors import UserInputError
+from denoisebench.interrupts import raise_if_requested
 from denoisebench.plugins import sandbox
 
 #: How often the parent looks at the worker while it waits (seconds).
@@ -291,6 +292,7 @@ class WorkerProcess:
                     return
             except (OSError, ValueError):
                 return  # a closed pipe: the read reports it
+            raise_if_requested()  # an interrupt (not the plugin) is why this call ends
             code = self.proc.poll()
             if code is not None:
                 raise self._ended(code)

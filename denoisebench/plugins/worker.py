@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import signal
 import sys
 import traceback
 from multiprocessing.connection import Connection
@@ -63,6 +64,7 @@ def _service(path: str, conn, args: list[str]):
 
 
 def main(argv: list[str]) -> int:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C reaches the process group: the parent stops us
     conn = Connection(int(argv[0]))
     service = _service(argv[1], conn, argv[2:])
     while True:
