@@ -41,7 +41,7 @@ from denoisebench.analysis.aggregate import rule_of
 from denoisebench.dataset import Dataset
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.metrics.field.colorvideovdp import viewing_conditions
-from denoisebench.reports import comparisons, figures, images
+from denoisebench.reports import comparisons, figures, figures_accuracy, images, screen_parts
 from denoisebench.reports import samplers as report_samplers
 from denoisebench.reports.html import render_html
 from denoisebench.reports.markdown import render_markdown
@@ -279,10 +279,14 @@ def build_report(
         for metric in shown
     ]
     tables = [equal_tables.build_tables(summary, model, data.spp, metric=metric) for metric in lead]
-    palette = figures.colors(data.labels)
+    palette = figures_accuracy.colors(data.labels)
     figure_files = {}
     if any(p.points for p in panels):
-        figure_files["accuracy_time"] = figures.accuracy_time_figure(panels, palette)
+        figure_files["accuracy_time"] = figures_accuracy.accuracy_time_figure(panels, palette)
+    # the first screen, identical denoisers and where each denoiser wins per scene (lead metric)
+    parts = screen_parts.screen_parts(store, data, panels, metric=lead[0] if lead else None)
+    if parts.scenes_figure is not None:
+        figure_files["scenes"] = parts.scenes_figure
     flicker = _flicker(data)
     if flicker.series:
         figure_files["flicker"] = figures.flicker_figure(flicker.series, palette)
@@ -330,6 +334,8 @@ def build_report(
         frames=data.frame_rows,
         sequences=data.sequence_rows,
         deciding_frames=deciding,
+        first_screen=parts.first_screen,
+        identical=parts.identical,
     )
 
 

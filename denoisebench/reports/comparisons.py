@@ -8,17 +8,21 @@ Notes
   the frame each deciding score is worst on: ``results.names.DECIDING_SCORES``) and the noisy input
   read from the dataset where its unit did not keep it.
 * **Where to look.** Crops are the two non-overlapping windows where the shown denoisers' mean relMSE
-  is worst (:func:`denoisebench.results.crops.worst_windows`), so every tile shows the same place.
+  is worst among those that show the reference (:func:`.crop_choice.crop_windows`: at least half of
+  a window's pixels visible after the tone map, where any window is), so every tile shows the same
+  place and none is a black patch of sky.
+* A stored strip whose window shows almost nothing of the reference (cut by an older rule) is
+  marked (``SceneStrip.visible``) and the report says so.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from denoisebench.analysis import summary as analysis
+from denoisebench.analysis.summary import RunData
 from denoisebench.dataset import Dataset
 from denoisebench.metrics import relmse_map
-from denoisebench.reports import images, strips
+from denoisebench.reports import crop_choice, images, strips
 from denoisebench.reports import samplers as report_samplers
 from denoisebench.reports.model import (
     Comparison,
@@ -30,7 +34,7 @@ from denoisebench.reports.model import (
     StripEntry,
     StripWindow,
 )
-from denoisebench.results.crops import window_size, worst_windows
+from denoisebench.results.crops import window_size
 from denoisebench.results.names import NOISY
 from denoisebench.results.store import ResultsStore
 
@@ -46,7 +50,7 @@ MAX_DECIDING_COMPARISONS = 12
 
 def comparisons(
     store: ResultsStore,
-    data: analysis.RunData,
+    data: RunData,
     dataset: Dataset,
     deciding: list[DecidingFrame],
     samplers: SamplerSection | None = None,
@@ -76,7 +80,7 @@ def comparisons(
 
 def comparison(
     store: ResultsStore,
-    data: analysis.RunData,
+    data: RunData,
     dataset: Dataset,
     scene: str,
     spp: int,
@@ -102,11 +106,8 @@ def comparison(
     if NOISY in data.labels and all(label != NOISY for label, _ in shown):
         shown.insert(0, (NOISY, np.nan_to_num(np.asarray(frame.color, np.float32), nan=0.0, posinf=0.0, neginf=0.0)))
     denoised = [img for label, img in shown if label != NOISY]
-    error = np.mean(
-        [relmse_map(img, reference).reshape(reference.shape[:2] + (-1,)).mean(axis=-1) for img in denoised], axis=0
-    )
     size = window_size(*reference.shape[:2])
-    windows = worst_windows(error, size, count=2)
+    windows = crop_choice.crop_windows(denoised, reference, size, count=2)
     scale = images.crop_scale(size)
     full_scale = max(1, 256 // max(reference.shape[:2]))
     entries = [
@@ -134,7 +135,7 @@ def comparison(
     )
 
 
-def scene_strips(store: ResultsStore, data: analysis.RunData, dataset: Dataset, spp: int) -> list[SceneStrip]:
+def scene_strips(store: ResultsStore, data: RunData, dataset: Dataset, spp: int) -> list[SceneStrip]:
     """Per scene: the noisy input's, each denoiser's and the reference's strip of one crop at ``spp``."""
     out = []
     for scene in data.scenes:
@@ -175,6 +176,7 @@ def scene_strips(store: ResultsStore, data: analysis.RunData, dataset: Dataset, 
                 frames=count,
                 window=StripWindow(top=top, left=left, side=side),
                 entries=entries,
+                visible=crop_choice.shows_something(refs),
             )
         )
     return out

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 from denoisebench.plugins.proxy import isolation_text
 from denoisebench.reports import formatting as fmt
-from denoisebench.reports import notes
+from denoisebench.reports import notes, summary_screen, wide_tables
 from denoisebench.reports.images import colour_bar_png, data_uri
 from denoisebench.reports.samplers import undersampled_lines
 
@@ -57,6 +57,8 @@ td.worst{background:#ffe3e0;font-weight:600}
 .note{color:#555;font-size:12.5px}
 .tile.sppmap{border-color:#440154}.bar{display:flex;gap:4px;align-items:center;justify-content:center;margin-top:3px}
 .bar img{width:96px;height:8px}
+details{margin:2px 0 14px}details summary{cursor:pointer;color:#0a58ca;font-size:12.5px}
+table.screen td{white-space:normal}table.screen td:first-child{font-weight:600}
 """
 
 SCRIPT = """
@@ -117,6 +119,39 @@ def _table(header: list[str], rows: list[list[str]], row_classes: list[str] | No
         )
         body.append(f"<tr{cls}>{cells}</tr>")
     return f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>'
+
+
+#: The summary and flicker tables' lead columns (the rest collapse under "all columns").
+SHORT_METRICS = ("relmse_robust", "relmse", "flip", "ssim", "temporal_relmse_robust", "cvvdp", "tpsnr")
+SHORT_EXTRA = ("total s/frame",)
+
+
+def _wide(header, rows, row_classes=None) -> str:
+    """A table that collapses when wide: its lead columns, then the whole table in ``<details>``."""
+    if not wide_tables.is_wide(header):
+        return _table(header, rows, row_classes)
+    short = _table(*wide_tables.lead_view(header, rows, metrics=SHORT_METRICS, extra=SHORT_EXTRA), row_classes)
+    return (
+        short
+        + f"<details><summary>all {len(header)} columns (raw scores, floors, every metric)</summary>"
+        + _table(header, rows, row_classes)
+        + "</details>"
+    )
+
+
+def _summary(report: ReportModel) -> str:
+    """The first screen: one row per denoiser (:mod:`.summary_screen`), then how to read it."""
+    screen = report.first_screen
+    if screen is None:
+        return '<p class="note">No accuracy-against-time panel of the lead metric: no summary.</p>'
+    header, rows = summary_screen.screen_rows(screen)
+    head = "".join(f"<th>{e(h)}</th>" for h in header)
+    body = "".join("<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in rows)
+    lines = "".join(f"<li>{e(line)}</li>" for line in summary_screen.screen_lines(screen))
+    return (
+        f'<div class="scroll"><table class="screen"><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>'
+        f'<ul class="readings">{lines}</ul>'
+    )
 
 
 def _figure(report: ReportModel, name: str, alt: str) -> str:
@@ -190,10 +225,17 @@ def _results(report: ReportModel) -> str:
     parts += [
         f'<p class="error">Pixels without a sample: {e(line)}</p>' for line in undersampled_lines(report.samplers)
     ]
+    if "scenes" in report.figures:
+        parts.append(
+            "<h3>Where each denoiser wins, per scene</h3>"
+            + _figure(report, "scenes", "where each denoiser wins: lead score relative to the noisy input, per scene")
+            + '<p class="note">Each cell: the denoiser\'s lead score on that scene at that spp over the noisy '
+            "input's there (below 1: better than the input); framed and bold: the scene's lowest at that spp.</p>"
+        )
     for spp in report.spp:
         header, rows = fmt.summary_rows(report, spp)
         classes = ["input" if r[0] == "noisy" else "" for r in rows]
-        parts.append(f"<h3>{spp} spp</h3>" + _table(header, rows, classes))
+        parts.append(f"<h3>{spp} spp</h3>" + _wide(header, rows, classes))
     lines = fmt.indistinguishable_lines(report)
     if lines:
         parts.append(
@@ -263,6 +305,12 @@ def _strip_section(report: ReportModel) -> str:
             f"<h3>{e(strip.scene)} \u2014 frames {strip.first_frame}\u2013{strip.first_frame + strip.frames - 1}, "
             f"{strip.spp} spp, crop at ({w.left}, {w.top}), {w.side} px</h3>"
         )
+        if not strip.visible:
+            parts.append(
+                '<p class="note">This window shows almost nothing of the reference (under half of its pixels '
+                "are visible after the tone map): the run chose it by an older rule, where the input flickers "
+                "most; a new run chooses the worst window a reader can see into.</p>"
+            )
         rows = "".join(
             f'<div class="tile {e(entry.kind)}" style="display:flex;gap:8px;align-items:center;text-align:left">'
             f'<img alt="animated crop of {e(entry.label)}" src="{entry.animation}">'
@@ -288,7 +336,7 @@ def _flicker(report: ReportModel) -> str:
     for spp in report.spp:
         header, rows = fmt.flicker_rows(report, spp)
         classes = ["input" if r[0] == "noisy" else "" for r in rows]
-        parts.append(f"<h3>{spp} spp</h3>" + _table(header, rows, classes))
+        parts.append(f"<h3>{spp} spp</h3>" + _wide(header, rows, classes))
     return "".join(parts) + _viewing(report) + _strip_section(report)
 
 
@@ -416,6 +464,7 @@ def render_html(report: ReportModel) -> str:
     )
     versions = ", ".join(f"{k} {v}" for k, v in sorted(run.versions.items()))
     sections = [
+        ("summary", "Summary", _summary(report)),
         ("accuracy", "Accuracy against time", _accuracy(report)),
         ("equal", "Equal time and equal quality", _equal_tables(report)),
         ("results", "Results", _results(report)),

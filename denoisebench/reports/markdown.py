@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 from denoisebench.plugins.proxy import isolation_text
 from denoisebench.reports import formatting as fmt
-from denoisebench.reports import notes
+from denoisebench.reports import notes, summary_screen, wide_tables
 from denoisebench.reports.samplers import undersampled_lines
 
 if TYPE_CHECKING:
@@ -33,6 +33,29 @@ def _table(header: list[str], rows: list[list[str]]) -> list[str]:
     return lines + [""]
 
 
+#: The lead columns of wide tables (as index.html's).
+SHORT_METRICS = ("relmse_robust", "relmse", "flip", "ssim", "temporal_relmse_robust", "cvvdp", "tpsnr")
+SHORT_EXTRA = ("total s/frame",)
+
+
+def _wide(header: list[str], rows: list[list[str]]) -> list[str]:
+    """A wide table as two: its lead columns, then "More columns" (the label and the rest)."""
+    lines = _table(*wide_tables.lead_view(header, rows, metrics=SHORT_METRICS, extra=SHORT_EXTRA))
+    rest = wide_tables.rest_view(header, rows, metrics=SHORT_METRICS, extra=SHORT_EXTRA)
+    if rest is not None:
+        lines += ["More columns (raw scores, floors, every metric):", ""] + _table(*rest)
+    return lines
+
+
+def _summary(report: ReportModel) -> list[str]:
+    """The first screen (:mod:`.summary_screen`)."""
+    screen = report.first_screen
+    if screen is None:
+        return []
+    lines = ["## Summary", ""] + _table(*summary_screen.screen_rows(screen))
+    return lines + [f"- {md(line)}" for line in summary_screen.screen_lines(screen)] + [""]
+
+
 def render_markdown(report: ReportModel) -> str:
     run = report.run
     lines = [
@@ -44,6 +67,7 @@ def render_markdown(report: ReportModel) -> str:
         "",
         md(isolation_text(run.config, run.versions)),
         "",
+        *_summary(report),
         "## Accuracy against time",
         "",
         "![error against seconds per frame](figures/accuracy_time.png)",
@@ -74,9 +98,19 @@ def render_markdown(report: ReportModel) -> str:
     ]
     lines += [f"> **Not held-out:** {md(line)}\n" for line in fmt.not_held_out_lines(report)]
     lines += [f"> **Pixels without a sample:** {md(line)}\n" for line in undersampled_lines(report.samplers)]
+    if "scenes" in report.figures:
+        lines += [
+            "### Where each denoiser wins, per scene",
+            "",
+            "![where each denoiser wins, per scene](figures/scenes.png)",
+            "",
+            "Each cell: the denoiser's lead score on that scene at that spp over the noisy input's there; framed: "
+            "the scene's lowest at that spp.",
+            "",
+        ]
     for spp in report.spp:
         header, rows = fmt.summary_rows(report, spp)
-        lines += [f"### {spp} spp", ""] + _table(header, rows)
+        lines += [f"### {spp} spp", ""] + _wide(header, rows)
     deciding = notes.deciding_frame_lines(report)
     if deciding:
         lines += (
@@ -130,7 +164,7 @@ def render_markdown(report: ReportModel) -> str:
         ]
         for spp in report.spp:
             header, rows = fmt.flicker_rows(report, spp)
-            lines += [f"### {spp} spp", ""] + _table(header, rows)
+            lines += [f"### {spp} spp", ""] + _wide(header, rows)
         if report.strips:
             lines += ["Frame strips of one crop per denoiser are in index.html.", ""]
         if report.cvvdp_viewing:

@@ -27,6 +27,8 @@ if TYPE_CHECKING:  # annotations only: build.py imports these modules where it b
     from denoisebench.analysis.equal_tables import Tables
     from denoisebench.analysis.summary import EffectBreakdown, Indistinguishable, SummaryRow
     from denoisebench.analysis.time_model import TimeModel
+    from denoisebench.reports.identical import IdenticalGroup
+    from denoisebench.reports.summary_screen import FirstScreen
     from denoisebench.results.records import EntryRow, FrameRow, NotApplicableCount, RunRow, SequenceRow
 
 
@@ -222,6 +224,9 @@ class SceneStrip:
     frames: int
     window: StripWindow
     entries: list[StripEntry]
+    visible: bool = True
+    """False: the stored window shows almost nothing of the reference (under half its pixels visible
+    after the tone map: cut by an older rule); the report says so."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -364,3 +369,8 @@ class ReportModel:
     deciding_frames: list[DecidingFrame] = field(default_factory=list)
     """Frames a plain mean would be decided by (over 10× their scene's median of the lead score):
     label, spp, scene, frame, value, median; the trimmed scene value leaves them out."""
+    first_screen: FirstScreen | None = None
+    """The report's first screen (:mod:`.summary_screen`): per denoiser its best spp, equal-time error,
+    equal-quality time and deciding scenes; None without an accuracy panel of the lead metric."""
+    identical: list[IdenticalGroup] = field(default_factory=list)
+    """Groups of denoisers whose every score and kept image agree (:mod:`.identical`)."""

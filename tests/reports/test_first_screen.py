@@ -1,0 +1,129 @@
+"""The report's first screen: best spp, equal-time error, equal-quality time and deciding scenes, read
+off a planted accuracy panel whose every figure is known in closed form; identical denoisers said once.
+
+The planted noisy input is a pure power law (error 0.5/spp, render seconds 3 + 0.5·spp), so log-log
+interpolation between its rungs is exact and each expected figure below is worked out by hand.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import pytest
+
+from denoisebench.analysis.accuracy import AccuracyTime, NoisyFit, Point
+from denoisebench.reports import identical, summary_screen
+
+
+def _at(points) -> AccuracyTime:
+    noisy = [Point(denoiser="noisy", spp=s, seconds=3.0 + 0.5 * s, error=0.5 / s) for s in (1, 4, 16)]
+    fit = NoisyFit(
+        intercept=math.log(0.5),
+        slope=-1.0,
+        seconds_per_spp=0.5,
+        measured_spp=[1, 4, 16],
+        assumed_slope=False,
+        time_offset=3.0,
+    )
+    at = AccuracyTime(
+        metric="relmse_robust", points=noisy + points, fit=fit, reference_seconds=None, reference_spp=None, hidden=[]
+    )
+    at.noisy_curve = {p.spp: p.error for p in noisy}
+    return at
+
+
+def test_best_spp_equal_time_and_equal_quality_match_the_hand_worked_figures():
+    at = _at(
+        [
+            # 1 spp in 4 s: rendering alone reaches 2 spp in 4 s, error 0.25; 0.05/0.25 = 0.2
+            Point(denoiser="a", spp=1, seconds=4.0, error=0.05),
+            # 4 spp in 6 s: rendering alone reaches 6 spp, error 1/12; 0.03·12 = 0.36
+            Point(denoiser="a", spp=4, seconds=6.0, error=0.03),
+            # slower than rendering at every spp and no better: ratio above 1
+            Point(denoiser="b", spp=1, seconds=9.0, error=0.2),
+        ]
+    )
+    scenes = {"a": {1: {"x": 0.9, "y": 0.05, "z": 0.05}}, "noisy": {1: {"x": 1.0, "y": 1.0, "z": 1.0}}}
+    screen = summary_screen.first_screen(at, scenes)
+    rows = {r.denoiser: r for r in screen.rows}
+    a = rows["a"]
+    assert a.best_spp == 1 and a.seconds == 4.0
+    assert a.equal_time_error == pytest.approx(0.25) and a.equal_time_ratio == pytest.approx(0.2)
+    assert a.equal_time_how == "interpolated"
+    # its 0.05 is what rendering alone reaches at 10 spp (between 4 and 16), in 3 + 5 = 8 s: 4/8
+    assert a.equal_quality_seconds == pytest.approx(8.0) and a.equal_quality_ratio == pytest.approx(0.5)
+    assert a.deciding_scenes == ["x"]  # 0.9 of 1.0
+    b = rows["b"]
+    # 9 s: rendering alone reaches 12 spp, error 1/24; 0.2·24 = 4.8
+    assert b.equal_time_ratio == pytest.approx(4.8) and b.deciding_scenes == []
+    assert [r.denoiser for r in screen.rows] == ["a", "b"]  # best first
+    assert screen.noisy_deciding == {}  # evenly spread: no scene decides the input's mean
+    header, body = summary_screen.screen_rows(screen)
+    assert header[0] == "denoiser" and [row[0] for row in body] == ["a", "b"]
+    assert body[0][1] == "1" and body[0][-1] == "x" and body[0][4].startswith("0.2×")
+    assert summary_screen.screen_lines(screen)[0].startswith("Best at equal time: a at 1 spp")
+
+
+def test_an_error_below_every_rung_is_marked_extrapolated_and_a_flat_input_gives_no_answer():
+    # 0.01 lies below the 16-spp rung (0.03125): rendering alone would need 50 spp, extrapolated
+    at = _at([Point(denoiser="c", spp=1, seconds=4.0, error=0.01)])
+    row = summary_screen.first_screen(at, {}).rows[0]
+    assert row.equal_quality_how == "extrapolated" and row.equal_quality_seconds == pytest.approx(3 + 25.0)
+    header, body = summary_screen.screen_rows(summary_screen.first_screen(at, {}))
+    assert "(extrapolated)" in body[0][5]
+    flat = _at([Point(denoiser="c", spp=1, seconds=4.0, error=0.01)])
+    flat.fit = None
+    row = summary_screen.first_screen(flat, {}).rows[0]
+    assert row.best_spp == 1 and row.equal_time_ratio is None and "no noisy-input curve" in row.note
+
+
+def test_deciding_scenes_need_more_than_half_of_the_sum():
+    assert summary_screen.deciding_scenes({"a": 3.0, "b": 1.0, "c": 1.0}) == ["a"]
+    assert summary_screen.deciding_scenes({"a": 1.0, "b": 1.0}) == []  # exactly half does not decide
+    assert summary_screen.deciding_scenes({"a": 5.0}) == []  # one scene decides nothing among others
+    assert summary_screen.deciding_scenes({"a": float("inf"), "b": 1.0, "c": 0.5}) == ["b"]
+
+
+def _frame(label, frame, value, status="ok"):
+    return SimpleNamespace(denoiser=label, scene="s", spp=1, frame=frame, status=status, metrics={"relmse": value})
+
+
+def _entry(label, spec=None):
+    return SimpleNamespace(label=label, spec=spec or label, load_error=None)
+
+
+def test_identical_denoisers_are_grouped_with_the_known_reason_and_only_when_pixels_agree():
+    frames = [_frame(label, i, 0.1 * (i + 1)) for label in ("oidn", "oidn_balanced", "x") for i in range(2)]
+    frames += [_frame("y", 0, 0.1), _frame("y", 1, 0.2000001)]  # one digit off: not identical
+    frames += [_frame("noisy", i, 0.1 * (i + 1)) for i in range(2)]  # the input is never grouped
+    entries = [_entry(n) for n in ("noisy", "oidn", "oidn_balanced", "x", "y")]
+    groups = identical.identical_groups(frames, [], entries, same_pixels=lambda a, b: (2, True))
+    assert [g.labels for g in groups] == [["oidn", "oidn_balanced", "x"]]
+    assert groups[0].reason is None  # the set includes x: no known reason for it
+    two = identical.identical_groups(
+        [f for f in frames if f.denoiser != "x"], [], entries, same_pixels=lambda a, b: (2, True)
+    )
+    assert [g.labels for g in two] == [["oidn", "oidn_balanced"]]
+    sentence = two[0].sentence()
+    assert (
+        "oidn and oidn_balanced are identical" in sentence and "rt_hdr_alb_nrm" in sentence and "2 frame(s)" in sentence
+    )
+    # different pixels under equal scores: not identical
+    assert identical.identical_groups(frames, [], entries, same_pixels=lambda a, b: (1, False)) == []
+    # a failed frame: not identical
+    failed = [f for f in frames if f.denoiser != "x"] + [_frame("oidn_balanced", 2, None, status="failed")]
+    assert identical.identical_groups(failed, [], entries) == []
+
+
+def test_first_screen_gives_identical_denoisers_one_row():
+    at = _at(
+        [
+            Point(denoiser="oidn", spp=1, seconds=4.0, error=0.05),
+            Point(denoiser="oidn_balanced", spp=1, seconds=4.0, error=0.05),
+        ]
+    )
+    group = identical.IdenticalGroup(labels=["oidn", "oidn_balanced"], frames=2, images=1, reason="same weights")
+    screen = summary_screen.first_screen(at, {}, [group])
+    assert [r.denoiser for r in screen.rows] == ["oidn = oidn_balanced"]
+    assert any("same weights" in line for line in summary_screen.screen_lines(screen))
