@@ -165,11 +165,13 @@ def _figure(report: ReportModel, name: str, alt: str) -> str:
 def _accuracy(report: ReportModel) -> str:
     parts = [
         _figure(report, "accuracy_time", "error against seconds per frame"),
-        '<p class="note">Each point is a denoiser at one input spp (the number beside it): mean error over the test '
-        "frames against total seconds per frame (render at that spp + denoise, at the resolution stated under Times), log axes. The grey curve is the "
-        "noisy input at rising spp, the \u201cjust render more samples\u201d line, dashed where extrapolated; the dotted "
-        "line is the reference's render time (its error against itself is zero, which a log axis cannot show). Circled "
-        "points are on the Pareto front.</p>",
+        '<p class="note">Each point is a denoiser at one input spp: mean error over the test frames against total '
+        "seconds per frame (render at that spp + denoise, at the resolution stated under Times), log axes; along a "
+        "denoiser's curve its spp rise left to right, and the curve is named at the right. The grey curve, drawn on "
+        "top, is the noisy input at rising spp (its spp beside each point), the \u201cjust render more samples\u201d "
+        "line; its dashed stub is extrapolated. The axes span the measured points: the reference's render time "
+        "(its error against itself is zero, which a log axis cannot show) is a dotted line, or is written at the "
+        "edge when it lies beyond them. Circled points are on the Pareto front.</p>",
     ]
     for metric, sentences in report.readings.items():
         items = "".join(f"<li>{e(s)}</li>" for s in sentences)

@@ -73,8 +73,10 @@ def render_markdown(report: ReportModel) -> str:
         "![error against seconds per frame](figures/accuracy_time.png)",
         "",
         "Each point is a denoiser at one input spp: its mean error against its total seconds per frame "
-        "(render at that spp + denoise, at the resolution stated under Times). The grey curve is the noisy input at rising spp: what rendering "
-        "more samples buys. Circled points are on the Pareto front.",
+        "(render at that spp + denoise, at the resolution stated under Times); along a denoiser's curve its spp rise "
+        "left to right. The grey curve, on top, is the noisy input at rising spp: what rendering more samples buys "
+        "(dashed stub: extrapolated). The axes span the measured points; the reference's time is written at the "
+        "edge when it lies beyond them. Circled points are on the Pareto front.",
         "",
     ]
     for metric, sentences in report.readings.items():
