@@ -14,6 +14,7 @@ third-party dataset), 1 internal failure.
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from denoisebench.errors import UserInputError
@@ -45,7 +46,13 @@ def _names(text: str) -> tuple[str, ...]:
 def add_arguments(parser) -> None:
     sub = parser.add_subparsers(dest="study", metavar="STUDY")
     sub.required = True
-    p = sub.add_parser("data-value", help="what the generator's scenes are worth on third-party scenes", epilog=EPILOG)
+    p = sub.add_parser(
+        "data-value",
+        help="what the generator's scenes are worth on third-party scenes",
+        description=__doc__.split("\n\n")[1],
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--pool", required=True, help="dataset of generated family scenes to draw training sets from")
     p.add_argument(
         "--third-party", required=True, help="dataset of third-party scenes to score on (e.g. made by --scene-list)"
