@@ -15,12 +15,19 @@ Notes
 * **Time.** ``render_seconds`` of a frame is the generator's measured render time at that spp
   (manifest); ``total_seconds`` = render + denoise (:func:`denoisebench.metrics.cost.total_seconds`).
   Denoise time is measured around ``denoise()`` only. Two runs on a busy machine measure different
-  times: the leaderboard shows the run it comes from.
+  times: a ranking shows the run each number comes from.
 * **The noisy input** is the color buffer after the harness's NaN/Inf sanitising (what denoisers
   see); its denoise time is 0.
-* A denoiser that cannot be loaded (missing optional dependency, broken plugin) is recorded with
-  its error in ``run_denoisers`` and gets no units; the run goes on. An unknown name or option
-  (``--option identity:nosuchopt=1``, an option for a spec that is not run) is bad input.
+* A denoiser the user named that cannot be loaded (broken plugin, missing optional dependency) is
+  bad input, raised before the run is written; one that ``all`` brought in is recorded with its
+  error in ``run_denoisers`` and gets no units, and so is one whose needs the dataset cannot meet
+  (:func:`skip_unrunnable`: rpf without per-sample data), with the flag that would enable it. An
+  unknown name or option (``--option identity:nosuchopt=1``, an option for a spec that is not run)
+  is bad input.
+* **Plugin code.** The config (the run's identity) holds a hash of each plugin's code
+  (``code``: :func:`denoisebench.denoisers.registry.denoiser_code_identity`; built-ins have none, a
+  run of built-ins keeps its id): an edited plugin makes a new run, and :func:`replaced_runs` names
+  the earlier runs of the same command it replaces.
 * **Untrusted plugins** run in worker processes of their own under a time and a memory limit
   (:mod:`denoisebench.denoisers.isolation`; ``BenchmarkConfig.isolation``, ``time_limit``,
   ``memory_limit_mb``); a plugin that exits, crashes, hangs or bloats fails its units with the
@@ -46,8 +53,9 @@ from denoisebench.dataset.bounds import check_scene_record
 from denoisebench.dataset.exr_io import canonical_json
 from denoisebench.dataset.verify import run_files, verify_files
 from denoisebench.denoisers import isolation as isolation_mod
+from denoisebench.denoisers.isolation import IsolatedDenoiser
 from denoisebench.denoisers.protocol import describe
-from denoisebench.denoisers.registry import DenoiserLoadError, available_denoisers
+from denoisebench.denoisers.registry import DenoiserLoadError, available_denoisers, denoiser_code_identity
 from denoisebench.errors import UserInputError
 from denoisebench.metrics.registry import default_metric_names, expand_metric_names, get_metric
 from denoisebench.plugins import DEFAULT_MEMORY_LIMIT_MB, DEFAULT_TIME_LIMIT, Limits
@@ -94,6 +102,7 @@ class BenchmarkConfig:
     verify: bool = True  # check every file's sha256 before the first unit
     trim: float | None = None  # robust scores' dropped fraction (None: metrics.robust.DEFAULT_TRIM, 0.1 %)
     samplers: list[str] = field(default_factory=list)  # live sampler × denoiser pairs (benchmark.sampler_units)
+    code: dict[str, str] = field(default_factory=dict)  # plugin spec -> hash of its code (registry identity)
 
     def as_dict(self) -> dict:
         data = {
@@ -119,6 +128,8 @@ class BenchmarkConfig:
             data["trim"] = float(self.trim)
         if self.samplers:
             data["samplers"] = list(self.samplers)
+        if self.code:  # plugins only: a run of built-ins keeps the id it always had
+            data["code"] = dict(sorted(self.code.items()))
         return data
 
     def limits(self):
@@ -189,10 +200,11 @@ def resolve_denoiser_specs(specs: Iterable[str]) -> list[str]:
 
 
 def load_denoisers(
-    specs: list[str], options: dict[str, dict], *, isolation: str = "plugins", limits=None
+    specs: list[str], options: dict[str, dict], *, isolation: str = "plugins", limits=None, required=()
 ) -> list[LoadedDenoiser]:
-    """Construct each denoiser (isolated by ``isolation``). An unknown name or option is bad input;
-    a load failure is recorded, not raised."""
+    """Construct each denoiser (isolated by ``isolation``). An unknown name or option is bad input,
+    and so is a load failure of a spec in ``required`` (those the user named: exit 2 with the
+    message ``check-plugin`` gives); any other load failure (``all``'s) is recorded, not raised."""
     unknown = [spec for spec in options if spec not in specs]
     if unknown:
         raise UserInputError(
@@ -206,6 +218,9 @@ def load_denoisers(
             info = describe(instance, fallback_name=spec)
             label, needs, temporal, error, trained = info.name, info.needs, info.temporal, None, info.trained_scenes
         except DenoiserLoadError as exc:
+            if spec in required:
+                close_isolated(d.instance for d in loaded)
+                raise
             instance, label, needs, temporal, error, trained = None, spec, frozenset(), False, str(exc), frozenset()
         base, n = label, 2
         while label in taken:  # two specs with one name (or a plugin called "noisy") stay apart
@@ -223,6 +238,41 @@ def load_denoisers(
             )
         )
     return loaded
+
+
+def close_isolated(instances: Iterable[object]) -> None:
+    """Stop the worker processes of the isolated ones among ``instances``."""
+    for instance in instances:
+        if isinstance(instance, IsolatedDenoiser):
+            instance.close()
+
+
+#: What a dataset may lack that a denoiser needs -> the generate-dataset flag that provides it.
+ENABLED_BY = {"samples": "per-sample data (generate-dataset --samples)"}
+
+
+def unmet_needs(dataset: Dataset, scenes: list[str], spp: list[int]) -> set[str]:
+    """The needs of :data:`ENABLED_BY` that the run's frames cannot meet: per-sample data where a
+    scene's first frame at the lowest spp has no samples file."""
+    first = min(spp)
+    lacking = set()
+    for scene in scenes:
+        record = dataset.record(scene, first, 0) or {}
+        if not record.get("samples"):
+            lacking.add("samples")
+    return lacking
+
+
+def skip_unrunnable(denoisers: list[LoadedDenoiser], named: set[str], lacking: set[str]) -> None:
+    """Mark the denoisers ``all`` brought in (not in ``named``) whose needs the dataset lacks as not
+    run, with the flag that would enable them; they then have no units (none counts as failed).
+    A denoiser the user named keeps its units: their failures say what is missing."""
+    for d in denoisers:
+        missing = sorted(need for need in d.needs & lacking if need in ENABLED_BY)
+        if d.loaded and d.spec not in named and missing:
+            close_isolated([d.instance])
+            d.load_error = "cannot run on this dataset: needs " + ", ".join(ENABLED_BY[m] for m in missing)
+            d.instance = None
 
 
 def check_dataset(dataset: Dataset, scenes: list[str], spp: list[int]) -> None:
@@ -280,6 +330,7 @@ class RunPlan:
     resumed: bool
     trim: float | None = None  # the config's (None: the robust scores' default)
     samplers: list = field(default_factory=list)  # sampler_units.SamplerPair: measured live, after the denoisers
+    replaced: list = field(default_factory=list)  # ReplacedRun: earlier runs of this command with other plugin code
 
     @property
     def labels(self) -> list[str]:
@@ -303,6 +354,31 @@ class RunPlan:
         return {label: scenes for label, scenes in seen.items() if scenes}
 
 
+@dataclass(frozen=True, kw_only=True)
+class ReplacedRun:
+    """An earlier run of the same command whose plugins' code differs (``specs``): not resumed."""
+
+    run_id: str
+    specs: tuple[str, ...]
+    units: int
+
+
+def replaced_runs(store: ResultsStore, run_id: str, *, data_hash: str, config: dict) -> list[ReplacedRun]:
+    """The runs on ``data_hash`` whose config is ``config`` but for the code of some plugin."""
+    mine = {k: v for k, v in config.items() if k != "code"}
+    code = config.get("code", {})
+    found = []
+    for run in store.runs(data_hash):
+        theirs = run.config if isinstance(run.config, dict) else {}
+        if run.run_id == run_id or {k: v for k, v in theirs.items() if k != "code"} != mine:
+            continue
+        old = theirs.get("code", {})
+        changed = tuple(spec for spec in sorted(set(code) | set(old)) if code.get(spec) != old.get(spec))
+        if changed:
+            found.append(ReplacedRun(run_id=run.run_id, specs=changed, units=len(store.units(run.run_id))))
+    return found
+
+
 def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, *, progress: bool = False) -> RunPlan:
     """Check the inputs, load the denoisers, create (or find) the run in the store."""
     # "all": every scene, for a dataset made only to be benchmarked (the demo's); a learned model's
@@ -321,14 +397,19 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
     # cheap checks first (names, options, metrics: a typo is refused before any file is hashed),
     # then the files: one stat per file, then one sha256 per file (minutes at 10 000 frames)
     spatial, temporal = split_metrics(config.metrics)
+    named = {s.strip() for s in config.denoisers if s.strip() not in ("all", "none")}
     specs = resolve_denoiser_specs(config.denoisers)
     config.denoisers = specs
-    denoisers = load_denoisers(specs, config.options, isolation=config.isolation, limits=config.limits())
+    config.code = {spec: code for spec in specs if (code := denoiser_code_identity(spec))}
+    denoisers = load_denoisers(
+        specs, config.options, isolation=config.isolation, limits=config.limits(), required=named
+    )
     pairs = []
     if config.samplers:
         taken = {d.label for d in denoisers} | {NOISY}
         pairs = plan_pairs(config.samplers, denoisers, taken, isolation=config.isolation, limits=config.limits())
     check_dataset(dataset, scenes, spp)
+    skip_unrunnable(denoisers, named, unmet_needs(dataset, scenes, spp))
     if config.verify:
         # samples files included (cheap): a samples file that is listed must be genuine too
         verify_files(dataset, run_files(dataset, scenes, spp, samples=True), progress=progress)
@@ -353,6 +434,7 @@ def prepare_run(dataset: Dataset, config: BenchmarkConfig, store: ResultsStore, 
         temporal=temporal,
         resumed=not created,
         trim=config.trim,
+        replaced=replaced_runs(store, run_id, data_hash=data_hash, config=config.as_dict()) if created else [],
     )
     seen = plan.trained_on()
     for d in denoisers:

@@ -12,6 +12,19 @@ manifest (--no-verify skips it, and the run records that), every manifest path c
 dataset folder, --out and --db writable, every --option naming a denoiser that is run and a
 keyword its constructor takes. Plugins (every denoiser that is not a built-in) run in worker
 processes of their own under --time-limit and --memory-limit (see docs/sandbox.md).
+
+A denoiser or sampler named on the command line that cannot be loaded (import error, missing
+attribute, wrong protocol) is bad input: exit 2 with the line check-plugin gives, before anything
+is written. --denoisers all runs every denoiser that can run on this dataset; the others are named
+in one line each with what would enable them (rpf, rpf_fast and lightfield need generate-dataset
+--samples), and are not counted as failed. A run resumes only what it would compute the same way:
+a plugin's identity includes a hash of its code (its file, or its package's files and its
+distribution's version), so an edited plugin is measured again in a new run, and the output names
+the run it replaces.
+
+Exit codes: 0 every unit measured; 3 the run completed but some units failed (warnings name them,
+the report lists them); 2 bad input (one line, nothing written); 1 internal failure; 130
+interrupted (Ctrl-C or SIGTERM; the same command resumes).
 """
 
 from __future__ import annotations
@@ -39,6 +52,9 @@ from denoisebench.reports.build import write_report
 from denoisebench.results.store import ResultsStore, utc_now
 from denoisebench.sampling.registry import check_sampler_spec
 
+#: Exit status of a run that completed with some failed units (distinct from bad input, 2, and internal failure, 1).
+EXIT_UNITS_FAILED = 3
+
 EPILOG = """examples:
   run-benchmark --data out/dataset --out report/
   run-benchmark --data out/dataset --denoisers identity,oidn --spp 1,4 --db results.sqlite
@@ -48,6 +64,9 @@ EPILOG = """examples:
   run-benchmark --data out/dataset --trim 0.002   # robust scores drop the worst 0.2 % of pixels
   run-benchmark --data out/dataset --time-at 3840x2160 --time-size 512x512   # times for 4K frames
   run-benchmark --data out/dataset --samplers uniform,ci_stop,dual_buffer,hachisuka2008 --denoisers none,oidn
+
+exit codes: 0 done, 3 some units failed (the run and its report are complete), 2 bad input, 1 internal
+failure, 130 interrupted (rerun the same command to resume)
 
 documentation:
   docs/metrics.md    --metrics, --trim, --include-unresolved: robust and corrected scores, aggregation, flicker
@@ -290,6 +309,11 @@ def _finish(args, dataset, store, plan, started, time_at, time_size) -> int:
         for d in plan.denoisers:
             if d.load_error:
                 print(f"  {d.spec}: not run: {d.load_error}")
+        for old in plan.replaced:
+            print(
+                f"  replaces run {old.run_id} ({old.units} units): the code of {', '.join(old.specs)} changed since, "
+                "so this run measures it again"
+            )
         few = few_scenes_line(args.split, len(plan.scenes), len(dataset.scenes))
         if few:
             print(few)
@@ -304,8 +328,9 @@ def _finish(args, dataset, store, plan, started, time_at, time_size) -> int:
             budget=args.time_budget,
             render_probe=not args.no_render_probe,
         )
+        code = EXIT_UNITS_FAILED if failed else 0
         if args.no_report:
-            return 0
+            return code
 
         index = write_report(
             store,
@@ -318,4 +343,4 @@ def _finish(args, dataset, store, plan, started, time_at, time_size) -> int:
         )
     print(f"report: {index.resolve()}")
     sys.stdout.flush()
-    return 0
+    return code

@@ -108,3 +108,9 @@ def check_denoiser_spec(spec: str) -> None:
     """:class:`UnknownDenoiserError` where ``spec`` names no denoiser, found without importing anything (a bare name
     that is no built-in or entry point, a ``file.py`` that does not exist)."""
     loading.check_spec(KIND, spec, _entry_points)
+
+
+def denoiser_code_identity(spec: str) -> str | None:
+    """A short hash of the code a plugin ``spec`` runs (None for a built-in): see
+    :func:`denoisebench.plugins.loading.code_identity`."""
+    return loading.code_identity(KIND, spec, _entry_points)

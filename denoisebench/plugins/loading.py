@@ -38,7 +38,9 @@ Notes
 from __future__ import annotations
 
 import functools
+import hashlib
 import importlib
+import importlib.machinery
 import importlib.metadata
 import importlib.util
 import inspect
@@ -306,3 +308,69 @@ def load(
         raise
     except Exception as error:  # noqa: BLE001
         raise kind.load_error(f"cannot construct {where}: {one_line(error)}") from error
+
+
+# --------------------------------------------------------------------------------------------------
+# code identity
+
+
+def _module_files(module_name: str) -> list[Path]:
+    """The source files of ``module_name``'s top-level package (or of the module alone), found on
+    ``sys.path`` without importing anything: a plugin's code is run only where it is isolated."""
+    top, *rest = module_name.split(".")
+    spec = importlib.machinery.PathFinder.find_spec(top)
+    if spec is None or spec.origin in (None, "built-in", "frozen"):
+        return []
+    if spec.submodule_search_locations:  # a package: every .py file under it
+        files: list[Path] = []
+        for location in spec.submodule_search_locations:
+            files.extend(sorted(p for p in Path(location).rglob("*.py") if "__pycache__" not in p.parts))
+        return files
+    return [Path(spec.origin)] if not rest else []
+
+
+def _files_digest(files: list[Path], base: str = "") -> str:
+    digest = hashlib.sha256(base.encode())
+    for path in files:
+        digest.update(f"\0{path.name}\0".encode())
+        try:
+            digest.update(path.read_bytes())
+        except OSError:
+            digest.update(b"<unreadable>")
+    return digest.hexdigest()[:16]
+
+
+def code_identity(
+    kind: PluginKind, spec: str, points: Callable[[], Mapping[str, importlib.metadata.EntryPoint]]
+) -> str | None:
+    """A short hash of the code ``spec`` runs, or None for a built-in (its code is the package's,
+    recorded with a run as the denoisebench version) and for what cannot be found.
+
+    ``file.py:ATTR``: the file's bytes. ``MODULE:ATTR``: the files of its top-level package (or the
+    module's file). An entry point: its distribution's name and version and the files of the package
+    its target lies in (an editable install included). Found without importing: hashing a plugin
+    must not run it outside its sandbox. A change in any of these files is a new identity, so a
+    benchmark run that includes it measures the plugin again instead of resuming.
+    """
+    spec = spec.strip()
+    if spec in kind.builtins:
+        return None
+    base = ""
+    if ":" in spec:
+        module_name, _ = _target(spec)
+    else:
+        entry_point = points().get(spec)
+        if entry_point is None:
+            return None
+        module_name = entry_point.value.partition(":")[0].strip()
+        dist = getattr(entry_point, "dist", None)
+        base = f"{dist.name} {dist.version}" if dist is not None else entry_point.value
+    if module_name == "denoisebench" or module_name.startswith("denoisebench."):
+        return None  # the package's own code, as a built-in's
+    if module_name.endswith(".py"):
+        files = [Path(module_name)] if Path(module_name).is_file() else []
+    else:
+        files = _module_files(module_name)
+    if not files and not base:
+        return None
+    return _files_digest(files, base)
