@@ -32,15 +32,24 @@ Notes
   mean over pairs t, valid pixels and channels of ``(Δp − Δr)² / (m_t² + 0.01)`` with the
   **warped** frame differences Δp = p_t − W(p_{t−1}), Δr = r_t − W(r_{t−1}) (W: frame t's motion,
   disocclusions masked exactly as ``temporal_l1_warped``) and m_t the reference's **local
-  magnitude**: the 3×3 box mean of |r_t| per channel (edges replicated). The local mean keeps
+  magnitude** over the two frames compared: the larger of the 3×3 box mean of |r_t| and the warped
+  3×3 box mean of |r_{t−1}|, W(box|r_{t−1}|), per channel (edges replicated). The local mean keeps
   one bright reference pixel, and the reference's own noise, out of the denominator (its noise
-  variance there is 1/9 of a pixel's). ``motion`` is optional: without it W is the identity,
+  variance there is 1/9 of a pixel's). Both frames enter it because both enter the numerator:
+  with frame t's magnitude alone, a value the warp carries from a bright pixel of frame t−1 onto a
+  pixel whose neighbourhood is black in frame t was divided by 0.01. Measured on the demo's
+  glossy_fireflies (small emitters of radiance ~1e4 in front of a black background; the
+  background's motion, −2.9 px per frame, is not the emitters', −0.6 px, so the warp reads the
+  emitter into background pixels, a disocclusion the mask does not see): 10–17 pixels per frame
+  pair scored 1e8–1e10, every denoiser's flicker was ~1.5e5 and the noisy input's rose with spp;
+  with both frames' magnitude the input's robust flicker is 0.39–0.80 at 1 spp, 0.11–0.18 at 4,
+  0.036–0.050 at 16 (docs/measurements.md). ``motion`` is optional: without it W is the identity,
   which is right for a static camera only. Pairs whose frames are both bright and flat score
   like relMSE of the frame difference; the 0.01 is relMSE's.
 * ``temporal_relmse_floor``: its reference-noise floor (see ``floors``). For a perfect
   prediction Δp − Δr = −(n_t − W(n_{t−1})), of variance V = v_t + W₂(v_{t−1}) where W₂ warps
   with the **squared** bilinear weights (independent noise per pixel and frame). Floor =
-  mean(V / (m_t² + 0.01)). Frame t's noise enters pairs t and t+1, so the counted values are
+  mean(V / (m_t² + 0.01)), m_t as above. Frame t's noise enters pairs t and t+1, so the counted values are
   not independent: the se multiplies the summed variance by 3, a bound for a chain whose
   neighbours alone correlate (Var ΣX ≤ ΣVar + 2Σ|Cov| ≤ 3ΣVar).
 * ``tpsnr``: PSNR (peak 1) of the tone-mapped frame differences,
@@ -325,7 +334,12 @@ def _relative_pairs(c: Checked, mask, mot, dep, tol, ref_var=None):
             if dep is not None:
                 valid[t - 1] &= _depth_ok(taps, dep[t].astype(np.float64), dep[t - 1].astype(np.float64), tol)
         diff[t - 1] = e[t] - prev
-        denom[t - 1] = np.square(_local_magnitude(ref[t])) + EPS_TEMPORAL_RELMSE
+        before = _local_magnitude(ref[t - 1])
+        if mot is not None:
+            before = _bilinear(before, taps)
+        # both frames' local magnitude (module Notes): a value carried from a bright pixel of frame t−1
+        # is measured against that brightness, not against frame t's black neighbourhood
+        denom[t - 1] = np.square(np.maximum(_local_magnitude(ref[t]), before)) + EPS_TEMPORAL_RELMSE
         if var is not None:
             var[t - 1] = ref_var[t] + prev_var
         if mask is not None:
@@ -434,7 +448,7 @@ METRICS: tuple[Metric, ...] = (
         kind="temporal",
         worst=math.inf,
         perfect=0.0,
-        description="mean((dp - dr)^2 / (m^2 + 0.01)), warped frame differences, m = 3x3 mean |r_t|",
+        description="mean((dp - dr)^2 / (m^2 + 0.01)), warped frame differences, m = larger 3x3 mean |r| of the two frames",
         accepts=("motion", "depth", "masks"),
         floor_fn=temporal_relmse_floor,
     ),
