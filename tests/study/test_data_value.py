@@ -80,7 +80,7 @@ def test_study_end_to_end_on_a_tiny_budget(tmp_path, capsys):
     listing = tmp_path / "tiny.toml"
     listing.write_text(SCENE_LIST.format(licence="CC BY 4.0"))
     tp = tmp_path / "tp"
-    common = ["--frames", "2", "--width", "16", "--height", "16", "--spp", "1,4", "--ref-spp", "256", "--quiet"]
+    common = ["--frames", "1", "--width", "16", "--height", "16", "--spp", "1,4", "--ref-spp", "128", "--quiet"]
     # a missing scene: one line naming the repository to clone
     assert main(["generate", "--out", str(tp), "--scene-list", str(listing), "--root", str(tmp_path), *common]) == 2
     assert "https://example.invalid/tiny-scenes" in capsys.readouterr().err.strip().splitlines()[-1]
