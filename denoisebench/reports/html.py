@@ -175,7 +175,10 @@ def _accuracy(report: ReportModel) -> str:
     ]
     for metric, sentences in report.readings.items():
         items = "".join(f"<li>{e(s)}</li>" for s in sentences)
-        parts.append(f"<h3>{e(metric)}</h3><ul class=\"readings\">{items}</ul>")
+        parts.append(
+            f"<details><summary>{e(metric)}: {len(sentences)} reading(s) in words</summary>"
+            f'<ul class="readings">{items}</ul></details>'
+        )
     hidden = [h for p in report.accuracy for h in p.hidden]
     if hidden:
         parts.append("<p class=\"note\">Not drawn: " + e("; ".join(hidden)) + "</p>")
@@ -187,6 +190,21 @@ def _accuracy(report: ReportModel) -> str:
             + _table(*fmt.time_model_rows(report))
         )
     return "".join(parts)
+
+
+def _equal_quality(table) -> str:
+    """The equal-quality table: the measured targets' columns, the extrapolated ones one click away."""
+    header, rows = fmt.equal_quality_rows(table)
+    measured = [i for i, h in enumerate(header) if "(extrapolated)" not in h]
+    if len(measured) == len(header):
+        return _table(header, rows)
+    extra = [0] + [i for i in range(1, len(header)) if i not in measured]
+    return (
+        _table(*wide_tables.pick(header, rows, measured))
+        + f"<details><summary>{len(extra) - 1} target(s) beyond the measured rungs (extrapolated)</summary>"
+        + _table(*wide_tables.pick(header, rows, extra))
+        + "</details>"
+    )
 
 
 def _equal_tables(report: ReportModel) -> str:
@@ -205,10 +223,13 @@ def _equal_tables(report: ReportModel) -> str:
             parts.append(f'<p class="note">{e(fmt.empty_table_text(table))}</p>')
             continue
         parts.append(f"<h3>Equal time: {e(table.metric)}</h3>" + _table(*fmt.equal_time_rows(table)))
-        parts.append(f"<h3>Equal quality: {e(table.metric)}</h3>" + _table(*fmt.equal_quality_rows(table)))
+        parts.append(f"<h3>Equal quality: {e(table.metric)}</h3>" + _equal_quality(table))
     if report.verdicts:
         items = "".join(f"<li>{e(v)}</li>" for v in report.verdicts)
-        parts.append(f'<h3>Verdicts (measured rungs only)</h3><ul class="readings">{items}</ul>')
+        parts.append(
+            f"<h3>Verdicts (measured rungs only)</h3><details><summary>{len(report.verdicts)} verdict sentence(s) "
+            f'(the Summary holds each denoiser\'s)</summary><ul class="readings">{items}</ul></details>'
+        )
     return "".join(parts)
 
 

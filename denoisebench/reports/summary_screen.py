@@ -11,13 +11,19 @@ Rules
   ``t`` seconds reaches ``spp_t`` (the render line, inverted) and the error of the noisy curve there
   (log-log between measured rungs: :func:`denoisebench.analysis.equal_tables.error_at`). The
   denoiser's **equal-time error** is its error over that one (below 1: it wins).
-* **Best spp.** The spp of the lowest equal-time error among those read between measured rungs;
-  only when none is, the lowest of the extrapolated ones (marked).
 * **Equal quality.** At its best spp the denoiser's error ``e``; rendering alone needs ``spp_e``
   (:func:`denoisebench.analysis.equal_tables.spp_for`) and its seconds; the **equal-quality time**
-  is the denoiser's seconds over those (below 1: it saves time). An ``e`` below the top rung's error
-  needs an extrapolated ``spp_e`` (marked, at most the analysis' extrapolation limit; beyond it:
-  "not reached" on the measured curve).
+  is the denoiser's seconds over those (below 1: it saves time).
+* **Never extrapolated: bounds.** The noisy curve falls with spp, so where ``spp_t`` lies beyond
+  the top rung rendering alone reaches *at most* the top rung's error there, and the ratio is a
+  lower bound (``≥``, how ``at_least``); below the lowest rung an upper bound (``≤``, ``at_most``).
+  Likewise for equal quality: an error below the top rung's needs more than the top rung's seconds
+  (the time ratio is ``≤`` that against it), one above the lowest rung's needs no more than the
+  lowest rung's (``≥``). A line through the rungs extended by decades says more about its last
+  segment than about rendering (on a partial demo run, the 8→16-spp segment put 80-spp rendering
+  at 5e-6).
+* **Best spp.** The spp of the lowest equal-time error among those read between measured rungs;
+  only when none is, the lowest bound.
 * **Deciding scenes.** A scene whose value carries more than half of the arithmetic mean of the
   denoiser's per-scene values at its best spp (:func:`deciding_scenes`): that one scene alone would
   move the mean. The per-scene values come from the caller (the same values the aggregate reads).
@@ -35,6 +41,8 @@ from denoisebench.results.names import NOISY
 
 #: A scene deciding a mean carries more than this share of the sum of the per-scene values.
 DECIDING_SHARE = 0.5
+#: How a figure read between measured rungs is marked (anything else is a bound).
+EXACT = ("measured", "interpolated")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -49,9 +57,10 @@ class ScreenRow:
     """Rendering alone's error in the same seconds."""
     equal_time_ratio: float | None
     equal_time_how: str | None
-    """``measured``/``interpolated`` (between rungs) or ``extrapolated``."""
+    """``measured``/``interpolated`` (between rungs), or a bound: ``at_least`` (the ratio is at least
+    this: rendering alone's error is at most the one given) or ``at_most``."""
     equal_quality_seconds: float | None
-    """Rendering alone's seconds to reach the denoiser's error."""
+    """Rendering alone's seconds to reach the denoiser's error (a rung's seconds for a bound)."""
     equal_quality_ratio: float | None
     equal_quality_how: str | None
     deciding_scenes: list[str]
@@ -88,15 +97,42 @@ def _render_spp_at(fit, seconds: float) -> float | None:
     return spp if math.isfinite(spp) and spp > 0 else None
 
 
+def _rungs(at) -> list[int]:
+    return sorted(s for s, e in at.noisy_curve.items() if e is not None and e > 0 and math.isfinite(e))
+
+
 def _equal_time(at, point):
-    """(rendering's error at the point's seconds, how) or (None, None)."""
+    """(rendering alone's error in the point's seconds, how: exact or a bound on the ratio) or (None, None)."""
     spp = _render_spp_at(at.fit, point.seconds)
-    if spp is None:
+    rungs = _rungs(at)
+    if spp is None or not rungs:
         return None, None
+    if spp > rungs[-1] and not math.isclose(spp, rungs[-1]):
+        return at.noisy_curve[rungs[-1]], "at_least"  # rendering reaches at most this: the ratio is at least
+    if spp < rungs[0] and not math.isclose(spp, rungs[0]):
+        return at.noisy_curve[rungs[0]], "at_most"
     found = error_at(at.noisy_curve, spp)
     if found is None or not (found.value > 0 and math.isfinite(found.value)):
         return None, None
     return found.value, found.how
+
+
+def _equal_quality(at, point):
+    """(rendering alone's seconds to the point's error, how: exact or a bound on the ratio) or (None, None)."""
+    rungs = _rungs(at)
+    if at.fit is None or not rungs:
+        return None, None
+    need = spp_for(at.noisy_curve, point.error)
+    if need is None or need.how == "extrapolated":  # below the top rung's error: it needs more than the top
+        spp, how = rungs[-1], "at_most"
+    elif need.how == "at_most":  # met at the lowest rung already: rendering needs no more than it
+        spp, how = rungs[0], "at_least"
+    else:
+        spp, how = need.value, need.how
+    seconds = at.fit.seconds_at(spp)
+    if not (seconds and seconds > 0 and math.isfinite(seconds)):
+        return None, None
+    return seconds, how
 
 
 def _row(at, label: str, per_scene: dict[int, dict[str, float]], *, group: list[str]) -> ScreenRow:
@@ -134,16 +170,10 @@ def _row(at, label: str, per_scene: dict[int, dict[str, float]], *, group: list[
             deciding_scenes=deciding_scenes(per_scene.get(best.spp, {})),
             note="no noisy-input curve to compare with (its error does not fall with spp, or no render times)",
         )
-    between = [s for s in usable if s[3] != "extrapolated"]
+    between = [s for s in usable if s[3] in EXACT]
     p, render_error, ratio, how = min(between or usable, key=lambda s: s[2])
-    eq_seconds = eq_ratio = eq_how = None
-    need = spp_for(at.noisy_curve, p.error) if at.noisy_curve else None
-    if need is not None and at.fit is not None:
-        eq_seconds = at.fit.seconds_at(need.value)
-        if eq_seconds and eq_seconds > 0 and math.isfinite(eq_seconds):
-            eq_ratio, eq_how = p.seconds / eq_seconds, need.how
-        else:
-            eq_seconds = None
+    eq_seconds, eq_how = _equal_quality(at, p)
+    eq_ratio = p.seconds / eq_seconds if eq_seconds else None
     return ScreenRow(
         denoiser=name,
         best_spp=p.spp,
@@ -156,7 +186,7 @@ def _row(at, label: str, per_scene: dict[int, dict[str, float]], *, group: list[
         equal_quality_ratio=eq_ratio,
         equal_quality_how=eq_how,
         deciding_scenes=deciding_scenes(per_scene.get(p.spp, {})),
-        note=None if eq_ratio is not None else "its error is beyond what the measured noisy curve reaches",
+        note=None if eq_ratio is not None else "no render time for the noisy curve",
     )
 
 
@@ -182,12 +212,16 @@ def first_screen(at, scene_values: dict[str, dict[int, dict[str, float]]], ident
 # text both renderers share
 
 
-def _mark(how: str | None) -> str:
-    return " (extrapolated)" if how == "extrapolated" else ""
+#: How a bound reads: the ratio's sign, and the sign of rendering alone's figure it rests on.
+BOUND_SIGNS = {"at_least": ("≥ ", "≤ "), "at_most": ("≤ ", "≥ ")}
 
 
-def _times(ratio: float) -> str:
-    return f"{ratio:.2g}×"
+def _times(ratio: float, how: str | None = None) -> str:
+    return BOUND_SIGNS.get(how, ("", ""))[0] + f"{ratio:.2g}×"
+
+
+def _theirs(how: str | None) -> str:
+    return BOUND_SIGNS.get(how, ("", ""))[1]
 
 
 def screen_rows(screen: FirstScreen) -> tuple[list[str], list[list[str]]]:
@@ -209,17 +243,18 @@ def screen_rows(screen: FirstScreen) -> tuple[list[str], list[list[str]]]:
             continue
         if r.equal_time_ratio is not None:
             eq_time = (
-                f"{_times(r.equal_time_ratio)} ({num(r.error)} vs {num(r.equal_time_error)}){_mark(r.equal_time_how)}"
+                f"{_times(r.equal_time_ratio, r.equal_time_how)} ({num(r.error)} vs "
+                f"{_theirs(r.equal_time_how)}{num(r.equal_time_error)})"
             )
         else:
             eq_time = "—"
         if r.equal_quality_ratio is not None:
             eq_quality = (
-                f"{_times(r.equal_quality_ratio)} ({num(r.seconds)} s vs {num(r.equal_quality_seconds)} s)"
-                f"{_mark(r.equal_quality_how)}"
+                f"{_times(r.equal_quality_ratio, r.equal_quality_how)} ({num(r.seconds)} s vs "
+                f"{_theirs(r.equal_quality_how)}{num(r.equal_quality_seconds)} s)"
             )
         else:
-            eq_quality = "not reached on the measured curve"
+            eq_quality = "—"
         rows.append(
             [
                 r.denoiser,
@@ -239,9 +274,11 @@ def screen_lines(screen: FirstScreen) -> list[str]:
     lines = [
         f"Lead score: {screen.metric}; times are {screen.time_label}. Ratios below 1× favour the denoiser: "
         "its error over rendering alone's in the same time, its time over rendering alone's to the same error. "
-        "A deciding scene carries more than half of the mean of the denoiser's per-scene scores at that spp."
+        "≤ and ≥: bounds, where rendering alone would have to be read beyond its measured rungs (never "
+        "extrapolated). A deciding scene carries more than half of the mean of the denoiser's per-scene scores at "
+        "that spp."
     ]
-    best = next((r for r in screen.rows if r.equal_time_ratio is not None and r.equal_time_how != "extrapolated"), None)
+    best = next((r for r in screen.rows if r.equal_time_ratio is not None and r.equal_time_how in EXACT), None)
     if best is not None:
         lines.insert(
             0,

@@ -65,13 +65,25 @@ def test_best_spp_equal_time_and_equal_quality_match_the_hand_worked_figures():
     assert summary_screen.screen_lines(screen)[0].startswith("Best at equal time: a at 1 spp")
 
 
-def test_an_error_below_every_rung_is_marked_extrapolated_and_a_flat_input_gives_no_answer():
-    # 0.01 lies below the 16-spp rung (0.03125): rendering alone would need 50 spp, extrapolated
+def test_beyond_the_measured_rungs_the_screen_gives_bounds_never_an_extrapolation():
+    # 0.01 lies below the 16-spp rung (0.03125): rendering alone needs more than 16 spp, i.e. more than
+    # its 11 s, so 4 s is at most 4/11 of it; and at 4 s rendering alone reaches 2 spp (exact)
     at = _at([Point(denoiser="c", spp=1, seconds=4.0, error=0.01)])
     row = summary_screen.first_screen(at, {}).rows[0]
-    assert row.equal_quality_how == "extrapolated" and row.equal_quality_seconds == pytest.approx(3 + 25.0)
-    header, body = summary_screen.screen_rows(summary_screen.first_screen(at, {}))
-    assert "(extrapolated)" in body[0][5]
+    assert row.equal_quality_how == "at_most" and row.equal_quality_seconds == pytest.approx(11.0)
+    assert row.equal_quality_ratio == pytest.approx(4 / 11)
+    # slower than the top rung (30 s > 11 s): rendering alone reaches at most the 16-spp error there,
+    # so the error ratio is at least 0.02 / 0.03125
+    slow = _at([Point(denoiser="d", spp=16, seconds=30.0, error=0.02)])
+    row = summary_screen.first_screen(slow, {}).rows[0]
+    assert row.equal_time_how == "at_least" and row.equal_time_ratio == pytest.approx(0.64)
+    assert row.equal_time_error == pytest.approx(0.03125)
+    header, body = summary_screen.screen_rows(summary_screen.first_screen(slow, {}))
+    assert body[0][4].startswith("≥ 0.64×") and "vs ≤ 0.0312" in body[0][4]
+    # an error above the lowest rung's: rendering needs at most 1 spp (3.5 s); 30 s is at least 8.6× it
+    worse = _at([Point(denoiser="e", spp=16, seconds=30.0, error=0.9)])
+    row = summary_screen.first_screen(worse, {}).rows[0]
+    assert row.equal_quality_how == "at_least" and row.equal_quality_ratio == pytest.approx(30 / 3.5)
     flat = _at([Point(denoiser="c", spp=1, seconds=4.0, error=0.01)])
     flat.fit = None
     row = summary_screen.first_screen(flat, {}).rows[0]
