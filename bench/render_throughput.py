@@ -10,9 +10,11 @@ the medians are compared; the minimum is printed too, since other processes on a
 only ever add time. ``--no-freeze`` traces our passes afresh every frame instead (the cost of a
 one-off frame; Mitsuba's ``path`` traces its C++ integrator every time, which is cheap).
 
-Without ``--scene``, ``--size`` or ``--spp`` it measures the three regimes of DEFAULT_REGIMES on the
-cluttered scene: a 1024x1024 frame at 1 and at 4 spp (where denoisers live: the per-pixel cost of
-the buffers shows there) and 128x128 at 16 spp; with any of them, the one regime asked for.
+Without ``--scene``, ``--size`` or ``--spp`` it measures the three regimes of DEFAULT_REGIMES: the
+cluttered scene at 1024x1024 and 1 and 4 spp (where denoisers live: a per-pixel cost of the buffers
+shows there), and the Cornell box at 128x128 and 16 spp (the single regime's defaults, where ours is
+closest to ``path``: 0.9-1.0; cluttered at that size is ~1.4); with any of them, the one regime
+asked for.
 
     .venv/bin/python bench/render_throughput.py                      # the three regimes
     .venv/bin/python bench/render_throughput.py --scene cluttered --size 1024 --spp 1 --repeats 3
@@ -71,7 +73,7 @@ def cluttered_scene(mi, max_depth: int):
 
 
 #: (scene, size, spp, repeats) measured when no regime is named on the command line.
-DEFAULT_REGIMES = (("cluttered", 1024, 1, 3), ("cluttered", 1024, 4, 3), ("cluttered", 128, 16, 7))
+DEFAULT_REGIMES = (("cluttered", 1024, 1, 3), ("cluttered", 1024, 4, 3), ("cornell", 128, 16, 7))
 
 
 def make_scene(mi, name: str, max_depth: int):
@@ -199,13 +201,21 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     render_passes.FREEZE_PASSES = not args.no_freeze
     if args.scene is None and args.size is None and args.spp is None:
-        regimes = [(scene, size, spp, args.repeats or repeats) for scene, size, spp, repeats in DEFAULT_REGIMES]
+        regimes = [
+            (scene, size, spp, repeats if args.repeats is None else args.repeats)
+            for scene, size, spp, repeats in DEFAULT_REGIMES
+        ]
     else:
-        size, spp = args.size or 128, args.spp or 16
-        regimes = [(args.scene or "cornell", size, spp, args.repeats or (3 if size >= 1024 else 7))]
+        size = 128 if args.size is None else args.size
+        spp = 16 if args.spp is None else args.spp
+        repeats = args.repeats if args.repeats is not None else 3 if size >= 1024 else 7
+        regimes = [(args.scene or "cornell", size, spp, repeats)]
     for name, size, spp, repeats in regimes:
         if size < 1 or spp < 1 or repeats < 1:
-            print(f"render_throughput: --size, --spp and --repeats must be >= 1 (got {size}, {spp}, {repeats})")
+            print(
+                f"render_throughput: --size, --spp and --repeats must be >= 1 (got {size}, {spp}, {repeats})",
+                file=sys.stderr,
+            )
             return 2
 
     mi = load_mitsuba()

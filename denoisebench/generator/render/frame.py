@@ -137,8 +137,9 @@ class FrameStream:
     Notes:
         Per-lane moments stay on the device between rounds (one entry per lane and channel, all
         bands at once): about ``pixels × groups × 2 × channels × 4`` bytes, e.g. 0.2 GB for a
-        1920×1080 frame with every feature. The last round's packed per-pixel moments are copied
-        to the host (float32); variances are formed there.
+        1920×1080 frame with every feature. The last pass of a round also writes every buffer
+        (means and variances of the mean, H×W×C float32, as much again), which the host wraps as
+        NumPy arrays without a copy.
     """
 
     def __init__(

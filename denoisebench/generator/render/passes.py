@@ -1,4 +1,4 @@
-"""One pass of the feature renderer: the kernels that trace a band of rows and pack per-pixel moments.
+"""One pass of the feature renderer: the kernels that trace a band of rows and write its per-pixel buffers.
 
 :func:`render_pass` traces samples ``start[p] .. end[p]`` of every pixel of a band, continuing each
 lane's running moments (:mod:`~denoisebench.generator.render.moments`), and writes the pixels' buffers
