@@ -131,9 +131,13 @@ def not_held_out_lines(report: ReportModel) -> list[str]:
 
 
 def indistinguishable_lines(report: ReportModel) -> list[str]:
-    """One sentence per pair of denoisers the reference cannot tell apart (analysis.indistinguishable_pairs)."""
+    """One sentence per pair of denoisers the reference cannot tell apart (analysis.indistinguishable_pairs);
+    pairs of identical denoisers (``report.identical``, said once under Summary) are left out."""
+    same = {frozenset((a, b)) for g in report.identical for a in g.labels for b in g.labels if a != b}
     lines = []
     for p in report.indistinguishable:
+        if frozenset((p.a, p.b)) in same:
+            continue
         scale = "" if rule_of(p.metric) == "mean" else " in log ratio"
         lines.append(
             f"{p.spp} spp, {p.metric}: {p.a} and {p.b} are not distinguishable at this reference quality "

@@ -223,10 +223,25 @@ def _times(report: ReportModel) -> list[str]:
             lines += [f"- {md(fmt.empty_table_text(table))}", ""]
             continue
         lines += [f"### Equal time: {md(table.metric)}", ""] + _table(*fmt.equal_time_rows(table))
-        lines += [f"### Equal quality: {md(table.metric)}", ""] + _table(*fmt.equal_quality_rows(table))
+        lines += [f"### Equal quality: {md(table.metric)}", ""] + _equal_quality(table)
     if report.verdicts:
         lines += ["**Verdicts** (measured rungs only)", ""] + [f"- {md(v)}" for v in report.verdicts] + [""]
     return lines
+
+
+def _equal_quality(table) -> list[str]:
+    """The equal-quality table split: the measured targets, then those beyond the rungs (extrapolated)."""
+    header, rows = fmt.equal_quality_rows(table)
+    measured = [i for i, h in enumerate(header) if "(extrapolated)" not in h]
+    if len(measured) == len(header):
+        return _table(header, rows)
+    extra = [0] + [i for i in range(1, len(header)) if i not in measured]
+    lines = _table(*wide_tables.pick(header, rows, measured))
+    return (
+        lines
+        + ["Targets beyond the measured rungs (extrapolated):", ""]
+        + _table(*wide_tables.pick(header, rows, extra))
+    )
 
 
 def _samplers(report: ReportModel) -> list[str]:
