@@ -527,3 +527,96 @@ def test_benchmark_side_records_are_keyword_only():
                     if keywords.get("kw_only") != "True":
                         bad.append(f"{path.relative_to(PACKAGE.parent)}:{node.lineno} {node.name}")
     assert not bad, "dataclasses built by position (add kw_only=True):\n" + "\n".join(bad)
+
+
+#: What an analysis may not import: the store, the dataset's readers, file formats.
+ANALYSIS_FORBIDDEN_IMPORTS = (
+    "sqlite3",
+    "OpenEXR",
+    "Imath",
+    "denoisebench.results.store",
+    "denoisebench.results.timings.read_timings",
+    "denoisebench.dataset.reader",
+    "denoisebench.dataset.exr_io",
+    "denoisebench.dataset.open_dataset",
+)
+
+
+def _public_methods(path: Path, class_name: str) -> set[str]:
+    tree = ast.parse(path.read_text())
+    cls = next(n for n in tree.body if isinstance(n, ast.ClassDef) and n.name == class_name)
+    return {f.name for f in cls.body if isinstance(f, ast.FunctionDef) and not f.name.startswith("_")}
+
+
+def _storage_reads(tree: ast.Module, readers: set[str]) -> list[str]:
+    """Where ``tree`` opens storage: imports of :data:`ANALYSIS_FORBIDDEN_IMPORTS`, ``open(...)``, a
+    path's ``read_*``/``open``, and calls of the store's or the dataset's reading methods (``readers``)."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            names = [f"{node.module}.{a.name}" for a in node.names] + [node.module or ""]
+        else:
+            names = []
+        found += [
+            f"{node.lineno}: imports {n}"
+            for n in names
+            if any(n == f or n.startswith(f + ".") for f in ANALYSIS_FORBIDDEN_IMPORTS)
+        ]
+        if isinstance(node, ast.Call):
+            func = node.func
+            if isinstance(func, ast.Name) and func.id in ("open", "open_dataset", "read_timings"):
+                found.append(f"{node.lineno}: {func.id}(...)")
+            elif isinstance(func, ast.Attribute) and (
+                func.attr in readers or func.attr in ("read_text", "read_bytes", "open")
+            ):
+                found.append(f"{node.lineno}: .{func.attr}(...)")
+    return found
+
+
+def _readers() -> set[str]:
+    """The store's and the dataset's public reading methods (their names, as an analysis would call them)."""
+    store = _public_methods(PACKAGE / "results" / "store.py", "ResultsStore")
+    dataset = _public_methods(PACKAGE / "dataset" / "reader.py", "Dataset")
+    writes = {m for m in store if m.startswith(("add_", "write_", "set_", "finish", "begin", "close", "transaction"))}
+    plain = set(dir(str)) | set(dir(dict)) | set(dir(list))  # ``name.split(...)`` is no read
+    return (store | dataset) - writes - plain
+
+
+def test_analysis_opens_no_store_and_no_file():
+    """``analysis/`` takes rows and arrays: it imports no store, no dataset reader and no file format,
+    and calls no store or dataset method; the callers (``reports/``, ``commands/``) load its inputs."""
+    readers = _readers()
+    bad = [
+        f"{path.relative_to(PACKAGE.parent)}:{line}"
+        for path in sorted((PACKAGE / "analysis").rglob("*.py"))
+        for line in _storage_reads(ast.parse(path.read_text()), readers)
+    ]
+    assert not bad, "analysis/ reads storage:\n" + "\n".join(bad)
+
+
+def test_the_storage_check_catches_planted_reads():
+    readers = _readers()
+    assert {"run", "frames", "units", "reference", "sequence"} <= readers
+    planted = ast.parse(
+        "import sqlite3\n"
+        "from denoisebench.results.store import ResultsStore\n"
+        "from denoisebench.dataset import open_dataset\n"
+        "def f(store, dataset, path):\n"
+        "    rows = store.frames('r')\n"
+        "    layers = dataset.reference('s', 0)\n"
+        "    return open(path).read(), path.read_text()\n"
+        "def g(data):\n"
+        "    return data.units_of('a', 1)\n"  # an analysis's own index: fine
+    )
+    assert sorted(_storage_reads(planted, readers)) == [
+        "1: imports sqlite3",
+        "2: imports denoisebench.results.store",
+        "2: imports denoisebench.results.store.ResultsStore",
+        "3: imports denoisebench.dataset.open_dataset",
+        "5: .frames(...)",
+        "6: .reference(...)",
+        "7: .read_text(...)",
+        "7: open(...)",
+    ]

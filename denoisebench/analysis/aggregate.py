@@ -1,6 +1,6 @@
 """How per-scene scores become one number per denoiser: the metric's aggregation rule, with intervals.
 
-Every place the leaderboard combines scenes (the summary table, ``denoisebench leaderboard``, the
+Every place that combines scenes (the report's summary table, ``denoisebench leaderboard``, the
 flicker table) goes through :func:`aggregate`, so a plugin metric that states its rule
 (:attr:`denoisebench.metrics.Metric.aggregate`) is combined correctly too.
 

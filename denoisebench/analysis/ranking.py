@@ -1,4 +1,5 @@
-"""The leaderboard: denoisers ranked by one metric at one input spp, across the runs on one dataset.
+"""The ranking ``denoisebench leaderboard`` prints: denoisers ranked by one metric at one input spp,
+across the runs on one dataset.
 
 Each denoiser's entry comes from the newest run that measured it at that spp (a rerun with newer
 code replaces the older number); the run id and its date are shown, so numbers from different runs
@@ -6,8 +7,12 @@ are never silently mixed. The value combines the scenes by the metric's aggregat
 (:mod:`.aggregate`: per scene the mean over its frames, or the sequence's temporal value; then the
 mean, the geometric mean, or the geometric mean of the ratio to the same run's noisy input), so a
 bright scene never decides a linear score; a score with a reference-noise floor is ranked corrected,
-as the report's tables show it (the same :func:`.analysis.metric_cell`); failed units count as
+as the report's tables show it (the same :func:`.summary.metric_cell`); failed units count as
 failed, not as missing, and rank last.
+
+This module is pure: it takes each run as its report reads it (:class:`RunView`: the run's rows,
+the scenes its report aggregates, its time model), loaded by
+:func:`denoisebench.reports.leaderboard.leaderboard`, which also picks the dataset and the runs.
 
 Notes
 -----
@@ -17,7 +22,7 @@ Notes
   different load are not comparable in time, only in accuracy.
 * **Samplers are a dimension.** Every entry says which live sampler made its input (None: the
   dataset's stored input) and which denoiser ran on it (:class:`~.records.EntryRow`);
-  ``leaderboard(sampler=...)`` ranks one sampler's entries (``""``: the stored inputs' only), and
+  :func:`labels_to_rank` keeps one sampler's entries (``""``: the stored inputs' only), and
   :func:`by_sampler` groups a ranking by sampler.
 * Per-scene values come from :class:`.run_index.RunIndex`, the one place they are computed.
 """
@@ -26,14 +31,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from denoisebench.analysis.summary import RunData, metric_cell, set_apart
-from denoisebench.analysis.time_model import build_time_model
-from denoisebench.dataset import open_dataset
-from denoisebench.errors import UserInputError
-from denoisebench.metrics import get_metric
+from denoisebench.analysis.summary import RunData, metric_cell
+from denoisebench.analysis.time_model import TimeModel
 from denoisebench.results.finite import finite_mean
-from denoisebench.results.store import ResultsStore
-from denoisebench.results.timings import read_timings
+from denoisebench.results.records import EntryRow, RunRow, UnitRow
 
 
 @dataclass(kw_only=True)
@@ -52,8 +53,9 @@ class Entry:
 
 @dataclass(kw_only=True)
 class Ranking:
-    """What :func:`leaderboard` returns: the metric, spp, dataset hash, entries best first, and the lines
-    that say how the numbers were read (scenes left out, the seconds' basis)."""
+    """What :func:`denoisebench.reports.leaderboard.leaderboard` returns: the metric, spp, dataset hash,
+    entries best first, and the lines that say how the numbers were read (scenes left out, the
+    seconds' basis)."""
 
     metric: object
     spp: int
@@ -79,174 +81,78 @@ def ranks(entries: list[Entry]) -> list[int | None]:
     return out
 
 
-def pick_dataset(store: ResultsStore, dataset: str | None) -> str:
-    """The dataset hash to rank: the one given (hash prefix or dataset path), else the newest run's."""
-    runs = store.runs()
-    if not runs:
-        raise UserInputError(f"{store.path} holds no runs")
-    if dataset is None:
-        return runs[0].dataset_hash
-    matches = {
-        r.dataset_hash
-        for r in runs
-        if r.dataset_hash.startswith(dataset) or r.dataset_path.rstrip("/") == dataset.rstrip("/")
+@dataclass(frozen=True, kw_only=True)
+class RunView:
+    """One run as its report reads it: its rows (``data``), the scenes its report aggregates
+    (``scenes``: the scenes it sets apart left out) and its time model (``model``; None: seconds as
+    measured at the dataset's size)."""
+
+    row: RunRow
+    data: RunData
+    scenes: set[str]
+    model: TimeModel | None
+
+
+def labels_to_rank(units: list[UnitRow], entries: list[EntryRow], *, spp: int, sampler: str | None) -> set[str]:
+    """The labels of a run's ``units`` measured at ``spp`` whose input ``sampler`` made (``""``: the
+    dataset's stored inputs; None: any)."""
+    made_by = {e.label: e.sampler for e in entries}
+    return {
+        u.denoiser for u in units if u.spp == spp and (sampler is None or (made_by.get(u.denoiser) or "") == sampler)
     }
-    if len(matches) != 1:
-        known = ", ".join(sorted({f"{r.dataset_hash[:12]} ({r.dataset_path})" for r in runs}))
-        raise UserInputError(f"dataset {dataset!r} matches {len(matches)} datasets in {store.path}; known: {known}")
-    return matches.pop()
 
 
-def leaderboard(
-    store: ResultsStore,
-    metric: str = "relmse_robust",
-    spp: int | None = None,
-    dataset: str | None = None,
-    sampler: str | None = None,
-    *,
-    run: str | None = None,
-    split: str | None = None,
-    include_unresolved: bool = False,
-    time_at: tuple[int, int] | None = None,
-) -> Ranking:
-    """The ranking (:class:`Ranking`, entries best first) of ``metric`` at ``spp`` on one dataset.
-
-    ``sampler``: rank only the entries whose input that live sampler made (``""``: only those on the
-    dataset's stored inputs, the noisy input among them); None: every entry. ``run`` (a run id
-    prefix) and ``split`` keep only the runs they name. Each run is read as its report reads it: the
-    scenes its report sets apart are left out (unless ``include_unresolved``; judged when the run's
-    dataset folder is still there), scores are the report's corrected cells, and seconds are the
-    run's time model at ``time_at`` (default the report's, 1920×1080, projected)."""
-    try:
-        m = get_metric(metric)
-    except ValueError as exc:
-        raise UserInputError(str(exc)) from None
-    data_hash = pick_dataset(store, dataset)
-    runs = store.runs(data_hash)  # newest first
-    if run is not None:
-        runs = [r for r in runs if r.run_id.startswith(run)]
-        if not runs:
-            raise UserInputError(f"no run {run!r} on dataset {data_hash[:12]} in {store.path}")
-    if split is not None:
-        splits = sorted({str(r.config.get("split")) for r in runs})
-        runs = [r for r in runs if str(r.config.get("split")) == split]
-        if not runs:
-            raise UserInputError(f"no run on split {split!r}; runs here are on: {', '.join(splits)}")
-    available = sorted({u.spp for r in runs for u in store.units(r.run_id)})
-    if not available:
-        raise UserInputError(f"{store.path}: no results for dataset {data_hash[:12]}")
-    if spp is None:
-        spp = available[0]
-    elif spp not in available:
-        raise UserInputError(f"no results at {spp} spp; measured: {', '.join(map(str, available))}")
-    if sampler:
-        known = sorted({d.sampler for r in runs for d in store.denoisers(r.run_id) if d.sampler})
-        if sampler not in known:
-            raise UserInputError(
-                f"no results of sampler {sampler!r} on dataset {data_hash[:12]}; samplers measured: "
-                + (", ".join(known) or "none")
-            )
-    entries: dict[str, Entry] = {}
+def run_entries(view: RunView, labels: set[str], *, spp: int, metric: str) -> tuple[dict[str, Entry], dict[str, Entry]]:
+    """({label: entry} of ``labels`` in one run, {label: entry} of those the run did not compute
+    ``metric`` for): the report's own corrected cell over the run's ``scenes``, seconds per frame
+    from its time model where it has one."""
+    data, row = view.data, view.row
+    measured: dict[str, Entry] = {}
     unmeasured: dict[str, Entry] = {}
-    notes: list[str] = []
-    for row in runs:
-        run_id = row.run_id
-        dimension = {d.label: (d.sampler, d.denoiser_label) for d in store.denoisers(run_id)}
-        all_units = store.units(run_id)
-        labels = {
-            u.denoiser
-            for u in all_units
-            if u.spp == spp and (sampler is None or (dimension.get(u.denoiser, (None,))[0] or "") == sampler)
-        } - set(entries)
-        if not labels:
-            continue
-        data = RunData(store, run_id)
-        scenes, model, note = _as_its_report(store, data, row, include_unresolved=include_unresolved, time_at=time_at)
-        notes += note
-        for label in sorted(labels):
-            ok = [f for f in data.ok_frames(label, spp) if f.scene in scenes]
-            # the report's own cell: corrected for the reference's noise where the score has a floor
-            value = metric_cell(data, label, spp, metric=m.name, scenes=sorted(scenes)).value
-            failed = sum(1 for u in data.units_of(label, spp) if u.status != "ok")
-            where = dimension.get(label, (None, label))
-            if value is None and not failed:  # this run did not compute the metric: look further back
-                sampler, denoiser_label = where
-                unmeasured.setdefault(
-                    label,
-                    Entry(
-                        denoiser=label,
-                        value=None,
-                        frames=len(ok),
-                        failed_units=0,
-                        denoise_seconds=None,
-                        total_seconds=None,
-                        run_id=run_id,
-                        created_at=row.created_at,
-                        sampler=sampler,
-                        denoiser_label=denoiser_label,
-                    ),
-                )
-                continue
-            denoise = finite_mean(f.denoise_seconds for f in ok)
-            total = finite_mean(f.total_seconds for f in ok)
-            if model is not None:
-                denoise, total = model.denoise_seconds(label, spp), model.total_seconds(label, spp)
-            sampler, denoiser_label = where
-            entries[label] = Entry(
+    for label in sorted(labels):
+        ok = [f for f in data.ok_frames(label, spp) if f.scene in view.scenes]
+        # the report's own cell: corrected for the reference's noise where the score has a floor
+        value = metric_cell(data, label, spp, metric=metric, scenes=sorted(view.scenes)).value
+        failed = sum(1 for u in data.units_of(label, spp) if u.status != "ok")
+        entry = data.entry(label)
+        sampler, denoiser_label = (entry.sampler, entry.denoiser_label) if entry is not None else (None, label)
+        if value is None and not failed:  # this run did not compute the metric: look further back
+            unmeasured[label] = Entry(
                 denoiser=label,
-                value=value if not failed else None,
+                value=None,
                 frames=len(ok),
-                failed_units=failed,
-                denoise_seconds=denoise,
-                total_seconds=total,
-                run_id=run_id,
+                failed_units=0,
+                denoise_seconds=None,
+                total_seconds=None,
+                run_id=row.run_id,
                 created_at=row.created_at,
                 sampler=sampler,
                 denoiser_label=denoiser_label,
             )
-    for label, entry in unmeasured.items():
-        entries.setdefault(label, entry)
-    sign = -1.0 if m.higher_is_better else 1.0
-    ranked = sorted(
-        entries.values(), key=lambda e: (e.value is None, sign * e.value if e.value is not None else 0.0, e.denoiser)
-    )
-    return Ranking(metric=m, spp=spp, data_hash=data_hash, entries=ranked, notes=list(dict.fromkeys(notes)))
+            continue
+        denoise = finite_mean(f.denoise_seconds for f in ok)
+        total = finite_mean(f.total_seconds for f in ok)
+        if view.model is not None:
+            denoise, total = view.model.denoise_seconds(label, spp), view.model.total_seconds(label, spp)
+        measured[label] = Entry(
+            denoiser=label,
+            value=value if not failed else None,
+            frames=len(ok),
+            failed_units=failed,
+            denoise_seconds=denoise,
+            total_seconds=total,
+            run_id=row.run_id,
+            created_at=row.created_at,
+            sampler=sampler,
+            denoiser_label=denoiser_label,
+        )
+    return measured, unmeasured
 
 
-def _as_its_report(store, data, row, include_unresolved: bool, time_at) -> tuple[set[str], object, list[str]]:
-    """(scenes the run's report aggregates, its time model or None, lines saying how) for one run."""
-    scenes = set(data.scenes)
-    try:
-        dataset = open_dataset(row.dataset_path, verify=False)
-    except Exception:  # noqa: BLE001 - moved or deleted: rank what the store holds, and say so
-        dataset = None
-    if dataset is None:
-        return (
-            scenes,
-            None,
-            [
-                f"run {row.run_id[:8]}: its dataset folder {row.dataset_path} is not readable here: no scene set apart, "
-                "seconds as measured at the dataset's size (its report projects them)"
-            ],
-        )
-    notes = []
-    apart = set_apart(data, dataset)
-    if apart and not include_unresolved:
-        scenes -= {u.scene for u in apart}
-        notes.append(
-            f"run {row.run_id[:8]}: left out as in its report: "
-            + "; ".join(f"{u.scene} ({u.reason})" for u in apart)
-            + " (--include-unresolved keeps them)"
-        )
-    record = dataset.scene(data.scenes[0]).record if data.scenes else {}
-    size = (int(record.get("width", 0)), int(record.get("height", 0)))
-    model = build_time_model(data, read_timings(store, row.run_id), time_at, dataset_size=size) if size[0] else None
-    if model is not None:
-        w, h = model.time_at
-        notes.append(
-            f"seconds per frame at {w}×{h}" + (" (projected, as in the run's report)" if model.projected else "")
-        )
-    return scenes, model, notes
+def best_first(entries: list[Entry], higher_is_better: bool) -> list[Entry]:
+    """``entries`` best first (unmeasured and failed last, ties by name)."""
+    sign = -1.0 if higher_is_better else 1.0
+    return sorted(entries, key=lambda e: (e.value is None, sign * e.value if e.value is not None else 0.0, e.denoiser))
 
 
 def by_sampler(entries: list[Entry]) -> dict[str | None, list[Entry]]:

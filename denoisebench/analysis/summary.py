@@ -1,4 +1,4 @@
-"""Numbers a report is made of, computed from one run in the results store (no drawing, no HTML).
+"""Numbers a report is made of, computed from one run's rows (no drawing, no HTML, no store or file read).
 
 Accuracy against time (the points, the noisy input's curve, the readings) is in :mod:`.accuracy`;
 this module has the run's rows (:class:`RunData`) and what is aggregated over scenes from them.
@@ -28,17 +28,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from denoisebench.analysis import aggregate as agg
-from denoisebench.analysis.aggregate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED  # noqa: F401 (re-exported)
 from denoisebench.analysis.run_index import RunIndex
-from denoisebench.metrics.floors import closed_form as floors
 from denoisebench.results.finite import finite_mean, is_finite
-from denoisebench.results.names import (  # noqa: F401 (ERROR_METRICS: re-exported for the report)
-    ERROR_METRICS,
+from denoisebench.results.names import (
     FLICKER_METRICS,
     FLICKER_PREFIX,
     NOISY,
 )
-from denoisebench.results.records import EntryRow, RunRow
+from denoisebench.results.records import EntryRow, RunRow, RunRows
 
 #: Scenes a per-effect column needs (on one scene a column is that scene's score, not the effect's).
 MIN_EFFECT_SCENES = 2
@@ -94,18 +91,19 @@ class SummaryRow:
 
 
 class RunData(RunIndex):
-    """One run's rows from the store, indexed once for the analyses (:class:`.run_index.RunIndex`).
+    """One run's rows, indexed once for the analyses (:class:`.run_index.RunIndex`). The caller loads
+    them (``RunData(store.run_rows(run_id))``, :func:`denoisebench.reports.run_inputs.run_data`).
 
     Typed rows: ``run`` (:class:`~.records.RunRow`), ``entries`` (:class:`~.records.EntryRow`, the
     run's labels in the order they were added), and from :class:`.run_index.RunIndex` ``unit_rows``,
     ``frame_rows``, ``sequence_rows``.
     """
 
-    def __init__(self, store, run_id: str):
-        self.run: RunRow = store.run(run_id)
-        self.run_id = run_id
-        self.entries: list[EntryRow] = store.denoisers(run_id)
-        super().__init__(store.units(run_id), store.frames(run_id), store.sequence_metrics(run_id))
+    def __init__(self, rows: RunRows):
+        self.run: RunRow = rows.run
+        self.run_id = rows.run.run_id
+        self.entries: list[EntryRow] = rows.entries
+        super().__init__(rows.units, rows.frames, rows.sequences)
         self.labels = [d.label for d in self.entries if not d.load_error]
         self._entry = {d.label: d for d in self.entries}
 
@@ -115,38 +113,16 @@ class RunData(RunIndex):
         return self._entry.get(label)
 
 
-#: References read per scene to measure their noise (evenly spaced frames; the largest share is kept).
-NOISE_CHECK_FRAMES = 4
-
-
-def reference_noisy_shares(dataset, scenes: list[str]) -> dict[str, float]:
-    """{scene: largest share of reference values too noisy for a floor} over a few frames of each scene
-    (:func:`denoisebench.metrics.floors.closed_form.noisy_value_share`); scenes without a reference variance are left out."""
-    out = {}
-    for scene in scenes:
-        info = dataset.scene(scene)
-        count = info.frame_count
-        picks = sorted({round(i * (count - 1) / max(NOISE_CHECK_FRAMES - 1, 1)) for i in range(NOISE_CHECK_FRAMES)})
-        shares = []
-        for index in picks if count else []:
-            try:
-                layers, _ = dataset.reference(scene, index)
-            except Exception:  # noqa: BLE001 - a missing or unreadable reference: its units failed already
-                continue
-            if "color_var" in layers:
-                shares.append(floors.noisy_value_share(layers["color"], layers["color_var"]))
-        if shares:
-            out[scene] = max(shares)
-    return out
-
-
-def set_apart(data: RunData, dataset) -> list[agg.Unresolved]:
+def set_apart(data: RunData, *, records: dict[str, dict], noisy_shares: dict[str, float]) -> list[agg.Unresolved]:
     """The scenes of a run whose scores cannot rank (:func:`.aggregate.unresolved_references`), judged
-    from the dataset's reference records and a few of its references (:func:`reference_noisy_shares`):
-    the one rule the report and ``denoisebench leaderboard`` share."""
-    states = agg.reference_states({s: dataset.scene(s).record for s in data.scenes})
-    for scene, share in reference_noisy_shares(dataset, data.scenes).items():
+    from the dataset's scene records (``records``: {scene: record}) and the largest share of each
+    scene's reference values too noisy for a floor (``noisy_shares``, read from a few references by
+    :func:`denoisebench.reports.run_inputs.reference_noisy_shares`): the one rule the report and
+    ``denoisebench leaderboard`` share."""
+    states = agg.reference_states({s: records[s] for s in data.scenes})
+    for scene, share in noisy_shares.items():
         states.setdefault(scene, {})["noisy_share"] = share
+    return agg.unresolved_references(data, states)
     return agg.unresolved_references(data, states)
 
 

@@ -20,7 +20,7 @@ Notes
   (:mod:`.sampler_maps`), so that the report shows them.
 * Each pair is registered with its place in the run's sampler dimension (the store's
   ``run_denoisers.sampler`` and ``denoiser_label``, :class:`~.records.EntryRow`), so the
-  leaderboard ranks and groups by sampler without parsing labels.
+  analyses rank and group by sampler without parsing labels.
 * Plugin samplers run in a worker of their own under the run's ``--isolation``, ``--time-limit`` and
   ``--memory-limit`` (:mod:`denoisebench.sampling.isolation`); built-ins in this process.
 """

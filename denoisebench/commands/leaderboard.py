@@ -9,8 +9,8 @@ the heading say so.
 
 from __future__ import annotations
 
-from denoisebench.analysis.ranking import leaderboard
 from denoisebench.analysis.time_model import parse_size
+from denoisebench.reports.leaderboard import leaderboard
 from denoisebench.results.store import ResultsStore
 
 EPILOG = """examples:
@@ -65,8 +65,8 @@ def run(args) -> int:
             store,
             args.metric,
             args.spp,
-            args.dataset,
-            sampler,
+            dataset=args.dataset,
+            sampler=sampler,
             run=args.run,
             split=args.split,
             include_unresolved=args.include_unresolved,

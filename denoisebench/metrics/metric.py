@@ -15,7 +15,7 @@ Aggregation over scenes (``Metric.aggregate``; docs/architecture.md, "Metrics")
 Scores of linear radiance grow with a scene's brightness: an arithmetic mean over scenes is then
 decided by the brightest scene (measured: ``temporal_l1`` ranked the noisy input above OIDN because
 glossy_fireflies scored 1.07–1.44 and every other scene 0.01–0.18). So every metric states how the
-leaderboard combines its per-scene values:
+analyses combine its per-scene values:
 
 * ``"mean"``: arithmetic mean. Only for scale-free scores (relMSE and its robust form, SMAPE, FLIP,
   SSIM, PSNR, tPSNR, ΔE2000 of tone-mapped colour, ``temporal_relmse`` and its robust form).

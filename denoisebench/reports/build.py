@@ -36,8 +36,15 @@ import numpy as np
 
 from denoisebench.analysis import accuracy, equal_tables, time_model
 from denoisebench.analysis import aggregate as agg
-from denoisebench.analysis import summary as analysis
 from denoisebench.analysis.aggregate import rule_of
+from denoisebench.analysis.summary import (
+    RunData,
+    effect_breakdown,
+    flicker_metrics,
+    flicker_series,
+    indistinguishable_pairs,
+    summary_table,
+)
 from denoisebench.dataset import Dataset
 from denoisebench.dataset.atomic import atomic_write_bytes
 from denoisebench.metrics.field.colorvideovdp import viewing_conditions
@@ -58,6 +65,8 @@ from denoisebench.reports.model import (
     UnresolvedReferences,
     ViewingDisplay,
 )
+from denoisebench.reports.run_inputs import run_data, set_apart_of
+from denoisebench.results.names import ERROR_METRICS
 from denoisebench.results.store import ResultsStore
 from denoisebench.results.timings import read_timings
 
@@ -157,19 +166,19 @@ def temporal_metric_order(names: list[str]) -> list[str]:
     return lead + [m for m in rest if rule_of(m) == "mean"] + [m for m in rest if rule_of(m) != "mean"]
 
 
-def _flicker(data: analysis.RunData) -> FlickerSection:
+def _flicker(data: RunData) -> FlickerSection:
     """The spp, the flicker metrics with a series, and {metric: {spp: {label: [per-frame means]}}}."""
-    metrics = analysis.flicker_metrics(data)
+    metrics = flicker_metrics(data)
     series: dict[str, dict[int, dict]] = {}
     for metric in metrics:
         for spp in data.spp:
-            found = analysis.flicker_series(data, spp, metric)
+            found = flicker_series(data, spp, metric)
             if found:
                 series.setdefault(metric, {})[spp] = found
     return FlickerSection(spp=list(data.spp), metrics=[m for m in metrics if m in series], series=series)
 
 
-def _cvvdp_viewing(dataset: Dataset, data: analysis.RunData) -> CvvdpViewing:
+def _cvvdp_viewing(dataset: Dataset, data: RunData) -> CvvdpViewing:
     """cvvdp's viewing conditions (:func:`denoisebench.metrics.field.colorvideovdp.viewing_conditions`): the
     display once, and per scene the frame's visual angle and the exposure from its reference sequence
     (the one cvvdp set for every denoiser of that scene)."""
@@ -217,7 +226,7 @@ def _dataset_size(dataset: Dataset, scenes: list[str]) -> tuple[int, int]:
     return int(record.get("width", 0)), int(record.get("height", 0))
 
 
-def _deciding_frames(data: analysis.RunData, metrics: list[str]) -> list[DecidingFrame]:
+def _deciding_frames(data: RunData, metrics: list[str]) -> list[DecidingFrame]:
     """Frames over 10× their scene's median of each lead metric (:meth:`.run_index.RunIndex.deciding_frames`)."""
     found = []
     for metric, label in ((m, label) for m in metrics if m in data.frame_metric_names for label in data.labels):
@@ -259,10 +268,10 @@ def build_report(
     (:func:`denoisebench.benchmark.stability.stability_table`; the report runs nothing itself).
     ``time_at``: the resolution of the report's time axis (default
     :data:`~denoisebench.analysis.time_model.DEFAULT_TIME_AT`), projected from the run's timings."""
-    data = analysis.RunData(store, run_id)
+    data = run_data(store, run_id)
     # scenes whose reference cannot resolve the headline scores: listed apart, out of the aggregates
-    unresolved = analysis.set_apart(data, dataset)
-    summary = analysis.summary_table(data, exclude=() if include_unresolved else agg.excluded_scenes(unresolved))
+    unresolved = set_apart_of(data, dataset)
+    summary = summary_table(data, exclude=() if include_unresolved else agg.excluded_scenes(unresolved))
     reference = _reference_info(dataset, data.scenes)
     model = time_model.build_time_model(
         data, read_timings(store, run_id), time_at, dataset_size=_dataset_size(dataset, data.scenes)
@@ -271,7 +280,7 @@ def build_report(
     deciding = _deciding_frames(data, lead)
     measured = data.frame_metric_names + data.sequence_metric_names
     # the figure: the robust relMSE first, raw relMSE beside it, FLIP; the tables: the lead metrics
-    shown = [m for m in analysis.ERROR_METRICS if m in measured]
+    shown = [m for m in ERROR_METRICS if m in measured]
     panels = [
         accuracy.accuracy_time(
             data, summary, metric, reference_seconds=reference.seconds, reference_spp=reference.spp, model=model
@@ -312,10 +321,10 @@ def build_report(
         time_model=model,
         equal_tables=tables,
         verdicts=[v for t in tables for v in equal_tables.verdicts(t)],
-        effects=analysis.effect_breakdown(data, scene_effects),
+        effects=effect_breakdown(data, scene_effects),
         flicker=flicker,
         temporal_metrics=temporal_metric_order(data.sequence_metric_names),
-        indistinguishable=analysis.indistinguishable_pairs(data, summary),
+        indistinguishable=indistinguishable_pairs(data, summary),
         strips=comparisons.scene_strips(store, data, dataset, spp=data.spp[0]) if data.spp else [],
         failures=failures,
         unresolved_references=UnresolvedReferences(included=include_unresolved, scenes=unresolved),

@@ -1,4 +1,4 @@
-"""The leaderboard's one rule for usable numbers: a score or a time is used only when it is finite.
+"""The benchmark side's one rule for usable numbers: a score or a time is used only when it is finite.
 
 A metric can be NaN (a constant image's correlation) or infinite (a PSNR of an exact match), a
 time can be missing (None); the store keeps such values as NULL and every mean, aggregate and

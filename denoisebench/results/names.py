@@ -1,4 +1,4 @@
-"""Names every part of the leaderboard shares: the noisy input's label and the metric groups.
+"""Names every part of the benchmark side shares: the noisy input's label and the metric groups.
 
 The runner stores rows under these names and the analyses and reports read them back by the same
 names, so they live here, below all of them, rather than in any one of them.

@@ -1,7 +1,7 @@
 """The records of a benchmark run: what the runner measures and writes, and the rows the store reads back.
 
-Written (made by :mod:`.runner`, :mod:`.sampler_units` and :mod:`.ray_executor`, kept by
-:class:`~.store.ResultsStore` in one transaction per unit):
+Written (made by :mod:`denoisebench.benchmark.measure` for the runner, the live sampler pairs and
+the Ray executor; kept by :class:`~.store.ResultsStore` in one transaction per unit):
 
 * :class:`FrameRecord`: one frame of a unit, its timings and metric values.
 * :class:`UnitRecord`: one denoiser (or sampler × denoiser pair) on one scene's sequence at one spp.
@@ -10,7 +10,8 @@ Read (what :class:`~.store.ResultsStore` returns, one class per table):
 
 * :class:`RunRow`, :class:`EntryRow` (a run's labels: the noisy input, its denoisers, its sampler
   pairs), :class:`UnitRow`, :class:`FrameRow`, :class:`SequenceRow`, :class:`NotApplicableRow`,
-  :class:`StripRow`, and :class:`NotApplicableCount` (a metric's not-applicable rows counted).
+  :class:`StripRow`, and :class:`NotApplicableCount` (a metric's not-applicable rows counted);
+  :class:`RunRows`: every row of one run the analyses read, loaded at once.
 
 Notes
 -----
@@ -211,3 +212,16 @@ class NotApplicableCount(Row):
 
     count: int
     reason: str
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunRows:
+    """Every row of one run the analyses read (:meth:`~.store.ResultsStore.run_rows`): the run, its
+    labels in the order they were added, its units, frames and temporal metric rows. The analyses
+    take this and never open the store themselves."""
+
+    run: RunRow
+    entries: list[EntryRow]
+    units: list[UnitRow]
+    frames: list[FrameRow]
+    sequences: list[SequenceRow]

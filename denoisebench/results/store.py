@@ -41,6 +41,7 @@ from denoisebench.results.records import (
     NotApplicableCount,
     NotApplicableRow,
     RunRow,
+    RunRows,
     SequenceRow,
     StripRow,
     UnitRecord,
@@ -208,6 +209,16 @@ class ResultsStore:
             versions=json.loads(versions),
             created_at=created,
             finished_at=finished,
+        )
+
+    def run_rows(self, run_id: str) -> RunRows:
+        """Every row of ``run_id`` the analyses read, in one record (:class:`~.records.RunRows`)."""
+        return RunRows(
+            run=self.run(run_id),
+            entries=self.denoisers(run_id),
+            units=self.units(run_id),
+            frames=self.frames(run_id),
+            sequences=self.sequence_metrics(run_id),
         )
 
     def runs(self, dataset_hash: str | None = None) -> list[RunRow]:

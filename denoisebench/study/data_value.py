@@ -46,11 +46,12 @@ from pathlib import Path
 from tqdm import tqdm
 
 from denoisebench.analysis import aggregate as agg
-from denoisebench.analysis.summary import RunData, metric_cell, set_apart
+from denoisebench.analysis.summary import metric_cell
 from denoisebench.benchmark.run import run_benchmark
 from denoisebench.benchmark.runner import BenchmarkConfig
 from denoisebench.dataset import open_dataset
 from denoisebench.errors import UserInputError
+from denoisebench.reports.run_inputs import run_data, set_apart_of
 from denoisebench.results.names import NOISY
 from denoisebench.results.store import ResultsStore
 
@@ -245,7 +246,7 @@ def read_scores(store, run_id: str, label: str, spp: int, kept: list[str]) -> di
     ``value``/``low``/``high``: the corrected aggregate over ``kept`` and its 95 % interval over
     scenes (the report's cell); ``per_scene``: every scene's corrected score (or the raw one where
     the metric has no floor), set-apart scenes included."""
-    data = RunData(store, run_id)
+    data = run_data(store, run_id)
     out = {}
     for metric in METRICS:
         cell = metric_cell(data, label, spp, metric, kept)
@@ -282,8 +283,8 @@ class StudyResult:
 def _references(options: StudyOptions, store, dataset) -> tuple[dict, list[str], dict]:
     """(scores of the noisy input and the references, scenes kept, {scene set apart: reason})."""
     run_id = _benchmark(options, store, list(options.references))
-    data = RunData(store, run_id)
-    apart = {u.scene: u.reason for u in set_apart(data, dataset)}
+    data = run_data(store, run_id)
+    apart = {u.scene: u.reason for u in set_apart_of(data, dataset)}
     kept = [s for s in data.scenes if s not in apart] or list(data.scenes)  # all set apart: keep them all
     scores = {label: read_scores(store, run_id, label, options.spp, kept) for label in [NOISY, *options.references]}
     return scores, kept, apart

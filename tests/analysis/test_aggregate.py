@@ -14,10 +14,11 @@ import numpy as np
 import pytest
 
 from denoisebench.analysis import aggregate as agg
-from denoisebench.analysis import summary as analysis
+from denoisebench.analysis.summary import indistinguishable_pairs, summary_table
 from denoisebench.benchmark.measure import measure_unit
 from denoisebench.dataset.frame import Frame, Sequence
 from denoisebench.reports import strips
+from denoisebench.reports.run_inputs import run_data
 from denoisebench.results import crops
 from denoisebench.results.names import NOISY
 from denoisebench.results.records import FrameRecord, UnitRecord
@@ -97,8 +98,8 @@ def measured(tmp_path_factory):
             units.append(measure_unit(NOISY, None, seq, spatial=spatial, temporal=temporal))
             units.append(measure_unit("blur", Blur(), seq, spatial=spatial, temporal=temporal))
     store, run_id = _store_with_units(tmp_path_factory.mktemp("scores") / "r.sqlite", units)
-    data = analysis.RunData(store, run_id)
-    return store, data, analysis.summary_table(data)
+    data = run_data(store, run_id)
+    return store, data, summary_table(data)
 
 
 def test_every_lead_temporal_and_gradient_score_ranks_the_smooth_prediction_above_the_input(measured):
@@ -188,8 +189,8 @@ def test_pairs_within_the_reference_noise_are_marked_not_distinguishable(tmp_pat
             _unit("c", scene, 0.0800, 0.002),
         ]
     store, run_id = _store_with_units(tmp_path / "r.sqlite", units, (NOISY, "a", "b", "c"))
-    data = analysis.RunData(store, run_id)
-    pairs = {(p.a, p.b) for p in analysis.indistinguishable_pairs(data, analysis.summary_table(data))}
+    data = run_data(store, run_id)
+    pairs = {(p.a, p.b) for p in indistinguishable_pairs(data, summary_table(data))}
     assert ("a", "b") in pairs
     assert not {("a", "c"), ("b", "c"), (NOISY, "a")} & pairs
     # resolution: 1.96 × sqrt(Σ (se_a + se_b)²) / scenes, with the scene se = frame se / sqrt(2 frames)
@@ -311,7 +312,7 @@ def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
 
 
 def test_the_leaderboard_command_ranks_a_linear_flicker_score_per_scene_against_the_input(tmp_path):
-    from denoisebench.analysis.ranking import leaderboard
+    from denoisebench.reports.leaderboard import leaderboard
 
     # the temporal_l1 per scene: an arithmetic mean would rank noisy (0.34) above oidn (0.37)
     noisy = {"cornell": 0.18, "dof": 0.05, "motion_blur": 0.06, "glossy_fireflies": 1.07}

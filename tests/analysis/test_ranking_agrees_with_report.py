@@ -15,6 +15,7 @@ from denoisebench.benchmark.runner import BenchmarkConfig
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.synthetic import make_synthetic_dataset
 from denoisebench.reports.build import write_report
+from denoisebench.reports.leaderboard import leaderboard
 from denoisebench.results.store import ResultsStore
 
 
@@ -37,7 +38,7 @@ def test_the_leaderboard_equals_the_report_for_its_run(run):
     with ResultsStore(root / "r.sqlite", readonly=True) as store:
         for metric in ("relmse_robust", "relmse", "flip"):
             for spp in (1, 4):
-                ranking = table.leaderboard(store, metric, spp, run=run_id[:8], split="all")
+                ranking = leaderboard(store, metric, spp, run=run_id[:8], split="all")
                 report = {r["denoiser"]: r["metrics"][metric] for r in results["summary"] if r["spp"] == spp}
                 points = {
                     p["denoiser"]: p["seconds"]
@@ -54,9 +55,9 @@ def test_the_leaderboard_equals_the_report_for_its_run(run):
                 if metric != "flip":
                     assert report["noisy"]["corrected"] is True  # the leaderboard ranks the corrected score
         with pytest.raises(Exception, match="no run on split"):
-            table.leaderboard(store, "relmse", 1, split="test")
+            leaderboard(store, "relmse", 1, split="test")
         with pytest.raises(Exception, match="no run"):
-            table.leaderboard(store, "relmse", 1, run="ffffffff")
+            leaderboard(store, "relmse", 1, run="ffffffff")
 
 
 def test_scenes_the_report_sets_apart_are_left_out_of_the_leaderboard(run, monkeypatch):
@@ -71,8 +72,8 @@ def test_scenes_the_report_sets_apart_are_left_out_of_the_leaderboard(run, monke
 
     monkeypatch.setattr(agg, "reference_states", states)
     with ResultsStore(root / "r.sqlite", readonly=True) as store:
-        ranking = table.leaderboard(store, "relmse", 1, run=run_id)
-        kept = table.leaderboard(store, "relmse", 1, run=run_id, include_unresolved=True)
+        ranking = leaderboard(store, "relmse", 1, run=run_id)
+        kept = leaderboard(store, "relmse", 1, run=run_id, include_unresolved=True)
     assert any(scene in note and "floor_growing" in note for note in ranking.notes)
     assert all(e.frames == 6 for e in ranking.entries) and all(e.frames == 9 for e in kept.entries)
     assert scene in ranking.text()

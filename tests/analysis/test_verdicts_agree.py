@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import pytest
 
 from denoisebench.analysis import accuracy, equal_tables, time_model
-from denoisebench.analysis import summary as analysis
+from denoisebench.analysis.summary import Cell, SummaryRow
 from denoisebench.results.names import NOISY
 
 RUNGS = [1, 2, 4, 8, 16]
@@ -19,10 +19,10 @@ RUNGS = [1, 2, 4, 8, 16]
 def _case(denoise_seconds: float, errors: dict[int, float]):
     noisy = {s: 0.8 / s for s in RUNGS}  # Monte Carlo: error ∝ 1/spp
     rows = [
-        analysis.SummaryRow(
+        SummaryRow(
             denoiser=NOISY,
             spp=s,
-            metrics={"relmse": analysis.Cell(value=e, low=None, high=None, scenes=3)},
+            metrics={"relmse": Cell(value=e, low=None, high=None, scenes=3)},
             denoise_seconds=0.0,
             total_seconds=None,
             render_seconds=None,
@@ -32,10 +32,10 @@ def _case(denoise_seconds: float, errors: dict[int, float]):
         for s, e in noisy.items()
     ]
     rows += [
-        analysis.SummaryRow(
+        SummaryRow(
             denoiser="d",
             spp=s,
-            metrics={"relmse": analysis.Cell(value=e, low=None, high=None, scenes=3)},
+            metrics={"relmse": Cell(value=e, low=None, high=None, scenes=3)},
             denoise_seconds=None,
             total_seconds=None,
             render_seconds=None,

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from denoisebench.analysis import accuracy
-from denoisebench.analysis import summary as analysis
+from denoisebench.analysis.summary import bootstrap_interval, effect_breakdown
 from denoisebench.reports import images
 from denoisebench.results import crops
 from denoisebench.results.names import NOISY
@@ -111,14 +111,14 @@ def test_single_spp_assumes_the_monte_carlo_slope_and_a_flat_curve_gives_no_fit(
 def test_bootstrap_interval_brackets_the_mean_and_needs_two_scenes():
     rng = np.random.default_rng(3)
     values = rng.normal(1.0, 0.2, 12)
-    low, high = analysis.bootstrap_interval(values)
+    low, high = bootstrap_interval(values)
     assert low < values.mean() < high
     # the percentile interval of the mean is about ±1.96·s/√n wide
     half = 1.96 * values.std(ddof=1) / math.sqrt(values.size)
     assert (high - low) / 2 == pytest.approx(half, rel=0.3)
-    assert analysis.bootstrap_interval([0.5]) == (None, None)
-    assert analysis.bootstrap_interval([0.5, 0.5, 0.5]) == (0.5, 0.5)
-    assert analysis.bootstrap_interval([1.0, math.nan, 3.0]) != (None, None)  # NaN dropped, two left
+    assert bootstrap_interval([0.5]) == (None, None)
+    assert bootstrap_interval([0.5, 0.5, 0.5]) == (0.5, 0.5)
+    assert bootstrap_interval([1.0, math.nan, 3.0]) != (None, None)  # NaN dropped, two left
 
 
 def test_worst_windows_find_planted_errors_without_overlap():
@@ -180,7 +180,7 @@ def test_effects_exercised_by_the_same_scenes_are_one_column_and_the_others_stay
         "b": ["environment", "specular", "transmission"],
         "c": ["glossy", "environment"],
     }
-    out = analysis.effect_breakdown(_EffectRun(values), scene_effects)
+    out = effect_breakdown(_EffectRun(values), scene_effects)
     assert out.effects == ["environment", "glossy", "specular + transmission"]
     row = out.table["d"]
     assert row["specular + transmission"] == pytest.approx(math.sqrt(0.5 * 0.2))

@@ -16,13 +16,15 @@ import numpy as np
 import pytest
 
 from denoisebench.analysis import ranking as table
-from denoisebench.analysis import summary as analysis
+from denoisebench.analysis.summary import summary_table
 from denoisebench.benchmark.ray_executor import light_plan, needed_denoisers
 from denoisebench.benchmark.run import run_benchmark
 from denoisebench.benchmark.runner import BenchmarkConfig, LoadedDenoiser, RunPlan, pending_groups
 from denoisebench.benchmark.sampler_units import SamplerPair, register_pairs
 from denoisebench.dataset import open_dataset
 from denoisebench.dataset.synthetic import make_synthetic_dataset
+from denoisebench.reports.leaderboard import leaderboard
+from denoisebench.reports.run_inputs import run_data
 from denoisebench.results.finite import finite_mean, finite_or_none, finite_values, is_finite
 from denoisebench.results.names import NOISY
 from denoisebench.results.records import EntryRow, FrameRecord, FrameRow, UnitRecord, UnitRow
@@ -170,7 +172,7 @@ def test_the_store_returns_typed_rows_read_by_attribute_and_written_to_json_with
     assert list(entries[0].as_dict()) == ["label", "spec", "kind", "needs", "temporal", "load_error", "trained_on"]
     assert {d.label: (d.sampler, d.denoiser_label) for d in entries} == DIMENSION
     with ResultsStore(tmp_path / "r.sqlite", readonly=True) as store:
-        data = analysis.RunData(store, "run1")
+        data = run_data(store, "run1")
     assert {label: (data.entry(label).sampler, data.entry(label).denoiser_label) for label in data.labels} == DIMENSION
     assert data.entry("nope") is None and data.entries == entries
     assert data.frame_rows == frames and data.run == run
@@ -207,11 +209,11 @@ def test_a_version_4_store_reads_and_migrates_to_the_same_sampler_dimension(tmp_
     with ResultsStore(path, readonly=True) as old:
         assert old.version == 4
         assert {d.label: (d.sampler, d.denoiser_label) for d in old.denoisers("run1")} == DIMENSION
-        before = table.leaderboard(old, "relmse", 4).entries
+        before = leaderboard(old, "relmse", 4).entries
     with ResultsStore(path) as migrated:
         assert migrated.version == SCHEMA_VERSION
         assert {d.label: (d.sampler, d.denoiser_label) for d in migrated.denoisers("run1")} == DIMENSION
-        after = table.leaderboard(migrated, "relmse", 4).entries
+        after = leaderboard(migrated, "relmse", 4).entries
     with sqlite3.connect(path) as conn:  # the migration stored the columns
         stored = dict(
             (r[0], (r[1], r[2])) for r in conn.execute("SELECT label, sampler, denoiser_label FROM run_denoisers")
@@ -221,9 +223,9 @@ def test_a_version_4_store_reads_and_migrates_to_the_same_sampler_dimension(tmp_
 
 def test_the_leaderboard_ranks_one_sampler_or_the_stored_inputs_and_groups_by_sampler(tmp_path):
     with _sampler_store(tmp_path / "r.sqlite") as store:
-        every = table.leaderboard(store, "relmse", 4).entries
-        uniform = table.leaderboard(store, "relmse", 4, sampler="uniform").entries
-        stored = table.leaderboard(store, "relmse", 4, sampler="").entries
+        every = leaderboard(store, "relmse", 4).entries
+        uniform = leaderboard(store, "relmse", 4, sampler="uniform").entries
+        stored = leaderboard(store, "relmse", 4, sampler="").entries
     assert [e.denoiser for e in every] == ["uniform+box", "box", "uniform", NOISY]  # planted: 0.1 < 0.2 < 0.6 < 0.8
     assert [(e.denoiser, e.sampler, e.denoiser_label) for e in uniform] == [
         ("uniform+box", "uniform", "box"),
@@ -263,13 +265,13 @@ def measured_run(tmp_path_factory):
 
 def test_the_summary_table_and_the_leaderboard_read_the_same_per_scene_values(measured_run):
     store, run_id = measured_run
-    data = analysis.RunData(store, run_id)
-    summary = {(r.denoiser, r.spp): r for r in analysis.summary_table(data)}
+    data = run_data(store, run_id)
+    summary = {(r.denoiser, r.spp): r for r in summary_table(data)}
     metrics = ["relmse", "ssim", "relmse_robust", "temporal_relmse", "tpsnr"]
     assert set(metrics) <= set(data.frame_metric_names + data.sequence_metric_names)
     for metric in metrics:
         for spp in (1, 4):
-            entries = table.leaderboard(store, metric, spp).entries
+            entries = leaderboard(store, metric, spp).entries
             for e in entries:
                 cell = summary[(e.denoiser, spp)].metrics[metric]
                 assert e.value == pytest.approx(cell.value, rel=1e-12)
