@@ -31,18 +31,30 @@ FLICKER_LABELS = {
 }
 
 
+#: Panels per row of the flicker figure (more spp wrap onto further rows, so panels stay readable).
+FLICKER_COLUMNS = 3
+
+
 def flicker_figure(
     series: dict[str, dict[int, dict[str, list[float | None]]]], palette: dict[str, str]
 ) -> tuple[bytes, str]:
-    """Per-frame flicker (frame t against t−1, mean over scenes): one column per input spp, one row
-    per metric (``series``: {metric: {spp: {denoiser: values of frames 1, 2, ...}}})."""
+    """Per-frame flicker (frame t against t−1, mean over scenes): one panel per metric and input spp,
+    at most :data:`FLICKER_COLUMNS` spp per row (``series``: {metric: {spp: {denoiser: values of
+    frames 1, 2, ...}}}); each metric starts a new row, its name on the y axis of the row's first panel."""
     plt = pyplot()
     metrics = list(series)
     spps = sorted({spp for by_spp in series.values() for spp in by_spp})
-    fig, axes = plt.subplots(len(metrics), len(spps), figsize=(4.6 * len(spps), 3.0 * len(metrics)), squeeze=False)
-    for row, metric in enumerate(metrics):
-        for col, spp in enumerate(spps):
-            ax = axes[row][col]
+    columns = min(FLICKER_COLUMNS, len(spps))
+    per_metric = -(-len(spps) // columns)
+    fig, axes = plt.subplots(
+        len(metrics) * per_metric, columns, figsize=(4.6 * columns, 3.0 * len(metrics) * per_metric), squeeze=False
+    )
+    for ax in axes.flat:
+        ax.set_visible(False)
+    for m, metric in enumerate(metrics):
+        for j, spp in enumerate(spps):
+            ax = axes[m * per_metric + j // columns][j % columns]
+            ax.set_visible(True)
             lines = series[metric].get(spp, {})
             for label, values in lines.items():
                 xs = [i + 1 for i, v in enumerate(values) if v is not None]
@@ -62,11 +74,9 @@ def flicker_figure(
             if metric != "tpsnr" and any(v for values in lines.values() for v in values if v):
                 ax.set_yscale("log")
             ax.grid(True, alpha=0.25)
-            if row == 0:
-                ax.set_title(f"{spp} spp")
-            if row == len(metrics) - 1:
-                ax.set_xlabel("frame (against the one before)")
-            if col == 0:
+            ax.set_title(f"{metric}, {spp} spp", fontsize=9)
+            ax.set_xlabel("frame (against the one before)", fontsize=8)
+            if j % columns == 0:
                 ax.set_ylabel(FLICKER_LABELS.get(metric, metric), fontsize=8)
     handles, labels = [], []
     for ax in axes.flat:
@@ -74,7 +84,8 @@ def flicker_figure(
             if l not in labels:
                 handles.append(h)
                 labels.append(l)
+    rows = len(metrics) * per_metric
     fig.suptitle("temporal flicker per frame (mean over scenes)", fontsize=10)
-    fig.legend(handles, labels, loc="lower center", ncol=min(6, max(1, len(labels))), fontsize=7, frameon=False)
-    fig.tight_layout(rect=(0, 0.06 + 0.03 * (len(labels) // 6), 1, 0.97))
+    fig.legend(handles, labels, loc="lower center", ncol=min(7, max(1, len(labels))), fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0, (0.5 + 0.2 * (len(labels) // 7)) / (3.0 * rows), 1, 1 - 0.3 / (3.0 * rows)))
     return save(fig)
