@@ -30,7 +30,10 @@ not part of the config: --executor ray gives the same bytes as the local executo
 
 --usd FILE copies the stage and the files it depends on into OUT/usd_<stem>/ (those outside its folder, as
 production assets lay them out, under files/ with the stage's paths rewritten, so the copy renders
-anywhere) and renders it along its own camera time samples (--frames does not apply to it).
+anywhere) and renders it along its own time codes: all of them by default (a stage of more than
+300 gets a note saying how many), --time-range START:END a window of them, --frames N that many
+evenly spaced (first and last included); the choice is written into the copy's customLayerData and
+recorded in dataset.json (frame_selection).
 Every --usd file is checked before anything is written: a missing or malformed stage, or one
 without a camera (give --camera PATH or --auto-camera), without a light (--default-light) or with
 nothing renderable, refuses the command (one line, exit 2). --auto-camera's orbit (over --frames
@@ -91,6 +94,7 @@ EPILOG = """examples:
   generate-dataset --out data/tp --scene-list mitsuba_docs --root mitsuba-data --frames 2 --width 64 --height 64
   generate-dataset --out data/tp_usd --scene-list usd_wg_assets --root assets --frames 2 --spp 1,4,16
   generate-dataset --out data/asset --usd asset.usdz --auto-camera --default-light --frames 8 --spp 4
+  generate-dataset --out data/shot --usd shot.usda --time-range 100:400 --frames 12   # 12 of its time codes
   generate-dataset --out data/bitterli --mitsuba staircase/scene_v3.xml --frames 4 --spp 1,4 --ref-spp 1024
   generate-dataset --out data/docs --mitsuba mitsuba-data/docs/scenes/sensor_thinlens.xml --frames 1
   generate-dataset --out data/ortho --mitsuba mitsuba-data/docs/scenes/sensor_orthographic.xml \\
@@ -138,7 +142,20 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--scenes", type=int, default=1, help="scenes per family, seeds --seed, --seed+1, ... (default 1)"
     )
-    parser.add_argument("--frames", type=int, default=8, help="frames per family scene (default 8)")
+    parser.add_argument(
+        "--frames",
+        type=int,
+        default=None,
+        help="frames per family scene (default 8); for a --usd stage with its own time codes, how many of them "
+        "to render, evenly spaced (default: all), and for --auto-camera without them the orbit's length",
+    )
+    parser.add_argument(
+        "--time-range",
+        default=None,
+        metavar="START:END",
+        help="render only a --usd stage's time codes from START to END (inclusive; with --frames N: N of "
+        "them evenly spaced); recorded in dataset.json",
+    )
     parser.add_argument("--width", type=int, default=128, help="image width in pixels (default 128)")
     parser.add_argument("--height", type=int, default=128, help="image height in pixels (default 128)")
     parser.add_argument("--spp", default="1,4,16", help="noisy sample counts, comma-separated (default 1,4,16)")
@@ -295,7 +312,9 @@ def _request(args, listed: dict):
         out=Path(args.out),
         families=_families(args.families, bool(usd or xml)),
         scenes=args.scenes,
-        frames=args.frames,
+        frames=8 if args.frames is None else args.frames,
+        time_range=_time_range(args.time_range),
+        stage_frames=args.frames if args.usd and args.frames is not None else None,
         width=args.width,
         height=args.height,
         spp=_int_list(args.spp),
@@ -314,6 +333,20 @@ def _request(args, listed: dict):
         search_paths=tuple(args.mitsuba_path),
         force=args.force,
     )
+
+
+def _time_range(text: str | None) -> tuple[float, float] | None:
+    """``"START:END"`` -> (start, end), start <= end; None for None."""
+    if text is None:
+        return None
+    start, sep, end = text.partition(":")
+    try:
+        values = (float(start), float(end)) if sep else None
+    except ValueError:
+        values = None
+    if values is None or not all(v == v and abs(v) != float("inf") for v in values) or values[0] > values[1]:
+        raise UserInputError(f"--time-range wants START:END with START <= END, e.g. 0:120 (got {text!r})")
+    return values
 
 
 def _first_names(names: list, shown: int = 12) -> str:

@@ -92,6 +92,9 @@ class GenerateRequest:
     # --mitsuba-path DIR: more folders to find the --mitsuba scenes' files in. Not in the config: the copies
     # hold every file they need, and a machine's folders must not change the config hash.
     search_paths: tuple[str, ...] = ()
+    # --time-range START:END and an explicit --frames: which of a --usd stage's own time codes to render
+    time_range: tuple[float, float] | None = None
+    stage_frames: int | None = None
 
     def define_dict(self) -> dict[str, str]:
         """The --define parameters as a dict (later ones win, as on Mitsuba's command line)."""
@@ -99,7 +102,14 @@ class GenerateRequest:
 
     def stage_options(self) -> dict:
         """What is written into every copied --usd stage (dataset_scenes.stage_options)."""
-        return scenes_mod.stage_options(self.camera, self.auto_camera, self.default_light, self.frames)
+        return scenes_mod.stage_options(
+            self.camera,
+            self.auto_camera,
+            self.default_light,
+            self.frames,
+            time_range=self.time_range,
+            stage_frames=self.stage_frames,
+        )
 
 
 @dataclass
@@ -151,6 +161,8 @@ def check_request(request: GenerateRequest) -> None:
             check_max_depth(request.max_depth, "--max-depth")
         except ValueError as error:
             raise UserInputError(str(error)) from None
+    if request.time_range is not None and not request.usd:
+        raise UserInputError("--time-range chooses among a --usd stage's time codes; give --usd")
 
 
 def validate_request(request: GenerateRequest) -> None:
@@ -252,6 +264,9 @@ def dataset_config(request: GenerateRequest) -> dict:
             else {}
         ),
         **({"defines": dict(sorted(request.define_dict().items()))} if request.defines else {}),
+        # which of the --usd stages' own time codes are rendered (keys only when asked for: older hashes hold)
+        **({"time_range": list(request.time_range)} if request.usd and request.time_range else {}),
+        **({"stage_frames": request.stage_frames} if request.usd and request.stage_frames is not None else {}),
         **(
             {
                 STAGE_OPTIONS_KEY: {
@@ -353,7 +368,15 @@ def _scene_record(spec: SceneSpec, translated, request: GenerateRequest, plan) -
         },
         # Paths inside OUT are made relative so that the manifest does not depend on where OUT is.
         "warnings": [w.replace(prefix, f"{spec.name}/") for w in translated.warnings],
+        **({"frame_selection": selection} if (selection := _selection(spec)) else {}),
     }
+
+
+def _selection(spec: SceneSpec) -> dict | None:
+    """The time codes a user stage's copy renders of its own (--frames, --time-range), or None."""
+    if spec.family != "usd":
+        return None
+    return scenes_mod.frame_selection(spec.usd_path)
 
 
 def _prepare_scenes(request: GenerateRequest, writer: DatasetWriter, user_names: list[str]) -> list[SceneSpec]:
@@ -440,6 +463,13 @@ def generate_dataset(request: GenerateRequest, executor, progress: bool = True, 
                 request.independent_rungs,
             )
         )
+    for spec in specs:
+        record = writer.manifest["scenes"][spec.name]
+        if spec.family == "usd" and "frame_selection" not in record and record["frames"] > scenes_mod.LONG_STAGE_FRAMES:
+            log(
+                f"note: {spec.name} renders all {record['frames']} time codes of its stage; --frames N takes N of "
+                "them evenly, --time-range START:END a window"
+            )
     summary = GenerateSummary(out=Path(request.out), scenes=len(specs))
     total_frames = sum(writer.manifest["scenes"][s.name]["frames"] for s in specs)
     summary.skipped = total_frames - len(jobs)

@@ -55,6 +55,7 @@ from denoisebench.errors import UserInputError
 from denoisebench.generator.mitsuba_xml import load_mitsuba_xml
 from denoisebench.generator.mitsuba_xml_structure import XML_NAME, portable_files
 from denoisebench.generator.usd.materialx import document_files
+from denoisebench.generator.usd.stage import FRAME_TIMES_KEY, own_time_codes
 from denoisebench.generator.usd.translate import apply_additions, translate_usd
 from denoisebench.scenes.effects import METADATA_KEY
 
@@ -68,15 +69,63 @@ FILES_DIR = "files"
 
 
 def stage_options(
-    camera: str | None = None, auto_camera: bool = False, default_light: bool = False, frames: int = 8
+    camera: str | None = None,
+    auto_camera: bool = False,
+    default_light: bool = False,
+    frames: int = 8,
+    *,
+    time_range: tuple[float, float] | None = None,
+    stage_frames: int | None = None,
 ) -> dict:
-    """The keywords of ``translate_usd`` that ``generate`` applies to every ``--usd`` stage."""
-    return {
+    """What ``generate`` applies to every ``--usd`` stage: the keywords of ``translate_usd``, and
+    (only when given) the choice among the stage's own time codes (:data:`SELECTION_KEYS`,
+    :func:`select_frame_times`)."""
+    options = {
         "camera_path": camera,
         "auto_camera": bool(auto_camera),
         "default_light": bool(default_light),
         "frames": int(frames),
     }
+    if time_range is not None:
+        options["time_range"] = (float(time_range[0]), float(time_range[1]))
+    if stage_frames is not None:
+        options["stage_frames"] = int(stage_frames)
+    return options
+
+
+#: stage_options keys that choose among a stage's own time codes (not ``translate_usd`` keywords).
+SELECTION_KEYS = ("time_range", "stage_frames")
+#: A stage with more time codes than this, rendered whole, gets a note (``--frames``, ``--time-range``).
+LONG_STAGE_FRAMES = 300
+
+
+def select_frame_times(
+    times: list[float], stage_frames: int | None = None, time_range: tuple[float, float] | None = None
+) -> list[float]:
+    """The time codes to render of a stage's own ``times``: those within ``time_range`` (inclusive),
+    then ``stage_frames`` of them evenly spaced, first and last included (all where there are no more).
+
+    UserInputError where the window holds none of them.
+    """
+    chosen = list(times)
+    if time_range is not None:
+        start, end = time_range
+        chosen = [t for t in chosen if start <= t <= end]
+        if not chosen:
+            raise UserInputError(
+                f"--time-range {start:g}:{end:g} holds none of the stage's time codes "
+                f"({times[0]:g}..{times[-1]:g}, {len(times)} of them)"
+            )
+    if stage_frames is not None and len(chosen) > stage_frames:
+        if stage_frames == 1:
+            return [chosen[0]]
+        step = (len(chosen) - 1) / (stage_frames - 1)
+        chosen = [chosen[round(k * step)] for k in range(stage_frames)]
+    return chosen
+
+
+def _translate_keywords(options: dict | None) -> dict:
+    return {k: v for k, v in (options or {}).items() if k not in SELECTION_KEYS}
 
 
 @dataclass(frozen=True)
@@ -314,7 +363,7 @@ def copy_user_stage(path: str | Path, scene_dir: Path, options: dict | None = No
             atomic_write_bytes(scene_dir / relative, data)
         dependencies_out = tuple(relative for _, relative in dependencies)
     atomic_write_bytes(scene_dir / layout.SCENE_USD, text.encode("utf-8"))
-    if options and (options.get("camera_path") or options.get("auto_camera") or options.get("default_light")):
+    if options and any(options.get(k) for k in ("camera_path", "auto_camera", "default_light", *SELECTION_KEYS)):
         atomic_write_bytes(
             scene_dir / layout.SCENE_USD, _with_additions(scene_dir / layout.SCENE_USD, options).encode("utf-8")
         )
@@ -325,7 +374,7 @@ def copy_user_stage(path: str | Path, scene_dir: Path, options: dict | None = No
 
 def _with_additions(stage_path: Path, options: dict) -> str:
     """The copied root layer's text with the camera choice, auto camera and default lights authored into it."""
-    from pxr import Sdf, Usd, UsdUtils
+    from pxr import Sdf, Usd, UsdUtils, Vt
 
     cached = Sdf.Layer.Find(str(stage_path))
     if cached is not None:
@@ -344,13 +393,51 @@ def _with_additions(stage_path: Path, options: dict) -> str:
         bool(options.get("default_light")),
         int(options.get("frames", 8)),
     )
+    data = dict(layer.customLayerData)
+    meta = dict(data.get(METADATA_KEY, {}) or {})
     if camera:
-        data = dict(layer.customLayerData)
-        meta = dict(data.get(METADATA_KEY, {}) or {})
         meta["camera"] = camera
+    if any(options.get(k) is not None for k in SELECTION_KEYS):
+        own = own_time_codes(stage)
+        chosen = select_frame_times(own, options.get("stage_frames"), options.get("time_range"))
+        if chosen != own:  # recorded in the copy (the dataset's stage is what was rendered) and the manifest
+            meta[FRAME_TIMES_KEY] = Vt.DoubleArray(chosen)  # typed: USD stores no mixed lists
+            record = {"stageFirst": float(own[0]), "stageLast": float(own[-1]), "stageCount": len(own)}
+            if options.get("time_range"):
+                record["timeRange"] = Vt.DoubleArray(list(options["time_range"]))
+            if options.get("stage_frames"):
+                record["frames"] = int(options["stage_frames"])
+            meta[SELECTION_RECORD_KEY] = record
+    if meta:
         data[METADATA_KEY] = meta
         layer.customLayerData = data
     return layer.ExportToString()
+
+
+#: Key of the record of a time-code choice in the copy's denoisebench metadata (also in the manifest).
+SELECTION_RECORD_KEY = "frameSelection"
+
+
+def frame_selection(stage_path: str | Path) -> dict | None:
+    """The time codes a dataset's copy of a user stage renders of its own, and why
+    (``{"stage_time_codes": [first, last, count], "time_range": ..., "frames": ..., "times": [...]}``),
+    or None where it renders them all."""
+    from pxr import Sdf
+
+    layer = Sdf.Layer.FindOrOpen(str(stage_path))
+    meta = (dict(layer.customLayerData).get(METADATA_KEY, {}) or {}) if layer is not None else {}
+    if meta.get(FRAME_TIMES_KEY) is None or not len(meta[FRAME_TIMES_KEY]):
+        return None
+    record = dict(meta.get(SELECTION_RECORD_KEY, {}) or {})
+    selection = {
+        "stage_time_codes": [float(record.get("stageFirst", 0.0)), float(record.get("stageLast", 0.0))],
+        "stage_frames": int(record.get("stageCount", 0)),
+    }
+    if "timeRange" in record:
+        selection["time_range"] = [float(t) for t in record["timeRange"]]
+    if "frames" in record:
+        selection["frames"] = int(record["frames"])
+    return {**selection, "times": [float(t) for t in meta[FRAME_TIMES_KEY]]}
 
 
 def check_user_stage(path: str | Path, options: dict | None = None):
@@ -365,9 +452,21 @@ def check_user_stage(path: str | Path, options: dict | None = None):
         raise UserInputError(f"{path}: no such USD file")
     if path.suffix.lower() not in USD_SUFFIXES:
         raise UserInputError(f"{path}: expected a {'/'.join(USD_SUFFIXES)} file")
-    translated = translate_usd(path, **(options or {}), strict=True)
+    translated = translate_usd(path, **_translate_keywords(options), strict=True)
     user_stage_dependencies(path)
+    if options and any(options.get(k) is not None for k in SELECTION_KEYS):
+        select_frame_times(stage_time_codes(path), options.get("stage_frames"), options.get("time_range"))
     return translated
+
+
+def stage_time_codes(path: str | Path) -> list[float]:
+    """The stage's own time codes (:func:`~denoisebench.generator.usd.stage.own_time_codes`)."""
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(path))
+    if stage is None:
+        raise UserInputError(f"{path}: cannot open USD stage")
+    return own_time_codes(stage)
 
 
 # --------------------------------------------------------------------------- Mitsuba XML scenes

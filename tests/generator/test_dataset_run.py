@@ -58,3 +58,62 @@ def test_an_empty_folder_is_not_foreign(tmp_path):
     out = tmp_path / "empty"
     out.mkdir()
     assert main(["generate", "--out", str(out), *TINY]) == 0
+
+
+def _animated_stage(folder, last: int):
+    """The plain box with its camera dollying in over time codes 0..last (24 per second)."""
+    from pxr import Usd, UsdGeom
+
+    from tests.support.plain_stages import author_plain_box
+
+    path = author_plain_box(folder / "shot.usda")
+    stage = Usd.Stage.Open(str(path))
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(last)
+    stage.SetTimeCodesPerSecond(24)
+    (op,) = UsdGeom.Xformable(stage.GetPrimAtPath("/Camera")).GetOrderedXformOps()
+    op.GetAttr().Clear()
+    for t in (0, last):
+        op.Set((0.0, 0.0, 3.4 - 0.5 * t / last), t)
+    stage.GetRootLayer().Save()
+    return path
+
+
+USD_TINY = ["--width", "8", "--height", "8", "--spp", "1", "--ref-spp", "4", "--ref-error", "0", "--quiet"]
+
+
+def test_frames_takes_an_even_subsample_of_a_stages_own_time_codes(tmp_path):
+    from denoisebench.dataset import open_dataset
+
+    stage = _animated_stage(tmp_path / "src", last=99)
+    out = tmp_path / "ds"
+    assert main(["generate", "--out", str(out), "--usd", str(stage), "--frames", "3", *USD_TINY]) == 0
+    info = open_dataset(out).scene("usd_shot")
+    assert info.frame_count == 3
+    selection = info.record["frame_selection"]
+    expected = {"stage_time_codes": [0.0, 99.0], "stage_frames": 100, "frames": 3, "times": [0.0, 50.0, 99.0]}
+    assert selection == expected
+    assert open_dataset(out).config["stage_frames"] == 3
+    poses = [open_dataset(out).record("usd_shot", 1, k)["camera_pose"] for k in range(3)]
+    assert [round(pose[2][3], 4) for pose in poses] == [round(3.4 - 0.5 * t / 99, 4) for t in (0, 50, 99)]
+    # a window, then 3 of its 11 codes
+    windowed = tmp_path / "window"
+    argv = ["generate", "--out", str(windowed), "--usd", str(stage), "--time-range", "10:20", "--frames", "3"]
+    assert main([*argv, *USD_TINY]) == 0
+    assert open_dataset(windowed).scene("usd_shot").record["frame_selection"]["times"] == [10.0, 15.0, 20.0]
+
+
+def test_a_window_outside_the_stage_and_a_long_stage(tmp_path, capsys, monkeypatch):
+    from denoisebench.generator import dataset_scenes
+
+    stage = _animated_stage(tmp_path / "src", last=2)
+    out = tmp_path / "ds"
+    assert main(["generate", "--out", str(out), "--usd", str(stage), "--time-range", "50:60", *USD_TINY]) == 2
+    assert "holds none of the stage's time codes" in capsys.readouterr().err and not out.exists()
+    monkeypatch.setattr(dataset_scenes, "LONG_STAGE_FRAMES", 2)  # 3 time codes count as long here
+    assert main(["generate", "--out", str(out), "--usd", str(stage), *USD_TINY]) == 0
+    notes = [line for line in capsys.readouterr().err.splitlines() if line.startswith("note:")]
+    assert notes == [
+        "note: usd_shot renders all 3 time codes of its stage; --frames N takes N of them evenly, "
+        "--time-range START:END a window"
+    ]

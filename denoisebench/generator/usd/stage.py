@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from denoisebench.errors import UserInputError
+from denoisebench.scenes.effects import METADATA_KEY
 
 # Lazy imports: pxr, inside the functions that use it (generator/usd/__init__.py says why).
 
@@ -69,8 +70,25 @@ def stage_meters_per_unit(stage) -> float:
     return float(UsdGeom.GetStageMetersPerUnit(stage))
 
 
+#: Key under the root layer's ``customLayerData["denoisebench"]`` of the time codes to render, where
+#: generate-dataset chose some of the stage's own (``--frames``, ``--time-range``).
+FRAME_TIMES_KEY = "frameTimes"
+
+
 def frame_range(stage) -> list[float]:
-    """The frame times of the sequence: integer time codes from start to end (at least one)."""
+    """The frame times of the sequence: the time codes the dataset's copy lists (``frameTimes`` in
+    its denoisebench metadata), else :func:`own_time_codes`."""
+    chosen = (stage.GetRootLayer().customLayerData.get(METADATA_KEY, {}) or {}).get(FRAME_TIMES_KEY)
+    if chosen is not None and len(chosen):
+        times = [float(t) for t in chosen]
+        if all(math.isfinite(t) for t in times) and times == sorted(set(times)):
+            return times
+        raise UserInputError(f"denoisebench {FRAME_TIMES_KEY} must be increasing finite time codes, got {chosen!r}")
+    return own_time_codes(stage)
+
+
+def own_time_codes(stage) -> list[float]:
+    """The stage's own sequence: integer time codes from start to end (at least one)."""
     if stage.HasAuthoredTimeCodeRange():
         start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
         if math.isfinite(start) and math.isfinite(end) and end >= start:
