@@ -293,7 +293,7 @@ def build_report(
     if any(p.points for p in panels):
         figure_files["accuracy_time"] = figures_accuracy.accuracy_time_figure(panels, palette)
     # the first screen, identical denoisers and where each denoiser wins per scene (lead metric)
-    parts = screen_parts.screen_parts(store, data, panels, metric=lead[0] if lead else None)
+    parts = screen_parts.screen_parts(store, data, panels, metric=lead[0] if lead else None, summary=summary)
     if parts.scenes_figure is not None:
         figure_files["scenes"] = parts.scenes_figure
     flicker = _flicker(data)

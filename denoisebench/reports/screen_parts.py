@@ -8,11 +8,12 @@ screen (:mod:`.summary_screen`) and the small multiples (:mod:`.figures_scenes`)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from denoisebench.reports import figures_scenes, identical, summary_screen
+from denoisebench.results.names import NOISY
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -62,8 +63,35 @@ def scene_values(data, metric: str) -> dict[str, dict[int, dict[str, float]]]:
     return out
 
 
-def screen_parts(store, data, panels: list, *, metric: str | None) -> ScreenParts:
-    """The parts for lead ``metric`` (None or no panel of it: no first screen and no figure)."""
+def _cell_deciding(summary, label: str, spp: int | None, metric: str) -> list[str] | None:
+    """The deciding scenes the aggregate named for (label, spp, metric) (a summary cell's
+    ``deciding_scenes``: (scene, share) pairs), or None when the cell has none to give."""
+    for row in summary or ():
+        if row.denoiser == label and row.spp == spp:
+            found = getattr(row.metrics.get(metric), "deciding_scenes", None)
+            return None if found is None else [scene for scene, _ in found]
+    return None
+
+
+def _named_by_cells(screen, summary, metric: str):
+    """``screen`` with each row's and the noisy input's deciding scenes as the aggregate's cells name
+    them, where they do (one rule with results.json's ``deciding_scenes``)."""
+    rows = []
+    for row in screen.rows:
+        found = _cell_deciding(summary, row.denoiser.split(" = ")[0], row.best_spp, metric)
+        rows.append(row if found is None else replace(row, deciding_scenes=found))
+    noisy = dict(screen.noisy_deciding)
+    for spp in {r.spp for r in summary or () if r.denoiser == NOISY}:
+        found = _cell_deciding(summary, NOISY, spp, metric)
+        if found is not None:
+            noisy[spp] = found
+    return replace(screen, rows=rows, noisy_deciding={s: n for s, n in sorted(noisy.items()) if n})
+
+
+def screen_parts(store, data, panels: list, *, metric: str | None, summary=None) -> ScreenParts:
+    """The parts for lead ``metric`` (None or no panel of it: no first screen and no figure);
+    ``summary``: the report's summary rows, whose cells name the deciding scenes where they do
+    (else the first screen finds them from the per-scene values, by the same rule)."""
     groups = identical.identical_groups(
         data.frame_rows,
         data.sequence_rows,
@@ -74,7 +102,7 @@ def screen_parts(store, data, panels: list, *, metric: str | None) -> ScreenPart
     if metric is None or panel is None:
         return ScreenParts(first_screen=None, identical=groups, scenes_figure=None)
     values = scene_values(data, metric)
-    screen = summary_screen.first_screen(panel, values, groups)
+    screen = _named_by_cells(summary_screen.first_screen(panel, values, groups), summary, metric)
     grids = []
     for scene in data.scenes:
         by_label = {

@@ -139,3 +139,24 @@ def test_first_screen_gives_identical_denoisers_one_row():
     screen = summary_screen.first_screen(at, {}, [group])
     assert [r.denoiser for r in screen.rows] == ["oidn = oidn_balanced"]
     assert any("same weights" in line for line in summary_screen.screen_lines(screen))
+
+
+def test_deciding_scenes_come_from_the_aggregates_cells_where_they_name_them():
+    from denoisebench.reports.screen_parts import _named_by_cells
+
+    at = _at([Point(denoiser="a", spp=1, seconds=4.0, error=0.05), Point(denoiser="b", spp=1, seconds=4.0, error=0.06)])
+    # per-scene values say x decides a's mean; the aggregate's cell (corrected values) says y
+    screen = summary_screen.first_screen(at, {"a": {1: {"x": 0.9, "y": 0.05, "z": 0.05}}})
+    cell = SimpleNamespace(deciding_scenes=[("y", 0.7)])
+    summary = [
+        SimpleNamespace(denoiser="a", spp=1, metrics={"relmse_robust": cell}),
+        SimpleNamespace(denoiser="b", spp=1, metrics={"relmse_robust": SimpleNamespace()}),  # names none
+        SimpleNamespace(
+            denoiser="noisy", spp=1, metrics={"relmse_robust": SimpleNamespace(deciding_scenes=[("z", 0.6)])}
+        ),
+    ]
+    named = _named_by_cells(screen, summary, "relmse_robust")
+    rows = {r.denoiser: r for r in named.rows}
+    assert rows["a"].deciding_scenes == ["y"] and rows["b"].deciding_scenes == []
+    assert named.noisy_deciding == {1: ["z"]}
+    assert _named_by_cells(screen, None, "relmse_robust") == screen
