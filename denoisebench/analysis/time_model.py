@@ -1,8 +1,8 @@
 """Times that hold where users render: fixed and per-pixel cost of rendering and of each denoiser.
 
-A benchmark's frames are small (the demo's are 80×80 = 6400 pixels); at that size most of a
+A benchmark's frames are small (the demo's are 64×64 = 4096 pixels); at that size most of a
 frame's seconds grow with neither pixels nor samples (kernel launches, a network's set-up, Python
-calls). Scaling such a time by the pixel ratio to 1920×1080 charges that overhead 324 times. This
+calls). Scaling such a time by the pixel ratio to 1920×1080 charges that overhead 506 times. This
 module separates the costs from measurements and projects them to the resolution a report states
 (``run-benchmark --time-at WxH``, default 1920×1080):
 
@@ -18,13 +18,20 @@ module separates the costs from measurements and projects them to the resolution
   and per-pixel work, so a change with spp measured only at ``P₀`` cannot be split; read through one
   line it made cross_bilateral's 1080p time at 2–16 spp its 3 ms fixed cost (0.8 s measured:
   its 1-spp frames estimate their own variance per pixel, 6 ms at 64×64 against 2.5 ms).
-* **Rendering**: ``seconds(P, s) = a(P) + b(P) · s``, a line through the stored render seconds of
-  the ladder's rungs (seconds against spp; with nested rungs, the progressive time to reach each)
-  at ``P₀``. ``b`` (per sample) is a per-pixel-sample cost: each sample is one camera path through
-  one pixel, so it is scaled by ``P / P₀``. The offset ``a`` is split into fixed and per-pixel parts
-  by **one timed render of the dataset's own stage** (its first scene, frame 0, at ``--time-size``
-  and spp 1 and 4, :func:`probe_render`); without that render (``--no-render-probe``, or it failed)
-  the offset is held fixed (not scaled), which the report says.
+* **Rendering**: ``seconds(P, s) = a(P) + b(P) · s``, one line per **buffer set** a render makes
+  (:class:`RenderCost`): rendering more samples without a denoiser makes colour only (with its
+  diffuse/specular split, :data:`~denoisebench.results.timings.COLOUR_ONLY`), a denoiser's input makes
+  the buffers it reads (``benchmark.timing.render_buffers``). Each line comes from **timed renders of
+  the dataset's own stage** (its first scene, frame 0, spp 1 and 4) made with that set, at the
+  dataset's size and at the timing size (``benchmark.timing.probe_render``): ``b`` (per sample) and the
+  offset ``a`` are each split into fixed and per-pixel parts through the two sizes. The noisy input's
+  "render more" curve, and every budget of the equal-time and equal-quality tables, is the colour-only
+  line; a denoiser's point is its own set's line plus its denoise seconds (:meth:`TimeModel.render_line`).
+  Without those renders (``--no-render-probe``, ``--time-size none``, or the probe failed) there is one
+  line, through the stored render seconds of the ladder's rungs (with nested rungs, the progressive time
+  to reach each) at ``P₀``: what the dataset rendered, every buffer it holds, charged to rendering alone
+  and to every denoiser alike; its per-sample cost is scaled with pixels (each sample is one camera path
+  through one pixel) and its offset held fixed, which the report says.
 
 Notes
 -----
@@ -32,9 +39,13 @@ Notes
   projection and is marked so; within ``P₀ … P₁`` (the two measured sizes) it is interpolated,
   beyond ``P₁`` extrapolated along the measured line. Without a second size (``--time-size none``)
   nothing is projected: the report's time axis stays at the dataset's resolution and says why.
-* **What cancels.** Rendering's offset is paid by "render s spp" and "render s′ spp, then denoise"
-  alike, so comparisons of the two (the equal-time table's verdicts) depend on ``b`` and the
-  denoiser's time, not on how the offset is split; ratios of seconds do depend on it.
+* **What cancels, and what does not.** Where both are charged the same line, rendering's offset is
+  paid by "render s spp" and "render s′ spp, then denoise" alike, and comparisons of the two depend on
+  ``b`` and the denoiser's time, not on how the offset is split. With a line per buffer set they differ
+  by what the denoiser's buffers add: charged to the denoiser, never to rendering alone (measured on the
+  renderer at 1 MP and 1 spp: features and variances cost about 3× a colour-only render, docs/time.md).
+  Pitfall: a line fitted through the dataset's frames charges rendering alone for buffers it never
+  needs, which pulls every time ratio toward 1.
 * **Time budget.** A denoiser whose proportional estimate at the timing size exceeds
   ``budget`` seconds is timed at the largest size that fits (at least 4 × ``P₀``), or not at all;
   the record says which size was used. The timing call is made after ``reset()`` and followed by
@@ -65,7 +76,7 @@ import numpy as np
 from denoisebench.errors import UserInputError
 from denoisebench.results.finite import is_finite
 from denoisebench.results.names import NOISY
-from denoisebench.results.timings import MIN_SPREAD, PROBE_REPEATS, TIMING_REPEATS, machine
+from denoisebench.results.timings import COLOUR_ONLY, MIN_SPREAD, PROBE_REPEATS, TIMING_REPEATS, machine
 
 #: The resolution a report's time axis is for unless ``--time-at`` says otherwise.
 DEFAULT_TIME_AT = (1920, 1080)
@@ -173,7 +184,10 @@ class HighestSppTiming:
 
 @dataclass(kw_only=True)
 class RenderCost:
-    """Render seconds per frame ``a(P) + b(P) · spp`` from the ladder at ``pixels0`` (and a probe)."""
+    """Render seconds per frame ``a(P) + b(P) · spp`` of one buffer set, from renders at ``pixels0`` (the
+    probe's at the dataset's size, or the ladder's own) and at the probe's larger size.
+
+    ``buffers``: the buffer set the line renders (empty: the dataset's own renders, whatever they held)."""
 
     pixels0: int
     offset0: float
@@ -182,6 +196,7 @@ class RenderCost:
     probe: dict | None = None  # {"pixels", "offset", "per_spp", "scene"}: the timed larger render
     note: str = ""
     spread: float = MIN_SPREAD  # median / minimum of the probe's renders (≥ MIN_SPREAD)
+    buffers: tuple[str, ...] = ()
 
     def _linear(self, pixels: int, at0: float, at1: float | None) -> float:
         """A cost measured at pixels0 (``at0``) and at the probe's size (``at1``), as fixed + per-pixel."""
@@ -206,12 +221,44 @@ class RenderCost:
 
     @property
     def per_megapixel_per_spp(self) -> float:
+        """Seconds per spp of a 1-megapixel frame (its fixed part included)."""
         return self.per_spp(1_000_000)
+
+    @property
+    def fixed(self) -> float:
+        """Seconds per frame that grow with neither pixels nor spp (the offset's fixed part)."""
+        return self.offset(0)
+
+    @property
+    def offset_per_megapixel(self) -> float:
+        """Seconds per megapixel of the offset (per frame, not per spp); 0 without a probe (held fixed)."""
+        return self.offset(1_000_000) - self.offset(0)
+
+    def as_dict(self, pixels: int) -> dict:
+        """The line as results.json lists it; ``pixels``: the time axis' resolution."""
+        return {
+            "buffers": list(self.buffers),
+            "fixed_s": self.fixed,
+            "seconds_per_megapixel": self.offset_per_megapixel,
+            "seconds_per_megapixel_per_spp": self.per_megapixel_per_spp,
+            "offset_s": self.offset(pixels),
+            "seconds_per_spp": self.per_spp(pixels),
+            "offset_s_at_dataset_size": self.offset0,
+            "seconds_per_spp_at_dataset_size": self.per_spp0,
+            "measured_spp": self.measured_spp,
+            "probe": self.probe,
+            "note": self.note,
+            "spread": self.spread,
+        }
 
 
 @dataclass(kw_only=True)
 class TimeModel:
-    """What a report's time axis rests on: the resolution, the machine and every cost."""
+    """What a report's time axis rests on: the resolution, the machine and every cost.
+
+    ``render`` is the line rendering alone pays (colour only when it was timed); ``lines`` holds every render
+    line by its buffer set (``render`` among them) and ``charged`` each denoiser's set: its points are charged
+    that line (:meth:`render_line`). ``timed_size``: the second size things were timed at (None: none)."""
 
     time_at: tuple[int, int]
     pixels0: int
@@ -221,13 +268,26 @@ class TimeModel:
     machine: dict = field(default_factory=dict)
     projected: bool = False  # times are at another resolution than the dataset's
     notes: list[str] = field(default_factory=list)
+    lines: dict[tuple[str, ...], RenderCost] = field(default_factory=dict)
+    charged: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    timed_size: tuple[int, int] | None = None
 
     @property
     def pixels(self) -> int:
         return self.time_at[0] * self.time_at[1]
 
-    def render_seconds(self, spp: float) -> float | None:
-        return None if self.render is None else self.render.seconds(self.pixels, spp)
+    def render_line(self, label: str = NOISY) -> RenderCost | None:
+        """The render line ``label``'s points are charged: rendering alone's for the noisy input (and for a
+        denoiser without a line of its own), else the line of the buffers it reads."""
+        if label == NOISY or label not in self.charged:
+            return self.render
+        return self.lines.get(self.charged[label], self.render)
+
+    def render_seconds(self, spp: float, label: str = NOISY) -> float | None:
+        """Seconds per frame of rendering ``spp`` samples with the buffers ``label`` reads (default: rendering
+        alone, colour only) at the time axis' resolution."""
+        line = self.render_line(label)
+        return None if line is None else line.seconds(self.pixels, spp)
 
     def denoise_seconds(self, label: str, spp: float) -> float | None:
         """Seconds per frame of ``label`` at the time axis' resolution (0 for the noisy input)."""
@@ -237,36 +297,52 @@ class TimeModel:
         return None if cost is None else cost.seconds(self.pixels, spp)
 
     def total_seconds(self, label: str, spp: float) -> float | None:
-        render, denoise = self.render_seconds(spp), self.denoise_seconds(label, spp)
+        """Render (``label``'s buffer set) + denoise seconds per frame at ``spp``."""
+        render, denoise = self.render_seconds(spp, label), self.denoise_seconds(label, spp)
         return None if render is None or denoise is None else render + denoise
 
     def ratio_bounds(self, label: str, spp: float, render_spp: float) -> tuple[float, float] | None:
         """(least, largest) plausible ratio of ``label``'s time at ``spp`` (render + denoise) to rendering
         ``render_spp`` alone, across the measured spreads (module Notes).
 
-        The render part of both sides moves together (one renderer, one machine): the least ratio has
-        rendering at its slowest and the denoiser at its fastest, the largest the other way round."""
+        The render part of both sides moves together (one renderer, one machine; its lines timed in the same
+        interleaved rounds) with the larger of the two lines' spreads: the least ratio has rendering at its
+        slowest and the denoiser at its fastest, the largest the other way round."""
         denoise = self.denoise_seconds(label, spp)
-        mine, alone = self.render_seconds(spp), self.render_seconds(render_spp)
+        mine, alone = self.render_seconds(spp, label), self.render_seconds(render_spp)
         if denoise is None or mine is None or not alone:
             return None
-        render_spread = self.render.spread if self.render is not None else MIN_SPREAD
+        lines = [line for line in (self.render, self.render_line(label)) if line is not None]
+        render_spread = max((line.spread for line in lines), default=MIN_SPREAD)
         cost = self.denoisers.get(label)
         denoise_spread = cost.spread if cost is not None else 1.0
         low = (render_spread * mine + denoise) / (render_spread * alone)
         high = (mine + denoise_spread * denoise) / alone
         return min(low, high), max(low, high)
 
+    def payers(self) -> dict[tuple[str, ...], list[str]]:
+        """{buffer set: the labels charged its line}, rendering alone (the noisy input) first on its line."""
+        out: dict[tuple[str, ...], list[str]] = {key: [] for key in self.lines}
+        if self.render is not None:
+            out.setdefault(self.render.buffers, []).append(NOISY)
+        for label in self.denoisers:
+            line = self.render_line(label)
+            if line is not None:
+                out.setdefault(line.buffers, []).append(label)
+        return out
+
     def measurement_text(self) -> str:
         """How the times were measured and how noisy they were, in one sentence for a report."""
         parts = []
         if self.render is not None:
+            spreads = [line.spread for line in self.lines.values()] or [self.render.spread]
             how = (
                 f"rendering: least of {self.render.probe.get('repeats', PROBE_REPEATS)} interleaved renders per point"
+                f" for each of {len(self.lines)} buffer set(s)"
                 if self.render.probe
                 else "rendering: the dataset's own render seconds"
             )
-            parts.append(f"{how}, spread ×{self.render.spread:.2f}")
+            parts.append(f"{how}, spread ×{min(spreads):.2f}–×{max(spreads):.2f}")
         if self.denoisers:
             spreads = [c.spread for c in self.denoisers.values()]
             parts.append(
@@ -288,27 +364,20 @@ class TimeModel:
         return self.projected and (not sizes or self.pixels > max(sizes))
 
     def as_dict(self) -> dict:
+        payers = self.payers()
         return {
             "time_at": list(self.time_at),
             "dataset_size": list(self.dataset_size),
+            "timed_size": None if self.timed_size is None else list(self.timed_size),
             "projected": self.projected,
             "beyond_timed_sizes": self.extrapolated_pixels(),
             "machine": self.machine,
             "notes": self.notes,
             "measurement": self.measurement_text(),
-            "render": None
-            if self.render is None
-            else {
-                "offset_s_at_dataset_size": self.render.offset0,
-                "seconds_per_spp_at_dataset_size": self.render.per_spp0,
-                "offset_s": self.render.offset(self.pixels),
-                "seconds_per_spp": self.render.per_spp(self.pixels),
-                "seconds_per_megapixel_per_spp": self.render.per_megapixel_per_spp,
-                "measured_spp": self.render.measured_spp,
-                "probe": self.render.probe,
-                "note": self.render.note,
-                "spread": self.render.spread,
-            },
+            "render": None if self.render is None else self.render.as_dict(self.pixels),
+            "render_lines": [
+                {**line.as_dict(self.pixels), "paid_by": payers.get(key, [])} for key, line in self.lines.items()
+            ],
             "denoisers": {
                 label: {
                     "fixed_s_per_call": c.fixed,
@@ -320,6 +389,9 @@ class TimeModel:
                     if c.highest is None
                     else {"spp": c.highest.spp, "pixels": c.highest.pixels, "seconds": c.highest.seconds},
                     "seconds_at_time_at": {str(s): c.seconds(self.pixels, s) for s in sorted(c.small)},
+                    "render_buffers": None
+                    if self.render_line(label) is None
+                    else list(self.render_line(label).buffers),
                     "note": c.note,
                     "spread": c.spread,
                 }
@@ -328,51 +400,69 @@ class TimeModel:
         }
 
 
-def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | None, dataset_size) -> TimeModel:
-    """The run's :class:`TimeModel` from its frames (``analysis.RunData``) and stored timings.
+def _probe_line(line: dict, probe: dict, *, pixels0: int, rungs: list[int]) -> RenderCost | None:
+    """One buffer set's :class:`RenderCost` from its probe record (both sizes), or None without its points."""
+    large, small = line_through(line.get("points") or []), line_through(line.get("small_points") or [])
+    if large is None or small is None or int(probe.get("small_pixels", 0)) != pixels0:
+        return None
+    width, height = int(probe["width"]), int(probe["height"])
+    spp = ", ".join(str(int(p[0])) for p in line["points"])
+    return RenderCost(
+        pixels0=pixels0,
+        offset0=small[0],
+        per_spp0=small[1],
+        measured_spp=rungs,
+        probe={
+            "pixels": width * height,
+            "width": width,
+            "height": height,
+            "scene": probe.get("scene"),
+            "offset": large[0],
+            "per_spp": large[1],
+            "repeats": int(probe.get("repeats", 1)),
+        },
+        note=f"renders of {probe.get('scene')} at the dataset's size and at {width}×{height} (spp {spp})",
+        spread=max(float(line.get("spread", MIN_SPREAD)), MIN_SPREAD),
+        buffers=tuple(line["buffers"]),
+    )
 
-    ``time_at`` None: :data:`DEFAULT_TIME_AT`. Without any second-size timing the model stays at the
-    dataset's resolution (``projected`` False) and says so in ``notes``."""
-    width0, height0 = dataset_size
-    pixels0 = int(width0 * height0)
-    requested = tuple(time_at or DEFAULT_TIME_AT)
+
+def _render_lines(data, timings: dict[str, dict], pixels0: int) -> tuple[RenderCost | None, dict, list[str]]:
+    """(rendering alone's line, {buffer set: line}, notes) from the probe's lines, or from the dataset's own
+    render seconds where the probe made none (one line for everything; older probes: that line's offset split)."""
     render_points = [(f.spp, f.render_seconds) for f in data.frames_of(NOISY)]
+    rungs = sorted({int(s) for s, _ in render_points})
+    probe = timings.get("render_probe") or {}
+    lines = {}
+    for line in probe.get("lines") or []:
+        cost = _probe_line(line, probe, pixels0=pixels0, rungs=rungs)
+        if cost is not None:
+            lines[cost.buffers] = cost
+    if COLOUR_ONLY in lines:
+        return lines[COLOUR_ONLY], lines, []
     fitted = line_through(render_points)
-    render = None
-    if fitted is not None:
-        render = RenderCost(
-            pixels0=pixels0,
-            offset0=fitted[0],
-            per_spp0=fitted[1],
-            measured_spp=sorted({int(s) for s, _ in render_points}),
+    if fitted is None:
+        return None, {}, []
+    dataset = tuple((timings.get("timing") or {}).get("dataset_buffers") or ())
+    render = RenderCost(pixels0=pixels0, offset0=fitted[0], per_spp0=fitted[1], measured_spp=rungs, buffers=dataset)
+    if probe.get("points"):  # a probe made before render lines: the dataset's buffers, one set
+        legacy = _probe_line({**probe, "buffers": dataset}, probe, pixels0=pixels0, rungs=rungs)
+        if legacy is not None:
+            render = legacy
+    if render.probe is None:
+        reason = probe.get("error") or "no timed larger render"
+        render.note = (
+            f"per-sample cost scaled with pixels; the per-frame offset ({fitted[0]:.3g} s) held fixed ({reason})"
         )
-        probe = timings.get("render_probe")
-        if probe and probe.get("points"):
-            line = line_through(probe["points"])
-            small_line = line_through(probe.get("small_points") or [])
-            if small_line is not None and int(probe.get("small_pixels", 0)) == pixels0:
-                # the same probe timed the dataset's size: both sizes under the same load (module Notes)
-                render.offset0, render.per_spp0 = small_line
-            render.spread = max(float(probe.get("spread", MIN_SPREAD)), MIN_SPREAD)
-            if line is not None:
-                render.probe = {
-                    "pixels": int(probe["width"]) * int(probe["height"]),
-                    "width": int(probe["width"]),
-                    "height": int(probe["height"]),
-                    "scene": probe.get("scene"),
-                    "offset": line[0],
-                    "per_spp": line[1],
-                    "repeats": int(probe.get("repeats", 1)),
-                }
-                render.note = (
-                    f"offset split into fixed and per-pixel parts by one render of {probe.get('scene')} at "
-                    f"{probe['width']}×{probe['height']} (spp {', '.join(str(int(p[0])) for p in probe['points'])})"
-                )
-        if render.probe is None:
-            reason = (probe or {}).get("error") or "no timed larger render"
-            render.note = (
-                f"per-sample cost scaled with pixels; the per-frame offset ({fitted[0]:.3g} s) held fixed ({reason})"
-            )
+    notes = [
+        "No colour-only render was timed: rendering alone and every denoiser are charged the dataset's own "
+        "renders (every buffer it holds), which overstates what rendering more samples without a denoiser costs."
+    ]
+    return render, {render.buffers: render}, notes
+
+
+def _denoiser_costs(data, timings: dict[str, dict], pixels0: int) -> dict[str, DenoiserCost]:
+    """Each denoiser's :class:`DenoiserCost` from the run's frames and its timing record."""
     costs = {}
     for label in data.labels:
         if label == NOISY:
@@ -406,6 +496,45 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
         if cost.highest is not None:  # its times between the two lines carry the larger of the two spreads
             cost.spread = max(cost.spread, float(high.get("spread") or MIN_SPREAD))
         costs[label] = cost
+    return costs
+
+
+def _timed_size(timings: dict[str, dict]) -> tuple[int, int] | None:
+    """The second size the run was timed at: its ``timing`` record's, else (older runs) the probe's or the
+    largest denoiser timing's; None when nothing was timed at a second size."""
+    record = timings.get("timing") or {}
+    if record.get("width"):
+        return int(record["width"]), int(record["height"])
+    sizes = [timings.get("render_probe") or {}] + [v for k, v in timings.items() if k.startswith("denoiser:")]
+    sizes = [(int(r["width"]), int(r["height"])) for r in sizes if r.get("width") and r.get("height")]
+    return max(sizes, key=lambda wh: wh[0] * wh[1]) if sizes else None
+
+
+def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | None, dataset_size) -> TimeModel:
+    """The run's :class:`TimeModel` from its frames (``analysis.RunData``) and stored timings.
+
+    ``time_at`` None: :data:`DEFAULT_TIME_AT`. Without any second-size timing the model stays at the
+    dataset's resolution (``projected`` False) and says so in ``notes``. A denoiser whose buffer set has no
+    line (a record without one, or a set the probe did not render) is charged the dearest line, and a note
+    says so."""
+    width0, height0 = dataset_size
+    pixels0 = int(width0 * height0)
+    requested = tuple(time_at or DEFAULT_TIME_AT)
+    render, lines, notes = _render_lines(data, timings, pixels0)
+    costs = _denoiser_costs(data, timings, pixels0)
+    charged, unlined = {}, []
+    dearest = max(lines, key=lambda key: lines[key].seconds(pixels0, 1.0)) if lines else None
+    for label in costs:
+        key = tuple((timings.get(f"denoiser:{label}") or {}).get("buffers") or ())
+        if key in lines:
+            charged[label] = key
+        elif dearest is not None:
+            charged[label] = dearest
+            if len(lines) > 1:
+                unlined.append(label)
+    if unlined:
+        notes.append(f"no render line of their own buffers: {', '.join(sorted(unlined))}; charged the dearest line")
+    timed_size = _timed_size(timings)
     timed = [c for c in costs.values() if c.fixed is not None]
     model = TimeModel(
         time_at=requested,
@@ -414,6 +543,10 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
         render=render,
         denoisers=costs,
         machine=timings.get("machine") or machine(),
+        notes=notes,
+        lines=lines,
+        charged=charged,
+        timed_size=timed_size,
     )
     if requested != (width0, height0):
         if costs and len(timed) < len(costs):

@@ -476,6 +476,7 @@ class CrossBilateral(DenoiserBase):
         self.separable = bool(config["separable"])
         self.guide_dims = config["guide_dims"]
         self.feature_sigmas = sigmas
+        self.uses = frozenset(sigmas)  # read when the frame has them: what its input's render is charged
         self.firefly_support = firefly_support
         self.name = "cross_bilateral" if preset == "balanced" else f"cross_bilateral_{preset}"
 

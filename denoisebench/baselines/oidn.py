@@ -87,6 +87,8 @@ class OIDN(DenoiserBase):
         self.quality = quality
         self.use_albedo = use_albedo
         self.use_normal = use_normal
+        # read when the frame has them (normal only beside albedo): what its input's render is charged
+        self.uses = frozenset(("albedo", "normal") if use_albedo and use_normal else ("albedo",) if use_albedo else ())
         self.name = "oidn" if quality == "high" else f"oidn_{quality}"
 
     def denoise(self, frame: Frame) -> np.ndarray:

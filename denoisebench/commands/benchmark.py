@@ -38,7 +38,7 @@ from denoisebench.analysis.time_model import parse_size
 from denoisebench.benchmark.run import run_benchmark
 from denoisebench.benchmark.runner import BenchmarkConfig
 from denoisebench.benchmark.stability import stability_table
-from denoisebench.benchmark.timing import DEFAULT_TIME_BUDGET, measure_run_timings
+from denoisebench.benchmark.timing import AUTO, DEFAULT_TIME_BUDGET, measure_run_timings
 from denoisebench.dataset import disk_space, open_dataset
 from denoisebench.denoisers.registry import check_denoiser_spec
 from denoisebench.errors import UserInputError
@@ -177,10 +177,11 @@ def add_arguments(parser) -> None:
     )
     parser.add_argument(
         "--time-size",
-        default="1024x1024",
+        default="auto",
         metavar="WxH",
-        help="second size each denoiser and one render are timed at after the run, on tiled copies of a frame "
-        "(default 1024x1024; none: no timing, times stay at the dataset's resolution)",
+        help="second size each denoiser and the render probe are timed at after the run, on tiled copies of a frame "
+        "(default auto: 8 times the dataset's width and height, at most 1024x1024, e.g. 256x256 for 32-px frames; "
+        "none: no timing, times stay at the dataset's resolution; e.g. --time-size 1024x1024)",
     )
     parser.add_argument(
         "--time-budget",
@@ -192,7 +193,9 @@ def add_arguments(parser) -> None:
     parser.add_argument(
         "--no-render-probe",
         action="store_true",
-        help="do not time one render of the dataset's stage at --time-size (render offsets are then held fixed)",
+        help="do not time renders of the dataset's stage (colour only, and the buffers each denoiser reads) at "
+        "--time-size: rendering alone and every denoiser are then charged the dataset's own render seconds, offsets "
+        "held fixed (default: timed; e.g. --no-render-probe)",
     )
 
     add_isolation_arguments(parser)
@@ -231,7 +234,7 @@ def _run(args) -> int:
             raise UserInputError(f"--trim: {exc}") from None
 
     time_at = parse_size(args.time_at, "--time-at")
-    time_size = parse_size(args.time_size, "--time-size")
+    time_size = AUTO if args.time_size.strip().lower() == AUTO else parse_size(args.time_size, "--time-size")
     if time_at is None:
         raise UserInputError("--time-at wants WIDTHxHEIGHT such as 1920x1080")
     if not args.time_budget > 0:

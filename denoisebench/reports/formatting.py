@@ -202,7 +202,8 @@ def _estimate(e, digits: int = 3) -> str:
 
 
 def time_axis_text(report: ReportModel) -> str:
-    """One sentence: the resolution the report's times are for, and whether they are projected."""
+    """One sentence: the resolution the report's times are for, the size they were timed at, and whether they
+    are projected."""
     model = report.time_model
     width, height = model.time_at
     w0, h0 = model.dataset_size
@@ -213,8 +214,9 @@ def time_axis_text(report: ReportModel) -> str:
         if model.extrapolated_pixels()
         else ""
     )
+    at = f" at {model.timed_size[0]}×{model.timed_size[1]}" if model.timed_size else " at a larger size"
     return (
-        f"Times are per frame at {width}×{height}, projected from {w0}×{h0} frames and timings at a larger size "
+        f"Times are per frame at {width}×{height}, projected from {w0}×{h0} frames and timings{at} "
         f"(fixed cost per call + cost per pixel){beyond}: every time in the tables and figure is projected."
     )
 
@@ -225,22 +227,34 @@ def machine_text(report: ReportModel) -> str:
     return f"Machine: {m.get('cores', '?')} cores ({m.get('cpu') or '?'}, {m.get('system') or '?'}), GPU {gpu}."
 
 
+def buffers_text(buffers) -> str:
+    """A render line's buffer set in words: "colour only", "colour + albedo, normal", "+ per-sample data"."""
+    extra = [b for b in buffers if b not in ("color", "diffuse", "specular", "samples")]
+    if not buffers:
+        return "the dataset's buffers"
+    text = "colour + " + ", ".join(extra) if extra else "colour only"
+    return text + (" + per-sample data" if "samples" in buffers else "")
+
+
 def time_model_rows(report: ReportModel) -> tuple[list[str], list[list[str]]]:
-    """(header, rows): rendering's and each denoiser's fixed and per-pixel cost, and the time at the axis' size."""
+    """(header, rows): each render line's and each denoiser's fixed and per-pixel cost, and the time at the axis'
+    size; a render line's row names what it renders and who pays it (rendering alone: the noisy input's curve
+    and every budget of the equal tables)."""
     model = report.time_model
     width, height = model.time_at
     header = ["", "fixed s (per call/frame)", "s per megapixel", f"s per frame at {width}×{height}", "measured how"]
     rows = []
-    if model.render is not None:
-        r = model.render
+    payers = model.payers()
+    for key, r in model.lines.items():
         top = max(r.measured_spp) if r.measured_spp else 1
+        paid = ["rendering alone" if label == NOISY else label for label in payers.get(key, [])]
         rows.append(
             [
-                "render, per spp",
-                num(r.offset(model.pixels)),
-                num(r.per_megapixel_per_spp) + " per spp",
-                f"{num(model.render_seconds(top))} at {top} spp",
-                f"line over spp {', '.join(map(str, r.measured_spp))}; {r.note}",
+                f"render: {buffers_text(r.buffers)}",
+                num(r.fixed),
+                f"{num(r.offset_per_megapixel)} + {num(r.per_megapixel_per_spp)} per spp",
+                f"{num(r.seconds(model.pixels, top))} at {top} spp",
+                f"paid by {', '.join(paid) if paid else 'none'}; {r.note}",
             ]
         )
     for label, c in model.denoisers.items():

@@ -16,8 +16,14 @@ import sqlite3
 #: The least spread (largest / least plausible time) every measured cost carries: repeats on a shared
 #: machine never see all of its load, so no time is taken as known to better than this.
 MIN_SPREAD = 1.1
-#: Timed renders per probe point after the warm-up, interleaved over the two sizes (the minimum is kept).
+#: Timed renders per probe point after the warm-up, interleaved over the buffer sets and the two sizes (the minimum
+#: is kept).
 PROBE_REPEATS = 3
+#: The buffers every render makes (with their variances), a colour-only one too: what rendering more samples
+#: without a denoiser is charged (the render probe's line of this set; ``benchmark.timing.render_buffers``).
+COLOUR_ONLY = ("color", "diffuse", "specular")
+#: The buffer-set name of per-sample data (a denoiser that reads them is charged every feature and them).
+SAMPLES = "samples"
 #: Timed calls per denoiser at the second size (the minimum is kept; one when a call takes over 2 s).
 TIMING_REPEATS = 3
 

@@ -103,7 +103,7 @@ def test_build_time_model_projects_only_when_every_denoiser_was_timed_at_a_secon
     del timings["denoiser:e"]
     model = tm.build_time_model(data, timings, (1920, 1080), (80, 80))
     assert not model.projected and model.time_at == (80, 80)
-    assert "e" in model.notes[0] and "never scaled by pixel count" in model.notes[0]
+    assert "e" in model.notes[-1] and "never scaled by pixel count" in model.notes[-1]
     assert model.denoise_seconds("e", 2) == pytest.approx(0.01)
     from denoisebench.reports.formatting import time_axis_text
 
