@@ -317,8 +317,9 @@ def _strip_section(report: ReportModel) -> str:
     if not report.strips:
         return ""
     parts = [
-        '<h3>Frame strips</h3><p class="note">One crop (where the noisy input flickers most) of the first frames '
-        "of each sequence at the lowest input spp, frames left to right, and the same frames looping in place; "
+        '<h3>Frame strips</h3><p class="note">One crop (where the noisy input flickers most, among windows at '
+        "least half visible in the reference) of the first frames of each sequence at the lowest input spp, frames "
+        "left to right, and the same frames looping in place; "
         "tone-mapped like the metrics. Flicker is a change from frame to frame that the reference's row does not "
         "have.</p>"
     ]
