@@ -43,7 +43,7 @@ def run(tmp_path_factory):
             """
         )
     )
-    data = open_dataset(make_synthetic_dataset(root / "ds", scenes=2, frames=3, height=16, width=16, spp=(1, 4)))
+    data = open_dataset(make_synthetic_dataset(root / "ds", scenes=2, frames=2, height=16, width=16, spp=(1, 4)))
     config = BenchmarkConfig(
         denoisers=["cross_bilateral_fast", f"{plugin}:Blur", f"{plugin}:BlurToo"],
         spp=[1, 4],
