@@ -23,7 +23,7 @@ from denoisebench.interrupts import requested as interrupted
 COMMANDS: dict[str, tuple[str, str]] = {
     "scenes": ("scenes", "list scene families, author a scene as USD, preview a stage"),
     "generate": ("generate", "render a dataset of noisy/reference EXR sequences (alias: generate-dataset)"),
-    "demo": ("demo", "author and preview one scene of every family (what `make demo` runs)"),
+    "demo": ("demo", "preview every family, render a small dataset, benchmark it, write the report (make demo)"),
     "train": ("train", "train a learned denoiser (dpcn, kpcn, rae, lbf) on a dataset's train split"),
     "benchmark": ("benchmark", "run denoisers over a dataset split into SQLite and write a report (run-benchmark)"),
     "leaderboard": ("leaderboard", "rank denoisers across the runs on one dataset in a results database"),

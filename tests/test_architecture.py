@@ -58,7 +58,7 @@ ALLOWED = {
     },
 }
 #: Top-level helper modules every stage may use (no stage of their own).
-HELPERS = {"errors", "interrupts", "mitsuba_runtime", "outputs", "progress"}
+HELPERS = {"errors", "interrupts", "mitsuba_runtime", "outputs"}
 
 
 def _module_name(path: Path, package: Path = PACKAGE) -> str:
@@ -620,3 +620,19 @@ def test_the_storage_check_catches_planted_reads():
         "7: .read_text(...)",
         "7: open(...)",
     ]
+
+
+def test_the_helpers_and_commands_are_those_the_architecture_page_names():
+    """:data:`HELPERS` are the package's top-level modules (but ``cli``), and docs/architecture.md names
+    exactly them and exactly the commands of ``cli.COMMANDS``."""
+    import re
+
+    from denoisebench.cli import COMMANDS
+
+    top = {p.stem for p in PACKAGE.glob("*.py")} - {"__init__", "cli"}
+    assert top == HELPERS
+    page = (PACKAGE.parent / "docs" / "architecture.md").read_text()
+    sentence = page[page.index("top-level helpers") :].split(")", 1)[0]
+    assert set(re.findall(r"`(\w+)`", sentence)) == HELPERS, sentence
+    listed = re.search(r"`denoisebench\s*<([^>]*)>`", page).group(1)
+    assert listed.replace("\n", "").split("|") == list(COMMANDS), listed

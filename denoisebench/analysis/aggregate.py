@@ -165,6 +165,41 @@ def bootstrap_mean(terms, ses=None) -> tuple[float | None, float | None]:
     return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
 
 
+def bootstrap_over_scenes(
+    scores: dict[str, list[float]],
+    frame_scene: list[str],
+    model: str,
+    peers: list[str],
+    *,
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    seed: int = BOOTSTRAP_SEED,
+):
+    """95 % percentile intervals of each denoiser's mean score over frames and of ``model``/peer
+    ratios of those means (the model cards' intervals).
+
+    Frames of one scene are correlated (same geometry and light), so the resampled unit is the
+    scene: each draw picks len(scenes) scenes with replacement and takes the mean over all their
+    frames, for every denoiser with the same draw (the ratios are paired). Deterministic (``seed``).
+    """
+    scenes = sorted(set(frame_scene))
+    index = {scene: i for i, scene in enumerate(scenes)}
+    owner = np.array([index[s] for s in frame_scene])
+    rng = np.random.default_rng(seed)
+    counts = np.stack(
+        [np.bincount(rng.integers(0, len(scenes), len(scenes)), minlength=len(scenes)) for _ in range(resamples)]
+    )  # resamples × scenes: how often each scene is drawn
+    weights = counts[:, owner].astype(np.float64)  # resamples × frames
+    means = {name: weights @ np.asarray(values, np.float64) / weights.sum(axis=1) for name, values in scores.items()}
+    intervals = {name: [float(v) for v in np.percentile(m, [2.5, 97.5])] for name, m in means.items()}
+    ratios = {}
+    for peer in peers:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = means[model] / means[peer]
+        finite = ratio[np.isfinite(ratio)]
+        ratios[peer] = [float(v) for v in np.percentile(finite, [2.5, 97.5])] if finite.size else None
+    return intervals, ratios
+
+
 def aggregate(rule: str, mine: dict, noisy: dict | None = None, ses: dict | None = None):
     """(value, low, high, scenes used) of per-scene values ``mine`` under ``rule`` (module docstring)."""
     terms, term_ses, back = scene_terms(rule, mine, noisy, ses=ses)

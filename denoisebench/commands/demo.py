@@ -36,12 +36,8 @@ Notes
 * **Sizes.** Five rungs instead of two give the benchmark 2.5 times the units; 64x64 instead of the
   former 80x80 (0.64 of the pixels, for the references too). The rungs are nested (rung k is the
   first k samples of one progressive render), so the ladder costs what its 16-spp rung costs.
-  Measured (``/usr/bin/time denoisebench demo --out /tmp/d``) on 2 cores shared with other jobs, so
-  wall times are upper bounds: 12 min 56 s at load average 1.6-5.3 (previews 16 s, dataset 246 s,
-  benchmark of 400 sequences 466 s, timing and report 48 s; 784 CPU seconds); 36 min 31 s at load
-  6-12. Seven scenes (with cornell and dim_room) took 22 min 53 s at load 1.5-8 (1628 CPU seconds).
-  Within 10 minutes on idle cores is an estimate (the idle 4-scene demo: 7 min 13 s, 70 s of
-  benchmark per scene), not a measurement.
+  What the demo costs, measured, and with which command: docs/demo.md, the one place its size and
+  cost are quoted (the README and this help point there).
 * **Timing at a second size.** DEMO_TIME_SIZE = 512x512 (0.26 MP, 64 times the frame) with a
   DEMO_TIME_BUDGET of 10 s per denoiser (RPF is timed smaller, at the largest size that fits): the
   1 MP default would add about 2 minutes on 2 cores (kpcn alone takes 38 s at 1 MP there).
@@ -204,7 +200,8 @@ def _dataset_stage(out: Path, args) -> None:
 
 
 def _report_stage(out: Path) -> int:
-    """Benchmark every built-in denoiser on every scene of the demo dataset; print where index.html is."""
+    """Benchmark every built-in denoiser but DEMO_SKIPS on every scene of the demo dataset; print where
+    index.html is."""
     from denoisebench.cli import main
 
     data = out / "dataset"

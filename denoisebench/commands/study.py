@@ -18,6 +18,7 @@ import argparse
 from pathlib import Path
 
 from denoisebench.errors import UserInputError
+from denoisebench.models.names import MODEL_NAMES
 
 EPILOG = """examples:
   generate-dataset --out data/pool --families all --scenes 3 --frames 2 --width 64 --height 64 --spp 1,4 --ref-spp 512
@@ -90,10 +91,10 @@ def run(args) -> int:
         if not (Path(folder) / "dataset.json").is_file():
             raise UserInputError(f"{option} {folder}: not a dataset folder (no dataset.json)")
     models = _names(args.models)
-    unknown = [m for m in models if m not in ("dpcn", "kpcn", "rae", "lbf")]
+    unknown = [m for m in models if m not in MODEL_NAMES]
     if not models or unknown:
         raise UserInputError(
-            f"--models: unknown model {unknown[0] if unknown else args.models!r} (dpcn, kpcn, rae, lbf)"
+            f"--models: unknown model {unknown[0] if unknown else args.models!r} ({', '.join(MODEL_NAMES)})"
         )
     options = StudyOptions(
         out=Path(args.out),

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from denoisebench.analysis.aggregate import BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED, bootstrap_over_scenes
 from denoisebench.dataset.errors import DatasetError
 from denoisebench.dataset.reader import open_dataset
 from denoisebench.denoisers.registry import load_denoiser
@@ -36,6 +37,7 @@ from denoisebench.denoisers.runner import run_sequence
 from denoisebench.errors import UserInputError
 from denoisebench.metrics.ours.spatial import relmse
 from denoisebench.models.card import render_card
+from denoisebench.models.names import MODEL_NAMES
 
 # Lazy imports: the models and the trainer (torch: 1 s) only when a model is trained or shipped, so
 # that --help stays quick.
@@ -56,8 +58,6 @@ documentation:
                     (denoisebench/models/weights/*.md)
 """
 
-MODELS = ("dpcn", "kpcn", "rae", "lbf")
-
 
 def _spp(text: str | None):
     if text is None:
@@ -72,7 +72,7 @@ def _spp(text: str | None):
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--model", required=True, choices=MODELS, help="which network to train")
+    parser.add_argument("--model", required=True, choices=MODEL_NAMES, help="which network to train")
     parser.add_argument("--data", required=True, help="dataset folder (dataset.json inside)")
     parser.add_argument(
         "--config",
@@ -298,7 +298,8 @@ def evaluate_on_split(
     order), so the recurrent model is scored as the benchmark scores it. Returns
     ``{"split", "scenes", "frames", "relmse": {name: value}, "ratio": {peer: ours / peer},
     "relmse_ci95": {name: [lo, hi]}, "ratio_ci95": {peer: [lo, hi]}, "bootstrap": {...}}``: the
-    intervals are 95% percentile bootstraps over scenes (:func:`bootstrap_over_scenes`).
+    intervals are 95% percentile bootstraps over scenes
+    (:func:`denoisebench.analysis.aggregate.bootstrap_over_scenes`, the analyses' resamples and seed).
     """
     ds = open_dataset(data)
     scenes = ds.split(split)
@@ -333,45 +334,8 @@ def evaluate_on_split(
         "ratio": {peer: means[model] / means[peer] for peer in peers},
         "relmse_ci95": intervals,
         "ratio_ci95": ratio_intervals,
-        "bootstrap": {"resamples": BOOTSTRAP_RESAMPLES, "unit": "scene", "seed": 0},
+        "bootstrap": {"resamples": BOOTSTRAP_RESAMPLES, "unit": "scene", "seed": BOOTSTRAP_SEED},
     }
-
-
-#: Bootstrap resamples of the test scenes for the cards' 95% intervals.
-BOOTSTRAP_RESAMPLES = 2000
-
-
-def bootstrap_over_scenes(
-    scores: dict[str, list[float]],
-    frame_scene: list[str],
-    model: str,
-    peers: list[str],
-    resamples: int = BOOTSTRAP_RESAMPLES,
-    seed: int = 0,
-):
-    """95% percentile intervals of each denoiser's mean score and of ``model``/peer ratios of means.
-
-    Frames of one scene are correlated (same geometry and light), so the resampled unit is the
-    scene: each draw picks len(scenes) scenes with replacement and takes the mean over all their
-    frames, for every denoiser with the same draw (the ratios are paired). Deterministic (seed 0).
-    """
-    scenes = sorted(set(frame_scene))
-    index = {scene: i for i, scene in enumerate(scenes)}
-    owner = np.array([index[s] for s in frame_scene])
-    rng = np.random.default_rng(seed)
-    counts = np.stack(
-        [np.bincount(rng.integers(0, len(scenes), len(scenes)), minlength=len(scenes)) for _ in range(resamples)]
-    )  # resamples × scenes: how often each scene is drawn
-    weights = counts[:, owner].astype(np.float64)  # resamples × frames
-    means = {name: weights @ np.asarray(values, np.float64) / weights.sum(axis=1) for name, values in scores.items()}
-    intervals = {name: [float(v) for v in np.percentile(m, [2.5, 97.5])] for name, m in means.items()}
-    ratios = {}
-    for peer in peers:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = means[model] / means[peer]
-        finite = ratio[np.isfinite(ratio)]
-        ratios[peer] = [float(v) for v in np.percentile(finite, [2.5, 97.5])] if finite.size else None
-    return intervals, ratios
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -15,6 +15,7 @@ from torch import nn
 
 from denoisebench.models import lbf, pcn, rae
 from denoisebench.models.features import OPTIONAL_BUFFERS
+from denoisebench.models.names import MODEL_NAMES
 
 
 @dataclass(frozen=True)
@@ -67,6 +68,10 @@ MODELS: dict[str, ModelSpec] = {
         recipes={"small": {"loss": "relmse"}, "paper": {"loss": "relmse"}},
     ),
 }
+
+
+if tuple(MODELS) != MODEL_NAMES:  # the one list of names (models/names.py: importable without torch)
+    raise ImportError(f"models/names.py lists {MODEL_NAMES}, the catalog builds {tuple(MODELS)}")
 
 
 def get_spec(name: str) -> ModelSpec:

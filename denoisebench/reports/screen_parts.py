@@ -78,11 +78,11 @@ def _named_by_cells(screen, summary, metric: str):
     them, where they do (one rule with results.json's ``deciding_scenes``)."""
     rows = []
     for row in screen.rows:
-        found = _cell_deciding(summary, row.denoiser.split(" = ")[0], row.best_spp, metric)
+        found = _cell_deciding(summary, row.denoiser.split(" = ")[0], row.best_spp, metric=metric)
         rows.append(row if found is None else replace(row, deciding_scenes=found))
     noisy = dict(screen.noisy_deciding)
     for spp in {r.spp for r in summary or () if r.denoiser == NOISY}:
-        found = _cell_deciding(summary, NOISY, spp, metric)
+        found = _cell_deciding(summary, NOISY, spp, metric=metric)
         if found is not None:
             noisy[spp] = found
     return replace(screen, rows=rows, noisy_deciding={s: n for s, n in sorted(noisy.items()) if n})

@@ -412,7 +412,7 @@ def test_pcn_convergence_bench_runs_a_few_steps(data, tmp_path):
 
 
 def test_bootstrap_over_scenes_is_paired_deterministic_and_covers_the_mean():
-    from denoisebench.commands.train import bootstrap_over_scenes
+    from denoisebench.analysis.aggregate import bootstrap_over_scenes
 
     rng = np.random.default_rng(1)
     scenes = [f"s{i}" for i in range(8) for _ in range(3)]
