@@ -26,9 +26,9 @@ reference while the noisy rungs wait to be written):
   :data:`NOISY_CHANNELS`) and, with per-sample data, the top rung's S×H×W samples
   (:data:`SAMPLE_BYTES_PER_SAMPLE` per sample and pixel; the rungs' samples are views of it);
 * the noisy stream while it renders: the lanes' float32 mean and M2 of every channel (one lane
-  per pixel, more on small images: ``TARGET_LANES``), in and out of a pass; the packed per-pixel
-  moments of the finished rung and of the running one (the next rung traces while the host
-  assembles a rung), and their host copy; with per-sample data the largest round's host arrays
+  per pixel, more on small images: ``TARGET_LANES``), in and out of a pass; the buffers the running
+  round's last pass writes (the next rung traces while a rung is handed out; the host reads the
+  device's buffers without a copy, so a held rung is that memory); with per-sample data the largest round's host arrays
   and two passes' device arrays;
 * then the reference stream (:data:`REFERENCE_CHANNELS`) and its buffers, in place of the noisy one.
 
@@ -84,12 +84,12 @@ def _bands(width: int, height: int) -> tuple[list[tuple[int, int]], int]:
 
 
 def _stream_bytes(width: int, height: int, channels: int) -> int:
-    """A stream's moments while it renders (module docstring): device lanes' and packed moments, host packed copy."""
+    """A stream's moments while it renders (module docstring): device lanes' moments and the running round's buffers."""
     bands, _ = _bands(width, height)
     lanes = sum(_device(pixels * groups * 4) * 2 * channels for pixels, groups in bands)  # every band's lanes
     largest = max(_device(pixels * groups * 4) * 2 * channels for pixels, groups in bands)  # a pass's new ones
     packed = sum(_device(pixels * 2 * channels * 4) for pixels, _ in bands)
-    return lanes + largest + 2 * packed + width * height * 2 * channels * 4
+    return lanes + largest + packed
 
 
 def _rounds(width: int, height: int, rungs: list[int]) -> list[int]:

@@ -213,6 +213,7 @@ class FrameStream:
         self._groups = [lane_groups(band, width, target_lanes) for _, band in self._bands]
         self._state: list = [None] * len(self._bands)
         self._counts = np.zeros((height, width), np.int64)
+        self._uniform: int | None = 0  # the count every pixel has, while rounds are one count for all (else None)
         self._round = None  # the launched round's (add, samples, pending, last), until finish()
         self._prefixes: dict = {}  # total → merged device buffers queued with the first round (queue_prefixes)
         self._band_buffers: list = [None] * len(self._bands)  # per band: name → (mean, var) host views, or None
@@ -247,11 +248,16 @@ class FrameStream:
         if self._round is not None:
             raise RuntimeError("finish() the launched round before launching another")
         self._prefixes = {}
-        add = np.broadcast_to(np.asarray(counts), (self.height, self.width))
+        add = np.asarray(counts)
+        np.broadcast_shapes(add.shape, (self.height, self.width))  # raises for another shape
         if not np.issubdtype(add.dtype, np.integer) or (add < 0).any():
             raise ValueError("per-pixel sample counts must be integers >= 0")
-        add = add.astype(np.int64)
-        if int((self._counts + add).max(initial=0)) >= 1 << 31:
+        # One count for all pixels of a stream whose pixels all have the same count: the arithmetic
+        # below runs on 0-d arrays, not on H×W ones (tens of ms per round at 1 MP).
+        flat = add.ndim == 0 and self._uniform is not None
+        add = add.astype(np.int64) if flat else np.broadcast_to(add, (self.height, self.width)).astype(np.int64)
+        most_after = self._uniform + int(add) if flat else int((self._counts + add).max(initial=0))
+        if most_after >= 1 << 31:
             raise ValueError("at most 2^31 - 1 samples per pixel")
         rows_most = int(add.max(initial=0))
         samples = None
@@ -264,8 +270,8 @@ class FrameStream:
         last = {}  # band index → the buffers (device arrays) of the band's last pass: all samples so far
         for index, ((row0, band), groups) in enumerate(zip(self._bands, self._groups)):
             rows = slice(row0, row0 + band)
-            before = self._counts[rows]
-            extra = add[rows]
+            before = np.asarray(self._uniform, np.int64) if flat else self._counts[rows]
+            extra = add if flat else add[rows]
             most = int(extra.max(initial=0))
             for offset in range(0, most, self._chunk):
                 starts = before + np.minimum(extra, offset)
@@ -320,7 +326,12 @@ class FrameStream:
             self._band_buffers[index] = self._host_views(buffers, self._bands[index][1])
         for entry in pending:
             self._copy_samples(samples, *entry)
-        self._counts = self._counts + add
+        if add.ndim == 0 and self._uniform is not None:
+            self._uniform += int(add)
+            self._counts = np.broadcast_to(np.int64(self._uniform), (self.height, self.width))  # read-only
+        else:
+            self._uniform = None
+            self._counts = self._counts + add
         return samples
 
     def _copy_samples(self, samples: dict, rows: slice, offset: int, count: int, targets: dict) -> None:

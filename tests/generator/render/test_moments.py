@@ -134,3 +134,20 @@ def test_zero_copy_rungs_keep_their_bytes_and_buffers_are_the_callers(cornell):
     kept = first["color"].copy()
     first["color"][:] = -1.0
     assert same_bits(stream.buffers()["color"], kept)
+
+
+def test_one_count_for_all_pixels_gives_the_bytes_of_a_per_pixel_map(cornell):
+    """Rounds given as one int (0-d arithmetic while every pixel has the same count) and the same rounds as
+    H×W maps: the same counts and buffers after each round, also once a per-pixel round breaks uniformity."""
+    camera, scene, plan = cornell
+    kw = dict(width=WIDTH, height=HEIGHT, seed=4, max_paths_per_pass=WIDTH * 6)
+    scalar, mapped = (FrameStream(scene, camera, 1, plan, **kw) for _ in range(2))
+    uneven = np.arange(HEIGHT * WIDTH).reshape(HEIGHT, WIDTH) % 3
+    for counts in (2, 1, uneven, 3):
+        scalar.advance(counts)
+        mapped.advance(np.broadcast_to(counts, (HEIGHT, WIDTH)).copy())
+        assert np.array_equal(scalar.counts, mapped.counts)
+        a, b = scalar.buffers(), mapped.buffers()
+        assert a.keys() == b.keys()
+        for name in a:
+            assert same_bits(a[name], b[name]), (counts if np.ndim(counts) == 0 else "map", name)
