@@ -27,6 +27,8 @@ module separates the costs from measurements and projects them to the resolution
   offset ``a`` are each split into fixed and per-pixel parts through the two sizes. The noisy input's
   "render more" curve, and every budget of the equal-time and equal-quality tables, is the colour-only
   line; a denoiser's point is its own set's line plus its denoise seconds (:meth:`TimeModel.render_line`).
+  Each pays the cheapest measured render that makes its buffers (:func:`_charge`): a render of more
+  buffers makes them too, so where noise measured one cheaper than the set's own, that one is charged.
   Without those renders (``--no-render-probe``, ``--time-size none``, or the probe failed) there is one
   line, through the stored render seconds of the ladder's rungs (with nested rungs, the progressive time
   to reach each) at ``P₀``: what the dataset rendered, every buffer it holds, charged to rendering alone
@@ -256,7 +258,7 @@ class RenderCost:
 class TimeModel:
     """What a report's time axis rests on: the resolution, the machine and every cost.
 
-    ``render`` is the line rendering alone pays (colour only when it was timed); ``lines`` holds every render
+    ``render`` is the line rendering alone pays (the colour-only one when it was timed); ``lines`` holds every render
     line by its buffer set (``render`` among them) and ``charged`` each denoiser's set: its points are charged
     that line (:meth:`render_line`). ``timed_size``: the second size things were timed at (None: none)."""
 
@@ -510,30 +512,63 @@ def _timed_size(timings: dict[str, dict]) -> tuple[int, int] | None:
     return max(sizes, key=lambda wh: wh[0] * wh[1]) if sizes else None
 
 
+def _cheapest(lines: dict, wanted, *, pixels: int, spp: float) -> tuple[str, ...] | None:
+    """The buffer set of the cheapest line (at ``pixels`` and ``spp``) whose render makes every buffer of ``wanted``."""
+    fits = [key for key in lines if set(wanted) <= set(key)]
+    return min(fits, key=lambda key: lines[key].seconds(pixels, spp)) if fits else None
+
+
+def _charge(model: TimeModel, timings: dict[str, dict]) -> None:
+    """Set ``model.render`` and ``model.charged``: rendering alone, and each denoiser, pays the cheapest measured
+    render that makes the buffers it reads (at the time axis' resolution and the ladder's top rung).
+
+    A render of more buffers makes those too, so where noise measured it cheaper than the set's own render it is
+    the one charged (a note names who); a denoiser whose record names no set, or a set no line makes, pays the
+    dearest line (noted). With one line (no probe) everything pays it."""
+    lines = model.lines
+    if not lines:
+        return
+    keys = list(lines)
+    top = max(model.render.measured_spp or [1]) if model.render is not None else 1
+    cost = lambda key: lines[key].seconds(model.pixels, top)  # noqa: E731
+    if len(keys) == 1:
+        model.render, model.charged = lines[keys[0]], dict.fromkeys(model.denoisers, keys[0])
+        return
+    alone = _cheapest(lines, COLOUR_ONLY, pixels=model.pixels, spp=top)
+    if alone is not None:
+        model.render = lines[alone]
+    dearest = max(keys, key=cost)
+    unlined, cheaper = [], []
+    for label in model.denoisers:
+        wanted = tuple((timings.get(f"denoiser:{label}") or {}).get("buffers") or ())
+        key = _cheapest(lines, wanted, pixels=model.pixels, spp=top) if wanted else None
+        if key is None:
+            key = dearest
+            unlined.append(label)
+        elif key != wanted:
+            cheaper.append(label)
+        model.charged[label] = key
+    if unlined:
+        model.notes.append(
+            f"no render line makes the buffers of {', '.join(sorted(unlined))}: charged the dearest line"
+        )
+    if cheaper:
+        model.notes.append(
+            f"charged a render of more buffers that was measured cheaper than their own: {', '.join(sorted(cheaper))}"
+        )
+
+
 def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | None, dataset_size) -> TimeModel:
     """The run's :class:`TimeModel` from its frames (``analysis.RunData``) and stored timings.
 
     ``time_at`` None: :data:`DEFAULT_TIME_AT`. Without any second-size timing the model stays at the
-    dataset's resolution (``projected`` False) and says so in ``notes``. A denoiser whose buffer set has no
-    line (a record without one, or a set the probe did not render) is charged the dearest line, and a note
-    says so."""
+    dataset's resolution (``projected`` False) and says so in ``notes``. Who pays which render line:
+    :func:`_charge`."""
     width0, height0 = dataset_size
     pixels0 = int(width0 * height0)
     requested = tuple(time_at or DEFAULT_TIME_AT)
     render, lines, notes = _render_lines(data, timings, pixels0)
     costs = _denoiser_costs(data, timings, pixels0)
-    charged, unlined = {}, []
-    dearest = max(lines, key=lambda key: lines[key].seconds(pixels0, 1.0)) if lines else None
-    for label in costs:
-        key = tuple((timings.get(f"denoiser:{label}") or {}).get("buffers") or ())
-        if key in lines:
-            charged[label] = key
-        elif dearest is not None:
-            charged[label] = dearest
-            if len(lines) > 1:
-                unlined.append(label)
-    if unlined:
-        notes.append(f"no render line of their own buffers: {', '.join(sorted(unlined))}; charged the dearest line")
     timed_size = _timed_size(timings)
     timed = [c for c in costs.values() if c.fixed is not None]
     model = TimeModel(
@@ -545,7 +580,6 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
         machine=timings.get("machine") or machine(),
         notes=notes,
         lines=lines,
-        charged=charged,
         timed_size=timed_size,
     )
     if requested != (width0, height0):
@@ -558,4 +592,5 @@ def build_time_model(data, timings: dict[str, dict], time_at: tuple[int, int] | 
             model.time_at = (width0, height0)
         else:
             model.projected = True
+    _charge(model, timings)
     return model

@@ -17,6 +17,7 @@ from denoisebench.dataset.frame import Frame
 from denoisebench.errors import UserInputError
 from denoisebench.results import timings
 from denoisebench.results.names import NOISY
+from denoisebench.results.timings import COLOUR_ONLY
 
 FIXED, PER_PIXEL = 0.05, 2e-7  # a denoiser: 50 ms per call + 0.2 s per megapixel
 P0, P1, HD = 80 * 80, 1024 * 1024, 1920 * 1080
@@ -103,7 +104,8 @@ def test_build_time_model_projects_only_when_every_denoiser_was_timed_at_a_secon
     del timings["denoiser:e"]
     model = tm.build_time_model(data, timings, (1920, 1080), (80, 80))
     assert not model.projected and model.time_at == (80, 80)
-    assert "e" in model.notes[-1] and "never scaled by pixel count" in model.notes[-1]
+    note = next(n for n in model.notes if "never scaled by pixel count" in n)
+    assert "e" in note
     assert model.denoise_seconds("e", 2) == pytest.approx(0.01)
     from denoisebench.reports.formatting import time_axis_text
 
@@ -257,3 +259,36 @@ def test_a_denoiser_whose_time_changes_with_spp_is_timed_at_the_highest_spp_too(
     assert slow["spp"] == 1 and slow["highest"]["spp"] == 4 and slow["highest"]["width"] == 64
     assert slow["highest"]["seconds"] < slow["seconds"] / 2  # a third of the per-pixel sleep, plus call overhead
     assert "highest" not in flat  # the same time at every spp: one timing
+
+
+def test_each_pays_the_cheapest_measured_render_that_makes_its_buffers():
+    """Planted render lines (seconds per frame = 0.1 + slope · spp at every size): a denoiser reading albedo pays
+    its own line; one reading albedo and normal pays the full feature set's line when that was measured cheaper
+    than its own (a render of more buffers makes them too); rendering alone pays the colour-only line."""
+    colour, albedo = COLOUR_ONLY, (*COLOUR_ONLY, "albedo")
+    pair, full = (*albedo, "normal"), (*albedo, "normal", "depth")
+
+    def line(key, slope):
+        points = [[1, 0.1 + slope], [4, 0.1 + 4 * slope]]
+        return {"buffers": list(key), "points": points, "small_points": points, "spread": 1.1}
+
+    probe = {"width": 160, "height": 160, "small_pixels": P0, "repeats": 3, "scene": "s"}
+    probe["lines"] = [line(colour, 0.01), line(albedo, 0.02), line(pair, 0.05), line(full, 0.03)]
+    frames = [
+        SimpleNamespace(denoiser=label, spp=spp, render_seconds=0.5, denoise_seconds=0.01)
+        for spp in (1, 4)
+        for label in (NOISY, "a", "p")
+    ]
+    timings = {
+        "render_probe": probe,
+        "denoiser:a": {"width": 160, "height": 160, "seconds": 0.04, "buffers": list(albedo)},
+        "denoiser:p": {"width": 160, "height": 160, "seconds": 0.04, "buffers": list(pair)},
+    }
+    model = tm.build_time_model(_Data(frames, [NOISY, "a", "p"], [1, 4]), timings, (80, 80), (80, 80))
+    assert model.render.buffers == colour and model.render_seconds(4) == pytest.approx(0.1 + 4 * 0.01)
+    assert model.render_line("a").buffers == albedo
+    assert model.render_line("p").buffers == full and model.render_seconds(4, "p") == pytest.approx(0.1 + 4 * 0.03)
+    assert model.total_seconds("p", 4) == pytest.approx(0.1 + 4 * 0.03 + 0.01)
+    assert any("measured cheaper" in n and "p" in n for n in model.notes)
+    paid = {tuple(r["buffers"]): r["paid_by"] for r in model.as_dict()["render_lines"]}
+    assert paid == {colour: [NOISY], albedo: ["a"], pair: [], full: ["p"]}
