@@ -322,10 +322,14 @@ def run_study(options: StudyOptions, on_part=None) -> StudyResult:
         result.references = references
         result.third_party.update({"kept": kept, "set_apart": apart})
         jobs = [(m, s, seed) for m in options.models for s in sets for seed in options.seeds]
+        order = {(m, s.name, seed): i for i, (m, s, seed) in enumerate(jobs)}
+        # finished parts first: a study extended with more seeds reports the old ones at once
+        jobs.sort(key=lambda job: _finished(options, *job, kept) is None)
         bar = tqdm(jobs, desc="study: model × set × seed", unit="run", disable=not options.progress, file=sys.stderr)
         for model, training_set, seed in bar:
             bar.set_postfix_str(f"{model} {training_set.name} seed {seed}")
             result.parts.append(_part(options, store, model, training_set, seed, kept))
+            result.parts.sort(key=lambda p: order[(p["model"], p["set"], p["seed"])])
             if on_part is not None:
                 result.scaling = scaling_curve(result.parts, sets, options.models)
                 on_part(result)
@@ -334,15 +338,25 @@ def run_study(options: StudyOptions, on_part=None) -> StudyResult:
     return result
 
 
-def _part(options: StudyOptions, store, model: str, training_set: TrainingSet, seed: int, kept: list[str]) -> dict:
-    """One (model, set, seed): trained, scored and recorded (a finished record is reused)."""
+def _finished(options: StudyOptions, model: str, training_set: TrainingSet, seed: int, kept: list[str]) -> dict | None:
+    """The record of a finished part with the same scenes and scored scenes, else None."""
     stem = part_stem(model, training_set.name, seed, options)
     record_path = Path(options.out) / "parts" / f"{stem}.json"
-    checkpoint = Path(options.out) / "checkpoints" / f"{stem}.pt"
-    if record_path.is_file() and checkpoint.is_file():
+    if record_path.is_file() and (Path(options.out) / "checkpoints" / f"{stem}.pt").is_file():
         record = json.loads(record_path.read_text())
         if record.get("scenes") == list(training_set.scenes) and record.get("kept") == kept:
             return record
+    return None
+
+
+def _part(options: StudyOptions, store, model: str, training_set: TrainingSet, seed: int, kept: list[str]) -> dict:
+    """One (model, set, seed): trained, scored and recorded (a finished record is reused)."""
+    finished = _finished(options, model, training_set, seed, kept)
+    if finished is not None:
+        return finished
+    stem = part_stem(model, training_set.name, seed, options)
+    record_path = Path(options.out) / "parts" / f"{stem}.json"
+    checkpoint = Path(options.out) / "checkpoints" / f"{stem}.pt"
     meta = _train(options, model, training_set, seed, checkpoint)
     digest = _sha256(checkpoint)
     run_id = _benchmark(
