@@ -28,6 +28,7 @@ noisy >= 0.85 at 1 MP 1 spp, >= 0.9 at 1 MP 4 spp and at 128 px 16 spp).
 from __future__ import annotations
 
 import argparse
+import gc
 import statistics
 import sys
 import time
@@ -219,11 +220,17 @@ def main(argv=None) -> int:
             return 2
 
     mi = load_mitsuba()
-    built, summary = {}, []
+    built, summary = None, []
     for name, size, spp, repeats in regimes:
-        if name not in built:
-            built[name] = (name, *make_scene(mi, name, args.max_depth))
-        summary.append(((name, size, spp), measure(mi, built[name], (size, spp, repeats), options=args)))
+        if built is None or built[0] != name:
+            # One scene alive at a time: Dr.Jit's virtual calls dispatch over every live instance of a
+            # domain, so a scene kept from an earlier regime slowed Mitsuba's path on the next (the
+            # Cornell box at 128 px took 0.81 s instead of 0.45 s after the cluttered regimes).
+            built = None
+            render_passes.forget_scene()
+            gc.collect()
+            built = (name, *make_scene(mi, name, args.max_depth))
+        summary.append(((name, size, spp), measure(mi, built, (size, spp, repeats), options=args)))
         print()
     print("summary (ours / path: median, min, CPU-time median)")
     for (name, size, spp), ratios in summary:

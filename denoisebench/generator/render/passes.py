@@ -194,6 +194,17 @@ def compiled_pass(scene, config, function=render_pass):
     return compiled
 
 
+def forget_scene() -> None:
+    """Drop the compiled passes and the scene they hold alive (:func:`compiled_pass`'s Notes).
+
+    For a process that is done with a scene and renders another through something else (e.g.
+    Mitsuba's own integrators, as bench/render_throughput.py does): a live scene's shapes and BSDFs
+    stay among the instances every Dr.Jit virtual call dispatches over.
+    """
+    _COMPILED.clear()
+    _COMPILED_SCENE[0] = None
+
+
 class _FreezeOrTrace:
     """A frozen pass that falls back to plain tracing where Dr.Jit refuses to record it.
 
