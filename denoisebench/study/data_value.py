@@ -417,6 +417,41 @@ def scaling_curve(parts: list[dict], sets: list[TrainingSet], models) -> dict:
     return out
 
 
+#: Bootstrap resamples of the paired ratios (seed 0: the same parts give the same report).
+PAIRED_RESAMPLES = 2000
+
+
+def paired_ratio(parts: list[dict], full: list[dict], metric: str, kept: list[str]) -> dict:
+    """Geometric mean over the kept scenes of this set's score ÷ the same model's ``full`` score
+    (per scene, means over seeds), with a 95 % percentile bootstrap over scenes: the comparison
+    in which a scene's own difficulty cancels. Scenes where either score is not positive are left
+    out (a black scene scores 0 for every model)."""
+    import numpy as np
+
+    def per_scene(group):
+        out = {}
+        for scene in kept:
+            values = [p["scores"][metric]["per_scene"].get(scene) for p in group]
+            values = [v for v in values if v is not None]
+            if values:
+                out[scene] = sum(values) / len(values)
+        return out
+
+    mine, base = per_scene(parts), per_scene(full)
+    logs = np.array([np.log(mine[s] / base[s]) for s in kept if mine.get(s, 0) > 0 and base.get(s, 0) > 0])
+    if logs.size == 0:
+        return {"value": None, "low": None, "high": None, "scenes": 0}
+    rng = np.random.default_rng(0)
+    draws = logs[rng.integers(0, logs.size, (PAIRED_RESAMPLES, logs.size))].mean(axis=1)
+    low, high = np.percentile(draws, [2.5, 97.5])
+    return {
+        "value": float(np.exp(logs.mean())),
+        "low": float(np.exp(low)),
+        "high": float(np.exp(high)),
+        "scenes": int(logs.size),
+    }
+
+
 # --------------------------------------------------------------------------- report
 
 
@@ -458,15 +493,29 @@ def markdown(result: StudyResult) -> str:
         "",
         f"## Summary at {spp} spp",
         "",
-        "| model | training set | scenes | relmse_robust (corrected) | FLIP |",
-        "|---|---|---|---|---|",
+        "| model | training set | scenes | relmse_robust (corrected) | FLIP | relmse_robust ÷ full (paired) "
+        "| FLIP ÷ full (paired) |",
+        "|---|---|---|---|---|---|---|",
     ]
     for label, scores in result.references.items():
-        lines.append(f"| {label} | (reference) | – | {_cell(scores['relmse_robust'])} | {_cell(scores['flip'])} |")
+        lines.append(
+            f"| {label} | (reference) | – | {_cell(scores['relmse_robust'])} | {_cell(scores['flip'])} | – | – |"
+        )
     groups = _groups(result.parts)
+    kept = result.third_party.get("kept", [])
     for (model, name), parts in groups.items():
         cells = [_cell(_seed_summary(parts, m)) for m in METRICS]
-        lines.append(f"| {model} | {name} | {len(parts[0]['scenes'])} | {cells[0]} | {cells[1]} |")
+        full = groups.get((model, "full"))
+        ratios = [_cell(paired_ratio(parts, full, m, kept)) if full and name != "full" else "1" for m in METRICS]
+        lines.append(
+            f"| {model} | {name} | {len(parts[0]['scenes'])} | {cells[0]} | {cells[1]} | {ratios[0]} | {ratios[1]} |"
+        )
+    lines += [
+        "",
+        "÷ full: the geometric mean over the kept scenes of this set's score over the same model's `full` "
+        "score on the same scene, with a 95 % bootstrap interval over scenes (a scene's difficulty cancels; "
+        "scenes scoring 0 are left out).",
+    ]
     scenes = result.third_party.get("scenes", [])
     for metric in METRICS:
         lines += [
