@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from denoisebench.analysis.equal_tables import ABOUT, ratio_text, spp_for
+from denoisebench.analysis.equal_tables import ABOUT, ratio_text, safe_exp, spp_for
 from denoisebench.analysis.summary import RunData, SummaryRow
 from denoisebench.results.names import NOISY
 
@@ -65,10 +65,10 @@ class NoisyFit:
         return self.time_offset + self.seconds_per_spp * spp
 
     def spp_for(self, error: float) -> float:
-        return math.exp((math.log(error) - self.intercept) / self.slope)
+        return safe_exp((math.log(error) - self.intercept) / self.slope)
 
     def error_at(self, spp: float) -> float:
-        return math.exp(self.intercept + self.slope * math.log(spp))
+        return safe_exp(self.intercept + self.slope * math.log(spp))
 
 
 @dataclass(kw_only=True)
@@ -217,6 +217,8 @@ def readings(at: AccuracyTime) -> list[str]:
     fit = at.fit
     noisy_error = at.noisy_curve or {p.spp: p.error for p in at.points if p.denoiser == NOISY}
     rungs = sorted(noisy_error)
+    if not rungs:
+        return [f"No noisy-input curve for {at.metric}: the input was not measured (no rung to compare with)."]
     measured = f"{rungs[0]}–{rungs[-1]} spp" if len(rungs) > 1 else f"{rungs[0]} spp"
     sentences = []
     best: dict[str, tuple[float, str]] = {}
@@ -238,6 +240,12 @@ def readings(at: AccuracyTime) -> list[str]:
             continue
         spp_eq = found.value
         seconds_eq = fit.seconds_at(spp_eq)
+        if not (seconds_eq > 0 and p.seconds > 0):
+            text = (
+                f"{p.denoiser} at {p.spp} spp ({at.metric} {p.error:.3g}): no time verdict (a time of 0 s to compare)."
+            )
+            best.setdefault(p.denoiser, (-math.inf + 1, text))
+            continue
         ratio = p.seconds / seconds_eq
         notes = []
         if at.reference_spp and spp_eq > at.reference_spp:

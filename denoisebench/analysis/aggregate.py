@@ -35,6 +35,14 @@ Notes
   positive value, and a value the reference cannot tell from 0 is reported as "at most what the
   reference resolves". The raise only ever makes a score worse, by less than one se, and the cells
   count the scenes where it happened (``at_resolution``). Raw values stay beside the corrected ones.
+* **Measured floors** (:func:`leading_floor`). A score with a closed-form floor also has its floor
+  measured from the reference's two independent halves (the score against each half, extrapolated
+  to the full reference: :mod:`denoisebench.metrics.floors.half_reference`). The closed form rests on the
+  reference's per-pixel variance and a smooth expansion; a heavy-tailed pixel (a rare bright path
+  that one half found and the variance estimate did not see) escapes it, the halves do not. Where
+  the two disagree by more than the measured floor's 95 % uncertainty, the measured one corrects the
+  score (and its se widens the intervals); the cell names those scenes (``measured_floor_leads``).
+  The set-apart rule below then judges the corrected scores with the floor that led.
 * **References whose scores cannot be used** (:func:`unresolved_references`). A scene is set apart
   only when even its corrected numbers cannot rank, for one of three reasons, judged on the headline
   scores that have floors (the robust relMSE and the robust flicker score; their raw forms for runs
@@ -89,6 +97,8 @@ __all__ = [
     "scene_terms",
     "bootstrap_mean",
     "reference_resolution",
+    "SceneFloors",
+    "leading_floor",
     "rule_of",
     "RESOLVE_FRACTION",
     "NOISY_VALUES_LIMIT",
@@ -116,6 +126,11 @@ def log_se(se: float | None, value: float) -> float:
     return math.sqrt(math.log1p((se / value) ** 2))
 
 
+def _exp(x: float) -> float:
+    """``math.exp`` held within the floats: the back-transform of a mean of logs is always finite."""
+    return math.exp(min(max(x, -745.0), 709.0))
+
+
 def scene_terms(rule: str, mine: dict, noisy: dict | None = None, ses: dict | None = None):
     """(terms, term ses, back-transform) on the rule's scale, over the scenes usable for ``rule``.
 
@@ -129,11 +144,12 @@ def scene_terms(rule: str, mine: dict, noisy: dict | None = None, ses: dict | No
     if rule == "geomean":
         if any(mine[s] <= 0 for s in scenes):
             return [], [], None
-        return ([math.log(mine[s]) for s in scenes], [log_se(ses.get(s), mine[s]) for s in scenes], math.exp)
+        return ([math.log(mine[s]) for s in scenes], [log_se(ses.get(s), mine[s]) for s in scenes], _exp)
     if rule == "relative_to_input":
         noisy = noisy or {}
         keep = [s for s in scenes if is_finite(noisy.get(s)) and noisy[s] > 0 and mine[s] > 0]
-        return ([math.log(mine[s] / noisy[s]) for s in keep], [log_se(ses.get(s), mine[s]) for s in keep], math.exp)
+        terms = [math.log(mine[s]) - math.log(noisy[s]) for s in keep]  # a ratio may underflow, its log not
+        return (terms, [log_se(ses.get(s), mine[s]) for s in keep], _exp)
     raise ValueError(f"unknown aggregation rule {rule!r}")
 
 
@@ -242,6 +258,39 @@ def corrected_values(
             corrected = value
         out[scene] = corrected
     return out, sorted(raised)
+
+
+@dataclass(frozen=True, kw_only=True)
+class SceneFloors:
+    """A score's reference-noise floors on one scene: the closed form's (``closed``, with the score's se
+    ``closed_se``), the one measured from the reference's two halves (``measured``, ``measured_se``), and
+    the one that leads (``floor``/``se``; ``source``: ``closed_form``, ``measured`` or ``none``)."""
+
+    closed: float | None
+    closed_se: float | None
+    measured: float | None
+    measured_se: float | None
+    floor: float | None
+    se: float | None
+    source: str
+
+
+def leading_floor(closed, closed_se, measured, measured_se) -> SceneFloors:
+    """The floor a scene's score is corrected with (module Notes, "Measured floors").
+
+    The measured one leads where it and the closed form disagree by more than the measured one's 95 %
+    uncertainty (Z95 × its se), or where there is no closed form; else the closed form (smoother: it
+    rests on every pixel's variance, not on one draw of two halves). Where the measured floor leads,
+    the se is the larger of the score's and the measured floor's."""
+    parts = {"closed": closed, "closed_se": closed_se, "measured": measured, "measured_se": measured_se}
+    if not is_finite(measured):
+        return SceneFloors(**parts, floor=closed, se=closed_se, source="none" if closed is None else "closed_form")
+    if closed is None:
+        return SceneFloors(**parts, floor=measured, se=measured_se, source="measured")
+    if abs(measured - closed) > Z95 * (measured_se or 0.0):
+        se = max(x for x in (closed_se, measured_se, 0.0) if is_finite(x))
+        return SceneFloors(**parts, floor=measured, se=se if se > 0 else None, source="measured")
+    return SceneFloors(**parts, floor=closed, se=closed_se, source="closed_form")
 
 
 def reference_resolution(rule: str, mine_a: dict, ses_a: dict, mine_b: dict, ses_b: dict) -> float | None:

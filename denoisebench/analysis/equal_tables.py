@@ -67,9 +67,14 @@ class Estimate:
         return self.how in ("measured", "interpolated", "at_most")
 
 
+def safe_exp(x: float) -> float:
+    """``math.exp`` held within the floats (a finite answer for any finite log: no OverflowError)."""
+    return math.exp(min(max(x, -745.0), 709.0))
+
+
 def _log_segment(x0, y0, x1, y1, x) -> float:
     t = (math.log(x) - math.log(x0)) / (math.log(x1) - math.log(x0))
-    return math.exp(math.log(y0) + t * (math.log(y1) - math.log(y0)))
+    return safe_exp(math.log(y0) + t * (math.log(y1) - math.log(y0)))
 
 
 def error_at(curve: dict[int, float], spp: float) -> Estimate | None:
@@ -107,17 +112,20 @@ def spp_for(curve: dict[int, float], target: float) -> Estimate | None:
         return Estimate(value=float(points[0][0]), how="at_most")
     for (x0, y0), (x1, y1) in zip(points, points[1:]):
         if y1 <= target < y0:
-            if math.isclose(y1, target):
+            drop = math.log(y1) - math.log(y0)
+            if math.isclose(y1, target) or drop == 0.0:  # adjacent floats: the logs cannot tell them apart
                 return Estimate(value=float(x1), how="measured")
-            t = (math.log(target) - math.log(y0)) / (math.log(y1) - math.log(y0))
-            return Estimate(value=math.exp(math.log(x0) + t * (math.log(x1) - math.log(x0))), how="interpolated")
+            t = (math.log(target) - math.log(y0)) / drop
+            return Estimate(value=safe_exp(math.log(x0) + t * (math.log(x1) - math.log(x0))), how="interpolated")
     if len(points) >= 2:
         (x0, y0), (x1, y1) = points[-2], points[-1]
-        if y1 < y0:
-            slope = (math.log(y1) - math.log(y0)) / (math.log(x1) - math.log(x0))
-            spp = math.exp(math.log(x1) + (math.log(target) - math.log(y1)) / slope)
-            if spp <= EXTRAPOLATION_LIMIT * x1:
-                return Estimate(value=spp, how="extrapolated")
+        slope = (math.log(y1) - math.log(y0)) / (math.log(x1) - math.log(x0))
+        if slope < 0:
+            # on the log scale: a nearly flat last segment puts the target beyond any float (the
+            # OverflowError a third-party dataset met), and beyond the limit it is not given anyway
+            log_spp = math.log(x1) + (math.log(target) - math.log(y1)) / slope
+            if log_spp <= math.log(EXTRAPOLATION_LIMIT * x1):
+                return Estimate(value=math.exp(log_spp), how="extrapolated")
     return None
 
 
@@ -301,7 +309,14 @@ def build_tables(summary, model, rungs: list[int], metric: str) -> Tables:
 
 
 def ratio_text(ratio: float) -> str:
-    """A time or error ratio in words: ``"1/10"`` below a half, else ``"57 %"``."""
+    """A time or error ratio in words: ``"1/10"`` below a half, else ``"57 %"``; ``"0 %"`` for none, and
+    ``"under 1/1000000"``/``"over 1000000 %"`` beyond those (never "inf" or "nan" in a sentence)."""
+    if not ratio > 0:
+        return "0 %"
+    if ratio < 1e-6:
+        return "under 1/1000000"
+    if ratio > 1e4:
+        return "over 1000000 %"
     return f"1/{1 / ratio:.0f}" if ratio < 0.5 else f"{100 * ratio:.0f} %"
 
 
@@ -314,7 +329,11 @@ def verdicts(tables: Tables) -> list[str]:
     """Sentences from rows whose every figure lies within the measured rungs (none from an extrapolation)."""
     out = []
 
-    wins = [r for r in tables.equal_time if r.best is not None and r.best_error.verdict_ok and not r.contested]
+    wins = [
+        r
+        for r in tables.equal_time
+        if r.best is not None and r.best_error.verdict_ok and not r.contested and r.ratio is not None
+    ]
     if wins:
         r = max(wins, key=lambda r: r.budget_spp)
         interval = f" [{num(r.best_error.low)}, {num(r.best_error.high)}]" if r.best_error.low is not None else ""
@@ -334,8 +353,8 @@ def verdicts(tables: Tables) -> list[str]:
         best = None
         for row in tables.equal_quality:
             need = row.needs.get(label)
-            if row.render_how != "measured" or need is None or not need[1].verdict_ok:
-                continue
+            if row.render_how != "measured" or need is None or not need[1].verdict_ok or not row.render_seconds > 0:
+                continue  # no time to compare with (a render of no seconds) is no verdict
             ratio = need[1].value / row.render_seconds
             if best is None or ratio < best[0]:
                 best = (ratio, row, need)

@@ -22,7 +22,10 @@ Notes
   whose plugin metric is no longer installed reads the same. Values that are not finite are left out
   (:mod:`.finite`). :meth:`RunIndex.deciding_frames` names frames far above their scene's median.
 * **Floors.** A scene's floor is the mean of its kept frames' floors (all must have one) and its
-  reference standard error that of the mean over them, sqrt(Σ se²)/n.
+  reference standard error that of the mean over them, sqrt(Σ se²)/n. A score with a closed-form
+  floor also has the floor measured from the reference's halves (frame "metrics" named
+  ``floor_measured.<name>``, no metrics themselves); the one that leads is chosen per scene by
+  :func:`.aggregate.leading_floor` (:meth:`RunIndex.scene_floors`).
 * **Indexed once.** Frames are grouped by (label, spp) and (label, spp, scene), sequence values by
   (label, spp, scene, metric), units by (label, spp), when the index is built: a lookup never
   rescans the run's rows. Lists keep the store's order (label, scene, spp, frame).
@@ -32,8 +35,9 @@ from __future__ import annotations
 
 import math
 
+from denoisebench.analysis.aggregate import SceneFloors, leading_floor
 from denoisebench.results.finite import finite_mean, finite_values, is_finite
-from denoisebench.results.names import FLICKER_PREFIX
+from denoisebench.results.names import FLICKER_PREFIX, MEASURED_FLOOR_PREFIX
 from denoisebench.results.records import FrameRow, SequenceRow, UnitRow
 
 #: Share of a scene's frames dropped at each end of the sorted values (at least 3 frames): one of 8.
@@ -64,7 +68,7 @@ class RunIndex:
         self.unit_rows, self.frame_rows, self.sequence_rows = units, frames, sequences
         self.spp = sorted({u.spp for u in units})
         self.scenes = sorted({u.scene for u in units})
-        stored = {m for f in frames for m in f.metrics}
+        stored = {m for f in frames for m in f.metrics if not m.startswith(MEASURED_FLOOR_PREFIX)}
         self.frame_metric_names = sorted(m for m in stored if not m.startswith("flicker"))
         self.sequence_metric_names = sorted({s.metric for s in sequences})
         #: the per-frame flicker names stored (``flicker.<metric>``, or ``flicker`` of older runs)
@@ -143,7 +147,31 @@ class RunIndex:
         return [(f.frame, f.metrics[metric], median) for f in frames if f.metrics[metric] > DECIDING_FACTOR * median]
 
     def scene_floor(self, label: str, spp: int, scene: str, metric: str) -> tuple[float | None, float | None]:
-        """(floor, ref_se) of a metric on one scene: frames' mean floor, se of the frames' mean."""
+        """(floor, ref_se) of a metric on one scene: the floor that leads, closed-form or measured
+        (:meth:`scene_floors`)."""
+        found = self.scene_floors(label, spp, scene, metric=metric)
+        return found.floor, found.se
+
+    def scene_floors(self, label: str, spp: int, scene: str, metric: str) -> SceneFloors:
+        """Both floors of ``metric`` on one scene (the stored one and the one measured from the reference's
+        halves, each the mean over the kept frames with the se of that mean) and the one that leads
+        (:func:`.aggregate.leading_floor`)."""
+        closed, closed_se = self._stored_floor(label, spp, scene, metric=metric)
+        measured = measured_se = None
+        name = self.per_frame_name(metric)
+        if name is not None:
+            frames = kept_frames(self.ok_frames(label, spp, scene), name)
+            key = MEASURED_FLOOR_PREFIX + name
+            floors = finite_values(f.metrics.get(key) for f in frames)
+            ses = finite_values(f.ref_se.get(key) for f in frames)
+            if frames and len(floors) == len(frames):
+                measured = finite_mean(floors)
+                if len(ses) == len(frames):
+                    measured_se = float(math.sqrt(sum(x * x for x in ses)) / len(ses))
+        return leading_floor(closed, closed_se, measured=measured, measured_se=measured_se)
+
+    def _stored_floor(self, label: str, spp: int, scene: str, metric: str) -> tuple[float | None, float | None]:
+        """(floor, ref_se) stored with the metric (closed form, or measured where there is none)."""
         name = self.per_frame_name(metric)
         if name is None:
             rows = self._sequences.get((label, spp, scene, metric), [])

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from denoisebench.analysis import aggregate as agg
+from denoisebench.analysis import lead
 from denoisebench.analysis.run_index import RunIndex
 from denoisebench.results.finite import finite_mean, is_finite
 from denoisebench.results.names import (
@@ -58,6 +59,21 @@ class Cell:
     the reference's uncertainty; ``raw``/``raw_low``/``raw_high`` are the score as measured against
     the reference, ``floor`` the floor aggregated by the same rule, ``at_resolution`` the scenes whose
     corrected value was at the reference's resolution. Without a floor ``raw`` is ``value``.
+
+    **The number that leads.** For the lead scores (:data:`.lead.LEAD_SCORES`) ``value``/``low``/``high``
+    (and ``raw``, ``floor``) are the anchored trimmed geometric mean (``rule`` = :data:`.lead.LEAD_RULE`:
+    each scene's score as a share of the noisy input's on that scene at ``anchor_spp``, the run's
+    lowest spp; :mod:`.lead`), which no single scene moves by orders of magnitude; ``by_rule`` is the
+    aggregate under the metric's own registry rule (``by_rule_name``) that led before. Every cell also
+    carries, in the score's units, the ``arithmetic`` mean over scenes of the (corrected) scores with
+    its bootstrap interval (``arithmetic_low``/``arithmetic_high``), the ``deciding_scenes`` that carry
+    more than half of it ([(scene, share)]), and ``drop_one``, the largest factor by which dropping one
+    scene moves the leading value (lead scores only).
+
+    **Floors.** ``floor_closed_form`` and ``floor_measured`` (from the reference's two halves,
+    :mod:`denoisebench.metrics.floors.half_reference`) are aggregated like ``floor``; ``measured_floor_leads``
+    names the scenes where the two disagreed beyond the measured one's uncertainty, so the measured
+    floor corrected the score there (:func:`.aggregate.leading_floor`).
     """
 
     value: float | None
@@ -70,6 +86,17 @@ class Cell:
     raw_low: float | None = None
     raw_high: float | None = None
     at_resolution: int = 0
+    arithmetic: float | None = None
+    arithmetic_low: float | None = None
+    arithmetic_high: float | None = None
+    deciding_scenes: list[tuple[str, float]] = field(default_factory=list)
+    by_rule: float | None = None
+    by_rule_name: str | None = None
+    anchor_spp: int | None = None
+    drop_one: float | None = None
+    floor_closed_form: float | None = None
+    floor_measured: float | None = None
+    measured_floor_leads: list[str] = field(default_factory=list)
 
     @property
     def corrected(self) -> float | None:
@@ -158,38 +185,108 @@ def summary_table(data: RunData, exclude=()) -> list[SummaryRow]:
 
 
 def metric_cell(data: RunData, label: str, spp: int, metric: str, scenes: list[str] | None) -> Cell:
-    """One metric of one denoiser at one spp, aggregated over ``scenes`` by the metric's rule.
+    """One metric of one denoiser at one spp, aggregated over ``scenes``.
 
-    With floors on every scene the cell leads with the corrected aggregate (:class:`Cell`); for
-    ``relative_to_input`` both the denoiser's and the input's scores are corrected before the ratio."""
+    With floors on every scene the cell is built from the corrected scores (:class:`Cell`); for
+    ``relative_to_input`` both the denoiser's and the input's scores are corrected before the ratio.
+    A lead score (:data:`.lead.LEAD_SCORES`) then leads with the anchored trimmed geometric mean
+    (:mod:`.lead`); every cell keeps the arithmetic mean and its deciding scenes beside it."""
     rule = agg.rule_of(metric)
     mine, floors, ses = data.per_scene(label, spp, metric, scenes=scenes)
     noisy = noisy_floors = noisy_ses = None
     if rule == "relative_to_input":
         noisy, noisy_floors, noisy_ses = data.per_scene(NOISY, spp, metric, scenes=scenes)
     value, low, high, count = agg.aggregate(rule, mine, noisy, ses=ses)
-    if not (floors and len(floors) == len(mine) and value is not None):
-        return Cell(value=value, low=low, high=high, scenes=count, rule=rule, raw=value, raw_low=low, raw_high=high)
-    # relative_to_input: the floor relative to the input's own score (noisy is None otherwise)
-    floor = agg.aggregate(rule, floors, noisy)[0]
-    higher = agg.higher_is_better(metric)
-    corrected, raised = agg.corrected_values(mine, floors, ses, higher_is_better=higher)
-    noisy_corrected = None
-    if noisy is not None:
-        noisy_corrected = agg.corrected_values(noisy, noisy_floors or {}, noisy_ses, higher_is_better=higher)[0]
-    c_value, c_low, c_high, c_count = agg.aggregate(rule, corrected, noisy_corrected, ses=ses)
-    return Cell(
-        value=c_value,
-        low=c_low,
-        high=c_high,
-        scenes=c_count,
-        rule=rule,
-        floor=floor,
-        raw=value,
-        raw_low=low,
-        raw_high=high,
-        at_resolution=len(raised),
-    )
+    floored = bool(floors) and len(floors) == len(mine) and value is not None
+    per_scene_floors: dict[str, dict | None] = {}
+    if not floored:
+        cell = Cell(value=value, low=low, high=high, scenes=count, rule=rule, raw=value, raw_low=low, raw_high=high)
+        scores = mine
+    else:
+        # relative_to_input: the floor relative to the input's own score (noisy is None otherwise)
+        floor = agg.aggregate(rule, floors, noisy)[0]
+        higher = agg.higher_is_better(metric)
+        corrected, raised = agg.corrected_values(mine, floors, ses, higher_is_better=higher)
+        noisy_corrected = None
+        if noisy is not None:
+            noisy_corrected = agg.corrected_values(noisy, noisy_floors or {}, noisy_ses, higher_is_better=higher)[0]
+        c_value, c_low, c_high, c_count = agg.aggregate(rule, corrected, noisy_corrected, ses=ses)
+        cell = Cell(
+            value=c_value,
+            low=c_low,
+            high=c_high,
+            scenes=c_count,
+            rule=rule,
+            floor=floor,
+            raw=value,
+            raw_low=low,
+            raw_high=high,
+            at_resolution=len(raised),
+        )
+        scores = corrected
+        per_scene_floors = _floor_sources(cell, data, (label, spp, metric), scenes=list(mine))
+    cell.arithmetic = lead.arithmetic_mean(scores)
+    arithmetic = [float(v) for v in scores.values() if is_finite(v)]
+    cell.arithmetic_low, cell.arithmetic_high = agg.bootstrap_mean(arithmetic) if arithmetic else (None, None)
+    cell.deciding_scenes = lead.deciding_scenes(scores)
+    if lead.is_lead_score(metric) and not agg.higher_is_better(metric):
+        _lead(cell, data, (label, spp, metric), scores=(mine, scores), floors=per_scene_floors)
+    return cell
+
+
+def _anchors(data: RunData, metric: str, scenes, corrected: bool) -> tuple[int | None, dict]:
+    """(anchor spp, {scene: the noisy input's score there}): the run's lowest spp, corrected like the cell."""
+    if not data.spp:
+        return None, {}
+    spp = data.spp[0]
+    values, floors, ses = data.per_scene(NOISY, spp, metric, scenes=scenes)
+    if corrected and floors and len(floors) == len(values):
+        values = agg.corrected_values(values, floors, ses)[0]
+    return spp, values
+
+
+def _lead(cell: Cell, data: RunData, key: tuple[str, int, str], *, scores: tuple[dict, dict], floors: dict) -> None:
+    """Make ``cell`` lead with the anchored trimmed geometric mean (:mod:`.lead`) of ``scores`` (raw,
+    and as the cell reads them: corrected where floored); ``floors``: {cell field: {scene: floor}}."""
+    label, spp, metric = key
+    mine, scores = scores
+    corrected = cell.floor is not None
+    anchor_spp, anchors = _anchors(data, metric, list(scores), corrected=corrected)
+    value, low, high, count = lead.lead_aggregate(scores, anchors)
+    cell.by_rule, cell.by_rule_name = cell.value, cell.rule
+    cell.value, cell.low, cell.high, cell.scenes = value, low, high, count
+    cell.rule, cell.anchor_spp = lead.LEAD_RULE, anchor_spp
+    cell.drop_one = lead.drop_one_factor(scores, anchors)
+    if corrected:
+        raw_anchors = _anchors(data, metric, list(scores), corrected=False)[1]
+        cell.raw, cell.raw_low, cell.raw_high, _ = lead.lead_aggregate(mine, raw_anchors)
+        for name, per_scene in floors.items():
+            shared = None if per_scene is None else lead.lead_value(per_scene, raw_anchors)
+            if shared is not None or name != "floor":  # a floor ≤ 0 keeps the rule's (the cell stays corrected)
+                setattr(cell, name, shared)
+    else:
+        cell.raw, cell.raw_low, cell.raw_high = value, low, high
+
+
+def _floor_sources(cell: Cell, data: RunData, key: tuple[str, int, str], *, scenes: list[str]) -> dict:
+    """Fill ``cell``'s closed-form and measured floors (aggregated like ``floor``) and the scenes where
+    the measured one led (:meth:`.run_index.RunIndex.scene_floors`); return the per-scene floors
+    {cell field: {scene: floor} or None where a scene lacks one}."""
+    label, spp, metric = key
+    found = {s: data.scene_floors(label, spp, s, metric=metric) for s in scenes}
+    closed = {s: f.closed for s, f in found.items() if f.closed is not None}
+    measured = {s: f.measured for s, f in found.items() if f.measured is not None}
+    leading = {s: f.floor for s, f in found.items() if f.floor is not None}
+    cell.measured_floor_leads = sorted(s for s, f in found.items() if f.source == "measured" and f.closed is not None)
+    rule = cell.rule
+    noisy = data.per_scene(NOISY, spp, metric, scenes=scenes)[0] if rule == "relative_to_input" else None
+    cell.floor_closed_form = agg.aggregate(rule, closed, noisy)[0] if len(closed) == len(scenes) else None
+    cell.floor_measured = agg.aggregate(rule, measured, noisy)[0] if len(measured) == len(scenes) else None
+    return {
+        "floor": leading,
+        "floor_closed_form": closed if len(closed) == len(scenes) else None,
+        "floor_measured": measured if len(measured) == len(scenes) else None,
+    }
 
 
 @dataclass(kw_only=True)

@@ -3,7 +3,9 @@
 :func:`measure_unit` runs the denoiser through :func:`denoisebench.denoisers.runner.run_sequence`
 (``reset()`` first, then the frames in order, every call timed, every output checked, failures
 contained), computes every per-frame metric (with its floor: closed-form, or measured from the
-reference's two halves) and the temporal ones over the sequence and its consecutive pairs, and
+reference's two halves; a closed-form floor also gets the measured one beside it, as the frame value
+``floor_measured.<name>``, per pair for the flicker scores) and the temporal ones over the sequence
+and its consecutive pairs, and
 returns the :class:`~denoisebench.results.records.UnitRecord` the store keeps. The runner
 (:mod:`.runner`) and the live sampler pairs (:mod:`.sampler_units`) both measure through it.
 
@@ -33,7 +35,7 @@ from denoisebench.metrics.registry import get_metric
 from denoisebench.metrics.validation import MetricNotApplicable
 from denoisebench.results.crops import cut
 from denoisebench.results.finite import is_finite
-from denoisebench.results.names import DECIDING_SCORES, FLICKER_METRICS, FLICKER_PREFIX
+from denoisebench.results.names import DECIDING_SCORES, FLICKER_METRICS, FLICKER_PREFIX, MEASURED_FLOOR_PREFIX
 from denoisebench.results.records import FrameRecord, UnitRecord
 
 
@@ -71,17 +73,36 @@ def _frame_metrics(pred: np.ndarray, ref: np.ndarray, names: list[str], *, ref_v
     values, floors, ses = _split_results(results)
     if halves is not None:
         (half_a, half_b), full_spp, half_spp = halves
-        open_ = [n for n in values if n not in floors and math.isfinite(values[n])]
-        if open_:
-            against_a = compute_metrics(pred, half_a, open_, trim=trim)
-            against_b = compute_metrics(pred, half_b, open_, trim=trim)
-            for name in open_:
-                measured = half_reference_floor(
-                    values[name], (against_a[name].value, against_b[name].value), full_spp, half_spp=half_spp
-                )
-                if math.isfinite(measured.floor) and math.isfinite(measured.se):
-                    floors[name], ses[name] = measured.floor, measured.se
+        scored = [n for n in values if math.isfinite(values[n])]
+        if scored:
+            against = (
+                compute_metrics(pred, half_a, scored, trim=trim),
+                compute_metrics(pred, half_b, scored, trim=trim),
+            )
+            _measured_floors((values, floors, ses), against, (full_spp, half_spp))
     return values, floors, ses, skipped
+
+
+def _measured_floors(scores: tuple[dict, dict, dict], against: tuple[dict, dict], spp: tuple) -> None:
+    """Each finite score's floor measured from the reference's halves (:mod:`denoisebench.metrics.floors.half_reference`).
+
+    ``scores``: (values, floors, ses) as stored, filled in place; ``against``: the results against half a
+    and half b; ``spp``: (full spp, (spp a, spp b)). A score with a closed-form floor keeps the measured
+    one beside it (``floor_measured.<name>`` among the values, its se among the ses: the analyses choose
+    which leads); one without has it as its floor."""
+    values, floors, ses = scores
+    against_a, against_b = against
+    full_spp, half_spp = spp
+    for name in [n for n in values if n in against_a and n in against_b and math.isfinite(values[n])]:
+        measured = half_reference_floor(
+            values[name], (against_a[name].value, against_b[name].value), full_spp, half_spp=half_spp
+        )
+        if not (math.isfinite(measured.floor) and math.isfinite(measured.se)):
+            continue
+        if name in floors:
+            values[MEASURED_FLOOR_PREFIX + name], ses[MEASURED_FLOOR_PREFIX + name] = measured.floor, measured.se
+        else:
+            floors[name], ses[name] = measured.floor, measured.se
 
 
 def _reference_halves(frame):
@@ -111,24 +132,55 @@ def _sequence_metrics(outputs, refs, motion, *, names: list[str], ref_vars=None,
     return (*_split_results(results), skipped)
 
 
-def _flicker(outputs, refs, motion=None, *, ref_vars=None, trim=None) -> list[tuple[dict, dict, dict]]:
+def _flicker(outputs, refs, motion=None, *, ref_vars=None, trim=None, halves=None) -> list[tuple[dict, dict, dict]]:
     """FLICKER_METRICS of each consecutive pair: (values, floors, ref_se) of frame t against frame t−1,
     named ``flicker.<metric>``. The scene's temporal score is their trimmed mean over pairs
-    (:mod:`denoisebench.analysis.run_index`), so one pair cannot decide it; the floors correct it."""
+    (:mod:`denoisebench.analysis.run_index`), so one pair cannot decide it; the floors correct it.
+    ``halves``: each frame's :func:`_reference_halves` (or None); with both frames' halves a pair's
+    floored scores also get their floor measured (:func:`_pair_halves`, :func:`_measured_floors`)."""
     out = []
     for t in range(1, len(outputs)):
         pair_motion = None if motion is None else motion[t - 1 : t + 1]
         pair_var = None if ref_vars is None else np.stack(ref_vars[t - 1 : t + 1])
-        results = compute_metrics(
-            np.stack(outputs[t - 1 : t + 1]),
-            np.stack(refs[t - 1 : t + 1]),
-            list(FLICKER_METRICS),
-            motion=pair_motion,
-            ref_var=pair_var,
-            trim=trim,
-        )
-        out.append(tuple({FLICKER_PREFIX + k: v for k, v in part.items()} for part in _split_results(results)))
+        pred = np.stack(outputs[t - 1 : t + 1])
+
+        def score(ref, var=None, pred=pred, pair_motion=pair_motion):
+            return compute_metrics(pred, ref, list(FLICKER_METRICS), motion=pair_motion, ref_var=var, trim=trim)
+
+        values, floors, ses = _split_results(score(np.stack(refs[t - 1 : t + 1]), pair_var))
+        pair = None if halves is None else _pair_halves(halves, t)
+        if pair is not None:
+            (half_a, half_b), full_spp, half_spp = pair
+            closed = {n: v for n, v in values.items() if n in floors}  # only floored scores: tpsnr has none
+            _measured_floors((closed, floors, ses), (score(half_a), score(half_b)), (full_spp, half_spp))
+            values.update(closed)
+        out.append(tuple({_flicker_name(k): v for k, v in part.items()} for part in (values, floors, ses)))
     return out
+
+
+def _flicker_name(name: str) -> str:
+    """``flicker.<metric>``, and ``floor_measured.flicker.<metric>`` for a measured floor."""
+    if name.startswith(MEASURED_FLOOR_PREFIX):
+        return MEASURED_FLOOR_PREFIX + FLICKER_PREFIX + name[len(MEASURED_FLOOR_PREFIX) :]
+    return FLICKER_PREFIX + name
+
+
+def _pair_halves(halves: list, t: int):
+    """((half a of frames t−1 and t, half b of them), full spp, (spp a, spp b)) of a pair, or None.
+
+    A pair's score carries both frames' reference noise; an adaptive reference's frames have different
+    spp, so the pair's are the harmonic means of the two frames' (a mean's noise variance falls as
+    1/spp, and the pair's as the mean of the two frames' 1/spp)."""
+    before, now = halves[t - 1], halves[t]
+    if before is None or now is None:
+        return None
+    (a0, b0), n0, (na0, nb0) = before
+    (a1, b1), n1, (na1, nb1) = now
+
+    def harmonic(x, y):
+        return 2.0 / (1.0 / x + 1.0 / y)
+
+    return (np.stack([a0, a1]), np.stack([b0, b1])), harmonic(n0, n1), (harmonic(na0, na1), harmonic(nb0, nb1))
 
 
 def _reference_variance(frame) -> np.ndarray | None:
@@ -220,8 +272,9 @@ def measure_unit(
     )
     unit.images = kept_images(records, outputs)
     if len(outputs) > 1:
+        halves = [_reference_halves(f) for f in frames]
         for record, (values, floors, ses) in zip(
-            records[1:], _flicker(outputs, refs, motion, ref_vars=ref_vars, trim=trim)
+            records[1:], _flicker(outputs, refs, motion, ref_vars=ref_vars, trim=trim, halves=halves)
         ):
             record.metrics.update(values)
             record.floors.update(floors)

@@ -66,7 +66,7 @@ from denoisebench.reports.model import (
     ViewingDisplay,
 )
 from denoisebench.reports.run_inputs import run_data, set_apart_of
-from denoisebench.results.names import ERROR_METRICS
+from denoisebench.results.names import ERROR_METRICS, NOISY
 from denoisebench.results.store import ResultsStore
 from denoisebench.results.timings import read_timings
 
@@ -380,11 +380,15 @@ def results_json(report: ReportModel) -> dict:
                                     "raw": c.raw,
                                     "raw_ci95": [c.raw_low, c.raw_high],
                                     "floor": c.floor,
+                                    "floor_closed_form": c.floor_closed_form,
+                                    "floor_measured": c.floor_measured,
+                                    "measured_floor_leads": c.measured_floor_leads,
                                     "at_resolution": c.at_resolution,
                                 }
                                 if c.floor is not None
                                 else {"corrected": False}
                             ),
+                            **_beside(c),
                         }
                         for m, c in r.metrics.items()
                     },
@@ -420,6 +424,22 @@ def results_json(report: ReportModel) -> dict:
             "sequence_metrics": report.sequences,
         }
     )
+
+
+def _beside(c) -> dict:
+    """A metric cell's numbers beside the one that leads (:class:`denoisebench.analysis.summary.Cell`):
+    the arithmetic mean over scenes in the score's units, the scenes carrying more than half of it, and
+    for a lead score the aggregate under the metric's own rule, the anchor and the drop-one factor."""
+    out = {
+        "arithmetic_mean": c.arithmetic,
+        "arithmetic_ci95": [c.arithmetic_low, c.arithmetic_high],
+        "deciding_scenes": [{"scene": scene, "share": share} for scene, share in c.deciding_scenes],
+    }
+    if c.by_rule_name is not None:
+        out["relative_to"] = {"label": NOISY, "spp": c.anchor_spp}
+        out["by_rule"] = {"aggregate": c.by_rule_name, "mean": c.by_rule}
+        out["drop_one_scene_factor"] = c.drop_one
+    return out
 
 
 #: First characters that make a spreadsheet read a cell as a formula (or that it strips first).

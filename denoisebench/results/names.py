@@ -18,6 +18,12 @@ REQUIRED_METRICS = ("relmse_robust", "relmse", "flip", "temporal_relmse_robust",
 FLICKER_METRICS = ("temporal_relmse_robust", "temporal_relmse", "tpsnr")
 FLICKER_PREFIX = "flicker."
 
+#: A score with a closed-form floor also has its floor measured from the reference's two halves
+#: (metrics.half_reference), kept beside it as the frame "metric" ``floor_measured.<name>`` (its value
+#: the measured floor, its ref_se the floor's se); for a per-pair flicker score the name is
+#: ``floor_measured.flicker.<metric>``. These are no metrics: the analyses read them as floors.
+MEASURED_FLOOR_PREFIX = "floor_measured."
+
 #: The error metrics of the accuracy-against-time figure, in panel order (the first leads:
 #: :mod:`denoisebench.metrics.ours.robust`).
 ERROR_METRICS = ("relmse_robust", "relmse", "flip")

@@ -112,7 +112,10 @@ def test_every_lead_temporal_and_gradient_score_ranks_the_smooth_prediction_abov
             m = get_metric(metric)
             blur, noisy = rows["blur"].metrics[metric].value, rows[NOISY].metrics[metric].value
             assert m.better(blur, noisy), (spp, metric, blur, noisy)
-            if m.aggregate == "relative_to_input":
+            cell = rows[NOISY].metrics[metric]
+            if m.aggregate == "relative_to_input":  # under its own rule the input is 1 at every spp
+                assert (cell.by_rule if cell.by_rule_name else cell.value) == pytest.approx(1.0)
+            if cell.anchor_spp == spp:  # the lead aggregate: a share of the input's error at the lowest spp
                 assert noisy == pytest.approx(1.0)
 
 
@@ -292,9 +295,16 @@ def test_report_files_carry_floors_flicker_per_spp_and_strips(tmp_path):
     results = json.loads((tmp_path / "report" / "results.json").read_text())
     for row in results["summary"]:
         relmse = row["metrics"]["relmse"]
-        assert relmse["aggregate"] == "mean" and relmse["floor"] > 0
+        assert relmse["aggregate"] == "anchored_trimmed_geomean" and relmse["floor"] > 0
+        assert relmse["by_rule"]["aggregate"] == "mean" and relmse["relative_to"] == {"label": NOISY, "spp": 1}
         assert relmse["corrected"] is True and relmse["at_resolution"] == 0
-        assert relmse["mean"] == pytest.approx(relmse["raw"] - relmse["floor"])
+        # one scene: the lead share is the corrected score over the input's corrected 1-spp score, and
+        # the arithmetic mean beside it is that corrected score in relMSE's units
+        assert relmse["arithmetic_mean"] == pytest.approx(relmse["by_rule"]["mean"])
+        noisy_1 = next(r for r in results["summary"] if r["denoiser"] == NOISY and r["spp"] == 1)
+        anchor = noisy_1["metrics"]["relmse"]["arithmetic_mean"]
+        assert relmse["mean"] == pytest.approx(relmse["arithmetic_mean"] / anchor)
+        assert relmse["floor_closed_form"] is not None and "floor_measured" in relmse
         assert row["metrics"]["temporal_relmse"]["floor"] > 0
         # the robust scores (always computed, they lead) carry floors too
         assert row["metrics"]["relmse_robust"]["floor"] > 0
