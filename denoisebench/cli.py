@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with handling_signals():  # from the first import of a command on: a signal is exit 130
             args = build_parser().parse_args(argv)
-        code = run_parsed(args)
+            code = run_parsed(args)
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         code = EXIT_INTERRUPTED
