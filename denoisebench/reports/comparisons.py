@@ -106,7 +106,8 @@ def comparison(
     if NOISY in data.labels and all(label != NOISY for label, _ in shown):
         shown.insert(0, (NOISY, np.nan_to_num(np.asarray(frame.color, np.float32), nan=0.0, posinf=0.0, neginf=0.0)))
     denoised = [img for label, img in shown if label != NOISY]
-    size = window_size(*reference.shape[:2])
+    height, width = reference.shape[:2]
+    size = window_size(width=width, height=height)
     windows = crop_choice.crop_windows(denoised, reference, size, count=2)
     scale = images.crop_scale(size)
     full_scale = max(1, 256 // max(reference.shape[:2]))

@@ -52,8 +52,9 @@ __all__ = [
 ]
 
 
-def window_size(height: int, width: int) -> int:
-    """Side of a worst-region window: a quarter of the short side, at least 4 pixels."""
+def window_size(*, width: int, height: int) -> int:
+    """Side of a worst-region window: a quarter of the short side, at least 4 pixels (a frame's size
+    is passed by name, width then height, as everywhere on the benchmark side)."""
     return max(4, min(height, width) // 4)
 
 
@@ -101,7 +102,7 @@ def worst_windows(
     return found
 
 
-def strip_side(height: int, width: int) -> int:
+def strip_side(*, width: int, height: int) -> int:
     return int(min(height, width, max(8, min(48, min(height, width) // 4))))
 
 
@@ -109,7 +110,7 @@ def choose_window(noisy: np.ndarray, refs: np.ndarray, motion: np.ndarray | None
     """(top, left, side) of the square where the noisy input's frame-to-frame error is largest, among
     those that show the reference (module notes)."""
     height, width = refs.shape[1:3]
-    side = strip_side(height, width)
+    side = strip_side(width=width, height=height)
     if len(refs) < 2:
         return (height - side) // 2, (width - side) // 2, side
     error = temporal_relmse_map(noisy, refs, motion=motion).mean(axis=0)

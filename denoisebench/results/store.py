@@ -60,7 +60,7 @@ def encode_image(image: np.ndarray) -> bytes:
     return zlib.compress(np.ascontiguousarray(image, dtype="<f4").tobytes(), 6)
 
 
-def decode_image(blob: bytes, height: int, width: int) -> np.ndarray:
+def decode_image(blob: bytes, *, width: int, height: int) -> np.ndarray:
     return np.frombuffer(zlib.decompress(blob), dtype="<f4").reshape(height, width, 3).astype(np.float32)
 
 
@@ -457,7 +457,7 @@ class ResultsStore:
         ).fetchone()
         if row is None:
             return None
-        return int(row[0]), decode_image(row[3], row[1], row[2])
+        return int(row[0]), decode_image(row[3], height=row[1], width=row[2])
 
     def strip(self, run_id: str, denoiser: str, scene: str, spp: int) -> StripRow | None:
         """The unit's strip (first frame, window, crops F×side×side×3), or None (none, or a v1 database)."""

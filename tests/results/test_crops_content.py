@@ -35,7 +35,7 @@ def test_content_map_is_the_share_of_visible_pixels():
 
 def test_the_strip_window_shows_the_wall_not_the_black_sky_around_the_lamps():
     noisy, ref = _sky_and_wall()
-    side = crops.strip_side(32, 32)
+    side = crops.strip_side(width=32, height=32)
     # without the content rule the flicker alone points at the sky
     error = crops.temporal_relmse_map(noisy, ref).mean(axis=0)
     ((top, left),) = crops.worst_windows(error, side, count=1)
