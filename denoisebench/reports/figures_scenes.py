@@ -12,7 +12,8 @@ Rules
   scene cannot swamp the others' colours. The colour scale is shared by every panel and symmetric
   in log around 1, clipped at :data:`RATIO_CLIP` either way.
 * **Only measured cells.** A cell without a value (failed unit, metric not applicable, or no input
-  score to divide by) stays blank; a column without any value has no winner.
+  score to divide by) stays blank; a column without any value has no winner; a scene without any
+  (the noisy input scores 0 there: a black frame) gets a panel that says so.
 * Ties: every cell that equals the column's lowest value is framed.
 
 :func:`scene_grid` computes what is drawn (tests read it); :func:`draw_scenes` draws it.
@@ -96,6 +97,22 @@ def draw_scenes(grids: list[SceneGrid], metric: str):
             ax.set_visible(False)
             continue
         g = grids[k]
+        if all(v is None for row in g.ratios for v in row):
+            # nothing to divide by (the input scores 0 or nothing here, e.g. a black frame): say so
+            ax.text(
+                0.5,
+                0.5,
+                "no ratio: the noisy input\nscores 0 or nothing here",
+                ha="center",
+                va="center",
+                fontsize=8,
+                color="#666666",
+                transform=ax.transAxes,
+            )
+            ax.set_xticks([])
+            ax.set_yticks([])
+            ax.set_title(g.scene, fontsize=9)
+            continue
         data = np.array(
             [[np.nan if v is None else min(max(v, 1 / RATIO_CLIP), RATIO_CLIP) for v in row] for row in g.ratios]
         )

@@ -217,7 +217,7 @@ BOUND_SIGNS = {"at_least": ("≥ ", "≤ "), "at_most": ("≤ ", "≥ ")}
 
 
 def _times(ratio: float, how: str | None = None) -> str:
-    return BOUND_SIGNS.get(how, ("", ""))[0] + f"{ratio:.2g}×"
+    return BOUND_SIGNS.get(how, ("", ""))[0] + f"{ratio:.3g}×"
 
 
 def _theirs(how: str | None) -> str:
@@ -279,11 +279,18 @@ def screen_lines(screen: FirstScreen) -> list[str]:
         "that spp."
     ]
     best = next((r for r in screen.rows if r.equal_time_ratio is not None and r.equal_time_how in EXACT), None)
-    if best is not None:
+    if best is not None and best.equal_time_ratio < 1:
         lines.insert(
             0,
             f"Best at equal time: {best.denoiser} at {best.best_spp} spp, {_times(best.equal_time_ratio)} rendering "
             f"alone's {screen.metric} in the same {num(best.seconds)} s per frame.",
+        )
+    elif best is not None:
+        lines.insert(
+            0,
+            f"At equal time no denoiser beats rendering alone in {screen.metric}; closest: {best.denoiser} at "
+            f"{best.best_spp} spp, {_times(best.equal_time_ratio)} rendering alone's error in the same "
+            f"{num(best.seconds)} s per frame.",
         )
     for spp, scenes in screen.noisy_deciding.items():
         lines.append(f"The noisy input's own mean at {spp} spp is decided by {', '.join(scenes)}.")

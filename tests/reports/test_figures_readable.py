@@ -158,3 +158,9 @@ def test_small_multiples_frame_each_scenes_winner_per_spp():
     # the tie in scene t at 1 spp (a and b both 0.5) and at 4 spp (both 0.05) frames both
     assert framed == sorted(["winner:a:1", "winner:b:4", "winner:a:1", "winner:b:1", "winner:a:4", "winner:b:4"])
     fa.pyplot().close(fig)
+    # a scene where the input scores 0 (a black frame): no ratio anywhere, and the panel says why
+    black = fs.scene_grid("black", {"noisy": {1: 0.0, 4: 0.0}, "a": {1: 1e-9, 4: 1e-10}}, [1, 4])
+    assert black.winners == {} and black.ratios == [[None, None]]
+    fig = fs.draw_scenes([black], "relmse_robust")
+    assert any("no ratio" in t.get_text() for t in fig.axes[0].texts)
+    fa.pyplot().close(fig)

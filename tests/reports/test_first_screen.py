@@ -160,3 +160,9 @@ def test_deciding_scenes_come_from_the_aggregates_cells_where_they_name_them():
     assert rows["a"].deciding_scenes == ["y"] and rows["b"].deciding_scenes == []
     assert named.noisy_deciding == {1: ["z"]}
     assert _named_by_cells(screen, None, "relmse_robust") == screen
+
+
+def test_when_every_denoiser_loses_at_equal_time_the_screen_says_so():
+    at = _at([Point(denoiser="b", spp=1, seconds=9.0, error=0.2)])  # 4.8× rendering alone's error
+    lines = summary_screen.screen_lines(summary_screen.first_screen(at, {}))
+    assert lines[0].startswith("At equal time no denoiser beats rendering alone") and "b at 1 spp, 4.8×" in lines[0]
