@@ -70,7 +70,9 @@ def flicker_figure(
                     label=label,
                     zorder=10 if label == NOISY else 2,
                 )
-            ax.xaxis.get_major_locator().set_params(integer=True)
+            pairs = max((len(values) for values in lines.values()), default=1)
+            ax.set_xlim(0.5, pairs + 0.5)  # frame pairs 1..n, even when there is one
+            ax.set_xticks(range(1, pairs + 1))
             if metric != "tpsnr" and any(v for values in lines.values() for v in values if v):
                 ax.set_yscale("log")
             ax.grid(True, alpha=0.25)
