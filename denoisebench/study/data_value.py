@@ -588,12 +588,23 @@ def scaling_figure(result: StudyResult, path: Path) -> Path | None:
             capsize=3,
             label=model,
         )
+    ax.set_xscale("log")
+    counts = sorted({r["scenes"] for rows in result.scaling.values() for r in rows})
+    ax.set_xticks(counts, [str(c) for c in counts])
+    ax.minorticks_off()
+    lines: list[tuple[float, list[str]]] = []  # reference lines; labels within 2 % share one line
     for label, scores in result.references.items():
         value = scores["relmse_robust"]["value"]
         if value is not None:
-            ax.axhline(value, linestyle="--", linewidth=0.8, color="grey")
-            ax.annotate(label, (ax.get_xlim()[0], value), fontsize=7, color="grey")
-    ax.set_xscale("log")
+            near = [line for line in lines if abs(line[0] - value) <= 0.02 * max(line[0], value)]
+            if near:
+                near[0][1].append(label)
+            else:
+                lines.append((value, [label]))
+    for value, labels in lines:
+        ax.axhline(value, linestyle="--", linewidth=0.8, color="grey")
+        text = " " + ", ".join(labels)
+        ax.text(0.01, value, text, fontsize=7, color="grey", va="bottom", transform=ax.get_yaxis_transform())
     ax.set_xlabel("generated training scenes")
     ax.set_ylabel("relmse_robust (corrected)")
     ax.legend(fontsize=8)
