@@ -35,6 +35,7 @@ from __future__ import annotations
 import io
 import math
 
+from denoisebench.analysis.lead import is_lead_score
 from denoisebench.results.names import NOISY
 
 NOISY_COLOR = "#444444"
@@ -323,7 +324,11 @@ def _panel(ax, at, palette: dict[str, str]) -> None:
     words = at.time_label if "render" in at.time_label else f"{at.time_label}: render at input spp + denoise"
     ax.set_xlabel(words)
     _plain_ticks(ax)
-    ax.set_ylabel(f"{at.metric} (lower is better)")
+    ax.set_ylabel(
+        f"{at.metric}: share of the noisy input's at its lowest spp (lower is better)"
+        if is_lead_score(at.metric)
+        else f"{at.metric} (lower is better)"
+    )
     ax.grid(True, which="both", alpha=0.25)
     ax.legend(loc="lower left", fontsize=8, frameon=True, framealpha=0.85)
     _labels(ax, ends, palette)

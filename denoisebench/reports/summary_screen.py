@@ -36,6 +36,7 @@ import math
 from dataclasses import dataclass, replace
 
 from denoisebench.analysis.equal_tables import error_at, spp_for
+from denoisebench.analysis.lead import is_lead_score
 from denoisebench.results.finite import num
 from denoisebench.results.names import NOISY
 
@@ -291,6 +292,13 @@ def screen_lines(screen: FirstScreen) -> list[str]:
             f"At equal time no denoiser beats rendering alone in {screen.metric}; closest: {best.denoiser} at "
             f"{best.best_spp} spp, {_times(best.equal_time_ratio)} rendering alone's error in the same "
             f"{num(best.seconds)} s per frame.",
+        )
+    if is_lead_score(screen.metric):
+        lines.append(
+            f"{screen.metric} leads as a share of the noisy input's at its lowest spp (each scene's score over the "
+            "input's there; geometric mean over scenes, from 3 scenes on without the highest and lowest ⌈12.5 %⌉): one "
+            "scene cannot move it "
+            "by orders of magnitude; the arithmetic mean and its deciding scenes are in results.json."
         )
     for spp, scenes in screen.noisy_deciding.items():
         lines.append(f"The noisy input's own mean at {spp} spp is decided by {', '.join(scenes)}.")
