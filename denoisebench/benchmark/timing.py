@@ -330,6 +330,8 @@ def measure_run_timings(
     pixels0 = width0 * height0
     auto = size == AUTO
     size = auto_time_size(width0, height0) if auto else (int(size[0]), int(size[1]))
+    if (done.get("timing") or {}).get("width"):  # a resumed run keeps the size it was timed at
+        size = (int(done["timing"]["width"]), int(done["timing"]["height"]))
     stored_plan = info.record.get("plan") or {}
     features, per_sample = tuple(stored_plan.get("features") or ()), bool(stored_plan.get("per_sample", False))
     if "timing" not in done:
