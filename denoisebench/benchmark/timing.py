@@ -216,8 +216,8 @@ def probe_render(
     Each spp is a render of its own, not a rung of one ladder: a rung's seconds is the time to reach it, and
     the ladder traces the next rung's samples while the host assembles this one's buffers, so its rungs at 1
     and 4 spp were within 4 % of each other (cornell at 256×256: 0.584 and 0.586 s; cluttered_915 at 512×512:
-    1.44 and 1.49 s, where separate renders took 0.36 and 0.91-1.25 s). The first render of each set at each size is a warm-up
-    and is not timed: it compiles (cold kernel cache), traces and records the frozen passes at that size
+    1.44 and 1.49 s, where separate renders took 0.36 and 0.91-1.25 s). The first render of each set at each
+    size is a warm-up and is not timed: it compiles (cold kernel cache), traces and records the frozen passes at that size
     (measured on the demo's cluttered_915 at 512×512: 1.30 s to reach 1 spp against 0.43-0.44 s warm), which
     the dataset's own frames pay once per sequence, not per frame. Then ``repeats`` rounds, each one render of
     every set at each size and spp in turn (interleaved: every set and size sees the same load), and each
