@@ -217,11 +217,12 @@ def probe_render(
     the ladder traces the next rung's samples while the host assembles this one's buffers, so its rungs at 1
     and 4 spp were within 4 % of each other (cornell at 256×256: 0.584 and 0.586 s; cluttered_915 at 512×512:
     1.44 and 1.49 s, where separate renders took 0.36 and 0.91-1.25 s). The first render of each set at each
-    size is a warm-up and is not timed: it compiles (cold kernel cache), traces and records the frozen passes at that size
-    (measured on the demo's cluttered_915 at 512×512: 1.30 s to reach 1 spp against 0.43-0.44 s warm), which
-    the dataset's own frames pay once per sequence, not per frame. Then ``repeats`` rounds, each one render of
-    every set at each size and spp in turn (interleaved: every set and size sees the same load), and each
-    point keeps the least of its renders (other processes on a shared machine only ever add time; module
+    size is a warm-up and is not timed: it compiles (cold kernel cache), traces and records the frozen passes
+    at that size (measured on the demo's cluttered_915 at 512×512: 1.30 s to reach 1 spp against 0.43-0.44 s
+    warm), which the dataset's own frames pay once per sequence, not per frame. Then ``repeats`` rounds, each
+    one render of every set at each size and spp in turn (interleaved: every set and size sees the same
+    load), and each point keeps the least of its renders (other processes on a shared machine only ever add
+    time; module
     Notes)."""
     from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
     from denoisebench.generator.dataset_scenes import load_scene_file
