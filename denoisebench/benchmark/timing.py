@@ -222,8 +222,7 @@ def probe_render(
     warm), which the dataset's own frames pay once per sequence, not per frame. Then ``repeats`` rounds, each
     one render of every set at each size and spp in turn (interleaved: every set and size sees the same
     load), and each point keeps the least of its renders (other processes on a shared machine only ever add
-    time; module
-    Notes)."""
+    time; module Notes)."""
     from denoisebench.generator.contract.render_plan import RenderOptions, make_render_plan
     from denoisebench.generator.dataset_scenes import load_scene_file
     from denoisebench.generator.render.scene import build_mitsuba_scene
