@@ -40,10 +40,10 @@ Notes
   pixel whose neighbourhood is black in frame t was divided by 0.01. Measured on the demo's
   glossy_fireflies (small emitters of radiance ~1e4 in front of a black background; the
   background's motion, −2.9 px per frame, is not the emitters', −0.6 px, so the warp reads the
-  emitter into background pixels, a disocclusion the mask does not see): 10–17 pixels per frame
-  pair scored 1e8–1e10, every denoiser's flicker was ~1.5e5 and the noisy input's rose with spp;
-  with both frames' magnitude the input's robust flicker is 0.39–0.80 at 1 spp, 0.11–0.18 at 4,
-  0.036–0.050 at 16 (docs/measurements.md). ``motion`` is optional: without it W is the identity,
+  emitter into background pixels, a disocclusion the mask does not see): 10–19 pixels per frame
+  pair scored 1e8–1e10, every denoiser's flicker was ~1.5e5 and the noisy input's stayed at
+  1e3–7e5 per pair at 1, 4 and 16 spp; with both frames' magnitude the input's robust flicker is
+  0.34–0.80 at 1 spp, 0.11–0.18 at 4, 0.036–0.051 at 16 (bench/flicker_pairs.py). ``motion`` is optional: without it W is the identity,
   which is right for a static camera only. Pairs whose frames are both bright and flat score
   like relMSE of the frame difference; the 0.01 is relMSE's.
 * ``temporal_relmse_floor``: its reference-noise floor (see ``floors``). For a perfect
