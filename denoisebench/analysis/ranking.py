@@ -5,8 +5,10 @@ Each denoiser's entry comes from the newest run that measured it at that spp (a 
 code replaces the older number); the run id and its date are shown, so numbers from different runs
 are never silently mixed. The value combines the scenes by the metric's aggregation rule
 (:mod:`.aggregate`: per scene the mean over its frames, or the sequence's temporal value; then the
-mean, the geometric mean, or the geometric mean of the ratio to the same run's noisy input), so a
-bright scene never decides a linear score; a score with a reference-noise floor is ranked corrected,
+mean, the geometric mean, or the geometric mean of the ratio to the same run's noisy input; for the
+lead scores the anchored trimmed geometric mean of :mod:`.lead`, a share of the same run's noisy input
+at its lowest spp, so runs on one dataset compare when they share that spp), so a bright scene never
+decides a linear score and no single scene decides a lead score; a score with a reference-noise floor is ranked corrected,
 as the report's tables show it (the same :func:`.summary.metric_cell`); failed units count as
 failed, not as missing, and rank last.
 
