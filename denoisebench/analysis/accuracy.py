@@ -274,7 +274,7 @@ def readings(at: AccuracyTime) -> list[str]:
                 f"{p.denoiser} at {p.spp} spp matches {spp_text(spp_eq)} rendering in {at.metric} in about its time "
                 f"({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame{spread}): no time verdict{note}."
             )
-        score = -math.log(ratio)
+        score = math.log(seconds_eq) - math.log(p.seconds)  # -log(ratio): a ratio may underflow to 0, its log not
         if p.denoiser not in best or score > best[p.denoiser][0]:
             best[p.denoiser] = (score, text)
     for _, text in sorted(best.values(), key=lambda item: -item[0]):

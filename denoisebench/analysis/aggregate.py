@@ -123,7 +123,10 @@ def log_se(se: float | None, value: float) -> float:
     """Standard deviation on the log scale of a positive value with standard error ``se`` (log-normal)."""
     if not se or value <= 0:
         return 0.0
-    return math.sqrt(math.log1p((se / value) ** 2))
+    ratio = se / value
+    if ratio > 1e150:  # (se/value)² beyond the floats: log1p(r²) = 2·log(r) to every digit there
+        return math.sqrt(2.0 * math.log(ratio))
+    return math.sqrt(math.log1p(ratio**2))
 
 
 def _exp(x: float) -> float:
@@ -177,8 +180,12 @@ def bootstrap_mean(terms, ses=None) -> tuple[float | None, float | None]:
     rng = np.random.default_rng(BOOTSTRAP_SEED)
     index = rng.integers(0, data.size, size=(BOOTSTRAP_RESAMPLES, data.size))
     samples = data[index] + rng.standard_normal(index.shape) * se[index]
-    means = samples.mean(axis=1)
-    return float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
+    with np.errstate(over="ignore", invalid="ignore"):
+        means = samples.mean(axis=1)
+        low, high = float(np.percentile(means, 2.5)), float(np.percentile(means, 97.5))
+    if not (math.isfinite(low) and math.isfinite(high)):
+        return None, None  # jitter beyond the floats: no interval rather than an infinite one
+    return low, high
 
 
 def bootstrap_over_scenes(
