@@ -85,7 +85,8 @@ def add_arguments(parser) -> None:
 
 
 def run(args) -> int:
-    from denoisebench.study.data_value import StudyOptions, run_study, write_report
+    from denoisebench.study.data_value import StudyOptions, run_study
+    from denoisebench.study.report import write_report
 
     for option, folder in (("--pool", args.pool), ("--third-party", args.third_party)):
         if not (Path(folder) / "dataset.json").is_file():
