@@ -10,7 +10,8 @@ It generates one small dataset (two procedural families, 16 px, 2 frames, spp 1,
 benchmarks two built-in denoisers on it without the render probe, and writes ``digest.json``: the
 sha256 of every dataset image, the manifest and ``results.json`` with measured seconds masked, and
 every row of the dataset's and the store's databases without their timed columns. What is masked varies run to run by nature (wall-clock seconds and
-what is derived from them: time verdicts, spreads, equal-time tables); everything else is compared.
+what is derived from them: time verdicts and the accuracy readings that quote seconds, spreads, equal-time tables);
+everything else is compared.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ import sys
 from pathlib import Path
 
 _TIMED = re.compile(
-    r"second|time|timing|probe|spread|verdict|equal_|started|finished|duration|created|host|version|path|elapsed"
+    r"second|time|reading|timing|probe|spread|verdict|equal_|started|finished|duration|created|host|version|path|elapsed"
 )
 
 
