@@ -111,13 +111,23 @@ def test_a_file_plugin_imports_the_module_beside_it_in_its_worker(plugin_dir):
         denoiser.close()
 
 
-def test_the_readme_plugin_passes_check_plugin_but_fireflies_with_a_hint(tmp_path, capsys):
+def test_the_readme_plugin_passes_every_hard_case_and_a_plain_blur_fails_fireflies_with_a_hint(tmp_path, capsys):
+    """The README's plugin passes all ten hard cases; what the README says a FAIL looks like holds for
+    its own example (a plain Gaussian blur fails ``fireflies``, with a hint)."""
     (tmp_path / "my_denoiser.py").write_text(_readme_plugin())
-    spec = f"{tmp_path}/my_denoiser.py:denoise"
+    code = cli.main(["check-plugin", f"{tmp_path}/my_denoiser.py:denoise", "--isolation", POLICY, "--json"])
+    cases = {c["case"]: c for c in json.loads(capsys.readouterr().out)["cases"]}
+    assert code == 0 and len(cases) == 10 and all(c["passed"] for c in cases.values()), cases
+    readme = (REPO / "README.md").read_text()
+    assert "passes all ten hard cases" in readme and "plain Gaussian\nblur, for one, fails `fireflies`" in readme
+    (tmp_path / "blur.py").write_text(
+        "import numpy as np\nfrom scipy.ndimage import gaussian_filter\n\n\n"
+        "def denoise(frame):\n    return gaussian_filter(frame.color, sigma=(1.0, 1.0, 0)).astype(np.float32)\n"
+    )
+    spec = f"{tmp_path}/blur.py:denoise"
     code = cli.main(["check-plugin", spec, "--case", "tiny", "--case", "fireflies", "--isolation", POLICY, "--json"])
     cases = {c["case"]: c for c in json.loads(capsys.readouterr().out)["cases"]}
-    assert code == 1 and cases["tiny"]["passed"], cases
-    assert not cases["fireflies"]["passed"]
+    assert code == 1 and cases["tiny"]["passed"] and not cases["fireflies"]["passed"], cases
     assert cases["fireflies"]["hint"].startswith("tests isolated samples") and "usual fix" in cases["fireflies"]["hint"]
 
 
