@@ -3,6 +3,11 @@
 :func:`signalled` starts ``python -m denoisebench.cli ARGS``, polls ``when(output_so_far)`` every
 20 ms, sends ``signum`` as soon as it is true (or the process has ended: then nothing is sent) and
 returns the exit status, the seconds from the signal to the exit, and the output.
+
+The command starts with SIGINT and SIGTERM at their default disposition, as a terminal's
+foreground command does. Pitfall: a test run started in the background of a non-interactive
+shell (``make test &``, ``nohup``) ignores SIGINT and its children inherit that; the command then
+rightly keeps ignoring it (:mod:`denoisebench.interrupts`) and runs to exit 0 with the signal sent.
 """
 
 from __future__ import annotations
@@ -25,6 +30,12 @@ class Signalled:
     output: str
 
 
+def _default_signals() -> None:
+    """In the child before exec: SIGINT and SIGTERM at their defaults, whatever the test run inherited."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
 def signalled(
     args: list[str],
     when: Callable[[str], bool],
@@ -41,6 +52,7 @@ def signalled(
         text=True,
         env={**os.environ, **(env or {})},
         cwd=cwd,
+        preexec_fn=_default_signals,
     )
     lines: list[str] = []
     reader = threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")), daemon=True)
