@@ -6,18 +6,19 @@ calls). Scaling such a time by the pixel ratio to 1920×1080 charges that overhe
 module separates the costs from measurements and projects them to the resolution a report states
 (``run-benchmark --time-at WxH``, default 1920×1080):
 
-* **Denoisers**: ``seconds(P, s) = fixed + (t₀(s) − fixed) · P / P₀``. ``t₀(s)`` is the median
-  measured seconds per frame at the dataset's ``P₀`` pixels and input spp ``s`` (the run's own
-  calls); ``fixed`` (per call) comes from a line through that time and one more call, after the
-  run, on a synthetic frame of ``--time-size`` pixels (default 1024×1024, 1 MP): the frame's
-  buffers (and per-sample data) tiled up to that size (:func:`upscaled_frame`) at the lowest spp.
-  The part that changes with spp is taken as per-pixel. Where ``t₀`` at the highest spp differs
-  from the lowest by more than the spread, the denoiser is timed at the larger size there too
-  (:class:`HighestSppTiming`) and ``seconds(P, s)`` lies between the two measured lines, at the
-  place ``t₀(s)`` takes between ``t₀`` at the two ends. Pitfall: a small frame's seconds mix fixed
-  and per-pixel work, so a change with spp measured only at ``P₀`` cannot be split; read through one
-  line it made cross_bilateral's 1080p time at 2–16 spp its 3 ms fixed cost (0.8 s measured:
-  its 1-spp frames estimate their own variance per pixel, 6 ms at 64×64 against 2.5 ms).
+* **Denoisers**: ``seconds(P, s₀) = fixed + (t₀(s₀) − fixed) · P / P₀`` at the lowest spp ``s₀``; ``t₀(s)``
+  is the median measured seconds per frame at the dataset's ``P₀`` pixels and input spp ``s`` (the run's own
+  calls); ``fixed`` (per call) comes from a line through that time and one more call, after the run, on a
+  synthetic frame of ``--time-size`` pixels (default 1024×1024, 1 MP): the frame's buffers (and per-sample
+  data) tiled up to that size (:func:`upscaled_frame`) at the lowest spp. At another spp that line is scaled
+  whole by ``t₀(s) / t₀(s₀)`` (a change seen only at ``P₀`` cannot be split; capping ``fixed`` at ``t₀(s)``
+  instead let load noise drop the per-pixel part: kpcn's 1080p frame at 2 spp charged its 43 ms 64×64 time).
+  Where ``t₀`` at the highest spp differs from the lowest by more than the spread, the denoiser is timed at
+  the larger size there too (:class:`HighestSppTiming`) and ``seconds(P, s)`` lies between the two measured
+  lines, at the place ``t₀(s)`` takes between ``t₀`` at the two ends. Pitfall: a small frame's seconds mix
+  fixed and per-pixel work, so a change with spp measured only at ``P₀`` cannot be split; read through one
+  line it made cross_bilateral's 1080p time at 2–16 spp its 3 ms fixed cost (0.8 s measured: its 1-spp
+  frames estimate their own variance per pixel, 6 ms at 64×64 against 2.5 ms).
 * **Rendering**: ``seconds(P, s) = a(P) + b(P) · s``, one line per **buffer set** a render makes
   (:class:`RenderCost`): rendering more samples without a denoiser makes colour only (with its
   diffuse/specular split, :data:`~denoisebench.results.timings.COLOUR_ONLY`), a denoiser's input makes
@@ -163,12 +164,12 @@ class DenoiserCost:
         if self.fixed is None:
             return None  # never scale a small frame's time by the pixel ratio alone
         high = self.highest
-        if high is None or high.spp not in self.small:
-            fixed = min(self.fixed, base)
-            return fixed + (base - fixed) * pixels / self.pixels0
         low_spp = min(self.small)
-        at_low, at_high = self.small[low_spp], self.small[high.spp]
+        at_low = self.small[low_spp]
         low_line = self.fixed + (at_low - self.fixed) * pixels / self.pixels0
+        if high is None or high.spp not in self.small:
+            return low_line * base / at_low if at_low > 0 else low_line
+        at_high = self.small[high.spp]
         high_line = high.fixed + (at_high - high.fixed) * pixels / self.pixels0
         weight = float(np.clip((base - at_low) / (at_high - at_low), 0.0, 1.0)) if at_high != at_low else 1.0
         return low_line + weight * (high_line - low_line)

@@ -47,8 +47,8 @@ def test_denoiser_cost_projects_fixed_plus_per_pixel_and_never_scales_a_small_fr
     assert cost.fixed == pytest.approx(FIXED)
     assert cost.seconds(HD, 1) == pytest.approx(_law(HD))
     assert cost.per_megapixel == pytest.approx(PER_PIXEL * 1e6)
-    # the spp-dependent part (0.01 s at P0) is per-pixel: × HD/P0 at 1920×1080
-    assert cost.seconds(HD, 4) == pytest.approx(_law(HD) + 0.01 * HD / P0)
+    # the spp-dependent part (0.01 s at P0) cannot be split: the measured line is scaled whole by it
+    assert cost.seconds(HD, 4) == pytest.approx(_law(HD) * (_law(P0) + 0.01) / _law(P0))
     # pure proportional scaling would have charged the 50 ms fixed cost HD/P0 = 324 times
     assert _law(P0) * HD / P0 > 10 * cost.seconds(HD, 1)
 
@@ -205,13 +205,35 @@ def test_a_cost_that_shrinks_after_one_spp_is_projected_from_a_timing_at_each_en
     cost = tm.DenoiserCost(label="d", pixels0=P0, small=dict(small))
     cost.fixed = tm.line_through([(P0, _low_law(P0)), (P1, _low_law(P1))])[0]
     assert cost.fixed == pytest.approx(0.0031)
-    assert cost.seconds(HD, 16) == pytest.approx(0.0025)  # the one-line projection: a 64x64 frame's time at 1080p
+    # one line: the 1-spp line scaled whole by the small frames' ratio, never a small frame's time
+    assert cost.seconds(HD, 16) == pytest.approx(_low_law(HD) * _high_law(P0) / _low_law(P0))
     fixed16 = tm.line_through([(P0, _high_law(P0)), (P1, _high_law(P1))])[0]
     cost.highest = tm.HighestSppTiming(spp=16, pixels=P1, seconds=_high_law(P1), fixed=fixed16)
     assert cost.seconds(HD, 1) == pytest.approx(_low_law(HD))
     assert cost.seconds(HD, 16) == pytest.approx(_high_law(HD))
     assert _high_law(HD) < cost.seconds(HD, 2) < _low_law(HD)
     assert cost.seconds(P0, 2) == pytest.approx(0.0027)  # the dataset's own size stays as measured
+
+
+def test_one_large_timing_never_drops_the_per_pixel_part_at_another_spp():
+    """kpcn's pattern on a loaded demo run: 86 ms per 64x64 frame at 1 spp, 43 ms at 2 spp (load, not work),
+    one timing at 512x512 and 1 spp (2.35 s) putting the fixed cost at 50 ms, above the 2-spp time. At every
+    spp the 1080p projection keeps the per-pixel part, scaled by the small frames' ratio; it was 43 ms."""
+    p0, p1 = 64 * 64, 512 * 512
+    small = {1: 0.0862, 2: 0.0434, 4: 0.0773, 16: 0.0805}
+    cost = tm.DenoiserCost(label="kpcn", pixels0=p0, small=dict(small))
+    fixed, slope = tm.line_through([(p0, small[1]), (p1, 2.345)])
+    cost.fixed = min(fixed, small[1])
+    assert cost.fixed > small[2]  # the planted trap: fixed above the 2-spp frame's whole time
+    per_pixel_hd = (small[1] - cost.fixed) / p0 * HD
+    assert per_pixel_hd == pytest.approx(slope * HD)
+    for spp in (1, 2, 3, 4, 16):
+        ratio = cost.small_at(spp) / small[1]
+        assert cost.seconds(HD, spp) >= per_pixel_hd * ratio - 1e-12
+        assert cost.seconds(HD, spp) == pytest.approx((cost.fixed + per_pixel_hd) * ratio)
+        assert cost.seconds(HD, spp) > 100 * cost.small_at(spp)  # a 1080p frame, not a 64x64 one
+    assert cost.seconds(p1, 1) == pytest.approx(2.345)  # the measured point itself
+    assert cost.seconds(p0, 2) == pytest.approx(0.0434)  # the dataset's own size stays as measured
 
 
 SPP_DEPENDENT = textwrap.dedent(
