@@ -206,7 +206,9 @@ def test_config_change_is_refused_unless_forced(local_dataset, tmp_path, capsys)
     out = tmp_path / "ds"
     (out / "keep.txt").parent.mkdir(parents=True)
     (out / "keep.txt").write_text("mine")
-    assert main(["generate", "--out", str(out), *ARGS[:-1], "--frames", "1", "--quiet"]) == 0
+    # a folder with the user's own file is not a dataset: written into only with --force, beside the file
+    assert main(["generate", "--out", str(out), *ARGS[:-1], "--frames", "1", "--quiet", "--force"]) == 0
+    assert (out / "keep.txt").read_text() == "mine"
     capsys.readouterr()
     before = (out / layout.MANIFEST_NAME).read_bytes()
     assert _generate(out) == 2
