@@ -1,5 +1,8 @@
 """Times that hold where users render: fixed and per-pixel cost of rendering and of each denoiser.
 
+One unit: the render lines, the denoiser costs and who pays which line are read together from one run's timing
+records into one :class:`TimeModel`; every time figure of a report reads that model.
+
 A benchmark's frames are small (the demo's are 64×64 = 4096 pixels); at that size most of a
 frame's seconds grow with neither pixels nor samples (kernel launches, a network's set-up, Python
 calls). Scaling such a time by the pixel ratio to 1920×1080 charges that overhead 506 times. This
@@ -28,8 +31,8 @@ module separates the costs from measurements and projects them to the resolution
   offset ``a`` are each split into fixed and per-pixel parts through the two sizes. The noisy input's
   "render more" curve, and every budget of the equal-time and equal-quality tables, is the colour-only
   line; a denoiser's point is its own set's line plus its denoise seconds (:meth:`TimeModel.render_line`).
-  Each pays the cheapest measured render that makes its buffers (:func:`_charge`): a render of more
-  buffers makes them too, so where noise measured one cheaper than the set's own, that one is charged.
+  Each pays its own set's line (:func:`_charge`), whose every measured point is the least over that set's
+  renders and those of every larger set (a render of more buffers makes them too: :func:`_least_of_supersets`).
   Without those renders (``--no-render-probe``, ``--time-size none``, or the probe failed) there is one
   line, through the stored render seconds of the ladder's rungs (with nested rungs, the progressive time
   to reach each) at ``P₀``: what the dataset rendered, every buffer it holds, charged to rendering alone
@@ -200,6 +203,7 @@ class RenderCost:
     note: str = ""
     spread: float = MIN_SPREAD  # median / minimum of the probe's renders (≥ MIN_SPREAD)
     buffers: tuple[str, ...] = ()
+    borrowed: int = 0  # measured points taken from a cheaper render of more buffers
 
     def _linear(self, pixels: int, at0: float, at1: float | None) -> float:
         """A cost measured at pixels0 (``at0``) and at the probe's size (``at1``), as fixed + per-pixel."""
@@ -427,7 +431,33 @@ def _probe_line(line: dict, probe: dict, *, pixels0: int, rungs: list[int]) -> R
         note=f"renders of {probe.get('scene')} at the dataset's size and at {width}×{height} (spp {spp})",
         spread=max(float(line.get("spread", MIN_SPREAD)), MIN_SPREAD),
         buffers=tuple(line["buffers"]),
+        borrowed=int(line.get("borrowed", 0)),
     )
+
+
+def _least_of_supersets(records: list[dict]) -> list[dict]:
+    """The probe's line records with each measured point (size, spp) the least over the renders of that set and
+    of every larger set that makes its buffers too (a render of more buffers makes them; other processes only
+    add time); ``borrowed`` counts the points a larger set gave.
+
+    Pitfall: choosing one whole line per alternative by comparing lines at one spp switched, with load, which
+    line (and so which offset/per-sample shape) rendering alone paid, and verdicts flipped between an idle and
+    a loaded run; a point-wise least moves continuously with every measurement and never switches shapes."""
+    out = []
+    for line in records:
+        mine = set(line.get("buffers") or ())
+        larger = [r for r in records if r is not line and mine <= set(r.get("buffers") or ())]
+        new, borrowed = dict(line), 0
+        for field_name in ("points", "small_points"):
+            best = {int(at): float(v) for at, v in line.get(field_name) or [] if is_finite(v)}
+            for other in larger:
+                for at, v in other.get(field_name) or []:
+                    if int(at) in best and is_finite(v) and float(v) < best[int(at)]:
+                        best[int(at)], borrowed = float(v), borrowed + 1
+            new[field_name] = [[at, best.get(int(at), v)] for at, v in line.get(field_name) or []]
+        new["borrowed"] = borrowed
+        out.append(new)
+    return out
 
 
 def _render_lines(data, timings: dict[str, dict], pixels0: int) -> tuple[RenderCost | None, dict, list[str]]:
@@ -437,7 +467,7 @@ def _render_lines(data, timings: dict[str, dict], pixels0: int) -> tuple[RenderC
     rungs = sorted({int(s) for s, _ in render_points})
     probe = timings.get("render_probe") or {}
     lines = {}
-    for line in probe.get("lines") or []:
+    for line in _least_of_supersets(probe.get("lines") or []):
         cost = _probe_line(line, probe, pixels0=pixels0, rungs=rungs)
         if cost is not None:
             lines[cost.buffers] = cost
@@ -520,12 +550,12 @@ def _cheapest(lines: dict, wanted, *, pixels: int, spp: float) -> tuple[str, ...
 
 
 def _charge(model: TimeModel, timings: dict[str, dict]) -> None:
-    """Set ``model.render`` and ``model.charged``: rendering alone, and each denoiser, pays the cheapest measured
-    render that makes the buffers it reads (at the time axis' resolution and the ladder's top rung).
+    """Set ``model.render`` and ``model.charged``: rendering alone pays the colour-only line, each denoiser its own
+    buffer set's line (each point already the least over its set and every larger one, :func:`_least_of_supersets`).
 
-    A render of more buffers makes those too, so where noise measured it cheaper than the set's own render it is
-    the one charged (a note names who); a denoiser whose record names no set, or a set no line makes, pays the
-    dearest line (noted). With one line (no probe) everything pays it."""
+    A set no line was measured for pays the cheapest line that makes its buffers (at the time axis' resolution and
+    the ladder's top rung); a denoiser whose record names no set, or a set no line makes, pays the dearest line
+    (noted). With one line (no probe) everything pays it."""
     lines = model.lines
     if not lines:
         return
@@ -535,27 +565,29 @@ def _charge(model: TimeModel, timings: dict[str, dict]) -> None:
     if len(keys) == 1:
         model.render, model.charged = lines[keys[0]], dict.fromkeys(model.denoisers, keys[0])
         return
-    alone = _cheapest(lines, COLOUR_ONLY, pixels=model.pixels, spp=top)
+    alone = COLOUR_ONLY if COLOUR_ONLY in lines else _cheapest(lines, COLOUR_ONLY, pixels=model.pixels, spp=top)
     if alone is not None:
         model.render = lines[alone]
     dearest = max(keys, key=cost)
-    unlined, cheaper = [], []
+    unlined = []
     for label in model.denoisers:
         wanted = tuple((timings.get(f"denoiser:{label}") or {}).get("buffers") or ())
-        key = _cheapest(lines, wanted, pixels=model.pixels, spp=top) if wanted else None
+        key = wanted if wanted in lines else None
+        if key is None and wanted:
+            key = _cheapest(lines, wanted, pixels=model.pixels, spp=top)
         if key is None:
             key = dearest
             unlined.append(label)
-        elif key != wanted:
-            cheaper.append(label)
         model.charged[label] = key
     if unlined:
         model.notes.append(
             f"no render line makes the buffers of {', '.join(sorted(unlined))}: charged the dearest line"
         )
-    if cheaper:
+    borrowed = [key for key in keys if lines[key].borrowed]
+    if borrowed:
         model.notes.append(
-            f"charged a render of more buffers that was measured cheaper than their own: {', '.join(sorted(cheaper))}"
+            f"{len(borrowed)} render line(s) take some points from a render of more buffers that was measured "
+            "cheaper (it makes theirs too)"
         )
 
 

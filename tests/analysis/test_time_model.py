@@ -283,10 +283,11 @@ def test_a_denoiser_whose_time_changes_with_spp_is_timed_at_the_highest_spp_too(
     assert "highest" not in flat  # the same time at every spp: one timing
 
 
-def test_each_pays_the_cheapest_measured_render_that_makes_its_buffers():
+def test_each_pays_its_own_line_with_each_point_the_least_of_the_renders_that_make_its_buffers():
     """Planted render lines (seconds per frame = 0.1 + slope · spp at every size): a denoiser reading albedo pays
-    its own line; one reading albedo and normal pays the full feature set's line when that was measured cheaper
-    than its own (a render of more buffers makes them too); rendering alone pays the colour-only line."""
+    its own line; one reading albedo and normal pays its own set's line, whose points are the full feature set's
+    where that was measured cheaper (a render of more buffers makes them too); rendering alone pays the
+    colour-only line whatever a larger set measured."""
     colour, albedo = COLOUR_ONLY, (*COLOUR_ONLY, "albedo")
     pair, full = (*albedo, "normal"), (*albedo, "normal", "depth")
 
@@ -309,8 +310,27 @@ def test_each_pays_the_cheapest_measured_render_that_makes_its_buffers():
     model = tm.build_time_model(_Data(frames, [NOISY, "a", "p"], [1, 4]), timings, (80, 80), (80, 80))
     assert model.render.buffers == colour and model.render_seconds(4) == pytest.approx(0.1 + 4 * 0.01)
     assert model.render_line("a").buffers == albedo
-    assert model.render_line("p").buffers == full and model.render_seconds(4, "p") == pytest.approx(0.1 + 4 * 0.03)
+    assert model.render_seconds(4, "a") == pytest.approx(0.1 + 4 * 0.02)
+    assert model.render_line("p").buffers == pair and model.render_seconds(4, "p") == pytest.approx(0.1 + 4 * 0.03)
     assert model.total_seconds("p", 4) == pytest.approx(0.1 + 4 * 0.03 + 0.01)
-    assert any("measured cheaper" in n and "p" in n for n in model.notes)
+    assert model.lines[pair].borrowed == 4 and model.lines[colour].borrowed == 0
+    assert any("measured cheaper" in n for n in model.notes)
     paid = {tuple(r["buffers"]): r["paid_by"] for r in model.as_dict()["render_lines"]}
-    assert paid == {colour: [NOISY], albedo: ["a"], pair: [], full: ["p"]}
+    assert paid == {colour: [NOISY], albedo: ["a"], pair: ["p"], full: []}
+
+
+def test_a_larger_set_measured_cheaper_at_one_spp_lends_that_point_only():
+    """Load noise: the colour+albedo render measured cheaper than colour alone at 4 spp, not at 1 spp. Rendering
+    alone keeps its own line, taking only that point (least of the two): its slope moves with the measurement
+    instead of its whole line switching to the other set's shape."""
+    colour, albedo = COLOUR_ONLY, (*COLOUR_ONLY, "albedo")
+    probe = {"width": 160, "height": 160, "small_pixels": P0, "repeats": 3, "scene": "s"}
+    # all per-pixel: each small point is the large one over the pixel ratio 4
+    own = {"buffers": list(colour), "points": [[1, 0.2], [4, 0.5]], "small_points": [[1, 0.05], [4, 0.125]]}
+    larger = {"buffers": list(albedo), "points": [[1, 0.4], [4, 0.45]], "small_points": [[1, 0.1], [4, 0.1125]]}
+    probe["lines"] = [own, larger]
+    frames = [SimpleNamespace(denoiser=NOISY, spp=spp, render_seconds=0.5, denoise_seconds=None) for spp in (1, 4)]
+    model = tm.build_time_model(_Data(frames, [NOISY], [1, 4]), {"render_probe": probe}, (160, 160), (80, 80))
+    assert model.render.buffers == colour and model.lines[colour].borrowed == 2  # 4 spp at both sizes
+    assert model.render_seconds(1) == pytest.approx(0.2) and model.render_seconds(4) == pytest.approx(0.45)
+    assert model.lines[albedo].seconds(160 * 160, 1) == pytest.approx(0.4)  # its own points: nothing larger
