@@ -93,7 +93,7 @@ def comparison(
     comes from the dataset where its unit did not keep that frame."""
     shown: list[tuple[str, np.ndarray]] = []
     for label in data.labels:
-        stored = store.image(data.run_id, label, scene, spp=spp, frame=frame_index)
+        stored = store.image(data.run_id, label, spp=spp, scene=scene, frame=frame_index)
         if stored is None:
             continue
         frame_index = stored[0] if frame_index is None else frame_index
@@ -140,7 +140,7 @@ def scene_strips(store: ResultsStore, data: RunData, dataset: Dataset, spp: int)
     """Per scene: the noisy input's, each denoiser's and the reference's strip of one crop at ``spp``."""
     out = []
     for scene in data.scenes:
-        found = [(label, store.strip(data.run_id, label, scene, spp=spp)) for label in data.labels]
+        found = [(label, store.strip(data.run_id, label, spp=spp, scene=scene)) for label in data.labels]
         found = [(label, strip) for label, strip in found if strip is not None]
         if not found:
             continue

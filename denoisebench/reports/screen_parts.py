@@ -34,11 +34,11 @@ def pixel_check(store, run_id: str, *, scenes: list[str], spps: list[int]):
         for scene in scenes:
             for spp in spps:
                 for frame in sorted(
-                    set(store.image_frames(run_id, a, scene, spp=spp))
-                    & set(store.image_frames(run_id, b, scene, spp=spp))
+                    set(store.image_frames(run_id, a, spp=spp, scene=scene))
+                    & set(store.image_frames(run_id, b, spp=spp, scene=scene))
                 ):
-                    left = store.image(run_id, a, scene, spp=spp, frame=frame)
-                    right = store.image(run_id, b, scene, spp=spp, frame=frame)
+                    left = store.image(run_id, a, spp=spp, scene=scene, frame=frame)
+                    right = store.image(run_id, b, spp=spp, scene=scene, frame=frame)
                     if left is None or right is None:
                         continue
                     if not np.array_equal(left[1], right[1], equal_nan=True):

@@ -436,7 +436,7 @@ class ResultsStore:
         )
         return _by_name(SequenceRow, rows)
 
-    def image_frames(self, run_id: str, denoiser: str, scene: str, spp: int) -> list[int]:
+    def image_frames(self, run_id: str, denoiser: str, *, spp: int, scene: str) -> list[int]:
         """The frames of a unit whose output is stored (its last frame and the frames its deciding scores
         are worst on; only the last in a database of version < 6), ascending."""
         rows = self.conn.execute(
@@ -446,7 +446,7 @@ class ResultsStore:
         return [int(r[0]) for r in rows]
 
     def image(
-        self, run_id: str, denoiser: str, scene: str, spp: int, frame: int | None = None
+        self, run_id: str, denoiser: str, *, spp: int, scene: str, frame: int | None = None
     ) -> tuple[int, np.ndarray] | None:
         """(frame index, H×W×3 float32) of a unit's stored output at ``frame`` (None: its last stored
         frame), or None when that frame was not kept."""
@@ -459,7 +459,7 @@ class ResultsStore:
             return None
         return int(row[0]), decode_image(row[3], height=row[1], width=row[2])
 
-    def strip(self, run_id: str, denoiser: str, scene: str, spp: int) -> StripRow | None:
+    def strip(self, run_id: str, denoiser: str, *, spp: int, scene: str) -> StripRow | None:
         """The unit's strip (first frame, window, crops F×side×side×3), or None (none, or a v1 database)."""
         if self.version < 2:
             return None

@@ -218,7 +218,7 @@ def test_a_version_1_database_stays_readable_and_is_migrated_when_written(tmp_pa
         assert old.version == 1
         ((frame, *_),) = [old.frames("run1")[:1]]
         assert frame.metrics["relmse"] == 0.5 and frame.floors == {}
-        assert old.strip("run1", NOISY, "s1", 1) is None and old.integrity_problems() == []
+        assert old.strip("run1", NOISY, spp=1, scene="s1") is None and old.integrity_problems() == []
         assert all(d.trained_on == [] for d in old.denoisers("run1"))
     with ResultsStore(path) as migrated:
         # 4: the not_applicable table; 5: the sampler dimension; 6: images keyed by frame
@@ -236,8 +236,8 @@ def test_a_version_1_database_stays_readable_and_is_migrated_when_written(tmp_pa
 
 def test_strips_cut_the_same_crop_for_every_unit_and_show_consecutive_frames(measured):
     store, data, _ = measured
-    a = store.strip("run1", NOISY, "plain", 1)
-    b = store.strip("run1", "blur", "plain", 1)
+    a = store.strip("run1", NOISY, spp=1, scene="plain")
+    b = store.strip("run1", "blur", spp=1, scene="plain")
     assert a is not None and b is not None
     assert (a.top, a.left, a.side) == (b.top, b.left, b.side)
     assert a.crops.shape == (crops.STRIP_FRAMES, a.side, a.side, 3)

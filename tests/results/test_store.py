@@ -356,11 +356,11 @@ def test_a_unit_keeps_its_last_frame_and_the_frames_its_deciding_scores_are_wors
     with ResultsStore(tmp_path / "r.sqlite") as store:
         store.ensure_run("r", dataset_hash="h", dataset_path="/d", config={}, versions={})
         assert store.write_unit("r", unit)
-        assert store.image_frames("r", "d", "s", 4) == [2, 3]
-        assert store.image("r", "d", "s", 4)[0] == 3  # no frame asked: the last
-        frame, image = store.image("r", "d", "s", 4, frame=2)
+        assert store.image_frames("r", "d", spp=4, scene="s") == [2, 3]
+        assert store.image("r", "d", spp=4, scene="s")[0] == 3  # no frame asked: the last
+        frame, image = store.image("r", "d", spp=4, scene="s", frame=2)
         assert frame == 2 and np.array_equal(image, outputs[2])
-        assert store.image("r", "d", "s", 4, frame=1) is None
+        assert store.image("r", "d", spp=4, scene="s", frame=1) is None
 
 
 def test_a_version_5_store_migrates_its_images_to_the_frame_key_and_keeps_them(tmp_path):
@@ -381,14 +381,14 @@ def test_a_version_5_store_migrates_its_images_to_the_frame_key_and_keeps_them(t
         conn.execute("DROP TABLE images_new")
         conn.execute("UPDATE schema_version SET version = 5")
     with ResultsStore(path, readonly=True) as old:
-        assert old.version == 5 and old.image("r", "d", "s", 4)[0] == 1
+        assert old.version == 5 and old.image("r", "d", spp=4, scene="s")[0] == 1
     with ResultsStore(path) as store:
         assert store.version == SCHEMA_VERSION == 6
-        assert store.image_frames("r", "d", "s", 4) == [1]
+        assert store.image_frames("r", "d", spp=4, scene="s") == [1]
         more = _unit_with_images({0: 0.3, 1: 0.2})
         more.scene, more.images = "t", {0: np.zeros((2, 2, 3), np.float32), 1: np.ones((2, 2, 3), np.float32)}
         assert store.write_unit("r", more)
-        assert store.image_frames("r", "d", "t", 4) == [0, 1]
+        assert store.image_frames("r", "d", spp=4, scene="t") == [0, 1]
     with sqlite3.connect(path) as conn:
         key = [r[1] for r in conn.execute("PRAGMA table_info(images)") if r[5]]
     assert key == ["run_id", "denoiser", "scene", "spp", "frame"]
