@@ -226,6 +226,18 @@ class RenderCost:
     def seconds(self, pixels: int, spp: float) -> float:
         return self.offset(pixels) + self.per_spp(pixels) * spp
 
+    def scaled_seconds(self, pixels: int, spp: float, *, low: float, high: float) -> float:
+        """:meth:`seconds` on the line through the probe's two renders with the one at its lower spp ``low`` times
+        and the one at its higher spp ``high`` times as long (each spp is a render of its own, so each may be
+        slower on its own); without probe spp the whole line ``low`` times. Never below the cheaper probe point."""
+        points = (self.probe or {}).get("spp") or []
+        if len(points) < 2:
+            return low * self.seconds(pixels, spp)
+        a, b = min(points), max(points)
+        at_a, at_b = self.seconds(pixels, a), self.seconds(pixels, b)
+        weight = (b - spp) / (b - a)
+        return max(weight * low * at_a + (1 - weight) * high * at_b, min(at_a, at_b))
+
     @property
     def per_megapixel_per_spp(self) -> float:
         """Seconds per spp of a 1-megapixel frame (its fixed part included)."""
@@ -313,19 +325,24 @@ class TimeModel:
         ``render_spp`` alone, across the measured spreads (module Notes).
 
         The render part of both sides moves together (one renderer, one machine; its lines timed in the same
-        interleaved rounds) with the larger of the two lines' spreads: the least ratio has rendering at its
-        slowest and the denoiser at its fastest, the largest the other way round."""
+        interleaved rounds) with the larger of the two lines' spreads, but the probe's render at each spp is a
+        render of its own: each may be up to that spread slower independently, which tilts both lines
+        (:meth:`RenderCost.scaled_seconds`). The bounds are the least and largest ratio over those tilts and the
+        denoiser at its fastest or slowest. Pitfall: one common factor for the whole line kept its offset/per-spp
+        split as measured, and a loaded run's split (the difference of two renders) flipped verdicts."""
         denoise = self.denoise_seconds(label, spp)
-        mine, alone = self.render_seconds(spp, label), self.render_seconds(render_spp)
-        if denoise is None or mine is None or not alone:
+        mine_line, alone_line = self.render_line(label), self.render
+        if denoise is None or mine_line is None or alone_line is None or not self.render_seconds(render_spp):
             return None
-        lines = [line for line in (self.render, self.render_line(label)) if line is not None]
-        render_spread = max((line.spread for line in lines), default=MIN_SPREAD)
+        render_spread = max(mine_line.spread, alone_line.spread)
         cost = self.denoisers.get(label)
         denoise_spread = cost.spread if cost is not None else 1.0
-        low = (render_spread * mine + denoise) / (render_spread * alone)
-        high = (mine + denoise_spread * denoise) / alone
-        return min(low, high), max(low, high)
+        ratios = []
+        for low, high in ((1.0, 1.0), (1.0, render_spread), (render_spread, 1.0), (render_spread, render_spread)):
+            mine = mine_line.scaled_seconds(self.pixels, spp, low=low, high=high)
+            alone = alone_line.scaled_seconds(self.pixels, render_spp, low=low, high=high)
+            ratios += [(mine + d) / alone for d in (denoise, denoise_spread * denoise) if alone > 0]
+        return (min(ratios), max(ratios)) if ratios else None
 
     def payers(self) -> dict[tuple[str, ...], list[str]]:
         """{buffer set: the labels charged its line}, rendering alone (the noisy input) first on its line."""
@@ -427,6 +444,7 @@ def _probe_line(line: dict, probe: dict, *, pixels0: int, rungs: list[int]) -> R
             "offset": large[0],
             "per_spp": large[1],
             "repeats": int(probe.get("repeats", 1)),
+            "spp": sorted({int(p[0]) for p in line["points"]}),
         },
         note=f"renders of {probe.get('scene')} at the dataset's size and at {width}×{height} (spp {spp})",
         spread=max(float(line.get("spread", MIN_SPREAD)), MIN_SPREAD),

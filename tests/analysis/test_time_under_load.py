@@ -124,6 +124,29 @@ def test_ratio_bounds_hold_the_nominal_ratio_and_widen_with_the_spread():
     assert tight.ratio_bounds("d", 1, 8) == pytest.approx((nominal, nominal))
 
 
+def test_ratio_bounds_cover_each_probe_render_slower_on_its_own():
+    """The probe renders 1 and 4 spp separately: either may be up to the spread slower alone, which tilts the
+    line. Rendering 8 spp is extrapolated from them, so the bounds hold every tilt: planted at 0.5 + 0.1 · spp
+    with spread 1.5, the 8-spp render lies between 2.35 (1 spp as measured, 4 spp ×1.5) and 0.9 (the other
+    way), never below the cheaper probe point, and the nominal ratio between the bounds."""
+    probe = {"pixels": 100, "offset": 0.5, "per_spp": 0.1, "spp": [1, 4]}
+    render = time_model.RenderCost(pixels0=100, offset0=0.5, per_spp0=0.1, measured_spp=[1, 4], probe=probe, spread=1.5)
+    assert render.scaled_seconds(100, 8, low=1.0, high=1.5) == pytest.approx(-4 / 3 * 0.6 + 7 / 3 * 1.5 * 0.9)
+    assert render.scaled_seconds(100, 8, low=1.5, high=1.0) == pytest.approx(-4 / 3 * 1.5 * 0.6 + 7 / 3 * 0.9)  # 0.9
+    assert render.scaled_seconds(100, 16, low=2.0, high=1.0) == pytest.approx(
+        0.6
+    )  # -4.8 + 4.5 < 0.6: the cheaper point
+    assert render.scaled_seconds(100, 2, low=1.5, high=1.5) == pytest.approx(1.5 * render.seconds(100, 2))
+    model = time_model.TimeModel(time_at=(10, 10), pixels0=100, dataset_size=(10, 10), render=render)
+    model.denoisers["d"] = time_model.DenoiserCost(label="d", pixels0=100, small={1: 0.4}, spread=1.0)
+    low, high = model.ratio_bounds("d", 1, 8)
+    assert low == pytest.approx(1.0 / 2.35) and high == pytest.approx((1.5 * 0.6 + 0.4) / 0.9)
+    nominal = model.total_seconds("d", 1) / model.render_seconds(8)
+    assert low < nominal < high
+    # a common factor alone (the line's old bounds) keeps the measured split: narrower, inside these
+    assert low < (1.5 * 0.6 + 0.4) / (1.5 * 1.3) and (0.6 + 0.4) / 1.3 < high
+
+
 def test_a_verdict_whose_bounds_straddle_one_is_withheld():
     # a denoiser at 1 spp matching 4-spp rendering at about its time: no verdict either way
     render = time_model.RenderCost(pixels0=100, offset0=0.0, per_spp0=1.0, measured_spp=[1, 4], spread=1.3)
