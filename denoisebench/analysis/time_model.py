@@ -65,7 +65,8 @@ Notes
   taken by their median. The **spread** of each cost is its median over its minimum (at least
   :data:`MIN_SPREAD`): the time could plausibly be that much larger. Every ratio of a denoiser's
   time to rendering's carries it (:meth:`TimeModel.ratio_bounds`: the render and the denoise parts
-  each between their minimum and minimum × spread, the render part of both sides moving together)
+  each between their minimum and minimum × spread, the render part of both sides moving together at
+  each probe spp, each spp's render on its own: the lines tilt, most where they are extrapolated)
   and a time verdict is written only when it holds at both ends (``analysis.equal_tables``,
   ``analysis.accuracy.readings``). Measured on the README tour's dataset: the probe's fixed
   1080p cost was 2.4 s idle and 11 s beside other jobs with one render per point (docs/time.md).
