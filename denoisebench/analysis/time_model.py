@@ -26,7 +26,7 @@ module separates the costs from measurements and projects them to the resolution
   (:class:`RenderCost`): rendering more samples without a denoiser makes colour only (with its
   diffuse/specular split, :data:`~denoisebench.results.timings.COLOUR_ONLY`), a denoiser's input makes
   the buffers it reads (``benchmark.timing.render_buffers``). Each line comes from **timed renders of
-  the dataset's own stage** (its first scene, frame 0, spp 1 and 4) made with that set, at the
+  the dataset's own stage** (its first scene, frame 0, spp 1 and 16) made with that set, at the
   dataset's size and at the timing size (``benchmark.timing.probe_render``): ``b`` (per sample) and the
   offset ``a`` are each split into fixed and per-pixel parts through the two sizes. The noisy input's
   "render more" curve, and every budget of the equal-time and equal-quality tables, is the colour-only

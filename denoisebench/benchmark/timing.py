@@ -74,8 +74,11 @@ AUTO_SIDE_FACTOR = 8
 AUTO = "auto"
 #: Seconds one denoiser's timing call may be expected to take before its size is reduced.
 DEFAULT_TIME_BUDGET = 60.0
-#: Spp of the render probe (two, so that its offset and per-sample cost separate).
-PROBE_SPP = (1, 4)
+#: Spp of the render probe: two far enough apart that the per-sample cost is not lost in the 1-spp render's
+#: own scatter. With 1 and 4 on the demo's cluttered_915 at 512×512 (quiet cores) the 1-spp point read
+#: 0.040-0.108 s from run to run against 0.135 s at 4 spp, so the per-spp slope came out 0.023-0.074 s per
+#: megapixel per spp; a 16-spp render (0.508 s) pins it at 0.118.
+PROBE_SPP = (1, 16)
 #: The smallest timing size, as a multiple of the dataset's pixels, that still separates the costs.
 MIN_SIZE_FACTOR = 4
 
