@@ -464,64 +464,38 @@ def unresolved_references(
             if best is not None:
                 bests.append((metric, *best))
         first = bests[0] if bests else (None, None, None, None, None)
-        if growth is not None and growth > growth_limit:
-            metric, value, label, spp, floor = first
-            needed = _needed(ref_spp, floor, value, fraction=fraction)
-            needed = max(needed or 0, 2 * ref_spp) if ref_spp else needed
-            out.append(
-                Unresolved(
-                    scene=scene,
-                    reason="floor_growing",
-                    metric=metric,
-                    reference_spp=ref_spp,
-                    floor_growth=growth,
-                    best=value,
-                    label=label,
-                    spp=spp,
-                    floor=floor,
-                    needed_spp=needed,
-                    needed_is_lower_bound=True,
-                )
+
+        def entry(reason: str, best: tuple, *, needed, lower_bound: bool, noisy_share=None) -> Unresolved:
+            metric, value, label, spp, floor = best
+            return Unresolved(
+                scene=scene,
+                reason=reason,
+                metric=metric,
+                reference_spp=ref_spp,
+                floor_growth=growth,
+                best=value,
+                label=label,
+                spp=spp,
+                floor=floor,
+                needed_spp=needed,
+                needed_is_lower_bound=lower_bound,
+                noisy_share=noisy_share,
             )
+
+        if growth is not None and growth > growth_limit:
+            needed = _needed(ref_spp, first[4], first[1], fraction=fraction)
+            needed = max(needed or 0, 2 * ref_spp) if ref_spp else needed
+            out.append(entry("floor_growing", first, needed=needed, lower_bound=True))
             continue
         if share is not None and share > noisy_limit:
-            metric, value, label, spp, floor = first
-            needed = _needed(ref_spp, floor, value, fraction=fraction)
-            out.append(
-                Unresolved(
-                    scene=scene,
-                    reason="reference_too_noisy",
-                    metric=metric,
-                    reference_spp=ref_spp,
-                    floor_growth=growth,
-                    best=value,
-                    label=label,
-                    spp=spp,
-                    floor=floor,
-                    needed_spp=needed,
-                    needed_is_lower_bound=False,
-                    noisy_share=share,
-                )
-            )
+            needed = _needed(ref_spp, first[4], first[1], fraction=fraction)
+            out.append(entry("reference_too_noisy", first, needed=needed, lower_bound=False, noisy_share=share))
             continue
-        for metric, value, label, spp, floor in bests:
+        for best in bests:
+            metric, value, _, _, floor = best
             if floor is not None and _can_rank(data, scene, metric) is False:
                 needed = _needed(ref_spp, floor, value, fraction=fraction)
-                out.append(
-                    Unresolved(
-                        scene=scene,
-                        reason="cannot_rank",
-                        metric=metric,
-                        reference_spp=ref_spp,
-                        floor_growth=growth,
-                        best=value,
-                        label=label,
-                        spp=spp,
-                        floor=floor,
-                        needed_spp=needed,
-                        needed_is_lower_bound=False,
-                    )
-                )
+                out.append(entry("cannot_rank", best, needed=needed, lower_bound=False))
                 break
     return out
 
