@@ -79,6 +79,8 @@ class FirstScreen:
     """Per spp, the scenes deciding the noisy input's own mean."""
     identical: list[str]
     """One sentence per group of identical denoisers (:meth:`.identical.IdenticalGroup.sentence`)."""
+    scenes: tuple[str, ...] = ()
+    """The scenes the screen's values come from (sorted). One alone decides every figure: the screen says so."""
 
 
 def deciding_scenes(values: dict[str, float]) -> list[str]:
@@ -206,6 +208,9 @@ def first_screen(at, scene_values: dict[str, dict[int, dict[str, float]]], ident
         rows=rows,
         noisy_deciding={spp: scenes for spp, scenes in sorted(noisy.items()) if scenes},
         identical=[g.sentence() for g in identical],
+        scenes=tuple(
+            sorted({scene for by_spp in scene_values.values() for values in by_spp.values() for scene in values})
+        ),
     )
 
 
@@ -299,6 +304,12 @@ def screen_lines(screen: FirstScreen) -> list[str]:
             "input's there; geometric mean over scenes, from 3 scenes on without the highest and lowest ⌈12.5 %⌉): one "
             "scene cannot move it "
             "by orders of magnitude; the arithmetic mean and its deciding scenes are in results.json."
+        )
+    if len(screen.scenes) == 1:
+        lines.insert(
+            0,
+            f"This run scores one scene ({screen.scenes[0]}): every figure here is that scene's, so no deciding "
+            "scene can be named; score more scenes (run-benchmark --split all, or a larger dataset) before ranking.",
         )
     for spp, scenes in screen.noisy_deciding.items():
         lines.append(f"The noisy input's own mean at {spp} spp is decided by {', '.join(scenes)}.")

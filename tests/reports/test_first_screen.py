@@ -166,3 +166,14 @@ def test_when_every_denoiser_loses_at_equal_time_the_screen_says_so():
     at = _at([Point(denoiser="b", spp=1, seconds=9.0, error=0.2)])  # 4.8× rendering alone's error
     lines = summary_screen.screen_lines(summary_screen.first_screen(at, {}))
     assert lines[0].startswith("At equal time no denoiser beats rendering alone") and "b at 1 spp, 4.8×" in lines[0]
+
+
+def test_a_run_of_one_scene_says_that_scene_decides_every_figure():
+    at = _at([Point(denoiser="a", spp=1, seconds=4.0, error=0.05)])
+    one = summary_screen.first_screen(at, {"a": {1: {"x": 0.05}}, "noisy": {1: {"x": 0.5}}})
+    assert one.scenes == ("x",)
+    assert summary_screen.screen_lines(one)[0].startswith("This run scores one scene (x)")
+    two = summary_screen.first_screen(at, {"a": {1: {"x": 0.05, "y": 0.04}}, "noisy": {1: {"x": 0.5, "y": 0.4}}})
+    assert two.scenes == ("x", "y") and not any(
+        line.startswith("This run scores one scene") for line in summary_screen.screen_lines(two)
+    )
