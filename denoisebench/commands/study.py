@@ -2,7 +2,7 @@
 
 ``denoisebench study data-value`` trains the same model (kpcn, rae: small configurations) at the
 same budget (steps × batch × crop pixels) on several training sets drawn from a pool of generated
-family scenes, scores every checkpoint on a third-party dataset through the normal benchmark (split
+family scenes, scores every checkpoint on one or more third-party datasets (pooled) through the normal benchmark (split
 all, corrected scores with 95 % intervals over scenes) beside the noisy input, cross_bilateral and
 OIDN, and writes OUT/study.md, OUT/study.json and OUT/scaling.png (error against the number of
 training scenes). Re-running the same command skips what is done and resumes a stopped training
@@ -24,9 +24,11 @@ EPILOG = """examples:
   generate-dataset --out data/pool --families all --scenes 3 --frames 2 --width 64 --height 64 --spp 1,4 --ref-spp 512
   generate-dataset --out data/tp --scene-list denoisebench/scenes/lists/mitsuba_docs.toml --root ~/mitsuba-data \\
       --frames 2 --width 64 --height 64 --spp 1,4,16 --ref-spp 2048
+  generate-dataset --out data/tp_usd --scene-list usd_wg_assets --root ~/assets \\
+      --frames 2 --width 64 --height 64 --spp 1,4,16 --ref-spp 2048
   denoisebench study data-value --pool data/pool --third-party data/tp --out study/ --steps 300 --scaling 8,16
-  denoisebench study data-value --pool data/pool --third-party data/tp --out study/ --models kpcn \\
-      --sets full,family:cornell,without:textures,loo:glass_env --seeds 0,1
+  denoisebench study data-value --pool data/pool --third-party data/tp --third-party data/tp_usd --out study/ \\
+      --models kpcn --sets full,family:cornell,without:textures,loo:glass_env --seeds 0,1
 
 documentation:
   docs/study.md   the study, its training sets, its figures and what they say
@@ -56,7 +58,11 @@ def add_arguments(parser) -> None:
     )
     p.add_argument("--pool", required=True, help="dataset of generated family scenes to draw training sets from")
     p.add_argument(
-        "--third-party", required=True, help="dataset of third-party scenes to score on (e.g. made by --scene-list)"
+        "--third-party",
+        required=True,
+        action="append",
+        help="dataset of third-party scenes to score on (e.g. made by --scene-list); repeat it (or give "
+        "A,B) to pool several, e.g. one rendered from the scenes' own sensors and one from the orbit",
     )
     p.add_argument("--out", required=True, help="study folder (created; re-running resumes it)")
     p.add_argument("--models", default="kpcn,rae", help="models to train, small configurations (default kpcn,rae)")
@@ -88,7 +94,8 @@ def run(args) -> int:
     from denoisebench.study.data_value import StudyOptions, run_study
     from denoisebench.study.report import write_report
 
-    for option, folder in (("--pool", args.pool), ("--third-party", args.third_party)):
+    thirds = tuple(Path(folder) for given in args.third_party for folder in _names(given))
+    for option, folder in (("--pool", args.pool), *(("--third-party", folder) for folder in thirds)):
         if not (Path(folder) / "dataset.json").is_file():
             raise UserInputError(f"{option} {folder}: not a dataset folder (no dataset.json)")
     models = _names(args.models)
@@ -100,7 +107,7 @@ def run(args) -> int:
     options = StudyOptions(
         out=Path(args.out),
         pool=Path(args.pool),
-        third_party=Path(args.third_party),
+        third_party=thirds,
         models=models,
         sets=_names(args.sets),
         scaling=_ints(args.scaling, "--scaling"),

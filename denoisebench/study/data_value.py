@@ -1,9 +1,11 @@
 """The data-value study: the same model, trained at the same budget on several training sets drawn
 from the generator's families, scored on a third-party dataset through the normal benchmark.
 
-Inputs are two datasets made by ``generate-dataset``: a **pool** of family scenes (``--families
-... --scenes N``) and a **third-party** dataset (``--scene-list``, ``--usd``/``--mitsuba``: scenes
-nobody here wrote). Training sets are subsets of the pool's scenes (``train_scenes`` of
+Inputs are datasets made by ``generate-dataset``: a **pool** of family scenes (``--families
+... --scenes N``) and one or more **third-party** datasets (``--scene-list``, ``--usd``/``--mitsuba``:
+scenes nobody here wrote; several because one ``generate`` run has one camera choice, so a list
+rendered from its own sensors and one from the orbit are two datasets). Scores pool the scenes of
+all third-party datasets as if they were one run: every aggregate and interval is over their union. Training sets are subsets of the pool's scenes (``train_scenes`` of
 :class:`~denoisebench.models.training_options.TrainOptions`, so training is ``denoisebench train``'s
 own loop), named by :func:`resolve_sets`:
 
@@ -18,7 +20,7 @@ Trainable pool scenes are those outside its val split (which validates every run
 held-out variants (``variants["pool"] == "held_out"``). Every run has the same budget: steps ×
 batch × crop pixels, one seed per run (several seeds: their spread is shown).
 
-Scores: each checkpoint is benchmarked on the whole third-party dataset (split ``all``) at one spp
+Scores: each checkpoint is benchmarked on each whole third-party dataset (split ``all``) at one spp
 (default 4) by :func:`~denoisebench.benchmark.run.run_benchmark` into ``OUT/study.sqlite``, and read
 as a report reads them: corrected scores aggregated over scenes by the metric's rule with their 95 %
 bootstrap intervals over scenes (:func:`~denoisebench.analysis.summary.metric_cell`). The scenes a
@@ -30,8 +32,8 @@ Resumable: a checkpoint's name carries its budget; a run that stopped is resumed
 checkpoint (same seed, same batches); a benchmark run's identity includes the checkpoint's sha256
 (a retrained checkpoint is scored anew); a finished part's record ``OUT/parts/*.json`` is reused.
 
-Pitfalls: the pool and the third-party dataset must not share scenes (a family scene is not
-third-party); scaling points with fewer scenes than families hold fewer families too (the curve
+Pitfalls: the pool and the third-party datasets must not share scenes (a family scene is not
+third-party), nor may two third-party datasets (scene names key every score); scaling points with fewer scenes than families hold fewer families too (the curve
 measures the generator's scenes as it makes them, variety and count together).
 """
 
@@ -46,12 +48,13 @@ from pathlib import Path
 from tqdm import tqdm
 
 from denoisebench.analysis import aggregate as agg
-from denoisebench.analysis.summary import metric_cell
+from denoisebench.analysis.summary import RunData, metric_cell
 from denoisebench.benchmark.run import run_benchmark
 from denoisebench.benchmark.runner import BenchmarkConfig
 from denoisebench.dataset import open_dataset
 from denoisebench.errors import UserInputError
 from denoisebench.reports.run_inputs import run_data, set_apart_of
+from denoisebench.results.records import RunRows
 from denoisebench.results.names import NOISY
 from denoisebench.results.store import ResultsStore
 
@@ -83,7 +86,7 @@ class StudyOptions:
 
     out: Path
     pool: Path
-    third_party: Path
+    third_party: tuple[Path, ...]
     models: tuple[str, ...] = ("kpcn", "rae")
     sets: tuple[str, ...] = DEFAULT_SETS
     scaling: tuple[int, ...] = ()
@@ -185,6 +188,15 @@ def resolve_sets(names, scaling, scenes: list[PoolScene]) -> list[TrainingSet]:
     return list(out.values())
 
 
+def _plain(value):
+    """An option as JSON holds it: paths as text, tuples of paths as lists of text."""
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, tuple) and any(isinstance(v, Path) for v in value):
+        return [str(v) for v in value]
+    return value
+
+
 def _sha256(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
@@ -226,27 +238,54 @@ def _train(options: StudyOptions, model: str, training_set: TrainingSet, seed: i
     )
 
 
-def _benchmark(options: StudyOptions, store, denoisers: list[str], extra: dict | None = None) -> str:
-    """Run (or resume) the benchmark of ``denoisers`` on the third-party dataset; return its run id."""
-    dataset = open_dataset(options.third_party)
-    config = BenchmarkConfig(
-        denoisers=denoisers,
-        spp=[options.spp],
-        split="all",
-        metrics=list(METRICS),
-        options=(extra or {}).get("options", {}),
-        nonce=(extra or {}).get("nonce"),
+def _benchmark(options: StudyOptions, store, denoisers: list[str], extra: dict | None = None) -> list[str]:
+    """Run (or resume) the benchmark of ``denoisers`` on each third-party dataset; return the run ids."""
+    run_ids = []
+    for folder in options.third_party:
+        config = BenchmarkConfig(
+            denoisers=denoisers,
+            spp=[options.spp],
+            split="all",
+            metrics=list(METRICS),
+            options=(extra or {}).get("options", {}),
+            nonce=(extra or {}).get("nonce"),
+        )
+        run_ids.append(run_benchmark(open_dataset(folder), config, store, progress=options.progress).run_id)
+    return run_ids
+
+
+def pooled_run_data(store, run_ids: list[str]) -> RunData:
+    """The rows of several runs (one per third-party dataset, same denoisers) as one run's: units,
+    frames and sequence rows side by side, so aggregates and intervals are over the union of scenes.
+
+    The first run's record and label order stand for all; the runs must not share a scene."""
+    rows = [store.run_rows(run_id) for run_id in run_ids]
+    seen: dict[str, str] = {}
+    for one in rows:
+        for scene in sorted({u.scene for u in one.units}):
+            if scene in seen:
+                raise UserInputError(f"third-party scene {scene} is in two datasets; scene names key every score")
+            seen[scene] = one.run.run_id
+    first = rows[0]
+    return RunData(
+        RunRows(
+            run=first.run,
+            entries=first.entries,
+            units=[u for one in rows for u in one.units],
+            frames=[f for one in rows for f in one.frames],
+            sequences=[q for one in rows for q in one.sequences],
+        )
     )
-    return run_benchmark(dataset, config, store, progress=options.progress).run_id
 
 
-def read_scores(store, run_id: str, label: str, spp: int, kept: list[str]) -> dict:
-    """{metric: {value, low, high, raw, rule, per_scene: {scene: corrected}}} of ``label`` in one run.
+def read_scores(store, run_ids: list[str], label: str, spp: int, kept: list[str]) -> dict:
+    """{metric: {value, low, high, raw, rule, per_scene: {scene: corrected}}} of ``label`` in the runs
+    (one per third-party dataset, pooled by :func:`pooled_run_data`).
 
     ``value``/``low``/``high``: the corrected aggregate over ``kept`` and its 95 % interval over
     scenes (the report's cell); ``per_scene``: every scene's corrected score (or the raw one where
     the metric has no floor), set-apart scenes included."""
-    data = run_data(store, run_id)
+    data = pooled_run_data(store, run_ids)
     out = {}
     for metric in METRICS:
         cell = metric_cell(data, label, spp, metric, kept)
@@ -280,13 +319,17 @@ class StudyResult:
     scaling: dict = field(default_factory=dict)
 
 
-def _references(options: StudyOptions, store, dataset) -> tuple[dict, list[str], dict]:
+def _references(options: StudyOptions, store, datasets) -> tuple[dict, list[str], dict]:
     """(scores of the noisy input and the references, scenes kept, {scene set apart: reason})."""
-    run_id = _benchmark(options, store, list(options.references))
-    data = run_data(store, run_id)
-    apart = {u.scene: u.reason for u in set_apart_of(data, dataset)}
-    kept = [s for s in data.scenes if s not in apart] or list(data.scenes)  # all set apart: keep them all
-    scores = {label: read_scores(store, run_id, label, options.spp, kept) for label in [NOISY, *options.references]}
+    run_ids = _benchmark(options, store, list(options.references))
+    apart = {}
+    scenes = []
+    for run_id, dataset in zip(run_ids, datasets):
+        data = run_data(store, run_id)
+        scenes += list(data.scenes)
+        apart.update({u.scene: u.reason for u in set_apart_of(data, dataset)})
+    kept = [s for s in scenes if s not in apart] or scenes  # all set apart: keep them all
+    scores = {label: read_scores(store, run_ids, label, options.spp, kept) for label in [NOISY, *options.references]}
     return scores, kept, apart
 
 
@@ -298,27 +341,42 @@ def run_study(options: StudyOptions, on_part=None) -> StudyResult:
     if options.steps < 1 or options.batch_size < 1 or options.crop < 4:
         raise UserInputError("--steps and --batch-size must be >= 1 and --crop >= 4")
     pool = open_dataset(options.pool)
-    third = open_dataset(options.third_party)
-    shared = sorted(set(pool.scenes) & set(third.scenes))
-    if shared:
-        raise UserInputError(
-            f"{options.third_party}: scene {shared[0]} is also in the pool; third-party scenes must not be trained on"
-        )
-    if options.spp not in {s for name in third.scenes for s in third.scene(name).spp}:
-        raise UserInputError(f"{options.third_party}: no {options.spp}-spp inputs to score at")
+    if not options.third_party:
+        raise UserInputError("--third-party: give at least one dataset of third-party scenes")
+    thirds = [open_dataset(folder) for folder in options.third_party]
+    owner: dict[str, Path] = {}
+    for folder, third in zip(options.third_party, thirds):
+        shared = sorted(set(pool.scenes) & set(third.scenes))
+        if shared:
+            raise UserInputError(
+                f"{folder}: scene {shared[0]} is also in the pool; third-party scenes must not be trained on"
+            )
+        twice = sorted(set(owner) & set(third.scenes))
+        if twice:
+            raise UserInputError(f"{folder}: scene {twice[0]} is also in {owner[twice[0]]}; give each scene once")
+        owner.update({name: folder for name in third.scenes})
+        if options.spp not in {s for name in third.scenes for s in third.scene(name).spp}:
+            raise UserInputError(f"{folder}: no {options.spp}-spp inputs to score at")
     scenes = trainable_scenes(pool)
     sets = resolve_sets(options.sets, options.scaling, scenes)
     out = Path(options.out)
     (out / "checkpoints").mkdir(parents=True, exist_ok=True)
     (out / "parts").mkdir(parents=True, exist_ok=True)
     result = StudyResult(
-        options={k: (str(v) if isinstance(v, Path) else v) for k, v in asdict(options).items() if k != "progress"},
+        options={k: _plain(v) for k, v in asdict(options).items() if k != "progress"},
         pool={"path": str(options.pool), "config_hash": pool.config_hash, "trainable": [s.name for s in scenes]},
-        third_party={"path": str(options.third_party), "config_hash": third.config_hash, "scenes": third.scenes},
+        third_party={
+            "path": ", ".join(str(folder) for folder in options.third_party),
+            "datasets": [
+                {"path": str(folder), "config_hash": third.config_hash, "scenes": list(third.scenes)}
+                for folder, third in zip(options.third_party, thirds)
+            ],
+            "scenes": [name for third in thirds for name in third.scenes],
+        },
         sets=[asdict(s) for s in sets],
     )
     with ResultsStore(out / STORE_NAME) as store:
-        references, kept, apart = _references(options, store, third)
+        references, kept, apart = _references(options, store, thirds)
         result.references = references
         result.third_party.update({"kept": kept, "set_apart": apart})
         jobs = [(m, s, seed) for m in options.models for s in sets for seed in options.seeds]
@@ -359,7 +417,7 @@ def _part(options: StudyOptions, store, model: str, training_set: TrainingSet, s
     checkpoint = Path(options.out) / "checkpoints" / f"{stem}.pt"
     meta = _train(options, model, training_set, seed, checkpoint)
     digest = _sha256(checkpoint)
-    run_id = _benchmark(
+    run_ids = _benchmark(
         options,
         store,
         [model],
@@ -377,9 +435,9 @@ def _part(options: StudyOptions, store, model: str, training_set: TrainingSet, s
         "train_seconds": float(meta.get("seconds", 0.0)),
         "checkpoint": str(checkpoint),
         "checkpoint_sha256": digest,
-        "run_id": run_id,
+        "run_ids": run_ids,
         "kept": kept,
-        "scores": read_scores(store, run_id, model, options.spp, kept),
+        "scores": read_scores(store, run_ids, model, options.spp, kept),
     }
     record_path.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
     return record

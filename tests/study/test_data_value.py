@@ -115,3 +115,29 @@ def test_study_end_to_end_on_a_tiny_budget(tmp_path, capsys):
     assert main(args) == 0
     assert {p.name: p.stat().st_mtime_ns for p in (out / "checkpoints").iterdir()} == before
     assert json.loads((out / "study.json").read_text())["parts"] == report["parts"]
+
+    # several third-party datasets pool into one set of scenes (one generate run has one camera choice)
+    (root / "c").mkdir()
+    (root / "c" / "disc.xml").write_text(SCENE_XML.format(radius="0.3", albedo="0.9, 0.9, 0.9"))
+    single = tmp_path / "one.toml"
+    single.write_text(SCENE_LIST.split("[[scene]]")[0] + '[[scene]]\nsource = "mitsuba"\npath = "c/disc.xml"\n')
+    tp2 = tmp_path / "tp2"
+    assert main(["generate", "--out", str(tp2), "--scene-list", str(single), "--root", str(root), *common]) == 0
+    twice = ["--third-party", f"{tp},{tp}"]
+    pooled_args = [*args[:4], "--third-party", str(tp), "--third-party", str(tp2), *args[6:]]
+    pooled_args[pooled_args.index(str(out))] = str(tmp_path / "pooled")
+    assert main([*args[:4], *twice, *args[6:]]) == 2
+    assert "xml_ball is also in" in capsys.readouterr().err
+    assert main(pooled_args) == 0
+    pooled = json.loads((tmp_path / "pooled" / "study.json").read_text())
+    assert pooled["third_party"]["kept"] == ["xml_ball", "xml_plate", "xml_disc"]
+    assert [d["scenes"] for d in pooled["third_party"]["datasets"]] == [["xml_ball", "xml_plate"], ["xml_disc"]]
+    for label, scores in pooled["references"].items():
+        for metric, score in scores.items():
+            assert score["scenes"] == 3
+            alone = report["references"][label][metric]["per_scene"]
+            # the first dataset's scenes score as they did alone: pooling adds scenes, changes none
+            assert {k: score["per_scene"][k] for k in alone} == pytest.approx(alone, rel=1e-12)
+    for part in pooled["parts"]:
+        assert set(part["scores"]["flip"]["per_scene"]) == {"xml_ball", "xml_plate", "xml_disc"}
+        assert len(part["run_ids"]) == 2
