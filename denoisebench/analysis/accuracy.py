@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from denoisebench.analysis.equal_tables import ABOUT, ratio_text, safe_exp, spp_for
+from denoisebench.analysis.equal_tables import ABOUT, ratio_text, safe_exp, spp_for, withheld_side
 from denoisebench.analysis.summary import RunData, SummaryRow
 from denoisebench.results.names import NOISY
 
@@ -270,8 +270,10 @@ def readings(at: AccuracyTime) -> list[str]:
                 f"samples is cheaper{note}."
             )
         else:
+            how = {"slower": "in no less than its time", "faster": "in at most slightly less than its time"}
             text = (
-                f"{p.denoiser} at {p.spp} spp matches {spp_text(spp_eq)} rendering in {at.metric} in about its time "
+                f"{p.denoiser} at {p.spp} spp matches {spp_text(spp_eq)} rendering in {at.metric} "
+                f"{how.get(withheld_side(low, high), 'in about its time')} "
                 f"({p.seconds:.3g} s vs {seconds_eq:.3g} s per frame{spread}): no time verdict{note}."
             )
         score = math.log(seconds_eq) - math.log(p.seconds)  # -log(ratio): a ratio may underflow to 0, its log not

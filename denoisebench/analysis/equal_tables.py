@@ -39,6 +39,19 @@ from denoisebench.results.names import NOISY
 
 #: A time ratio within this of 1 is "about rendering's time" (the same rule as accuracy.readings).
 ABOUT = 0.05
+
+
+def withheld_side(low: float, high: float) -> str:
+    """What a withheld time verdict's bounds (ratios to rendering's time, within ``ABOUT`` of 1 at one
+    end at least) still say: ``"slower"`` when they lie wholly at or above 1 (no saving, perhaps a
+    loss), ``"faster"`` when wholly at or below 1 (a saving of at most ``ABOUT``), else ``"either"``.
+
+    Pitfall: a range like 100–117 % is no saving; calling it "about its time" read as a tie."""
+    if low >= 1.0:
+        return "slower"
+    if high <= 1.0:
+        return "faster"
+    return "either"
 #: Multiples of the top rung the equal-quality table adds as (extrapolated) targets.
 EXTRA_TARGETS = (4, 16)
 #: An extrapolation further than this multiple of the top rung is not given (a nearly flat last segment
@@ -373,7 +386,14 @@ def verdicts(tables: Tables) -> list[str]:
         elif low > 1 + ABOUT:
             tail = f"{ratio:.2g}× rendering's time{spread}: rendering more samples is cheaper"
         else:
-            tail = f"about rendering's time ({ratio_text(low)}–{ratio_text(high)} across the timings' spread: no saving shown)"
+            span = f"{ratio_text(low)}–{ratio_text(high)} across the timings' spread"
+            side = withheld_side(low, high)
+            if side == "slower":
+                tail = f"no faster than rendering ({span}: no saving, perhaps a loss)"
+            elif side == "faster":
+                tail = f"at most slightly faster than rendering ({span}: too small a saving to call)"
+            else:
+                tail = f"about rendering's time ({span}: no saving shown)"
         out.append(
             f"Equal quality ({tables.metric}): {label} reaches the error of {row.target_spp:g}-spp rendering "
             f"({num(row.target)}) in {bound}{num(seconds.value)} s per frame against {num(row.render_seconds)} s "

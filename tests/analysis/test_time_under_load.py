@@ -176,3 +176,25 @@ def test_a_verdict_whose_bounds_straddle_one_is_withheld():
     tables.equal_quality.append(row)
     (text,) = equal_tables.verdicts(tables)
     assert "about rendering's time" in text and "cheaper" not in text
+
+
+def test_a_withheld_verdict_says_which_side_its_bounds_lie_on():
+    # 100-117 % of rendering's time is no saving: it must not read as a tie ("about its time")
+    assert equal_tables.withheld_side(1.0, 1.17) == "slower"
+    assert equal_tables.withheld_side(0.96, 1.0) == "faster"
+    assert equal_tables.withheld_side(0.97, 1.04) == "either"
+    tables = equal_tables.Tables(
+        metric="relmse", time_at=(10, 10), projected=False, equal_time=[], equal_quality=[], denoisers=["d"]
+    )
+    row = equal_tables.EqualQualityRow(target=0.1, target_spp=4.0, render_seconds=4.0, render_how="measured")
+    row.needs["d"] = (
+        equal_tables.Estimate(value=1.0, how="measured"),
+        equal_tables.Estimate(value=4.1, how="measured"),
+    )
+    row.ratio_bounds["d"] = (1.0, 1.17)
+    tables.equal_quality.append(row)
+    (text,) = equal_tables.verdicts(tables)
+    assert "no faster than rendering" in text and "about rendering's time" not in text
+    row.ratio_bounds["d"] = (0.96, 1.0)
+    (text,) = equal_tables.verdicts(tables)
+    assert "at most slightly faster" in text and "about rendering's time" not in text
