@@ -87,6 +87,11 @@ def add_arguments(parser) -> None:
         help="reference denoisers beside the noisy input (default cross_bilateral,oidn)",
     )
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads for training (default 1)")
+    p.add_argument(
+        "--report-only",
+        action="store_true",
+        help="write the report from the finished parts: train and score nothing new (missing parts are listed)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -120,6 +125,7 @@ def run(args) -> int:
         references=_names(args.references),
         threads=args.threads,
         progress=not args.quiet,
+        report_only=args.report_only,
     )
     result = run_study(options, on_part=lambda partial: write_report(partial, options.out))
     path = write_report(result, options.out)

@@ -28,6 +28,11 @@ report would set apart are judged once, from the reference run (noisy input, cro
 OIDN), and left out of every aggregate alike, so rows compare over the same scenes; the per-scene
 table still shows them.
 
+``report_only`` writes the report from the finished parts alone (``--report-only``): parts of one
+study run side by side in several folders (one process per model, say) are gathered by copying
+their ``parts/`` and ``checkpoints/`` into one folder and reporting there; what was asked for and
+not run is listed as missing.
+
 Resumable: a checkpoint's name carries its budget; a run that stopped is resumed from its last
 checkpoint (same seed, same batches); a benchmark run's identity includes the checkpoint's sha256
 (a retrained checkpoint is scored anew); a finished part's record ``OUT/parts/*.json`` is reused.
@@ -54,8 +59,8 @@ from denoisebench.benchmark.runner import BenchmarkConfig
 from denoisebench.dataset import open_dataset
 from denoisebench.errors import UserInputError
 from denoisebench.reports.run_inputs import run_data, set_apart_of
-from denoisebench.results.records import RunRows
 from denoisebench.results.names import NOISY
+from denoisebench.results.records import RunRows
 from denoisebench.results.store import ResultsStore
 
 # Lazy imports: torch and the trainer only where a model is trained; matplotlib only for the figure.
@@ -99,6 +104,9 @@ class StudyOptions:
     references: tuple[str, ...] = REFERENCES
     threads: int = 1
     progress: bool = True
+    #: write the report from the finished parts only: train and score nothing new (a study stopped
+    #: at a deadline, or parts gathered from several study folders run side by side)
+    report_only: bool = False
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -317,6 +325,8 @@ class StudyResult:
     parts: list[dict] = field(default_factory=list)
     references: dict = field(default_factory=dict)
     scaling: dict = field(default_factory=dict)
+    #: parts asked for but not run (``report_only``): "model set seed"
+    missing: list[str] = field(default_factory=list)
 
 
 def _references(options: StudyOptions, store, datasets) -> tuple[dict, list[str], dict]:
@@ -383,6 +393,11 @@ def run_study(options: StudyOptions, on_part=None) -> StudyResult:
         order = {(m, s.name, seed): i for i, (m, s, seed) in enumerate(jobs)}
         # finished parts first: a study extended with more seeds reports the old ones at once
         jobs.sort(key=lambda job: _finished(options, *job, kept) is None)
+        if options.report_only:
+            result.missing = [
+                f"{m} {s.name} seed {seed}" for m, s, seed in jobs if _finished(options, m, s, seed, kept) is None
+            ]
+            jobs = [job for job in jobs if _finished(options, *job, kept) is not None]
         bar = tqdm(jobs, desc="study: model × set × seed", unit="run", disable=not options.progress, file=sys.stderr)
         for model, training_set, seed in bar:
             bar.set_postfix_str(f"{model} {training_set.name} seed {seed}")

@@ -109,7 +109,14 @@ def markdown(result: StudyResult) -> str:
         lines.append(
             f"| {model} | {name} | {len(parts[0]['scenes'])} | {cells[0]} | {cells[1]} | {ratios[0]} | {ratios[1]} |"
         )
+    rules = {
+        m: next((sc[m].get("rule") for sc in result.references.values() if sc[m].get("rule")), None) for m in METRICS
+    }
     lines += [
+        "",
+        "Aggregates over scenes by each metric's rule (the benchmark report's lead): "
+        + "; ".join(f"{m}: {_RULES.get(r, r)}" for m, r in rules.items() if r)
+        + ".",
         "",
         "÷ full: the geometric mean over the kept scenes of this set's score over the same model's `full` "
         "score on the same scene, with a 95 % bootstrap interval over scenes (a scene's difficulty cancels; "
@@ -148,10 +155,25 @@ def markdown(result: StudyResult) -> str:
             lines.append(
                 f"| {model} | {row['scenes']} | {row['set']} | {_cell(row['relmse_robust'])} | {_cell(row['flip'])} |"
             )
+    if result.missing:
+        lines += [
+            "",
+            "## Not run",
+            "",
+            "Asked for, not finished when this report was written: " + ", ".join(result.missing) + ".",
+        ]
     lines += ["", "## Training sets", ""]
     for s in result.sets:
         lines.append(f"* `{s['name']}` ({s['kind']}): {len(s['scenes'])} scenes of {', '.join(s['families'])}")
     return "\n".join(lines) + "\n"
+
+
+#: How the aggregate rules read in the report (analysis/aggregate.py states them exactly).
+_RULES = {
+    "anchored_trimmed_geomean": "each scene's score over the noisy input's on that scene, geometric mean without "
+    "the top and bottom 12.5 % of scenes (the noisy input reads 1)",
+    "mean": "arithmetic mean",
+}
 
 
 def _groups(parts: list[dict]) -> dict[tuple[str, str], list[dict]]:

@@ -141,3 +141,13 @@ def test_study_end_to_end_on_a_tiny_budget(tmp_path, capsys):
     for part in pooled["parts"]:
         assert set(part["scores"]["flip"]["per_scene"]) == {"xml_ball", "xml_plate", "xml_disc"}
         assert len(part["run_ids"]) == 2
+
+    # --report-only: a report from the finished parts; what was asked for and not run is listed, not trained
+    seeds = args.index("--scaling")
+    more = [*args[:seeds], "--seeds", "0,1", *args[seeds:], "--report-only"]
+    assert main(more) == 0
+    after = json.loads((out / "study.json").read_text())
+    assert {p.name: p.stat().st_mtime_ns for p in (out / "checkpoints").iterdir()} == before
+    assert after["parts"] == report["parts"]
+    assert set(after["missing"]) == {"kpcn full seed 1", "kpcn family:plain seed 1", "kpcn n:2 seed 1"}
+    assert "## Not run" in (out / "study.md").read_text()
