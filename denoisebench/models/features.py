@@ -199,6 +199,15 @@ def split_lobes(buffers: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.T
     return diffuse, diffuse_var.clamp_min(0.0), specular, specular_var.clamp_min(0.0)
 
 
+def dark_pixels(buffers: dict[str, torch.Tensor]) -> torch.Tensor | None:
+    """N×1×H×W mask of the pixels :func:`albedo_factor` leaves undemodulated (mean albedo below
+    ALBEDO_MIN: emitters, background, black materials); None without an albedo buffer."""
+    albedo = buffers.get("albedo")
+    if albedo is None:
+        return None
+    return safe(albedo).clamp(0.0, 1.0).mean(dim=1, keepdim=True) < ALBEDO_MIN
+
+
 def albedo_factor(buffers: dict[str, torch.Tensor], like: torch.Tensor) -> torch.Tensor:
     """albedo + ε, the demodulation divisor; 1 where the albedo is below ALBEDO_MIN or absent.
 
@@ -211,8 +220,7 @@ def albedo_factor(buffers: dict[str, torch.Tensor], like: torch.Tensor) -> torch
     if albedo is None:
         return torch.ones_like(like)
     albedo = safe(albedo).clamp(0.0, 1.0)
-    dark = albedo.mean(dim=1, keepdim=True) < ALBEDO_MIN
-    return torch.where(dark, torch.ones_like(albedo), albedo + ALBEDO_EPS)
+    return torch.where(dark_pixels(buffers), torch.ones_like(albedo), albedo + ALBEDO_EPS)
 
 
 def pcn_inputs(buffers: dict[str, torch.Tensor], log_depth_var: bool = False) -> dict[str, torch.Tensor]:

@@ -47,7 +47,15 @@ from torch import nn
 from torch.nn import functional as F
 
 from denoisebench.models.features import LOG_MAX as LOG_MAX_OUTPUT
-from denoisebench.models.features import PCN_INPUT_CHANNELS, from_log, normalize_radiance, pcn_inputs, safe
+from denoisebench.models.features import (
+    PCN_INPUT_CHANNELS,
+    dark_pixels,
+    from_log,
+    normalize_radiance,
+    pcn_inputs,
+    safe,
+    split_lobes,
+)
 
 #: Logits beyond this carry no extra information (exp(±50) spans every float32 ratio) and keep softmax finite.
 LOGIT_MAX = 50.0
@@ -273,6 +281,28 @@ class PCN(nn.Module):
         clamped = y.clamp(math.log(self.log_offset), LOG_MAX_OUTPUT)
         return (torch.exp(y + (clamped - y).detach()) - self.log_offset).clamp_min(0.0)
 
+    def _dark_diffuse(self, buffers: dict[str, torch.Tensor], diffuse: torch.Tensor, kd: torch.Tensor | None):
+        """``diffuse`` with its pixels of no albedo (emitters, background, black materials) replaced.
+
+        Those pixels are not demodulated (:func:`~.features.albedo_factor`): the branch's output
+        there is a value of the demodulated domain (an irradiance, radiance ÷ albedo) taken from
+        lit neighbours and remodulated by 1. On a black rough-plastic sphere beside a grey floor
+        (Mitsuba's bsdf_roughplastic_ggx) that painted the floor's irradiance onto the sphere, 15×
+        the reference, and decided the scene's score. KPCN there filters the rendered diffuse
+        with its own kernel restricted to other such pixels (renormalised; a pixel none of whose
+        taps is dark keeps its rendered value); DPCN, whose head has no such kernel, keeps the
+        rendered value. A black material's diffuse is 0 whatever the filter does."""
+        dark = dark_pixels(buffers)
+        if dark is None or not bool(dark.any()):
+            return diffuse
+        rendered = split_lobes(buffers)[0]
+        if kd is None:
+            return torch.where(dark, rendered, diffuse)
+        mask = dark.to(rendered.dtype)
+        weight = apply_kernels(mask, kd, self.kernel_size)
+        filtered = apply_kernels(rendered * mask, kd, self.kernel_size) / weight.clamp_min(1e-6)
+        return torch.where(dark, torch.where(weight > 1e-6, filtered, rendered), diffuse)
+
     def forward(self, buffers: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
         buffers, scale = normalize_radiance(buffers)
         prepared = pcn_inputs(buffers, self.log_depth_var)
@@ -284,6 +314,7 @@ class PCN(nn.Module):
         else:
             diffuse_lin, kd = self._branch(self.diffuse, prepared["diffuse_in"], prepared["diffuse_lin"])
             diffuse = diffuse_lin * factor
+        diffuse = self._dark_diffuse(buffers, diffuse, kd)
         specular_log, ks = self._branch(self.specular, prepared["specular_in"], prepared["specular_log"])
         specular = decode(specular_log)
         diffuse, specular = diffuse * scale, specular * scale
