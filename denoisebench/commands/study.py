@@ -90,7 +90,8 @@ def add_arguments(parser) -> None:
     p.add_argument(
         "--report-only",
         action="store_true",
-        help="write the report from the finished parts: train and score nothing new (missing parts are listed)",
+        help="train nothing: report the finished parts, score checkpoints already trained to the budget, "
+        "list the rest as not run",
     )
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 

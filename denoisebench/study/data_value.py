@@ -28,10 +28,11 @@ report would set apart are judged once, from the reference run (noisy input, cro
 OIDN), and left out of every aggregate alike, so rows compare over the same scenes; the per-scene
 table still shows them.
 
-``report_only`` writes the report from the finished parts alone (``--report-only``): parts of one
-study run side by side in several folders (one process per model, say) are gathered by copying
-their ``parts/`` and ``checkpoints/`` into one folder and reporting there; what was asked for and
-not run is listed as missing.
+``report_only`` (``--report-only``) trains nothing: it reports the finished parts, scores the
+checkpoints already trained to the budget whose scores are missing, and lists the rest as not run.
+Parts of one study run side by side in several folders (one process per model, say) are gathered
+by copying their ``checkpoints/`` (and ``parts/``) into one folder and reporting there; copying the
+checkpoints alone scores them anew with today's code.
 
 Resumable: a checkpoint's name carries its budget; a run that stopped is resumed from its last
 checkpoint (same seed, same batches); a benchmark run's identity includes the checkpoint's sha256
@@ -394,10 +395,9 @@ def run_study(options: StudyOptions, on_part=None) -> StudyResult:
         # finished parts first: a study extended with more seeds reports the old ones at once
         jobs.sort(key=lambda job: _finished(options, *job, kept) is None)
         if options.report_only:
-            result.missing = [
-                f"{m} {s.name} seed {seed}" for m, s, seed in jobs if _finished(options, m, s, seed, kept) is None
-            ]
-            jobs = [job for job in jobs if _finished(options, *job, kept) is not None]
+            ready = [job for job in jobs if _trained(options, *job[:3], kept)]
+            result.missing = [f"{m} {s.name} seed {seed}" for m, s, seed in jobs if (m, s, seed) not in ready]
+            jobs = ready
         bar = tqdm(jobs, desc="study: model × set × seed", unit="run", disable=not options.progress, file=sys.stderr)
         for model, training_set, seed in bar:
             bar.set_postfix_str(f"{model} {training_set.name} seed {seed}")
@@ -420,6 +420,18 @@ def _finished(options: StudyOptions, model: str, training_set: TrainingSet, seed
         if record.get("scenes") == list(training_set.scenes) and record.get("kept") == kept:
             return record
     return None
+
+
+def _trained(options: StudyOptions, model: str, training_set: TrainingSet, seed: int, kept: list[str]) -> bool:
+    """A finished part, or a checkpoint trained to the budget whose scores are still to be taken."""
+    if _finished(options, model, training_set, seed, kept) is not None:
+        return True
+    checkpoint = Path(options.out) / "checkpoints" / f"{part_stem(model, training_set.name, seed, options)}.pt"
+    if not checkpoint.is_file():
+        return False
+    from denoisebench.models.checkpoint import load_checkpoint
+
+    return int(load_checkpoint(checkpoint, expect_model=model)["meta"].get("steps", 0)) >= options.steps
 
 
 def _part(options: StudyOptions, store, model: str, training_set: TrainingSet, seed: int, kept: list[str]) -> dict:

@@ -151,3 +151,10 @@ def test_study_end_to_end_on_a_tiny_budget(tmp_path, capsys):
     assert after["parts"] == report["parts"]
     assert set(after["missing"]) == {"kpcn full seed 1", "kpcn family:plain seed 1", "kpcn n:2 seed 1"}
     assert "## Not run" in (out / "study.md").read_text()
+    # a checkpoint trained to the budget but never scored (its record gone) is scored, not retrained
+    record = next((out / "parts").glob("kpcn__full__seed0__*.json"))
+    record.unlink()
+    assert main(more) == 0
+    assert {p.name: p.stat().st_mtime_ns for p in (out / "checkpoints").iterdir()} == before
+    rescored = json.loads((out / "study.json").read_text())
+    assert rescored["parts"] == report["parts"] and record.is_file()
