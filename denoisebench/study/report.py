@@ -16,6 +16,8 @@ from denoisebench.study.data_value import FIGURE, METRICS, REPORT_JSON, REPORT_M
 # Lazy imports: numpy for the paired bootstrap, matplotlib for the figure.
 
 
+#: The reference every row is also compared with, scene by scene (the classic a learned model must beat).
+PEER = "cross_bilateral"
 #: Bootstrap resamples of the paired ratios (seed 0: the same parts give the same report).
 PAIRED_RESAMPLES = 2000
 
@@ -93,21 +95,30 @@ def markdown(result: StudyResult) -> str:
         f"## Summary at {spp} spp",
         "",
         "| model | training set | scenes | relmse_robust (corrected) | FLIP | relmse_robust ÷ full (paired) "
-        "| FLIP ÷ full (paired) |",
-        "|---|---|---|---|---|---|---|",
+        f"| FLIP ÷ full (paired) | relmse_robust ÷ {PEER} (paired) | FLIP ÷ {PEER} (paired) |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
+    kept = result.third_party.get("kept", [])
+    peer = [{"scores": result.references[PEER]}] if PEER in result.references else None
+
+    def versus_peer(parts: list[dict]) -> list[str]:
+        return [_cell(paired_ratio(parts, peer, m, kept)) if peer else "–" for m in METRICS]
+
     for label, scores in result.references.items():
+        mine = versus_peer([{"scores": scores}]) if label != PEER else ["1", "1"]
         lines.append(
-            f"| {label} | (reference) | – | {_cell(scores['relmse_robust'])} | {_cell(scores['flip'])} | – | – |"
+            f"| {label} | (reference) | – | {_cell(scores['relmse_robust'])} | {_cell(scores['flip'])} | – | – "
+            f"| {mine[0]} | {mine[1]} |"
         )
     groups = _groups(result.parts)
-    kept = result.third_party.get("kept", [])
     for (model, name), parts in groups.items():
         cells = [_cell(seed_summary(parts, m)) for m in METRICS]
         full = groups.get((model, "full"))
         ratios = [_cell(paired_ratio(parts, full, m, kept)) if full and name != "full" else "1" for m in METRICS]
+        mine = versus_peer(parts)
         lines.append(
-            f"| {model} | {name} | {len(parts[0]['scenes'])} | {cells[0]} | {cells[1]} | {ratios[0]} | {ratios[1]} |"
+            f"| {model} | {name} | {len(parts[0]['scenes'])} | {cells[0]} | {cells[1]} | {ratios[0]} | {ratios[1]} "
+            f"| {mine[0]} | {mine[1]} |"
         )
     rules = {
         m: next((sc[m].get("rule") for sc in result.references.values() if sc[m].get("rule")), None) for m in METRICS
@@ -120,7 +131,8 @@ def markdown(result: StudyResult) -> str:
         "",
         "÷ full: the geometric mean over the kept scenes of this set's score over the same model's `full` "
         "score on the same scene, with a 95 % bootstrap interval over scenes (a scene's difficulty cancels; "
-        "scenes scoring 0 are left out).",
+        f"scenes scoring 0 are left out); ÷ {PEER}: the same against {PEER}'s score on each scene (below 1: "
+        "better than it).",
     ]
     scenes = result.third_party.get("scenes", [])
     for metric in METRICS:

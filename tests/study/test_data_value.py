@@ -109,6 +109,11 @@ def test_study_end_to_end_on_a_tiny_budget(tmp_path, capsys):
     assert [p["scenes"] for p in curve] == [2, len(sets["full"]["scenes"])]
     text = (out / "study.md").read_text()
     assert "| kpcn | family:plain |" in text and "xml_ball | xml_plate" in text and "## Scaling curve" in text
+    # every row is also compared scene by scene with cross_bilateral, which reads 1 against itself
+    assert "relmse_robust ÷ cross_bilateral (paired)" in text
+    assert "| cross_bilateral | (reference) | – |" in text and text.split("| cross_bilateral | (reference)")[1].split(
+        "\n"
+    )[0].endswith("| 1 | 1 |")
     assert (out / "scaling.png").stat().st_size > 1000
     # resumable: a second run trains and measures nothing new, and writes the same numbers
     before = {p.name: p.stat().st_mtime_ns for p in (out / "checkpoints").iterdir()}
