@@ -20,7 +20,11 @@ support with ReLU between them (the paper: 9 × 100 × 5×5).
   softmax-normalised into a non-negative kernel summing to one that is applied to the branch's noisy
   buffer (demodulated diffuse, log specular) around the pixel.
 
-Then diffuse is remodulated by albedo + ε, specular exponentiated, and the two are added.
+Then diffuse is remodulated by albedo + ε, specular exponentiated, and the two are added. Our
+deviation: where the demodulated domain cannot be trusted (pixels of no albedo; channels of albedo
+below ``ALBEDO_TRUSTED``, mostly partly covered silhouettes) KPCN filters the rendered diffuse over
+taps of the same class only, and DPCN keeps the rendered diffuse at pixels of no albedo
+(:meth:`PCN._dark_diffuse`; found on third-party scenes, docs/study.md).
 
 Notes
 -----
