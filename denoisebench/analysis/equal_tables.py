@@ -52,6 +52,8 @@ def withheld_side(low: float, high: float) -> str:
     if high <= 1.0:
         return "faster"
     return "either"
+
+
 #: Multiples of the top rung the equal-quality table adds as (extrapolated) targets.
 EXTRA_TARGETS = (4, 16)
 #: An extrapolation further than this multiple of the top rung is not given (a nearly flat last segment
