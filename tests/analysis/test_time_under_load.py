@@ -147,6 +147,21 @@ def test_ratio_bounds_cover_each_probe_render_slower_on_its_own():
     assert low < (1.5 * 0.6 + 0.4) / (1.5 * 1.3) and (0.6 + 0.4) / 1.3 < high
 
 
+def _one_equal_quality_row(*, seconds: float, bounds: tuple[float, float]):
+    """Tables with one equal-quality row: denoiser d at 1 spp needs ``seconds`` for 4-spp rendering's error (4 s)."""
+    tables = equal_tables.Tables(
+        metric="relmse", time_at=(10, 10), projected=False, equal_time=[], equal_quality=[], denoisers=["d"]
+    )
+    row = equal_tables.EqualQualityRow(target=0.1, target_spp=4.0, render_seconds=4.0, render_how="measured")
+    row.needs["d"] = (
+        equal_tables.Estimate(value=1.0, how="measured"),
+        equal_tables.Estimate(value=seconds, how="measured"),
+    )
+    row.ratio_bounds["d"] = bounds
+    tables.equal_quality.append(row)
+    return tables, row
+
+
 def test_a_verdict_whose_bounds_straddle_one_is_withheld():
     # a denoiser at 1 spp matching 4-spp rendering at about its time: no verdict either way
     render = time_model.RenderCost(pixels0=100, offset0=0.0, per_spp0=1.0, measured_spp=[1, 4], spread=1.3)
@@ -164,16 +179,7 @@ def test_a_verdict_whose_bounds_straddle_one_is_withheld():
     at.noisy_curve = {1: 0.4, 4: 0.1}
     sentence = next(s for s in accuracy.readings(at) if s.startswith("d at 1 spp"))
     assert "no time verdict" in sentence and "cheaper" not in sentence
-    tables = equal_tables.Tables(
-        metric="relmse", time_at=(10, 10), projected=False, equal_time=[], equal_quality=[], denoisers=["d"]
-    )
-    row = equal_tables.EqualQualityRow(target=0.1, target_spp=4.0, render_seconds=4.0, render_how="measured")
-    row.needs["d"] = (
-        equal_tables.Estimate(value=1.0, how="measured"),
-        equal_tables.Estimate(value=4.0, how="measured"),
-    )
-    row.ratio_bounds["d"] = model.ratio_bounds("d", 1, 4)
-    tables.equal_quality.append(row)
+    tables, _ = _one_equal_quality_row(seconds=4.0, bounds=model.ratio_bounds("d", 1, 4))
     (text,) = equal_tables.verdicts(tables)
     assert "about rendering's time" in text and "cheaper" not in text
 
@@ -183,16 +189,7 @@ def test_a_withheld_verdict_says_which_side_its_bounds_lie_on():
     assert equal_tables.withheld_side(1.0, 1.17) == "slower"
     assert equal_tables.withheld_side(0.96, 1.0) == "faster"
     assert equal_tables.withheld_side(0.97, 1.04) == "either"
-    tables = equal_tables.Tables(
-        metric="relmse", time_at=(10, 10), projected=False, equal_time=[], equal_quality=[], denoisers=["d"]
-    )
-    row = equal_tables.EqualQualityRow(target=0.1, target_spp=4.0, render_seconds=4.0, render_how="measured")
-    row.needs["d"] = (
-        equal_tables.Estimate(value=1.0, how="measured"),
-        equal_tables.Estimate(value=4.1, how="measured"),
-    )
-    row.ratio_bounds["d"] = (1.0, 1.17)
-    tables.equal_quality.append(row)
+    tables, row = _one_equal_quality_row(seconds=4.1, bounds=(1.0, 1.17))
     (text,) = equal_tables.verdicts(tables)
     assert "no faster than rendering" in text and "about rendering's time" not in text
     row.ratio_bounds["d"] = (0.96, 1.0)
