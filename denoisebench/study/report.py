@@ -204,12 +204,15 @@ def scaling_figure(result: StudyResult, path: Path) -> Path | None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(5, 3.4), dpi=120)
-    for model, rows in result.scaling.items():
+    fig, ax = plt.subplots(figsize=(6.6, 3.6), dpi=120)
+    models = [m for m, rows in result.scaling.items() if rows]
+    for i, (model, rows) in enumerate(result.scaling.items()):
         rows = [r for r in rows if r["relmse_robust"]["value"] is not None]
         if not rows:
             continue
-        x = [r["scenes"] for r in rows]
+        # a small horizontal offset per model keeps overlapping intervals apart
+        shift = 1.0 + 0.03 * (i - (len(models) - 1) / 2)
+        x = [r["scenes"] * shift for r in rows]
         y = [r["relmse_robust"]["value"] for r in rows]
         low = [r["relmse_robust"]["low"] if r["relmse_robust"]["low"] is not None else v for r, v in zip(rows, y)]
         high = [r["relmse_robust"]["high"] if r["relmse_robust"]["high"] is not None else v for r, v in zip(rows, y)]
@@ -219,28 +222,29 @@ def scaling_figure(result: StudyResult, path: Path) -> Path | None:
             yerr=[[max(v - lo, 0) for v, lo in zip(y, low)], [max(hi - v, 0) for v, hi in zip(y, high)]],
             marker="o",
             capsize=3,
-            label=model,
+            label=f"{model} (trained here)",
         )
     ax.set_xscale("log")
+    ax.set_yscale("log")
     counts = sorted({r["scenes"] for rows in result.scaling.values() for r in rows})
     ax.set_xticks(counts, [str(c) for c in counts])
     ax.minorticks_off()
-    lines: list[tuple[float, list[str]]] = []  # reference lines; labels within 2 % share one line
-    for label, scores in result.references.items():
+    styles = [(0, (5, 2)), (0, (1, 1)), (0, (3, 1, 1, 1)), (0, (8, 2, 1, 2)), (0, (2, 3))]
+    for k, (label, scores) in enumerate(result.references.items()):
         value = scores["relmse_robust"]["value"]
-        if value is not None:
-            near = [line for line in lines if abs(line[0] - value) <= 0.02 * max(line[0], value)]
-            if near:
-                near[0][1].append(label)
-            else:
-                lines.append((value, [label]))
-    for value, labels in lines:
-        ax.axhline(value, linestyle="--", linewidth=0.8, color="grey")
-        text = " " + ", ".join(labels)
-        ax.text(0.01, value, text, fontsize=7, color="grey", va="bottom", transform=ax.get_yaxis_transform())
+        if value is not None and value > 0:
+            ax.axhline(
+                value,
+                linestyle=styles[k % len(styles)],
+                linewidth=0.9,
+                color=str(0.15 + 0.12 * (k % 5)),
+                label=f"{label} {value:.3g} ({'shipped weights' if label in result.scaling else 'reference'})",
+            )
+    rule = next((sc["relmse_robust"].get("rule") for sc in result.references.values()), None)
+    ylabel = "relmse_robust ÷ noisy input" if rule == "anchored_trimmed_geomean" else "relmse_robust"
     ax.set_xlabel("generated training scenes")
-    ax.set_ylabel("relmse_robust (corrected)")
-    ax.legend(fontsize=8)
+    ax.set_ylabel(f"{ylabel} (corrected, log)")
+    ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
