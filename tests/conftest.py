@@ -18,9 +18,15 @@ from __future__ import annotations
 import ctypes
 import ctypes.util
 import gc
+import importlib
+import site
 import sys
+import sysconfig
 
 import pytest
+
+from tests.support.editable import editable_install
+from tests.support.paths import REPO
 
 
 @pytest.fixture(scope="session")
@@ -32,6 +38,19 @@ def mi():
     if not module.variant().startswith("llvm"):
         pytest.skip("needs the LLVM variant (libLLVM >= 16)")
     return module
+
+
+@pytest.fixture(scope="session")
+def installed_example():
+    """The example plugin package (examples/denoisebench-example-plugin) installed for the session with
+    ``pip install -e`` and removed after it (tests/support/editable.py); its denoiser's name."""
+    with editable_install(REPO / "examples" / "denoisebench-example-plugin", "denoisebench-example-plugin"):
+        # make it importable in this process too (its .pth is read at start-up), so that tests that
+        # list and load every available denoiser after this one find a working entry point
+        site.addsitedir(sysconfig.get_paths()["purelib"])
+        importlib.invalidate_caches()
+        yield "example_median"
+    importlib.invalidate_caches()
 
 
 def _malloc_trim() -> None:

@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-import importlib
 import json
-import site
 import subprocess
 import sys
-import sysconfig
 import textwrap
 
 import pytest
@@ -19,33 +16,6 @@ from denoisebench.errors import UserInputError
 from tests.support.paths import REPO  # noqa: E402
 
 EXAMPLE = REPO / "examples" / "denoisebench-example-plugin"
-
-
-@pytest.fixture(scope="session")
-def installed_example():
-    """``pip install --no-deps --no-build-isolation -e`` the example package into this environment."""
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "pip",
-            "install",
-            "--quiet",
-            "--no-deps",
-            "--no-build-isolation",
-            "--no-index",
-            "-e",
-            str(EXAMPLE),
-        ],
-        capture_output=True,
-        text=True,
-    )
-    assert done.returncode == 0, done.stderr[-2000:]
-    # make it importable in this process too (its .pth is read at start-up), so that tests that
-    # list and load every available denoiser after this one find a working entry point
-    site.addsitedir(sysconfig.get_paths()["purelib"])
-    importlib.invalidate_caches()
-    return "example_median"
 
 
 def _run(*args: str) -> subprocess.CompletedProcess:

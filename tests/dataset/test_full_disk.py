@@ -87,12 +87,12 @@ def test_generate_stops_on_a_full_disk_and_resumes_to_the_same_bytes(tmp_path):
     assert _exr_hashes(copy) == _exr_hashes(peer) and len(_exr_hashes(peer)) == 18
 
 
-def test_benchmark_stops_on_a_full_disk_and_resumes_with_every_unit_once(tmp_path):
+def test_benchmark_stops_on_a_full_disk_and_resumes_with_every_unit_once(tmp_path, installed_example):
     data = make_synthetic_dataset(tmp_path / "ds", scenes=2, frames=2, height=16, width=16, spp=(1,))
     mount = tmp_path / "small"
     mount.mkdir()
     db = mount / "r.sqlite"
-    denoisers = "identity,cross_bilateral,cross_bilateral_fast,cross_bilateral_high,nlmeans,example_median"
+    denoisers = f"identity,cross_bilateral,cross_bilateral_fast,cross_bilateral_high,nlmeans,{installed_example}"
     command = (
         f"{BIN / 'run-benchmark'} --data {data} --db {db} --no-report --split all --metrics relmse "
         f"--denoisers {denoisers} --time-size none"

@@ -8,6 +8,7 @@ import textwrap
 
 import pytest
 
+from tests.support.editable import editable_install
 from tests.support.paths import REPO  # noqa: E402
 
 EXAMPLE = REPO / "examples" / "denoisebench-example-sampler"
@@ -15,11 +16,10 @@ EXAMPLE = REPO / "examples" / "denoisebench-example-sampler"
 
 @pytest.fixture(scope="module")
 def installed_sampler():
-    """``pip install --no-deps --no-build-isolation -e`` the example sampler package into this environment."""
-    command = [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation", "--no-index"]
-    done = subprocess.run([*command, "-e", str(EXAMPLE)], capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr[-2000:]
-    return "example_variance"
+    """``pip install --no-deps --no-build-isolation -e`` the example sampler package into this environment
+    for the module (removed after it: tests/support/editable.py)."""
+    with editable_install(EXAMPLE, "denoisebench-example-sampler"):
+        yield "example_variance"
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
