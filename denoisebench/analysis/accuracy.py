@@ -270,7 +270,7 @@ def readings(at: AccuracyTime) -> list[str]:
                 f"samples is cheaper{note}."
             )
         else:
-            how = {"slower": "in no less than its time", "faster": "in at most slightly less than its time"}
+            how = {"slower": "in no less than its time", "faster": "in less than its time, perhaps only slightly"}
             text = (
                 f"{p.denoiser} at {p.spp} spp matches {spp_text(spp_eq)} rendering in {at.metric} "
                 f"{how.get(withheld_side(low, high), 'in about its time')} "

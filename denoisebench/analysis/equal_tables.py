@@ -43,8 +43,9 @@ ABOUT = 0.05
 
 def withheld_side(low: float, high: float) -> str:
     """What a withheld time verdict's bounds (ratios to rendering's time, within ``ABOUT`` of 1 at one
-    end at least) still say: ``"slower"`` when they lie wholly at or above 1 (no saving, perhaps a
-    loss), ``"faster"`` when wholly at or below 1 (a saving of at most ``ABOUT``), else ``"either"``.
+    end at least) still say: ``"slower"`` when they lie wholly at or above 1 (no saving; a loss that
+    may be smaller than ``ABOUT``), ``"faster"`` when wholly at or below 1 (a saving that may be
+    smaller than ``ABOUT``: the end nearest 1 is within it), else ``"either"``.
 
     Pitfall: a range like 100–117 % is no saving; calling it "about its time" read as a tie."""
     if low >= 1.0:
@@ -393,7 +394,7 @@ def verdicts(tables: Tables) -> list[str]:
             if side == "slower":
                 tail = f"no faster than rendering ({span}: no saving, perhaps a loss)"
             elif side == "faster":
-                tail = f"at most slightly faster than rendering ({span}: too small a saving to call)"
+                tail = f"below rendering's time, perhaps only slightly ({span}: a saving too small to call)"
             else:
                 tail = f"about rendering's time ({span}: no saving shown)"
         out.append(

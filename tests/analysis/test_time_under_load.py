@@ -194,4 +194,4 @@ def test_a_withheld_verdict_says_which_side_its_bounds_lie_on():
     assert "no faster than rendering" in text and "about rendering's time" not in text
     row.ratio_bounds["d"] = (0.96, 1.0)
     (text,) = equal_tables.verdicts(tables)
-    assert "at most slightly faster" in text and "about rendering's time" not in text
+    assert "below rendering's time, perhaps only slightly" in text and "about rendering's time" not in text
