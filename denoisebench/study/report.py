@@ -11,6 +11,7 @@ import json
 from dataclasses import asdict
 from pathlib import Path
 
+from denoisebench.models.names import MODEL_NAMES
 from denoisebench.study.data_value import FIGURE, METRICS, REPORT_JSON, REPORT_MD, StudyResult, seed_summary
 
 # Lazy imports: numpy for the paired bootstrap, matplotlib for the figure.
@@ -238,7 +239,7 @@ def scaling_figure(result: StudyResult, path: Path) -> Path | None:
                 linestyle=styles[k % len(styles)],
                 linewidth=0.9,
                 color=str(0.15 + 0.12 * (k % 5)),
-                label=f"{label} {value:.3g} ({'shipped weights' if label in result.scaling else 'reference'})",
+                label=f"{label} {value:.3g} ({'shipped weights' if label in MODEL_NAMES else 'reference'})",
             )
     rule = next((sc["relmse_robust"].get("rule") for sc in result.references.values()), None)
     ylabel = "relmse_robust ÷ noisy input" if rule == "anchored_trimmed_geomean" else "relmse_robust"
