@@ -47,8 +47,28 @@ def dataset(tmp_path_factory):
     return open_dataset(out)
 
 
-def _verdicts(store, run_id, dataset) -> dict[tuple, str]:
-    """{(what, denoiser, spp or target): "denoiser" | "render"} of every time verdict in the report."""
+#: A verdict whose bounds come within this of rendering's time (either way) is marginal: see the test.
+MARGIN = 0.25
+SPREAD = re.compile(r"(1/\d+|[\d.]+ %)–(1/\d+|[\d.]+ %) across the timings' spread")
+
+
+def _ratio(text: str) -> float:
+    """A ratio as ratio_text writes it: "1/3" or "57 %"."""
+    return 1 / float(text[2:]) if text.startswith("1/") else float(text.rstrip(" %")) / 100
+
+
+def _marginal(text: str) -> bool:
+    """Whether a verdict's bounds (its timings' spread) come within MARGIN of rendering's time."""
+    found = SPREAD.search(text)
+    if not found:
+        return False
+    low, high = _ratio(found.group(1)), _ratio(found.group(2))
+    return high > 1 - MARGIN and low < 1 + MARGIN
+
+
+def _verdicts(store, run_id, dataset, *, clear_only: bool = False) -> dict[tuple, str]:
+    """{(what, denoiser, spp or target): "denoiser" | "render"} of every time verdict in the report
+    (``clear_only``: only those whose bounds stay MARGIN away from rendering's time)."""
     built = report.build_report(store, run_id, dataset, time_at=TIME_AT)
     kinds = {}
     for metric, sentences in built.readings.items():
@@ -57,6 +77,8 @@ def _verdicts(store, run_id, dataset) -> dict[tuple, str]:
             if not found:
                 continue
             key = ("reading", metric, found.group(1), int(found.group(2)))
+            if clear_only and _marginal(text):
+                continue
             if "rendering more samples is cheaper" in text:
                 kinds[key] = "render"
             elif "of its time (" in text:
@@ -65,6 +87,8 @@ def _verdicts(store, run_id, dataset) -> dict[tuple, str]:
         found = re.match(r"Equal quality \((\S+)\): (\S+) reaches the error of ([\d.]+)-spp", text)
         if found:
             key = ("equal_quality", *found.groups())
+            if clear_only and _marginal(text):
+                continue
             if "rendering more samples is cheaper" in text:
                 kinds[key] = "render"
             elif "of rendering's time" in text and "about" not in text:
@@ -90,7 +114,7 @@ def _run(dataset, db, loaded: bool) -> dict[tuple, str]:
             plan = run_benchmark(dataset, config, store, progress=False)
             instances = {d.label: d.instance for d in plan.denoisers}
             timing.measure_run_timings(store, dataset, plan, instances, (96, 96), progress=False)
-            return _verdicts(store, plan.run_id, dataset)
+            return _verdicts(store, plan.run_id, dataset, clear_only=True)
     finally:
         for w in workers:
             w.terminate()
@@ -98,6 +122,11 @@ def _run(dataset, db, loaded: bool) -> dict[tuple, str]:
 
 
 def test_time_verdicts_do_not_flip_beside_a_cpu_bound_load(dataset, tmp_path):
+    # A clear verdict (its bounds at least MARGIN from rendering's time) never flips beside a load.
+    # Marginal ones can, and the time model cannot stop it: on this 96×96 timing a load of two
+    # spinning processes slowed rendering 2.3× (0.0123 -> 0.0285 s per frame) but nlmeans 1.6×, so
+    # nlmeans' equal-quality verdict went from 116-134 % of rendering's time (rendering cheaper) to
+    # 69-92 % (a saving); with every verdict compared this test failed 2 runs in 7 at 7b7fcd7.
     idle = _run(dataset, tmp_path / "idle.sqlite", loaded=False)
     busy = _run(dataset, tmp_path / "busy.sqlite", loaded=True)
     assert idle, "the idle run gave no time verdict to compare"
