@@ -24,7 +24,7 @@ Then diffuse is remodulated by albedo + ε, specular exponentiated, and the two 
 deviation: where the demodulated domain cannot be trusted (pixels of no albedo; channels of albedo
 below ``ALBEDO_TRUSTED``, mostly partly covered silhouettes) KPCN filters the rendered diffuse over
 taps of the same class only, and DPCN keeps the rendered diffuse at pixels of no albedo
-(:meth:`PCN._dark_diffuse`; found on third-party scenes, docs/study.md).
+(:meth:`PCN._kernel_diffuse`; found on third-party scenes, docs/study.md).
 
 Notes
 -----
@@ -53,7 +53,6 @@ from torch.nn import functional as F
 from denoisebench.models.features import LOG_MAX as LOG_MAX_OUTPUT
 from denoisebench.models.features import (
     PCN_INPUT_CHANNELS,
-    albedo_factor,
     dark_pixels,
     from_log,
     normalize_radiance,
@@ -63,7 +62,7 @@ from denoisebench.models.features import (
 )
 
 #: A diffuse channel whose albedo is below this is filtered in the rendered domain, over taps of low
-#: albedo only (KPCN; PCN._dark_diffuse): its quotient is mostly what lies around a partly covered
+#: albedo only (KPCN; PCN._kernel_diffuse): its quotient is mostly what lies around a partly covered
 #: pixel ÷ a small albedo.
 ALBEDO_TRUSTED = 0.1
 #: Logits beyond this carry no extra information (exp(±50) spans every float32 ratio) and keep softmax finite.
@@ -290,7 +289,7 @@ class PCN(nn.Module):
         clamped = y.clamp(math.log(self.log_offset), LOG_MAX_OUTPUT)
         return (torch.exp(y + (clamped - y).detach()) - self.log_offset).clamp_min(0.0)
 
-    def _dark_diffuse(self, buffers: dict[str, torch.Tensor], diffuse: torch.Tensor, kd: torch.Tensor | None):
+    def _kernel_diffuse(self, buffers: dict[str, torch.Tensor], prepared: dict, kd: torch.Tensor) -> torch.Tensor:
         """``diffuse`` where the demodulated domain cannot be trusted, filtered without it.
 
         Pixels of no albedo (emitters, background, black materials: :func:`~.features.dark_pixels`)
@@ -310,17 +309,12 @@ class PCN(nn.Module):
         rendered diffuse at pixels of no albedo. The shipped kpcn at 4 spp, relMSE geometric mean:
         15 third-party scenes 0.0325 → 0.0233, the 13 families' test split 0.0271 → 0.0265
         (docs/study.md)."""
+        lin, factor, size = prepared["diffuse_lin"], prepared["albedo_factor"], self.kernel_size
         dark = dark_pixels(buffers)
-        if dark is None:
-            return diffuse
+        trusted = None if dark is None else (safe(buffers["albedo"]).clamp(0.0, 1.0) >= ALBEDO_TRUSTED) & ~dark
+        if trusted is None or bool(trusted.all()):
+            return apply_kernels(lin, kd, size) * factor  # one kernel over every tap
         rendered = split_lobes(buffers)[0]
-        if kd is None:
-            return torch.where(dark, rendered, diffuse) if bool(dark.any()) else diffuse
-        albedo = safe(buffers["albedo"]).clamp(0.0, 1.0)
-        trusted = (albedo >= ALBEDO_TRUSTED) & ~dark
-        if bool(trusted.all()):
-            return diffuse
-        size = self.kernel_size
 
         def restricted(values: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
             mask = mask.to(values.dtype).expand_as(values)
@@ -328,8 +322,7 @@ class PCN(nn.Module):
             filtered = apply_kernels(values * mask, kd, size) / weight.clamp_min(1e-6)
             return torch.where(weight > 1e-6, filtered, values)
 
-        factor = albedo_factor(buffers, rendered)
-        out = restricted(rendered / factor, trusted) * factor
+        out = restricted(lin, trusted) * factor  # lin: the rendered diffuse ÷ factor (pcn_inputs)
         out = torch.where(dark, restricted(rendered, dark), out)
         weak = ~trusted & ~dark
         return torch.where(weak, restricted(rendered, weak), out)
@@ -342,10 +335,12 @@ class PCN(nn.Module):
         if self.mode == "direct":
             diffuse_log, kd = self._branch(self.diffuse, prepared["diffuse_in"], prepared["diffuse_log"])
             diffuse = decode(diffuse_log) * factor
+            dark = dark_pixels(buffers)  # no kernel to restrict: the rendered diffuse (_kernel_diffuse)
+            if dark is not None and bool(dark.any()):
+                diffuse = torch.where(dark, split_lobes(buffers)[0], diffuse)
         else:
-            diffuse_lin, kd = self._branch(self.diffuse, prepared["diffuse_in"], prepared["diffuse_lin"])
-            diffuse = diffuse_lin * factor
-        diffuse = self._dark_diffuse(buffers, diffuse, kd)
+            kd = softmax_kernels(self.diffuse(prepared["diffuse_in"]))
+            diffuse = self._kernel_diffuse(buffers, prepared, kd)
         specular_log, ks = self._branch(self.specular, prepared["specular_in"], prepared["specular_log"])
         specular = decode(specular_log)
         diffuse, specular = diffuse * scale, specular * scale
