@@ -5,7 +5,8 @@ Inputs are datasets made by ``generate-dataset``: a **pool** of family scenes (`
 ... --scenes N``) and one or more **third-party** datasets (``--scene-list``, ``--usd``/``--mitsuba``:
 scenes nobody here wrote; several because one ``generate`` run has one camera choice, so a list
 rendered from its own sensors and one from the orbit are two datasets). Scores pool the scenes of
-all third-party datasets as if they were one run: every aggregate and interval is over their union. Training sets are subsets of the pool's scenes (``train_scenes`` of
+all third-party datasets as if they were one run: every aggregate and interval is over their union.
+Training sets are subsets of the pool's scenes (``train_scenes`` of
 :class:`~denoisebench.models.training_options.TrainOptions`, so training is ``denoisebench train``'s
 own loop), named by :func:`resolve_sets`:
 
@@ -39,7 +40,8 @@ checkpoint (same seed, same batches); a benchmark run's identity includes the ch
 (a retrained checkpoint is scored anew); a finished part's record ``OUT/parts/*.json`` is reused.
 
 Pitfalls: the pool and the third-party datasets must not share scenes (a family scene is not
-third-party), nor may two third-party datasets (scene names key every score); scaling points with fewer scenes than families hold fewer families too (the curve
+third-party), nor may two third-party datasets (scene names key every score); scaling points with
+fewer scenes than families hold fewer families too (the curve
 measures the generator's scenes as it makes them, variety and count together).
 """
 
@@ -267,14 +269,9 @@ def pooled_run_data(store, run_ids: list[str]) -> RunData:
     """The rows of several runs (one per third-party dataset, same denoisers) as one run's: units,
     frames and sequence rows side by side, so aggregates and intervals are over the union of scenes.
 
-    The first run's record and label order stand for all; the runs must not share a scene."""
+    The first run's record and label order stand for all. Pitfall: the runs must not share a scene
+    (:func:`run_study` refuses a scene in two third-party datasets before anything runs)."""
     rows = [store.run_rows(run_id) for run_id in run_ids]
-    seen: dict[str, str] = {}
-    for one in rows:
-        for scene in sorted({u.scene for u in one.units}):
-            if scene in seen:
-                raise UserInputError(f"third-party scene {scene} is in two datasets; scene names key every score")
-            seen[scene] = one.run.run_id
     first = rows[0]
     return RunData(
         RunRows(
@@ -287,14 +284,13 @@ def pooled_run_data(store, run_ids: list[str]) -> RunData:
     )
 
 
-def read_scores(store, run_ids: list[str], label: str, spp: int, kept: list[str]) -> dict:
-    """{metric: {value, low, high, raw, rule, per_scene: {scene: corrected}}} of ``label`` in the runs
-    (one per third-party dataset, pooled by :func:`pooled_run_data`).
+def read_scores(data: RunData, label: str, spp: int, kept: list[str]) -> dict:
+    """{metric: {value, low, high, raw, rule, per_scene: {scene: corrected}}} of ``label`` in ``data``
+    (the runs of every third-party dataset, pooled by :func:`pooled_run_data`).
 
     ``value``/``low``/``high``: the corrected aggregate over ``kept`` and its 95 % interval over
     scenes (the report's cell); ``per_scene``: every scene's corrected score (or the raw one where
     the metric has no floor), set-apart scenes included."""
-    data = pooled_run_data(store, run_ids)
     out = {}
     for metric in METRICS:
         cell = metric_cell(data, label, spp, metric, kept)
@@ -340,7 +336,8 @@ def _references(options: StudyOptions, store, datasets) -> tuple[dict, list[str]
         scenes += list(data.scenes)
         apart.update({u.scene: u.reason for u in set_apart_of(data, dataset)})
     kept = [s for s in scenes if s not in apart] or scenes  # all set apart: keep them all
-    scores = {label: read_scores(store, run_ids, label, options.spp, kept) for label in [NOISY, *options.references]}
+    pooled = pooled_run_data(store, run_ids)
+    scores = {label: read_scores(pooled, label, options.spp, kept) for label in [NOISY, *options.references]}
     return scores, kept, apart
 
 
@@ -464,7 +461,7 @@ def _part(options: StudyOptions, store, model: str, training_set: TrainingSet, s
         "checkpoint_sha256": digest,
         "run_ids": run_ids,
         "kept": kept,
-        "scores": read_scores(store, run_ids, model, options.spp, kept),
+        "scores": read_scores(pooled_run_data(store, run_ids), model, options.spp, kept),
     }
     record_path.write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
     return record
