@@ -11,6 +11,7 @@ import json
 from dataclasses import asdict
 from pathlib import Path
 
+from denoisebench.analysis.lead import LEAD_RULE, SCENE_TRIM
 from denoisebench.models.names import MODEL_NAMES
 from denoisebench.study.data_value import FIGURE, METRICS, REPORT_JSON, REPORT_MD, StudyResult, seed_summary
 
@@ -183,8 +184,8 @@ def markdown(result: StudyResult) -> str:
 
 #: How the aggregate rules read in the report (analysis/aggregate.py states them exactly).
 _RULES = {
-    "anchored_trimmed_geomean": "each scene's score over the noisy input's on that scene, geometric mean without "
-    "the top and bottom 12.5 % of scenes (the noisy input reads 1)",
+    LEAD_RULE: "each scene's score over the noisy input's on that scene, geometric mean without "
+    f"the top and bottom {100 * SCENE_TRIM:g} % of scenes (the noisy input reads 1)",
     "mean": "arithmetic mean",
 }
 
@@ -242,7 +243,7 @@ def scaling_figure(result: StudyResult, path: Path) -> Path | None:
                 label=f"{label} {value:.3g} ({'shipped weights' if label in MODEL_NAMES else 'reference'})",
             )
     rule = next((sc["relmse_robust"].get("rule") for sc in result.references.values()), None)
-    ylabel = "relmse_robust ÷ noisy input" if rule == "anchored_trimmed_geomean" else "relmse_robust"
+    ylabel = "relmse_robust ÷ noisy input" if rule == LEAD_RULE else "relmse_robust"
     ax.set_xlabel("generated training scenes")
     ax.set_ylabel(f"{ylabel} (corrected, log)")
     ax.legend(fontsize=7, loc="center left", bbox_to_anchor=(1.01, 0.5), frameon=False)
