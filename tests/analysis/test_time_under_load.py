@@ -66,9 +66,9 @@ def _marginal(text: str) -> bool:
     return high > 1 - MARGIN and low < 1 + MARGIN
 
 
-def _verdicts(store, run_id, dataset, *, clear_only: bool = False) -> dict[tuple, str]:
-    """{(what, denoiser, spp or target): "denoiser" | "render"} of every time verdict in the report
-    (``clear_only``: only those whose bounds stay MARGIN away from rendering's time)."""
+def _verdicts(store, run_id, dataset) -> dict[tuple, str]:
+    """{(what, denoiser, spp or target): "denoiser" | "render"} of every clear time verdict in the report
+    (its bounds MARGIN away from rendering's time, or none stated)."""
     built = report.build_report(store, run_id, dataset, time_at=TIME_AT)
     kinds = {}
     for metric, sentences in built.readings.items():
@@ -77,7 +77,7 @@ def _verdicts(store, run_id, dataset, *, clear_only: bool = False) -> dict[tuple
             if not found:
                 continue
             key = ("reading", metric, found.group(1), int(found.group(2)))
-            if clear_only and _marginal(text):
+            if _marginal(text):
                 continue
             if "rendering more samples is cheaper" in text:
                 kinds[key] = "render"
@@ -87,7 +87,7 @@ def _verdicts(store, run_id, dataset, *, clear_only: bool = False) -> dict[tuple
         found = re.match(r"Equal quality \((\S+)\): (\S+) reaches the error of ([\d.]+)-spp", text)
         if found:
             key = ("equal_quality", *found.groups())
-            if clear_only and _marginal(text):
+            if _marginal(text):
                 continue
             if "rendering more samples is cheaper" in text:
                 kinds[key] = "render"
@@ -114,7 +114,7 @@ def _run(dataset, db, loaded: bool) -> dict[tuple, str]:
             plan = run_benchmark(dataset, config, store, progress=False)
             instances = {d.label: d.instance for d in plan.denoisers}
             timing.measure_run_timings(store, dataset, plan, instances, (96, 96), progress=False)
-            return _verdicts(store, plan.run_id, dataset, clear_only=True)
+            return _verdicts(store, plan.run_id, dataset)
     finally:
         for w in workers:
             w.terminate()
