@@ -126,9 +126,31 @@ def _build_mesh(mi, record: MeshShape, bsdf, emitter, frame: int | None = None, 
     return mesh
 
 
+#: Control points of the zero-radius B-spline appended to every ``bsplinecurve`` (:func:`_build_curves`).
+BSPLINE_GUARD_POINTS = 4
+
+
 def _build_curves(mi, record: CurvesShape, bsdf):
     """A curves record (usd/curves.py) → Mitsuba ``bsplinecurve``/``linearcurve``, loaded from the text
-    file Mitsuba 3.9 reads (``x y z radius`` per control point, a blank line between curves)."""
+    file Mitsuba 3.9 reads (``x y z radius`` per control point, a blank line between curves).
+
+    A ``bsplinecurve`` gets one more curve at the end, a guard: the last curve's last four control
+    points with radius 0, i.e. a copy of the last segment's centre line, inside its tube.
+
+    Notes:
+        Mitsuba 3.9.1's ``bsplinecurve`` reads its segment-index buffer one element past the end for
+        rare rays on the LLVM variant (under ``drjit.JitFlag.Debug``: ``drjit.gather(): out-of-bounds
+        read from position N in an array of size N``, N the segment count). The index it then reads
+        is garbage, and the kernel segfaults: fur_field_102 of ``--seed 100`` crashed generation at
+        a reference round, and Mitsuba's own ``path`` crashes there at ``seed=392``, 64², 8 spp.
+        Upstream clamps the segment index since (mitsuba3 pull request 1928); pip has no such
+        release. With the guard, position N is the guard segment, whose points lie on the real last
+        segment: such a rare hit is shaded from that centre line, and the guard itself cannot be hit
+        (radius 0, inside a tube of positive radius). The light is the same; the BVH is not, so
+        renders agree with an unguarded one only up to float rounding (paths that diverge after a
+        rounding difference, about 1 % of the pixels of a fur_field frame past 1e-3).
+        ``linearcurve`` is left as it is (not seen to fail).
+    """
     import os
     import tempfile
 
@@ -137,6 +159,10 @@ def _build_curves(mi, record: CurvesShape, bsdf):
         block = record.points[start : start + int(count)]
         start += int(count)
         blocks.append("\n".join(" ".join(f"{v:.9g}" for v in row) for row in block))
+    if record.basis != "linear" and start >= BSPLINE_GUARD_POINTS:
+        guard = np.array(record.points[start - BSPLINE_GUARD_POINTS : start], dtype=np.float64)
+        guard[:, 3] = 0.0
+        blocks.append("\n".join(" ".join(f"{v:.9g}" for v in row) for row in guard))
     handle, name = tempfile.mkstemp(prefix="denoisebench-curves-", suffix=".txt")
     try:
         with os.fdopen(handle, "w") as stream:

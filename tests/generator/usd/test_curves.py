@@ -249,3 +249,41 @@ def test_materialx_chiang_hair_becomes_mitsubas_hair_bsdf(tmp_path):
     sensor = sensor_dict(translated.camera, 0, SIZE, SIZE, 8)
     image = np.array(mi.render(build_mitsuba_scene(translated, sensor, {"type": "path"})))
     assert np.isfinite(image).all() and image.max() > 0.01
+
+
+#: Mitsuba's own ``path`` on fur_field_102 (``--seed 100``'s scene, 64², 8 spp) at sampler seed 392
+#: read the Grass curves' segment indices one past the end (4868 of 4868) and segfaulted without the
+#: guard curve (render/scene.py ``_build_curves``; found generating a 13-family training set).
+_GUARD_SCRIPT = """
+import sys
+from pathlib import Path
+from denoisebench.mitsuba_runtime import load_mitsuba
+from denoisebench.generator.render.scene import build_mitsuba_scene, sensor_dict
+from denoisebench.generator.usd.translate import translate_usd
+from denoisebench.scenes import get_family
+
+mi = load_mitsuba()
+import drjit as dr  # after load_mitsuba, which finds libLLVM for it
+assert mi.variant().startswith("llvm"), mi.variant()
+translated = translate_usd(get_family("fur_field").author(Path(sys.argv[1]), seed=102, frames=3, width=64, height=64))
+scene = build_mitsuba_scene(translated)  # as generation builds it: no sensor, no integrator
+sensor = mi.load_dict(sensor_dict(translated.camera, 0, 64, 64, 8))
+dr.set_flag(dr.JitFlag.Debug, True)  # out-of-bounds gathers are reported (and read as 0) instead of crashing
+image = mi.render(scene, sensor=sensor, integrator=mi.load_dict({"type": "path"}), seed=392, spp=8)
+dr.eval(image)
+dr.sync_thread()
+print("rendered")  # not the image's mean: in debug mode the film's own packet writes are reported and dropped
+"""
+
+
+def test_bspline_curves_are_not_read_past_their_segment_buffer(tmp_path):
+    import subprocess
+    import sys
+
+    run = subprocess.run(
+        [sys.executable, "-c", _GUARD_SCRIPT, str(tmp_path)], capture_output=True, text=True, timeout=600
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert "rendered" in run.stdout
+    out_of_bounds = [line for line in run.stderr.splitlines() if "gather(): out-of-bounds" in line]
+    assert out_of_bounds == []
