@@ -14,6 +14,9 @@ and pinned memory there), else on the CPU with --threads threads (up to the core
 
 --evaluate additionally scores the trained model on the test split against the identity and
 cross_bilateral denoisers (relMSE, mean over frames), as the shipped model cards report.
+--ship with --third-party DIR also scores the shipped weights on datasets of scenes nobody here
+wrote (pooled; beside the noisy input, cross_bilateral and OIDN, at every spp they have) and puts
+that section in the card (denoisebench.study.card_scores).
 
 Exit codes: 0 done, 2 bad input (unknown model, no such dataset, empty train split, a checkpoint
 of another model), 1 internal failure.
@@ -51,6 +54,8 @@ EPILOG = """examples:
   denoisebench train --model dpcn --data data/mine --steps 3000 --lr 1e-4 --loss relmse --init-from denoisebench/models/weights/dpcn_small.pt --out d.pt
   denoisebench train --model dpcn --data data/mine --steps 0 --resume denoisebench/models/weights/dpcn_small.pt --out d.pt --evaluate
   denoisebench train --model rae --data data/small --steps 0 --resume rae.pt --out rae.pt --evaluate
+  denoisebench train --model kpcn --data data/small --steps 0 --resume kpcn.pt --out kpcn.pt --ship weights/ \
+      --third-party data/tp_docs --third-party data/tp_usd   # the card also scores scenes nobody here wrote
   denoisebench benchmark --data data/small --denoisers kpcn --option kpcn:checkpoint=kpcn.pt   # use the result
 
 documentation:
@@ -171,6 +176,22 @@ def add_arguments(parser) -> None:
         help="implies --evaluate; write DIR/MODEL_CONFIG.pt (no optimiser state) and its model card DIR/MODEL_CONFIG.md",
     )
     parser.add_argument(
+        "--third-party",
+        action="append",
+        default=[],
+        metavar="DIR",
+        help="with --ship: also score the weights on this dataset of third-party scenes (e.g. made by "
+        "generate --scene-list) beside the noisy input, cross_bilateral and OIDN at every spp, and put the "
+        "scores in the card; repeat it to pool several datasets",
+    )
+    parser.add_argument(
+        "--third-party-out",
+        default=None,
+        metavar="DIR",
+        help="folder of --third-party's results store and scores (resumable; default: third_party_runs beside "
+        "the checkpoint, never the --ship folder)",
+    )
+    parser.add_argument(
         "--train-scenes",
         default=None,
         metavar="A,B,...",
@@ -197,6 +218,12 @@ def run(args) -> int:
         raise UserInputError(f"--peers must name at least one other denoiser (got {args.peers!r})")
     if not (Path(args.data) / "dataset.json").is_file():
         raise UserInputError(f"{args.data}: not a dataset folder (no dataset.json)")
+    if args.third_party:
+        if not args.ship:
+            raise UserInputError("--third-party puts scores in the model card: give --ship DIR too")
+        from denoisebench.study.card_scores import check_third_party
+
+        check_third_party(args.third_party)  # before training: a wrong folder costs nothing
 
     options = TrainOptions(
         model=args.model,
@@ -266,6 +293,14 @@ def ship(checkpoint: str, args, evaluation: dict) -> str:
     stem = f"{args.model}_{args.config}"
     weights = strip_for_shipping(checkpoint, folder / f"{stem}.pt")
     payload = load_checkpoint(weights)
+    sections = None
+    if args.third_party:
+        from denoisebench.study.card_scores import card_section, score_checkpoint
+
+        out = Path(args.third_party_out) if args.third_party_out else Path(checkpoint).parent / "third_party_runs"
+        record = score_checkpoint(args.model, weights, args.third_party, out, progress=not args.quiet)
+        (out / f"{stem}.third_party.json").write_text(json.dumps(record, indent=1, sort_keys=True) + "\n")
+        sections = card_section(args.model, record)
     card = render_card(
         args.model,
         args.config,
@@ -278,6 +313,7 @@ def ship(checkpoint: str, args, evaluation: dict) -> str:
         list(payload["meta"].get("commands", [])),
         args.data,
         named_config=model_config(args.model, args.config),
+        sections=sections,
     )
     (folder / f"{stem}.md").write_text(card)
     return f"shipped {weights} ({weights.stat().st_size / 1024:.0f} KiB) and {folder / f'{stem}.md'}"

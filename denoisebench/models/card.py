@@ -206,10 +206,12 @@ def render_card(
     train_commands: list[str],
     data_dir: str,
     named_config: dict | None = None,
+    sections: list[str] | None = None,
 ) -> str:
     """The card's Markdown. ``named_config``: today's keywords of ``config_name``; when the weights'
     ``config`` differs (weights made before the configuration changed, kept by ``--init-from``), the
-    card says so."""
+    card says so. ``sections``: Markdown lines placed before "Limits" (the third-party scores of
+    ``train --ship --third-party``, :func:`denoisebench.study.card_scores.card_section`)."""
     val = meta.get("validation") or {}
     scored_elsewhere = meta.get("evaluated_on") or {}
     relmse = evaluation["relmse"]
@@ -304,8 +306,8 @@ def render_card(
             f"* against {peer}: relMSE {ours:.5f} vs {relmse[peer]:.5f}, ratio {ratio:.3f} ({_pct(ours, relmse[peer])})"
             + _ratio_interval(evaluation, peer)
         )
+    lines += ["", *(sections or [])]
     lines += [
-        "",
         "## Limits",
         "",
         f"Trained for minutes on a CPU on {len(all_train_scenes(meta))} small scenes "

@@ -251,17 +251,26 @@ def _train(options: StudyOptions, model: str, training_set: TrainingSet, seed: i
 
 def _benchmark(options: StudyOptions, store, denoisers: list[str], extra: dict | None = None) -> list[str]:
     """Run (or resume) the benchmark of ``denoisers`` on each third-party dataset; return the run ids."""
+    return benchmark_third_party(options.third_party, options.spp, store, denoisers, extra, options.progress)
+
+
+def benchmark_third_party(
+    folders, spp: int, store, denoisers: list[str], extra: dict | None = None, progress: bool = True
+) -> list[str]:
+    """Run (or resume) the benchmark of ``denoisers`` on each dataset of ``folders`` (split ``all``, one
+    ``spp``) into ``store``; return the run ids. ``extra``: ``{"options": {denoiser: {...}}, "nonce": str}``
+    (a checkpoint's options, and its sha256 so that new weights are new runs)."""
     run_ids = []
-    for folder in options.third_party:
+    for folder in folders:
         config = BenchmarkConfig(
             denoisers=denoisers,
-            spp=[options.spp],
+            spp=[spp],
             split="all",
             metrics=list(METRICS),
             options=(extra or {}).get("options", {}),
             nonce=(extra or {}).get("nonce"),
         )
-        run_ids.append(run_benchmark(open_dataset(folder), config, store, progress=options.progress).run_id)
+        run_ids.append(run_benchmark(open_dataset(folder), config, store, progress=progress).run_id)
     return run_ids
 
 
