@@ -221,9 +221,9 @@ def run(args) -> int:
     if args.third_party:
         if not args.ship:
             raise UserInputError("--third-party puts scores in the model card: give --ship DIR too")
-        from denoisebench.study.card_scores import check_third_party
+        from denoisebench.study.data_value import open_third_party
 
-        check_third_party(args.third_party)  # before training: a wrong folder costs nothing
+        open_third_party(args.third_party)  # before training: a wrong folder costs nothing
 
     options = TrainOptions(
         model=args.model,

@@ -29,7 +29,6 @@ from __future__ import annotations
 import hashlib
 from pathlib import Path
 
-from denoisebench.dataset import open_dataset
 from denoisebench.errors import UserInputError
 from denoisebench.reports.run_inputs import run_data, set_apart_of
 from denoisebench.results.names import NOISY
@@ -39,25 +38,11 @@ from denoisebench.study.data_value import (
     REFERENCES,
     STORE_NAME,
     benchmark_third_party,
+    open_third_party,
     pooled_run_data,
     read_scores,
 )
 from denoisebench.study.report import PEER, paired_ratio
-
-
-def check_third_party(folders) -> list:
-    """Open the third-party datasets; refuse a scene given twice (scene names key every score)."""
-    if not folders:
-        raise UserInputError("--third-party: give at least one dataset of third-party scenes")
-    thirds, owner = [], {}
-    for folder in folders:
-        third = open_dataset(folder)
-        twice = sorted(set(owner) & set(third.scenes))
-        if twice:
-            raise UserInputError(f"{folder}: scene {twice[0]} is also in {owner[twice[0]]}; give each scene once")
-        owner.update({name: folder for name in third.scenes})
-        thirds.append(third)
-    return thirds
 
 
 def score_checkpoint(
@@ -72,7 +57,7 @@ def score_checkpoint(
     ``folders`` at every spp they share; return ``{"datasets", "spp", "kept", "set_apart",
     "scores": {spp: {label: read_scores(...)}}}`` (labels: the noisy input, ``model``, the references)."""
     folders = [Path(f) for f in folders]
-    thirds = check_third_party(folders)
+    thirds = open_third_party(folders)
     spps = sorted(set.intersection(*[{s for name in t.scenes for s in t.scene(name).spp} for t in thirds]))
     if not spps:
         raise UserInputError("--third-party: the datasets share no input spp to score at")

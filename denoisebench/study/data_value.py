@@ -254,6 +254,21 @@ def _benchmark(options: StudyOptions, store, denoisers: list[str], extra: dict |
     return benchmark_third_party(options.third_party, options.spp, store, denoisers, extra, options.progress)
 
 
+def open_third_party(folders) -> list:
+    """Open the third-party datasets; refuse none, and a scene given twice (scene names key every score)."""
+    if not folders:
+        raise UserInputError("--third-party: give at least one dataset of third-party scenes")
+    thirds, owner = [], {}
+    for folder in folders:
+        third = open_dataset(folder)
+        twice = sorted(set(owner) & set(third.scenes))
+        if twice:
+            raise UserInputError(f"{folder}: scene {twice[0]} is also in {owner[twice[0]]}; give each scene once")
+        owner.update({name: folder for name in third.scenes})
+        thirds.append(third)
+    return thirds
+
+
 def benchmark_third_party(
     folders, spp: int, store, denoisers: list[str], extra: dict | None = None, progress: bool = True
 ) -> list[str]:
@@ -358,20 +373,13 @@ def run_study(options: StudyOptions, on_part=None) -> StudyResult:
     if options.steps < 1 or options.batch_size < 1 or options.crop < 4:
         raise UserInputError("--steps and --batch-size must be >= 1 and --crop >= 4")
     pool = open_dataset(options.pool)
-    if not options.third_party:
-        raise UserInputError("--third-party: give at least one dataset of third-party scenes")
-    thirds = [open_dataset(folder) for folder in options.third_party]
-    owner: dict[str, Path] = {}
+    thirds = open_third_party(options.third_party)
     for folder, third in zip(options.third_party, thirds):
         shared = sorted(set(pool.scenes) & set(third.scenes))
         if shared:
             raise UserInputError(
                 f"{folder}: scene {shared[0]} is also in the pool; third-party scenes must not be trained on"
             )
-        twice = sorted(set(owner) & set(third.scenes))
-        if twice:
-            raise UserInputError(f"{folder}: scene {twice[0]} is also in {owner[twice[0]]}; give each scene once")
-        owner.update({name: folder for name in third.scenes})
         if options.spp not in {s for name in third.scenes for s in third.scene(name).spp}:
             raise UserInputError(f"{folder}: no {options.spp}-spp inputs to score at")
     scenes = trainable_scenes(pool)
