@@ -148,3 +148,21 @@ def test_a_partly_covered_silhouette_does_not_paint_its_quotient_on_the_wall():
     # the wall's green and blue stay near their 0.15 beside the silhouette (whose own is 0.44)
     assert np.quantile(out[:, w // 2 - 3 : w // 2, 1:], 0.95) < 0.25
     assert np.abs(out[:, w // 2 + 1 :] - 0.8).max() < 0.08  # the background keeps its value
+
+
+def test_kpcn_card_scores_third_party_scenes_and_words_them_by_their_intervals():
+    # written by `train --ship --third-party` (study/card_scores.py): the words follow the paired intervals
+    from denoisebench.study.card_scores import verdict
+
+    card = (WEIGHTS_DIR / "kpcn_small.md").read_text()
+    section = card.split("## Third-party scenes")[1].split("## Limits")[0]
+    rows = [
+        line.split("|")[1].strip() for line in section.splitlines() if line.startswith("| ") and "denoiser" not in line
+    ]
+    assert rows == ["kpcn", "noisy", "cross_bilateral", "oidn"]
+    said = re.findall(r"(beats it|ties it|loses to it) by (\w+) \(([0-9.]+) \[([0-9.]+), ([0-9.]+)\]", section)
+    assert len(said) == 3 * 2 * 2  # 1/4/16 spp × (noisy input, cross_bilateral) × (relmse_robust, flip)
+    for words, _, value, low, high in said:
+        assert float(low) <= float(value) <= float(high)
+        expected = verdict({"value": float(value), "low": float(low), "high": float(high)})
+        assert words == {"beats": "beats it", "ties": "ties it", "loses to": "loses to it"}[expected]
