@@ -244,6 +244,7 @@ def render_card(
             if list(evaluation["ratio"]) == ["identity", "cross_bilateral"]
             else f" `--peers {','.join(evaluation['ratio'])}`"
         )
+        + (" and `--third-party DIR` for each dataset named under Third-party scenes" if sections else "")
         + " added, also scored the test split and wrote these weights (without optimiser state) and this card."
         + (
             " It adds no steps (`--steps 0`): it validates and ships the checkpoint the command before it wrote."
