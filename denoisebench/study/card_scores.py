@@ -30,7 +30,6 @@ import hashlib
 from pathlib import Path
 
 from denoisebench.errors import UserInputError
-from denoisebench.reports.run_inputs import run_data, set_apart_of
 from denoisebench.results.names import NOISY
 from denoisebench.results.store import ResultsStore
 from denoisebench.study.data_value import (
@@ -38,9 +37,11 @@ from denoisebench.study.data_value import (
     REFERENCES,
     STORE_NAME,
     benchmark_third_party,
+    kept_scenes,
     open_third_party,
     pooled_run_data,
     read_scores,
+    set_apart_in,
 )
 from denoisebench.study.report import PEER, paired_ratio
 
@@ -68,16 +69,13 @@ def score_checkpoint(
     }
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    runs, apart, scenes = {}, {}, []
+    runs, apart = {}, {}
     with ResultsStore(out / STORE_NAME) as store:
         for spp in spps:
             runs[spp] = benchmark_third_party(folders, spp, store, [model, *references], extra, progress)
-            for run_id, third in zip(runs[spp], thirds):
-                data = run_data(store, run_id)
-                if spp == spps[0]:
-                    scenes += list(data.scenes)
-                apart.update({u.scene: f"{u.reason} (at {spp} spp)" for u in set_apart_of(data, third)})
-        kept = [s for s in scenes if s not in apart] or scenes  # all set apart: keep them all
+            scenes, here = set_apart_in(store, runs[spp], thirds)
+            apart.update({scene: f"{reason} (at {spp} spp)" for scene, reason in here.items()})
+        kept = kept_scenes(scenes, apart)
         scores = {}
         for spp in spps:
             pooled = pooled_run_data(store, runs[spp])

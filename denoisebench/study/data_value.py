@@ -350,16 +350,26 @@ class StudyResult:
     missing: list[str] = field(default_factory=list)
 
 
-def _references(options: StudyOptions, store, datasets) -> tuple[dict, list[str], dict]:
-    """(scores of the noisy input and the references, scenes kept, {scene set apart: reason})."""
-    run_ids = _benchmark(options, store, list(options.references))
-    apart = {}
-    scenes = []
+def set_apart_in(store, run_ids: list[str], datasets) -> tuple[list[str], dict]:
+    """(every scene of the runs, {scene a report sets apart: reason}): one run per third-party dataset."""
+    scenes, apart = [], {}
     for run_id, dataset in zip(run_ids, datasets):
         data = run_data(store, run_id)
         scenes += list(data.scenes)
         apart.update({u.scene: u.reason for u in set_apart_of(data, dataset)})
-    kept = [s for s in scenes if s not in apart] or scenes  # all set apart: keep them all
+    return scenes, apart
+
+
+def kept_scenes(scenes: list[str], apart) -> list[str]:
+    """The scenes scored: those not set apart (all of them when every one is set apart)."""
+    return [s for s in scenes if s not in apart] or list(scenes)
+
+
+def _references(options: StudyOptions, store, datasets) -> tuple[dict, list[str], dict]:
+    """(scores of the noisy input and the references, scenes kept, {scene set apart: reason})."""
+    run_ids = _benchmark(options, store, list(options.references))
+    scenes, apart = set_apart_in(store, run_ids, datasets)
+    kept = kept_scenes(scenes, apart)
     pooled = pooled_run_data(store, run_ids)
     scores = {label: read_scores(pooled, label, options.spp, kept) for label in [NOISY, *options.references]}
     return scores, kept, apart
