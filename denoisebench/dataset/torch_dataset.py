@@ -127,7 +127,10 @@ def _chw(array: np.ndarray) -> torch.Tensor:
 
 
 class CropDataset(_CropBase):
-    """Random crops of single frames: ``{buffer: C×h×w, "reference": 3×h×w, ...}``.
+    """Random crops of single frames: ``{buffer: C×h×w, "reference": 3×h×w, ..., "spp": 1×1×1}``.
+
+    ``spp`` is the crop's sample count, batched to N×1×1×1 as the models read it (KPCN's
+    partly-covered rule needs it to read the variance buffers; models/features.py FRAME_SCALARS).
 
     ``dataset``: a :class:`~denoisebench.dataset.reader.Dataset` or its path; ``split``: a split name
     or a list of scene names; ``spp``: one sample count or several (each is its own item);
@@ -168,7 +171,7 @@ class CropDataset(_CropBase):
         rows, cols = self._window(rng, *arrays["color"].shape[:2])
         transform = random_transform(rng) if self.augment else IDENTITY
         cropped = transform_buffers({name: a[rows, cols] for name, a in arrays.items()}, transform)
-        return {name: _chw(a) for name, a in cropped.items()}
+        return {**{name: _chw(a) for name, a in cropped.items()}, "spp": torch.full((1, 1, 1), float(spp))}
 
 
 class SequenceCropDataset(_CropBase):

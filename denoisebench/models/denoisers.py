@@ -27,7 +27,7 @@ from denoisebench.dataset.frame import Frame
 from denoisebench.denoisers.protocol import DenoiserBase
 from denoisebench.denoisers.registry import DenoiserUnavailableError
 from denoisebench.models.checkpoint import load_checkpoint, model_from_checkpoint
-from denoisebench.models.features import exposure, frame_tensors, to_image
+from denoisebench.models.features import FRAME_SCALARS, exposure, frame_tensors, to_image
 from denoisebench.models.provenance import all_train_scenes
 
 WEIGHTS_DIR = Path(__file__).parent / "weights"
@@ -97,9 +97,8 @@ class PCNDenoiser(LearnedDenoiser):
             for left in range(0, width, self.tile):
                 y0, x0 = max(0, top - self.halo), max(0, left - self.halo)
                 y1, x1 = min(height, top + self.tile + self.halo), min(width, left + self.tile + self.halo)
-                part = self.model({k: v if k == "exposure" else v[..., y0:y1, x0:x1] for k, v in tensors.items()})[
-                    "color"
-                ]
+                tile = {k: v if k in FRAME_SCALARS else v[..., y0:y1, x0:x1] for k, v in tensors.items()}
+                part = self.model(tile)["color"]
                 rows, cols = min(self.tile, height - top), min(self.tile, width - left)
                 out[..., top : top + rows, left : left + cols] = part[
                     ..., top - y0 : top - y0 + rows, left - x0 : left - x0 + cols

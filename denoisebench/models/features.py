@@ -2,7 +2,10 @@
 
 Every model reads a dict of N×C×H×W float32 tensors keyed by buffer name (what
 :class:`~denoisebench.dataset.torch_dataset.CropDataset` yields after batching, and what
-:func:`frame_tensors` makes of a :class:`~denoisebench.dataset.frame.Frame`).
+:func:`frame_tensors` makes of a :class:`~denoisebench.dataset.frame.Frame`), plus the per-frame
+scalars of FRAME_SCALARS as N×1×1×1 tensors: ``spp`` (the frame's sample count, when known) and
+``exposure`` (set by a tiled wrapper). Pitfall: code that crops or tiles the dict must pass those
+through whole.
 
 Transforms (Bako et al. 2017, section 4.1):
 
@@ -42,6 +45,12 @@ ALBEDO_MIN = 0.01
 COLOR_MAX = 1e8
 #: log(1 + x) outputs are clamped to this before exp(): exp(30) ≈ 1e13 stays finite in float32.
 LOG_MAX = 30.0
+
+#: Keys of a model's input dict that hold one value per frame (N×1×1×1), not an image.
+FRAME_SCALARS = ("spp", "exposure")
+#: A pixel whose albedo and depth both read as a surface covering less than this fraction of it is
+#: partly background (:func:`partly_background`).
+COVER_MIN = 0.9
 
 #: An isolated value above this multiple of its 8 neighbours' maximum is a firefly (the OIDN wrapper's rule).
 FIREFLY_FACTOR = 16.0
@@ -208,6 +217,49 @@ def dark_pixels(buffers: dict[str, torch.Tensor]) -> torch.Tensor | None:
     return safe(albedo).clamp(0.0, 1.0).mean(dim=1, keepdim=True) < ALBEDO_MIN
 
 
+def covered_fraction(mean: torch.Tensor, var: torch.Tensor, spp: torch.Tensor) -> torch.Tensor:
+    """The fraction of a pixel's samples that read a value ``a``, if each read either 0 or ``a``.
+
+    With coverage c the samples' mean is c·a and their (population) variance a²·c·(1 − c), so
+    c = mean² / (mean² + σ²). ``var`` is the variance of the mean the renderer writes (the unbiased
+    sample variance ÷ n), so σ² = (n − 1)·var. A pixel with no evidence (mean and variance 0, or
+    one sample) reads 1: fully covered.
+    """
+    sigma2 = (spp - 1.0).clamp_min(0.0) * safe(var).clamp_min(0.0)
+    mean2 = safe(mean).square()
+    total = mean2 + sigma2
+    return torch.where(total > 0, mean2 / total.clamp_min(1e-30), torch.ones_like(total))
+
+
+def partly_background(buffers: dict[str, torch.Tensor]) -> torch.Tensor | None:
+    """N×1×H×W mask of the pixels a surface covers only in part, the rest being background or an
+    emitter seen directly; None without ``spp``, albedo, depth and their variances.
+
+    A sample that misses every surface reads albedo 0 and depth 0, so at a silhouette before the
+    background both buffers are two-valued with the same coverage: :func:`covered_fraction` of the
+    albedo (its three channels summed, their deviations added: the channels vary together) and of
+    the depth both fall below COVER_MIN. Demodulation fails there: the pixel's radiance is mostly
+    the background's, its albedo a fraction of the surface's, and their quotient (7× the lit wall's
+    on Mitsuba's two-sided Cornell box, at albedo 0.12 of 0.49) spreads through the kernel taps
+    that reach it, into the surface's own channels too. A texture edge (albedo varies, depth does
+    not) and a depth edge between two surfaces (depth varies, albedo need not) read as covered.
+
+    Pitfalls: at 1 spp there is no variance and no pixel is found (the rule is then today's
+    without it); a black material before the background has no albedo evidence and is found
+    only when its depth is, which is harmless (its diffuse is 0).
+    """
+    spp = buffers.get("spp")
+    names = ("albedo", "albedo_var", "depth", "depth_var")
+    if spp is None or any(name not in buffers for name in names):
+        return None
+    spp = safe(spp)
+    albedo = safe(buffers["albedo"]).clamp(0.0, 1.0)
+    albedo_sd = safe(buffers["albedo_var"]).clamp_min(0.0).sqrt().sum(dim=1, keepdim=True)
+    albedo_cover = covered_fraction(albedo.sum(dim=1, keepdim=True), albedo_sd.square(), spp)
+    depth_cover = covered_fraction(buffers["depth"][:, :1], buffers["depth_var"][:, :1], spp)
+    return (albedo_cover < COVER_MIN) & (depth_cover < COVER_MIN) & ~dark_pixels(buffers)
+
+
 def albedo_factor(buffers: dict[str, torch.Tensor], like: torch.Tensor) -> torch.Tensor:
     """albedo + ε, the demodulation divisor; 1 where the albedo is below ALBEDO_MIN or absent.
 
@@ -328,12 +380,15 @@ def rae_inputs(
 
 
 def frame_tensors(frame, names=("color",) + OPTIONAL_BUFFERS + ("position",)) -> dict[str, torch.Tensor]:
-    """The frame's buffers among ``names`` as 1×C×H×W float32 tensors (copies: frames are read-only)."""
+    """The frame's buffers among ``names`` as 1×C×H×W float32 tensors (copies: frames are read-only),
+    and its sample count as ``spp`` (1×1×1×1) when the frame knows it."""
     out = {}
     for name in names:
         if name in frame.buffers:
             array = np.asarray(frame.buffers[name], dtype=np.float32)
             out[name] = torch.from_numpy(np.ascontiguousarray(np.moveaxis(array, -1, 0)).copy())[None]
+    if getattr(frame, "spp", 0) > 0:
+        out["spp"] = torch.full((1, 1, 1, 1), float(frame.spp))
     return out
 
 

@@ -408,3 +408,51 @@ def test_dpcn_log_offset_output_keeps_relative_precision_near_black():
     with pytest.raises(ValueError, match="log_offset"):
         build_model("dpcn", {**model_config("dpcn", "small"), "log_offset": -1.0})
     assert float(scale.flatten()[0]) > 0
+
+
+def _pixel_moments(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel mean and variance of the mean (unbiased sample variance ÷ n), as the renderer writes them."""
+    n = samples.shape[0]
+    return samples.mean(axis=0), samples.var(axis=0, ddof=1) / n
+
+
+def test_partly_background_finds_silhouettes_and_not_texture_or_depth_edges():
+    from denoisebench.models.features import covered_fraction, partly_background
+
+    # four samples per pixel; a sample that misses every surface reads albedo 0 and depth 0
+    surface_albedo, surface_depth = np.array([0.49, 0.05, 0.05]), 9.7
+    pixels = {
+        "silhouette": ([surface_albedo, 0 * surface_albedo, 0 * surface_albedo, 0 * surface_albedo], [9.7, 0, 0, 0]),
+        "texture edge": ([[0.8] * 3, [0.8] * 3, [0.1] * 3, [0.1] * 3], [4.0, 4.0, 4.0, 4.0]),
+        "depth edge": ([[0.5] * 3] * 4, [1.0, 1.0, 10.0, 10.0]),
+        "black material before the background": ([[0.0] * 3] * 4, [3.0, 0.0, 0.0, 0.0]),
+        "surface": ([surface_albedo] * 4, [surface_depth, surface_depth + 0.01, surface_depth - 0.01, surface_depth]),
+    }
+    albedo, depth = np.array([p[0] for p in pixels.values()], float), np.array([p[1] for p in pixels.values()], float)
+    a_mean, a_var = _pixel_moments(np.moveaxis(albedo, 1, 0))  # samples first: 4 × P × 3
+    d_mean, d_var = _pixel_moments(depth.T[..., None])
+
+    def image(values):  # P × C → 1 × C × 1 × P
+        return torch.tensor(values, dtype=torch.float32).T[None, :, None, :]
+
+    buffers = {
+        "albedo": image(a_mean),
+        "albedo_var": image(a_var),
+        "depth": image(d_mean),
+        "depth_var": image(d_var),
+        "spp": torch.full((1, 1, 1, 1), 4.0),
+    }
+    # the two-valued silhouette's coverage is exact: one sample in four hit the wall
+    cover = covered_fraction(buffers["depth"], buffers["depth_var"], buffers["spp"])
+    assert cover[0, 0, 0, 0].item() == pytest.approx(0.25, abs=1e-6)
+    found = partly_background(buffers)[0, 0, 0].tolist()
+    assert dict(zip(pixels, found)) == {
+        "silhouette": True,
+        "texture edge": False,
+        "depth edge": False,
+        "black material before the background": False,  # no albedo: a dark pixel, its own class
+        "surface": False,
+    }
+    # one sample: no variance, no evidence; no spp: the rule is off
+    assert not partly_background({**buffers, "spp": torch.ones(1, 1, 1, 1)}).any()
+    assert partly_background({k: v for k, v in buffers.items() if k != "spp"}) is None
